@@ -2,12 +2,15 @@
 // The simulated embedded-calibration stereo head (ROS-free): two distorted pinhole cameras
 // behind a half-mirror, the calibration device's boards reflected by the mirror copies,
 // a textured 3D scene with known depth, sensor noise and run-time drift. It renders
-//   I = transmittance * I_scene + light_level * reflectance * I_device + noise
-// with anti-aliased (supersampled) boards so that rendered corners agree with the
-// ground-truth corner positions to 0.02 px.
+//   I = PSF * (transmittance * I_scene + light_level * reflectance * I_device) + noise
+// with anti-aliased boards (analytic pixel-area averaging) and a symmetric Gaussian lens PSF, so
+// that rendered corners agree with the ground-truth corner positions to 0.02 px.
+// Per-camera layers (scene, device, depth) are cached and re-rendered only when that camera's
+// truth changes (zoom, drift; every frame while a thermal rate is set).
 //
-// Threading: render() may run on one thread while setDrift()/advanceTime() run on another;
-// the drift state is guarded by a mutex and render() works on a snapshot of it.
+// Threading: render() may run on one thread while setDrift()/truthAt() run on another;
+// the drift state is guarded by a mutex and render() works on a snapshot of it. render() itself
+// is meant for one thread at a time (its layer caches are serialised by a second mutex).
 #include <Eigen/Geometry>
 #include <cstdint>
 #include <memory>
@@ -42,6 +45,7 @@ struct SimOpticsConfig {
   double reflectance = 0.5;    // r: lit device -> camera
   double device_white = 0.95;  // radiance of lit white squares, fraction of full scale
   double device_black = 0.05;  // radiance of lit black squares and of the device housing
+  double psf_sigma_px = 1.0;   // Gaussian lens blur of scene and device, pixels (0 = none)
 };
 
 struct SimRigConfig {
@@ -82,8 +86,11 @@ class SimRig {
   ~SimRig();
 
   const SimRigConfig& config() const { return config_; }
-  // Returns an empty string on success, otherwise why the request was refused.
+  // Returns an empty string on success, otherwise why the request was refused (state unchanged).
+  // The thermal rotation starts at the time of the request: the latest time_s given to render().
   std::string setDrift(const DriftRequest& request);
+  // Same, with an explicit request time on the render() clock (tests, replay).
+  std::string setDrift(const DriftRequest& request, double time_s);
   // Current truth at time t (seconds since construction of the clock used by render()).
   StereoRig truthAt(double time_s) const;
   // Virtual boards in the rig frame (fixed to the left camera).

@@ -1,0 +1,272 @@
+// The simulated stereo head: drift state, truth, cached per-camera layers, frame composition.
+#include "embedded_calibration_stereo/core/sim/sim_rig.h"
+
+#include <algorithm>
+#include <cmath>
+#include <opencv2/imgproc.hpp>
+
+#include "camera_rays.h"
+#include "device_renderer.h"
+#include "embedded_calibration_stereo/core/config_error.h"
+#include "scene_renderer.h"
+
+namespace ecs {
+
+namespace {
+
+// Corners closer than this to the image border are not reported (a detector cannot refine them).
+constexpr double kObservationMarginPx = 5.0;
+// Rows per noise band: each band has its own RNG stream so the noise does not depend on how
+// cv::parallel_for_ splits the image.
+constexpr int kNoiseBandRows = 16;
+
+// Limits of a drift request (a simulation of small real-world changes, not arbitrary poses).
+constexpr double kMinFocalScale = 0.5, kMaxFocalScale = 2.0;
+constexpr double kMaxRotationDeg = 10.0;
+constexpr double kMaxThermalRateDegPerS = 1.0;
+constexpr double kMaxKnockTranslationM = 0.05;
+
+uint64_t mixSeed(uint64_t x) {  // splitmix64 finaliser
+  x += 0x9E3779B97F4A7C15ULL;
+  x = (x ^ (x >> 30)) * 0xBF58476D1CE4E5B9ULL;
+  x = (x ^ (x >> 27)) * 0x94D049BB133111EBULL;
+  return x ^ (x >> 31);
+}
+
+struct DriftState {
+  double focal_scale = 1.0;
+  Eigen::Vector3d right_rotation_deg = Eigen::Vector3d::Zero();
+  double thermal_rate_deg_per_s = 0.0;
+  double thermal_start_s = 0.0;
+  Eigen::Isometry3d knock = Eigen::Isometry3d::Identity();  // applied to right_from_left
+};
+
+StereoRig truthFor(const StereoRig& nominal, const DriftState& d, double time_s) {
+  StereoRig rig = nominal;
+  rig.left = nominal.left.withFocalScale(d.focal_scale);
+  rig.right = nominal.right.withFocalScale(d.focal_scale);
+  const double thermal_deg = d.thermal_rate_deg_per_s * std::max(0.0, time_s - d.thermal_start_s);
+  // Rotation of the right camera about its own centre, in its own optical frame: the new
+  // frame's axes are R_old * R_drift, so points map with R_drift^T.
+  const Eigen::Matrix3d R_drift = rotationFromVectorDeg(d.right_rotation_deg) *
+                                  rotationFromVectorDeg(Eigen::Vector3d(0.0, thermal_deg, 0.0));
+  Eigen::Isometry3d camera_turn = Eigen::Isometry3d::Identity();
+  camera_turn.linear() = R_drift.transpose();
+  rig.right_from_left = camera_turn * d.knock * nominal.right_from_left;
+  return rig;
+}
+
+std::string checkRequest(const DriftRequest& r) {
+  if (!(r.focal_scale >= kMinFocalScale && r.focal_scale <= kMaxFocalScale))
+    return "focal_scale must be in [0.5, 2] (1 = nominal), got " + std::to_string(r.focal_scale);
+  if (!r.right_rotation_deg.allFinite() || r.right_rotation_deg.norm() > kMaxRotationDeg)
+    return "right_rotation_deg must be finite with a norm <= 10 deg";
+  if (!std::isfinite(r.thermal_rate_deg_per_s) || std::abs(r.thermal_rate_deg_per_s) > kMaxThermalRateDegPerS)
+    return "thermal_rate_deg_per_s must be finite and within +-1 deg/s";
+  if (!r.knock_rotation_deg.allFinite() || r.knock_rotation_deg.norm() > kMaxRotationDeg)
+    return "knock_rotation_deg must be finite with a norm <= 10 deg";
+  if (!r.knock_translation_m.allFinite() || r.knock_translation_m.norm() > kMaxKnockTranslationM)
+    return "knock_translation_m must be finite with a norm <= 0.05 m";
+  return "";
+}
+
+// What one camera sees that only changes with its truth (intrinsics and pose), cached between
+// frames: rendering it is the expensive part, composing a frame from it is cheap.
+struct CameraLayers {
+  bool valid = false;
+  PinholeCamera camera;
+  Eigen::Isometry3d rig_from_camera = Eigen::Isometry3d::Identity();
+  cv::Mat scene;     // CV_32F transmittance * scene radiance, grey levels
+  cv::Mat scene_u8;  // the same, saturated to 8 bit in the output encoding
+  cv::Mat device;    // CV_32F device radiance, fraction of full scale
+  cv::Mat depth;     // CV_32F z of the scene hit in the rig frame (left camera only)
+};
+
+void toEncoding(const cv::Mat& mono, const std::string& encoding, cv::Mat* out) {
+  if (encoding == "bgr8")
+    cv::cvtColor(mono, *out, cv::COLOR_GRAY2BGR);
+  else
+    *out = mono;
+}
+
+}  // namespace
+
+struct SimRig::Impl {
+  explicit Impl(const SimRigConfig& config) : scene(config.scene) {}
+  sim::SceneRenderer scene;  // immutable textures
+
+  std::mutex drift_mutex;  // guards drift and latest_time_s
+  DriftState drift;
+  double latest_time_s = 0.0;
+
+  std::mutex render_mutex;  // guards everything below (render() caches)
+  sim::CameraRays rays[2];
+  bool rays_valid[2] = {false, false};
+  CameraLayers layers[2];
+
+  void updateLayers(int index, const SimRigConfig& config, const std::vector<VirtualBoard>& boards,
+                    const PinholeCamera& camera, const Eigen::Isometry3d& rig_from_camera);
+  void compose(const CameraLayers& layers, double device_gain, double noise_sigma, uint64_t seed,
+               const std::string& encoding, cv::Mat* image) const;
+};
+
+void SimRig::Impl::updateLayers(int index, const SimRigConfig& config,
+                                const std::vector<VirtualBoard>& boards, const PinholeCamera& camera,
+                                const Eigen::Isometry3d& rig_from_camera) {
+  CameraLayers& l = layers[index];
+  const bool same_pose = (l.rig_from_camera.matrix().array() == rig_from_camera.matrix().array()).all();
+  if (l.valid && same_pose && sim::sameIntrinsics(l.camera, camera)) return;
+  if (!rays_valid[index] || !sim::sameIntrinsics(rays[index].camera, camera)) {
+    rays[index] = sim::computeCameraRays(camera);
+    rays_valid[index] = true;
+  }
+  // Fresh buffers each time: frames handed out earlier never alias the cache.
+  CameraLayers fresh;
+  scene.render(rays[index], rig_from_camera, &fresh.scene, index == 0 ? &fresh.depth : nullptr);
+  fresh.scene *= config.optics.transmittance;
+  sim::renderDevice(boards, rays[index], rig_from_camera, config.optics.device_white,
+                    config.optics.device_black, &fresh.device);
+  // The lens blurs the sum of both light paths; by linearity each layer is blurred alone.
+  // A symmetric PSF moves no corner and no edge.
+  if (config.optics.psf_sigma_px > 0) {
+    const double sigma = config.optics.psf_sigma_px;
+    cv::GaussianBlur(fresh.scene, fresh.scene, cv::Size(), sigma, 0, cv::BORDER_REPLICATE);
+    cv::GaussianBlur(fresh.device, fresh.device, cv::Size(), sigma, 0, cv::BORDER_REPLICATE);
+  }
+  cv::Mat mono;
+  fresh.scene.convertTo(mono, CV_8U);
+  toEncoding(mono, config.encoding, &fresh.scene_u8);
+  fresh.camera = camera;
+  fresh.rig_from_camera = rig_from_camera;
+  fresh.valid = true;
+  l = fresh;
+}
+
+void SimRig::Impl::compose(const CameraLayers& l, double device_gain, double noise_sigma,
+                           uint64_t seed, const std::string& encoding, cv::Mat* image) const {
+  const int W = l.scene.cols, H = l.scene.rows;
+  cv::Mat mono(H, W, CV_8U);
+  const int bands = (H + kNoiseBandRows - 1) / kNoiseBandRows;
+  cv::parallel_for_(cv::Range(0, bands), [&](const cv::Range& range) {
+    cv::Mat sum, noise;
+    for (int band = range.start; band < range.end; ++band) {
+      const cv::Range rows(band * kNoiseBandRows, std::min(H, (band + 1) * kNoiseBandRows));
+      cv::scaleAdd(l.device.rowRange(rows), device_gain, l.scene.rowRange(rows), sum);
+      if (noise_sigma > 0) {
+        noise.create(rows.size(), W, CV_32F);
+        cv::RNG rng(mixSeed(seed ^ mixSeed(static_cast<uint64_t>(band) + 1)));
+        rng.fill(noise, cv::RNG::NORMAL, 0.0, noise_sigma);
+        sum += noise;
+      }
+      cv::Mat out = mono.rowRange(rows);
+      sum.convertTo(out, CV_8U);  // rounds to nearest and saturates
+    }
+  });
+  toEncoding(mono, encoding, image);
+}
+
+SimRig::SimRig(SimRigConfig config) : config_(std::move(config)) {
+  const std::string problem = config_.validate();
+  if (!problem.empty()) {
+    const size_t colon = problem.find(": ");
+    throw ConfigError(problem.substr(0, colon), colon == std::string::npos ? problem : problem.substr(colon + 2));
+  }
+  boards_ = config_.device.virtualBoards();
+  impl_ = std::make_unique<Impl>(config_);
+}
+
+SimRig::~SimRig() = default;
+
+std::string SimRig::setDrift(const DriftRequest& request) {
+  double now;
+  {
+    std::lock_guard<std::mutex> lock(impl_->drift_mutex);
+    now = impl_->latest_time_s;
+  }
+  return setDrift(request, now);
+}
+
+std::string SimRig::setDrift(const DriftRequest& request, double time_s) {
+  const std::string problem = checkRequest(request);
+  if (!problem.empty()) return problem;
+  if (!std::isfinite(time_s)) return "time must be finite";
+  std::lock_guard<std::mutex> lock(impl_->drift_mutex);
+  DriftState& d = impl_->drift;
+  if (request.reset) d = DriftState();
+  d.focal_scale = request.focal_scale;
+  d.right_rotation_deg = request.right_rotation_deg;
+  d.thermal_rate_deg_per_s = request.thermal_rate_deg_per_s;
+  d.thermal_start_s = time_s;
+  Eigen::Isometry3d knock = Eigen::Isometry3d::Identity();
+  knock.linear() = rotationFromVectorDeg(request.knock_rotation_deg);
+  knock.translation() = request.knock_translation_m;
+  d.knock = knock * d.knock;
+  return "";
+}
+
+StereoRig SimRig::truthAt(double time_s) const {
+  DriftState snapshot;
+  {
+    std::lock_guard<std::mutex> lock(impl_->drift_mutex);
+    snapshot = impl_->drift;
+  }
+  return truthFor(config_.rig, snapshot, time_s);
+}
+
+namespace {
+
+StereoObservation observe(const StereoRig& rig, const std::vector<VirtualBoard>& boards, double stamp) {
+  StereoObservation obs;
+  obs.stamp = stamp;
+  const Eigen::Vector3d right_centre = rig.leftFromRight().translation();
+  for (const VirtualBoard& b : boards) {
+    const Eigen::Vector3d normal = b.rig_from_board.linear().col(2);
+    const Eigen::Vector3d origin = b.rig_from_board.translation();
+    for (int side = 0; side < 2; ++side) {
+      const Eigen::Vector3d centre = side == 0 ? Eigen::Vector3d::Zero() : right_centre;
+      if (normal.dot(centre - origin) <= 0) continue;  // the camera sees the board's back
+      const PinholeCamera& cam = side == 0 ? rig.left : rig.right;
+      BoardCorners corners;
+      corners.board_id = b.virtual_id;
+      for (int id = 0; id < b.cornerCount(); ++id) {
+        const Eigen::Vector3d p_rig = b.cornerInRig(id);
+        const Eigen::Vector3d p = side == 0 ? p_rig : Eigen::Vector3d(rig.right_from_left * p_rig);
+        Eigen::Vector2d px;
+        if (!cam.project(p, &px) || !cam.inImage(px, kObservationMarginPx)) continue;
+        corners.corner_ids.push_back(id);
+        corners.u.push_back(static_cast<float>(px.x()));
+        corners.v.push_back(static_cast<float>(px.y()));
+      }
+      if (corners.size() > 0) (side == 0 ? obs.left : obs.right).push_back(corners);
+    }
+  }
+  return obs;
+}
+
+}  // namespace
+
+SimFrame SimRig::render(double time_s, double light_level, uint64_t noise_seed) const {
+  {
+    std::lock_guard<std::mutex> lock(impl_->drift_mutex);
+    impl_->latest_time_s = std::max(impl_->latest_time_s, time_s);
+  }
+  SimFrame frame;
+  frame.truth = truthAt(time_s);
+  const double level = std::min(std::max(light_level, 0.0), 1.0);
+  const double device_gain = level * config_.optics.reflectance * 255.0;
+
+  std::lock_guard<std::mutex> lock(impl_->render_mutex);
+  impl_->updateLayers(0, config_, boards_, frame.truth.left, Eigen::Isometry3d::Identity());
+  impl_->updateLayers(1, config_, boards_, frame.truth.right, frame.truth.leftFromRight());
+  const uint64_t seed = mixSeed(noise_seed);
+  impl_->compose(impl_->layers[0], device_gain, config_.noise_sigma, seed, config_.encoding, &frame.left);
+  impl_->compose(impl_->layers[1], device_gain, config_.noise_sigma, mixSeed(seed ^ 0x5bd1e995ULL),
+                 config_.encoding, &frame.right);
+  frame.left_scene = impl_->layers[0].scene_u8.clone();
+  frame.right_scene = impl_->layers[1].scene_u8.clone();
+  frame.left_depth = impl_->layers[0].depth.clone();
+  frame.observations = observe(frame.truth, boards_, time_s);
+  return frame;
+}
+
+}  // namespace ecs
