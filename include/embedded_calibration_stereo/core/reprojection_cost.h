@@ -1,0 +1,119 @@
+#pragma once
+// Ceres reprojection functors of the stereo bundle adjuster (plumb_bob distortion, templated so
+// that Ceres differentiates them automatically).
+//
+// Parameter blocks (all doubles):
+//   intrinsics[9]  = fx, fy, cx, cy, k1, k2, p1, p2, k3   (skew is fixed at zero)
+//   board_pose[7]  = qx, qy, qz, qw (Eigen order, unit), tx, ty, tz: rig_from_board, i.e. the
+//                    virtual board in the left optical frame (metres)
+//   extrinsics[6]  = rotation vector (rad), translation (m) of right_from_left
+// Residual: predicted minus observed raw pixel (2 values).
+//
+// Threading: the functors are immutable after construction; Ceres may evaluate them from
+// several threads at once.
+#include <ceres/autodiff_cost_function.h>
+#include <ceres/rotation.h>
+
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+
+namespace ecs {
+
+constexpr int kIntrinsicsSize = 9;
+constexpr int kBoardPoseSize = 7;
+constexpr int kExtrinsicsSize = 6;
+
+// Index of each intrinsic in the intrinsics block.
+enum IntrinsicIndex { kFx = 0, kFy, kCx, kCy, kK1, kK2, kP1, kP2, kK3 };
+
+// A point in a camera's optical frame -> raw pixel with the plumb_bob model of OpenCV/ROS.
+template <typename T>
+void projectPlumbBob(const T* intrinsics, const T* point, T* pixel) {
+  const T x = point[0] / point[2];
+  const T y = point[1] / point[2];
+  const T& k1 = intrinsics[kK1];
+  const T& k2 = intrinsics[kK2];
+  const T& p1 = intrinsics[kP1];
+  const T& p2 = intrinsics[kP2];
+  const T& k3 = intrinsics[kK3];
+  const T r2 = x * x + y * y;
+  const T radial = T(1.0) + r2 * (k1 + r2 * (k2 + r2 * k3));
+  const T xd = x * radial + T(2.0) * p1 * x * y + p2 * (r2 + T(2.0) * x * x);
+  const T yd = y * radial + p1 * (r2 + T(2.0) * y * y) + T(2.0) * p2 * x * y;
+  pixel[0] = intrinsics[kFx] * xd + intrinsics[kCx];
+  pixel[1] = intrinsics[kFy] * yd + intrinsics[kCy];
+}
+
+// Board corner (local board coordinates) -> point in the left optical (rig) frame.
+template <typename T>
+Eigen::Matrix<T, 3, 1> boardCornerInRig(const T* board_pose, const Eigen::Vector3d& corner) {
+  const Eigen::Map<const Eigen::Quaternion<T>> rotation(board_pose);
+  const Eigen::Map<const Eigen::Matrix<T, 3, 1>> translation(board_pose + 4);
+  return rotation * corner.cast<T>() + translation;
+}
+
+// A corner seen by the left camera, whose optical frame is the rig frame.
+// Parameters: intrinsics[9], board_pose[7].
+class LeftCornerReprojectionCost {
+ public:
+  LeftCornerReprojectionCost(const Eigen::Vector3d& corner_in_board, const Eigen::Vector2d& pixel)
+      : corner_(corner_in_board), pixel_(pixel) {}
+
+  static ceres::CostFunction* Create(const Eigen::Vector3d& corner_in_board,
+                                     const Eigen::Vector2d& pixel) {
+    return new ceres::AutoDiffCostFunction<LeftCornerReprojectionCost, 2, kIntrinsicsSize,
+                                           kBoardPoseSize>(
+        new LeftCornerReprojectionCost(corner_in_board, pixel));
+  }
+
+  template <typename T>
+  bool operator()(const T* intrinsics, const T* board_pose, T* residual) const {
+    const Eigen::Matrix<T, 3, 1> p = boardCornerInRig(board_pose, corner_);
+    if (!(p[2] > T(0.0))) return false;  // behind the camera: not a valid evaluation point
+    T pixel[2];
+    projectPlumbBob(intrinsics, p.data(), pixel);
+    residual[0] = pixel[0] - T(pixel_.x());
+    residual[1] = pixel[1] - T(pixel_.y());
+    return true;
+  }
+
+ private:
+  Eigen::Vector3d corner_;
+  Eigen::Vector2d pixel_;
+};
+
+// A corner seen by the right camera, reached from the rig frame through right_from_left.
+// Parameters: intrinsics[9], board_pose[7], extrinsics[6].
+class RightCornerReprojectionCost {
+ public:
+  RightCornerReprojectionCost(const Eigen::Vector3d& corner_in_board, const Eigen::Vector2d& pixel)
+      : corner_(corner_in_board), pixel_(pixel) {}
+
+  static ceres::CostFunction* Create(const Eigen::Vector3d& corner_in_board,
+                                     const Eigen::Vector2d& pixel) {
+    return new ceres::AutoDiffCostFunction<RightCornerReprojectionCost, 2, kIntrinsicsSize,
+                                           kBoardPoseSize, kExtrinsicsSize>(
+        new RightCornerReprojectionCost(corner_in_board, pixel));
+  }
+
+  template <typename T>
+  bool operator()(const T* intrinsics, const T* board_pose, const T* extrinsics,
+                  T* residual) const {
+    const Eigen::Matrix<T, 3, 1> p_left = boardCornerInRig(board_pose, corner_);
+    T p_right[3];
+    ceres::AngleAxisRotatePoint(extrinsics, p_left.data(), p_right);
+    for (int i = 0; i < 3; ++i) p_right[i] += extrinsics[3 + i];
+    if (!(p_right[2] > T(0.0))) return false;
+    T pixel[2];
+    projectPlumbBob(intrinsics, p_right, pixel);
+    residual[0] = pixel[0] - T(pixel_.x());
+    residual[1] = pixel[1] - T(pixel_.y());
+    return true;
+  }
+
+ private:
+  Eigen::Vector3d corner_;
+  Eigen::Vector2d pixel_;
+};
+
+}  // namespace ecs
