@@ -1,0 +1,172 @@
+// Pattern tracker timing and detection rates on simulated stereo frames, against OpenCV's
+// chessboard detectors on the same frames.
+//   bench_tracker [sim_rig.yaml] [frames]
+// (default: $ECS_SOURCE_DIR/config/sim_rig.yaml, 40 frames). Prints wall-clock ms per stereo
+// pair and the process CPU time per pair (all threads; on a loaded machine the wall time is
+// inflated by other processes, the CPU time much less).
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <ctime>
+#include <map>
+#include <opencv2/calib3d.hpp>
+#include <opencv2/core/utility.hpp>
+#include <string>
+#include <vector>
+
+#include "embedded_calibration_stereo/core/board_teacher.h"
+#include "embedded_calibration_stereo/core/pattern_tracker.h"
+#include "embedded_calibration_stereo/core/sim/sim_rig.h"
+
+using namespace ecs;
+using Clock = std::chrono::steady_clock;
+
+namespace {
+
+double msSince(Clock::time_point t0) {
+  return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+}
+
+struct Stats {
+  std::vector<double> ms;
+  void print(const char* what) const {
+    std::vector<double> s = ms;
+    std::sort(s.begin(), s.end());
+    double mean = 0;
+    for (double v : s) mean += v / s.size();
+    std::printf("%-46s mean %7.2f  median %7.2f  p95 %7.2f  max %7.2f ms  (n=%zu)\n", what, mean,
+                s[s.size() / 2], s[std::min(s.size() - 1, static_cast<size_t>(0.95 * s.size()))], s.back(),
+                s.size());
+  }
+};
+
+struct Accuracy {
+  size_t truth = 0, matched = 0, wrong = 0;
+  double sum_sq = 0;
+  void add(const std::vector<BoardCorners>& tracked, const std::vector<BoardCorners>& gt_boards) {
+    std::map<std::pair<int, int>, cv::Point2f> gt;
+    for (const BoardCorners& b : gt_boards)
+      for (size_t i = 0; i < b.size(); ++i) gt[{b.board_id, b.corner_ids[i]}] = cv::Point2f(b.u[i], b.v[i]);
+    truth += gt.size();
+    for (const BoardCorners& b : tracked)
+      for (size_t i = 0; i < b.size(); ++i) {
+        const auto it = gt.find({b.board_id, b.corner_ids[i]});
+        const double e = it == gt.end() ? 1e9 : cv::norm(it->second - cv::Point2f(b.u[i], b.v[i]));
+        if (e > 1.0) {
+          ++wrong;
+        } else {
+          ++matched;
+          sum_sq += e * e;
+        }
+      }
+  }
+  void print(const char* what) const {
+    std::printf("%-46s found %zu/%zu corners (%.2f%%), wrong ids %zu, RMS %.4f px\n", what, matched, truth,
+                100.0 * matched / std::max<size_t>(1, truth), wrong,
+                matched ? std::sqrt(sum_sq / matched) : 0.0);
+  }
+};
+
+PatternPrior teach(const SimRig& sim, const SimFrame& on, const SimFrame& off) {
+  const StereoRig& rig = sim.config().rig;
+  PatternPrior prior;
+  prior.cameras.push_back(
+      teachCamera({{on.left, off.left}},
+                  BoardLayout::device(sim.virtualBoards(), rig.left, Eigen::Isometry3d::Identity()), "left")
+          .prior);
+  prior.cameras.push_back(
+      teachCamera({{on.right, off.right}},
+                  BoardLayout::device(sim.virtualBoards(), rig.right, rig.right_from_left), "right")
+          .prior);
+  return prior;
+}
+
+void trackRun(const char* name, const PatternPrior& prior, const SimFrame* background,
+              const std::vector<SimFrame>& frames) {
+  PatternTracker tracker(prior, TrackerOptions());
+  if (background) tracker.setBackground(background->left, background->right);
+  Stats time, cpu;
+  Accuracy acc;
+  for (size_t k = 0; k < frames.size(); ++k) {
+    const Clock::time_point t0 = Clock::now();
+    const std::clock_t c0 = std::clock();
+    const StereoObservation obs = tracker.trackStereo(frames[k].left, frames[k].right, k / 30.0);
+    const double ms = msSince(t0);
+    const double cpu_ms = 1000.0 * (std::clock() - c0) / CLOCKS_PER_SEC;
+    if (k >= 3) {  // steady state: after the first frames from the prior
+      time.ms.push_back(ms);
+      cpu.ms.push_back(cpu_ms);
+    }
+    acc.add(obs.left, frames[k].observations.left);
+    acc.add(obs.right, frames[k].observations.right);
+  }
+  time.print((std::string(name) + ": ms per stereo pair").c_str());
+  cpu.print((std::string(name) + ": CPU ms per pair (all threads)").c_str());
+  acc.print((std::string(name) + ": accuracy").c_str());
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  std::string path;
+  if (argc > 1) {
+    path = argv[1];
+  } else if (const char* dir = std::getenv("ECS_SOURCE_DIR")) {
+    path = std::string(dir) + "/config/sim_rig.yaml";
+  } else {
+    std::fprintf(stderr, "usage: bench_tracker SIM_RIG.yaml [frames]   (or set ECS_SOURCE_DIR)\n");
+    return 2;
+  }
+  const int frame_count = argc > 2 ? std::max(5, std::atoi(argv[2])) : 40;
+  const SimRigConfig config = loadSimRigConfig(path);
+  const SimRig sim(config);
+  std::printf("sim: %s, %dx%d %s, t=%.2f r=%.2f noise %.1f, %zu virtual boards; OpenCV threads %d, CPUs %d\n",
+              path.c_str(), config.rig.left.width, config.rig.left.height, config.encoding.c_str(),
+              config.optics.transmittance, config.optics.reflectance, config.noise_sigma,
+              sim.virtualBoards().size(), cv::getNumThreads(), cv::getNumberOfCPUs());
+
+  const SimFrame on = sim.render(0.0, 1.0, 1), off = sim.render(0.0, 0.0, 2);
+  std::vector<SimFrame> frames;
+  for (int k = 0; k < frame_count; ++k) frames.push_back(sim.render(0.1 + k / 30.0, 1.0, 1000 + k));
+
+  Stats teach_time;
+  PatternPrior prior;
+  for (int k = 0; k < 3; ++k) {
+    const Clock::time_point t0 = Clock::now();
+    prior = teach(sim, on, off);
+    teach_time.ms.push_back(msSince(t0));
+  }
+  teach_time.print("teach (on/off pair, both cameras)");
+
+  trackRun("track with background", prior, &off, frames);
+  trackRun("track without background", prior, nullptr, frames);
+
+  // OpenCV's detectors on the same light-on frames (one 8x6 board searched per image; each
+  // image holds six). Detection rate = images where a board was found.
+  const cv::Size pattern(sim.virtualBoards().front().cols, sim.virtualBoards().front().rows);
+  const int opencv_frames = std::min(frame_count, 5);
+  for (int detector = 0; detector < 2; ++detector) {
+    Stats time;
+    int found = 0, images = 0;
+    for (int k = 0; k < opencv_frames; ++k) {
+      for (const cv::Mat* image : {&frames[k].left, &frames[k].right}) {
+        std::vector<cv::Point2f> corners;
+        const Clock::time_point t0 = Clock::now();
+        const bool ok =
+            detector == 0
+                ? cv::findChessboardCorners(*image, pattern, corners,
+                                            cv::CALIB_CB_ADAPTIVE_THRESH | cv::CALIB_CB_NORMALIZE_IMAGE)
+                : cv::findChessboardCornersSB(*image, pattern, corners, cv::CALIB_CB_NORMALIZE_IMAGE);
+        time.ms.push_back(msSince(t0));
+        found += ok;
+        ++images;
+      }
+    }
+    const char* name = detector == 0 ? "cv::findChessboardCorners" : "cv::findChessboardCornersSB";
+    std::printf("%-46s found a board in %d/%d light-on images\n", name, found, images);
+    time.print((std::string(name) + ": ms per image").c_str());
+  }
+  return 0;
+}

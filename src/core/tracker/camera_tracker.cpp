@@ -1,0 +1,443 @@
+// CameraTracker: per-board prediction, re-centring, refinement and acceptance (see
+// pattern_tracker.h for the algorithm and the threading contract).
+#include <algorithm>
+#include <cmath>
+#include <opencv2/calib3d.hpp>
+#include <opencv2/imgproc.hpp>
+#include <stdexcept>
+
+#include "board_geometry.h"
+#include "embedded_calibration_stereo/core/config_error.h"
+#include "embedded_calibration_stereo/core/pattern_tracker.h"
+
+namespace ecs {
+
+using tracker::applyHomography;
+using tracker::BoxSampler;
+using tracker::gridPoint;
+
+namespace {
+
+struct RecentreResult {
+  cv::Point2f shift;
+  double score = -1.0;
+};
+
+// Mean side of one square (px) at the board's centre.
+double squareSizePx(const cv::Matx33d& h, const BoardPrior& board) {
+  cv::Point2f ac, ar;
+  tracker::gridAxes(h, 0.5 * (board.cols - 1), 0.5 * (board.rows - 1), &ac, &ar);
+  return 0.5 * (cv::norm(ac) + cv::norm(ar));
+}
+
+cv::Point2f offsetNear(const BoardPrior& board, const std::vector<cv::Point2f>& offsets, double col,
+                       double row) {
+  const int c = std::min(std::max(static_cast<int>(std::lround(col)), 0), board.cols - 1);
+  const int r = std::min(std::max(static_cast<int>(std::lround(row)), 0), board.rows - 1);
+  return offsets[r * board.cols + c];
+}
+
+// Bright (+1) or dark (-1) square whose (-col, -row) corner is grid point (col, row).
+int squareSign(const BoardPrior& board, int col, int row) {
+  return ((col + row) & 1) == 0 ? board.sign : -board.sign;
+}
+
+// Correlates the expected brightness of the squares (and of the white margin around them)
+// with box means of the image over a window of shifts. The score is flat while every box stays
+// inside its square, so the shift is the centroid of the near-maximal plateau, not the argmax.
+RecentreResult recentre(const cv::Mat& gray, const cv::Matx33d& h, const BoardPrior& board,
+                        const std::vector<cv::Point2f>& offsets, double square, double radius, int step) {
+  struct Sample {
+    cv::Point2f p;
+    float sign;
+  };
+  std::vector<Sample> samples;
+  for (int r = -2; r <= board.rows; ++r) {
+    for (int c = -2; c <= board.cols; ++c) {
+      const bool margin = r == -2 || c == -2 || r == board.rows || c == board.cols;
+      const double x = c + 0.5, y = r + 0.5;
+      const float sign = margin ? 1.0f : static_cast<float>(squareSign(board, c, r));
+      samples.push_back({applyHomography(h, x, y) + offsetNear(board, offsets, x, y), sign});
+    }
+  }
+  const int box = std::max(1, static_cast<int>(std::lround(0.2 * square)));
+  const int reach = static_cast<int>(std::ceil(radius)) + box + 2;
+  float umin = 1e9f, vmin = 1e9f, umax = -1e9f, vmax = -1e9f;
+  for (const Sample& s : samples) {
+    umin = std::min(umin, s.p.x);
+    vmin = std::min(vmin, s.p.y);
+    umax = std::max(umax, s.p.x);
+    vmax = std::max(vmax, s.p.y);
+  }
+  const cv::Rect roi(static_cast<int>(std::floor(umin)) - reach, static_cast<int>(std::floor(vmin)) - reach,
+                     static_cast<int>(umax - umin) + 2 * reach + 2,
+                     static_cast<int>(vmax - vmin) + 2 * reach + 2);
+  const BoxSampler sampler(gray, roi, box);
+  // Keep the samples whose box stays in the image at every shift.
+  const int r_int = static_cast<int>(std::ceil(radius));
+  std::vector<Sample> usable;
+  double sign_sum = 0.0;
+  for (const Sample& s : samples) {
+    if (sampler.contains(s.p + cv::Point2f(-r_int, -r_int)) &&
+        sampler.contains(s.p + cv::Point2f(r_int, r_int))) {
+      usable.push_back(s);
+      sign_sum += s.sign;
+    }
+  }
+  RecentreResult result;
+  const double n = static_cast<double>(usable.size());
+  if (usable.size() < 8) return result;
+  const double sign_var = n - sign_sum * sign_sum / n;
+  if (sign_var <= 0) return result;
+  const int cells = 2 * (r_int / step) + 1;
+  cv::Mat scores(cells, cells, CV_64F, cv::Scalar(-1.0));
+  double best = -2.0;
+  cv::Point best_cell(0, 0);
+  for (int iy = 0; iy < cells; ++iy) {
+    for (int ix = 0; ix < cells; ++ix) {
+      const cv::Point2f d(static_cast<float>((ix - cells / 2) * step),
+                          static_cast<float>((iy - cells / 2) * step));
+      double sv = 0, v1 = 0, v2 = 0;
+      for (const Sample& s : usable) {
+        float v = 0;
+        sampler.mean(s.p + d, &v);
+        sv += s.sign * v;
+        v1 += v;
+        v2 += static_cast<double>(v) * v;
+      }
+      const double cov = sv - sign_sum * v1 / n;
+      const double var = v2 - v1 * v1 / n;
+      const double score = var > 1e-9 ? cov / std::sqrt(var * sign_var) : 0.0;
+      scores.at<double>(iy, ix) = score;
+      if (score > best) {
+        best = score;
+        best_cell = cv::Point(ix, iy);
+      }
+    }
+  }
+  // Centroid of the plateau around the best shift (within half a square of it).
+  const double threshold = best - 0.1 * std::abs(best);
+  const int half = std::max(1, static_cast<int>(0.5 * square / step));
+  double wsum = 0, xsum = 0, ysum = 0;
+  for (int iy = std::max(0, best_cell.y - half); iy <= std::min(cells - 1, best_cell.y + half); ++iy) {
+    for (int ix = std::max(0, best_cell.x - half); ix <= std::min(cells - 1, best_cell.x + half); ++ix) {
+      const double wgt = scores.at<double>(iy, ix) - threshold;
+      if (wgt <= 0) continue;
+      wsum += wgt;
+      xsum += wgt * (ix - cells / 2) * step;
+      ysum += wgt * (iy - cells / 2) * step;
+    }
+  }
+  result.score = best;
+  result.shift = wsum > 0 ? cv::Point2f(static_cast<float>(xsum / wsum), static_cast<float>(ysum / wsum))
+                          : cv::Point2f((best_cell.x - cells / 2) * step, (best_cell.y - cells / 2) * step);
+  return result;
+}
+
+// Least-squares homography of grid -> (pixel - offset) for the listed corners after a RANSAC
+// pass; returns the corners within max_residual of it.
+bool fitBoardModel(const BoardPrior& board, const std::vector<int>& ids, const std::vector<cv::Point2f>& pos,
+                   const std::vector<cv::Point2f>& offsets, double max_residual, cv::Matx33d* h,
+                   std::vector<int>* inliers) {
+  inliers->clear();
+  if (ids.size() < 4) return false;
+  std::vector<cv::Point2f> grid, image;
+  for (int id : ids) {
+    grid.push_back(gridPoint(id, board.cols));
+    image.push_back(pos[id] - offsets[id]);
+  }
+  std::vector<int> current = ids;
+  // Steady state: every candidate agrees with the least-squares fit; RANSAC only otherwise.
+  cv::Matx33d ls;
+  bool all_fit = tracker::fitHomographyLeastSquares(grid, image, &ls);
+  for (size_t k = 0; all_fit && k < ids.size(); ++k)
+    all_fit = cv::norm(applyHomography(ls, grid[k].x, grid[k].y) - image[k]) <= max_residual;
+  if (all_fit) {
+    *h = ls;
+    *inliers = ids;
+    return true;
+  }
+  cv::Mat fit;
+  if (ids.size() >= 8) {
+    std::vector<uchar> mask;
+    fit = cv::findHomography(grid, image, cv::RANSAC, 2.0 * max_residual, mask, 500, 0.999);
+    if (fit.empty()) return false;
+    std::vector<cv::Point2f> g2, i2;
+    current.clear();
+    for (size_t k = 0; k < ids.size(); ++k) {
+      if (!mask[k]) continue;
+      current.push_back(ids[k]);
+      g2.push_back(grid[k]);
+      i2.push_back(image[k]);
+    }
+    grid.swap(g2);
+    image.swap(i2);
+    if (current.size() < 4) return false;
+  }
+  // Least squares on the RANSAC inliers, then drop what is still too far and fit once more.
+  for (int round = 0; round < 2; ++round) {
+    if (!tracker::fitHomographyLeastSquares(grid, image, h)) return false;
+    std::vector<cv::Point2f> g2, i2;
+    std::vector<int> kept;
+    for (size_t k = 0; k < current.size(); ++k) {
+      const cv::Point2f model = applyHomography(*h, grid[k].x, grid[k].y);
+      if (cv::norm(model - image[k]) <= max_residual) {
+        kept.push_back(current[k]);
+        g2.push_back(grid[k]);
+        i2.push_back(image[k]);
+      }
+    }
+    const bool stable = kept.size() == current.size();
+    current.swap(kept);
+    grid.swap(g2);
+    image.swap(i2);
+    if (current.size() < 4) return false;
+    if (stable) break;
+  }
+  *inliers = current;
+  return true;
+}
+
+}  // namespace
+
+CameraTracker::CameraTracker(CameraPrior prior, TrackerOptions options)
+    : prior_(std::move(prior)), options_(options) {
+  const std::string problem = prior_.validate();
+  if (!problem.empty()) throw ConfigError("prior", problem);
+  const std::string bad_option = options_.check();
+  if (!bad_option.empty()) throw ConfigError("tracker options", bad_option);
+  reset();
+}
+
+void CameraTracker::reset() {
+  states_.assign(prior_.boards.size(), BoardState());
+  stats_.assign(prior_.boards.size(), BoardTrackStats());
+  for (size_t i = 0; i < prior_.boards.size(); ++i) {
+    states_[i].offsets = prior_.boards[i].offsets;
+    stats_[i].board_id = prior_.boards[i].board_id;
+  }
+}
+
+void CameraTracker::setBackground(const cv::Mat& light_off, ColorOrder order) {
+  const cv::Mat gray = toGrayImage(light_off, order);
+  if (gray.cols != prior_.width || gray.rows != prior_.height)
+    throw std::invalid_argument("background image size differs from the prior's image size");
+  background_.set(gray);
+}
+
+namespace {
+size_t cornerCount(const std::vector<BoardCorners>& boards) {
+  size_t n = 0;
+  for (const BoardCorners& b : boards) n += b.size();
+  return n;
+}
+}  // namespace
+
+std::vector<BoardCorners> CameraTracker::track(const cv::Mat& image, ColorOrder order) {
+  const cv::Mat gray = toGrayImage(image, order);
+  if (background_.empty()) return trackAll(gray, false);
+  if (gray.size() != cv::Size(prior_.width, prior_.height))
+    throw std::invalid_argument("image size differs from the prior's image size");
+  std::vector<BoardCorners> found =
+      trackAll(background_.difference(gray, options_.difference_smoothing_px), true);
+  if (cornerCount(found) < last_found_ / 2) {
+    // A stale background (the image moved since) can hide the boards: find them without it.
+    std::vector<BoardCorners> raw = trackAll(gray, false);
+    if (cornerCount(raw) > cornerCount(found)) found = std::move(raw);
+  }
+  for (int round = 0; round < 3 && background_.follow(found, options_.background_motion_px); ++round)
+    found = trackAll(background_.difference(gray, options_.difference_smoothing_px), true);
+  last_found_ = cornerCount(found);
+  return found;
+}
+
+std::vector<BoardCorners> CameraTracker::trackAll(const cv::Mat& gray, bool on_difference) {
+  std::vector<BoardCorners> out(prior_.boards.size());
+  auto body = [&](const cv::Range& range) {
+    for (int i = range.start; i < range.end; ++i) out[i] = trackBoard(gray, i, on_difference);
+  };
+  if (options_.parallel)
+    cv::parallel_for_(cv::Range(0, boardCount()), body);
+  else
+    body(cv::Range(0, boardCount()));
+  std::vector<BoardCorners> found;
+  for (BoardCorners& b : out)
+    if (b.size() > 0) found.push_back(std::move(b));
+  return found;
+}
+
+BoardCorners CameraTracker::trackBoard(const cv::Mat& gray, int index, bool on_difference) {
+  BoardCorners out = trackBoardOnce(gray, index, on_difference, false);
+  // The quick steady-state path can be fooled by a move of about half a square (the score at the
+  // old position is still high): retry with the full re-centring search.
+  if (out.size() == 0 && !stats_[index].wide_search) out = trackBoardOnce(gray, index, on_difference, true);
+  return out;
+}
+
+BoardCorners CameraTracker::trackBoardOnce(const cv::Mat& gray, int index, bool on_difference, bool wide) {
+  CV_Assert(gray.type() == CV_8UC1);
+  const BoardPrior& board = prior_.boards.at(index);
+  BoardState& state = states_[index];
+  BoardTrackStats& stats = stats_[index];
+  stats = BoardTrackStats();
+  stats.board_id = board.board_id;
+  BoardCorners out;
+  out.board_id = board.board_id;
+  const int n = board.cornerCount();
+
+  cv::Matx33d h =
+      state.valid ? state.homography : tracker::homographyFromOuter(board, board.meanOuterCorners());
+  const std::vector<cv::Point2f>& offsets = state.offsets;
+  const double square = squareSizePx(h, board);
+  const int window = options_.window_radius_px > 0 ? options_.window_radius_px
+                     : on_difference
+                         // Scene removed: a window of 0.6 square averages the residual better.
+                         ? std::min(7, std::max(2, static_cast<int>(std::lround(0.6 * square))))
+                         // Scene present: keep its texture out of the window.
+                         : std::min(5, std::max(2, static_cast<int>(std::lround(0.4 * square))));
+  const double max_residual =
+      on_difference ? options_.max_residual_px : options_.max_residual_no_background_px;
+
+  // 1. Re-centre on the expected pattern.
+  // Steady state: a small search around the last position, accepted when the pattern is as
+  // clear as last time; otherwise (first frame, zoom step, knock) the full search window.
+  RecentreResult centre;
+  bool settled = false;
+  if (!wide && state.valid && state.last_score > 0) {
+    // The score is flat while the boxes stay inside their squares, so the score at the last
+    // position tells whether the board is still within the refinement's reach.
+    centre = recentre(gray, h, board, offsets, square, 0.0, 1);
+    settled = centre.score >= 0.85 * state.last_score;
+  }
+  stats.wide_search = !settled;
+  if (!settled)
+    centre = recentre(gray, h, board, offsets, square, options_.search_radius_px,
+                      options_.search_radius_px > 4 ? 2 : 1);
+  stats.pattern_score = centre.score;
+  stats.recentre_shift = centre.shift;
+  if (centre.score < options_.min_pattern_score) return out;
+  h = cv::Matx33d(1, 0, centre.shift.x, 0, 1, centre.shift.y, 0, 0, 1) * h;
+
+  // Corners whose refinement window (and saddle samples) stay inside the image.
+  const float margin = static_cast<float>(window + 2);
+  auto insideImage = [&](const cv::Point2f& p) {
+    return p.x >= margin && p.y >= margin && p.x <= gray.cols - 1 - margin && p.y <= gray.rows - 1 - margin;
+  };
+  std::vector<int> todo;
+  for (int id = 0; id < n; ++id) {
+    const cv::Point2f g = gridPoint(id, board.cols);
+    if (insideImage(applyHomography(h, g.x, g.y) + offsets[id])) todo.push_back(id);
+  }
+  stats.predicted = static_cast<int>(todo.size());
+  const int needed = std::max(options_.min_board_corners,
+                              static_cast<int>(std::ceil(options_.min_board_fraction * stats.predicted)));
+  if (stats.predicted < needed) return out;
+
+  const int saddle_box = std::max(1, static_cast<int>(std::lround(0.12 * square)));
+  const int reach = static_cast<int>(std::ceil(0.6 * square)) + saddle_box + window + 2;
+  float umin = 1e9f, vmin = 1e9f, umax = -1e9f, vmax = -1e9f;
+  for (const cv::Point2f& g : board.outerGridPoints()) {
+    const cv::Point2f p = applyHomography(h, g.x, g.y);
+    umin = std::min(umin, p.x);
+    vmin = std::min(vmin, p.y);
+    umax = std::max(umax, p.x);
+    vmax = std::max(vmax, p.y);
+  }
+  const BoxSampler saddle_sampler(
+      gray,
+      cv::Rect(static_cast<int>(umin) - reach, static_cast<int>(vmin) - reach,
+               static_cast<int>(umax - umin) + 2 * reach, static_cast<int>(vmax - vmin) + 2 * reach),
+      saddle_box);
+  const float min_contrast =
+      static_cast<float>(std::max(options_.min_contrast, options_.relative_contrast * board.contrast));
+  const double max_shift = options_.max_refine_shift * window;
+  const cv::TermCriteria criteria(cv::TermCriteria::EPS + cv::TermCriteria::COUNT, 10, 0.01);
+
+  std::vector<cv::Point2f> pos(n);
+  std::vector<char> candidate(n, 0);
+  std::vector<int> accepted;
+  bool fitted = false;
+  for (int iteration = 0; iteration < options_.max_iterations && !todo.empty(); ++iteration) {
+    // 2. Predict and refine.
+    std::vector<cv::Point2f> points;
+    for (int id : todo) {
+      const cv::Point2f g = gridPoint(id, board.cols);
+      points.push_back(applyHomography(h, g.x, g.y) + offsets[id]);
+    }
+    const std::vector<cv::Point2f> predicted = points;
+    cv::cornerSubPix(gray, points, cv::Size(window, window), cv::Size(-1, -1), criteria);
+    // 3. Saddle test: the expected polarity with enough contrast.
+    int fresh = 0;
+    for (size_t k = 0; k < todo.size(); ++k) {
+      const int id = todo[k];
+      if (!insideImage(points[k]) || cv::norm(points[k] - predicted[k]) > max_shift) continue;
+      const cv::Point2f g = gridPoint(id, board.cols);
+      cv::Point2f ac, ar;
+      tracker::gridAxes(h, g.x, g.y, &ac, &ar);
+      const int bright =
+          ((static_cast<int>(g.x) + static_cast<int>(g.y)) & 1) == 0 ? board.sign : -board.sign;
+      if (tracker::saddleContrast(saddle_sampler, points[k], ac, ar, bright) < min_contrast) continue;
+      pos[id] = points[k];
+      candidate[id] = 1;
+      ++fresh;
+    }
+    if (fresh == 0 && fitted) break;
+    // 4. Re-fit the board model to every candidate; keep the consistent ones.
+    std::vector<int> ids;
+    for (int id = 0; id < n; ++id)
+      if (candidate[id]) ids.push_back(id);
+    cv::Matx33d refit;
+    std::vector<int> inliers;
+    if (!fitBoardModel(board, ids, pos, offsets, max_residual, &refit, &inliers)) break;
+    h = refit;
+    fitted = true;
+    accepted = inliers;
+    std::fill(candidate.begin(), candidate.end(), 0);
+    for (int id : accepted) candidate[id] = 1;
+    // 5. Retry the rest from the re-fitted model.
+    todo.clear();
+    for (int id = 0; id < n; ++id) {
+      if (candidate[id]) continue;
+      const cv::Point2f g = gridPoint(id, board.cols);
+      if (insideImage(applyHomography(h, g.x, g.y) + offsets[id])) todo.push_back(id);
+    }
+  }
+  if (!fitted || static_cast<int>(accepted.size()) < needed) return out;
+
+  std::sort(accepted.begin(), accepted.end());
+  double sq = 0;
+  for (int id : accepted) {
+    const cv::Point2f g = gridPoint(id, board.cols);
+    const cv::Point2f residual = pos[id] - offsets[id] - applyHomography(h, g.x, g.y);
+    sq += residual.dot(residual);
+    out.corner_ids.push_back(id);
+    out.u.push_back(pos[id].x);
+    out.v.push_back(pos[id].y);
+    // Follow slow changes of the distortion pattern (the board moving in the image).
+    state.offsets[id] += static_cast<float>(options_.offset_update_rate) * residual;
+  }
+  state.homography = h;
+  state.valid = true;
+  state.last_score = centre.score;
+  stats.found = static_cast<int>(accepted.size());
+  stats.rms_residual_px = std::sqrt(sq / accepted.size());
+
+  // Deviation of the tracked outer corners from the prior's mean + modes.
+  if (!board.outer_mean.empty()) {
+    cv::Mat x(1, 8, CV_64F);
+    const std::vector<cv::Point2f> grid = board.outerGridPoints();
+    const int outer_ids[4] = {0, board.cols - 1, n - 1, n - board.cols};
+    for (int i = 0; i < 4; ++i) {
+      const cv::Point2f p = applyHomography(h, grid[i].x, grid[i].y) + state.offsets[outer_ids[i]];
+      x.at<double>(0, 2 * i) = p.x;
+      x.at<double>(0, 2 * i + 1) = p.y;
+    }
+    cv::Mat d = x - board.outer_mean;
+    for (int m = 0; m < board.outer_modes.rows; ++m)
+      d -= d.dot(board.outer_modes.row(m)) * board.outer_modes.row(m);
+    stats.prior_deviation_px = std::sqrt(d.dot(d) / 4.0);
+  }
+  return out;
+}
+
+}  // namespace ecs
