@@ -1,0 +1,42 @@
+#pragma once
+// The camera driver's parameters (private namespace of the nodelet), read and validated in one
+// place. Every problem throws ecs::ConfigError whose message starts with the parameter name.
+// See the README for the table of parameters, defaults and units.
+#include <ros/node_handle.h>
+
+#include <string>
+
+#include "embedded_calibration_stereo/core/light_schedule.h"
+#include "embedded_calibration_stereo/ros/frame_source.h"
+#include "embedded_calibration_stereo/ros/light_backend.h"
+
+namespace embedded_calibration_stereo {
+
+struct DriverParams {
+  std::string backend = "sim";          // sim | files | v4l2
+  std::string light_backend = "sim";    // sim | serial | gpio | none (default: sim for the sim backend, else none)
+  double fps = 30.0;                    // frames per second
+  std::string left_frame_id = "stereo_left_optical_frame";
+  std::string right_frame_id = "stereo_right_optical_frame";
+  // The right image and camera_info carry left_frame_id (true, default) or right_frame_id.
+  // image_geometry::StereoCameraModel (hence stereo_image_proc) asserts that both cameras have
+  // the same frame id: the right P's Tx already places the right camera in the left frame.
+  bool right_in_left_frame = true;
+  std::string left_camera_name = "stereo_left";
+  std::string right_camera_name = "stereo_right";
+  std::string left_camera_info_url;     // empty: file://${ROS_HOME}/camera_info/${NAME}.yaml
+  std::string right_camera_info_url;
+  std::string sim_config;               // path of sim_rig.yaml (sim backend)
+  ecs::LightScheduleConfig schedule;    // calibration_period_s, calibration_frames, settle_frames
+  FilesSourceParams files;
+  V4l2SourceParams v4l2;
+  SerialLightParams serial;
+  GpioLightParams gpio;
+};
+
+// Reads and validates the parameters. `default_sim_config` is used when sim_config is not set.
+// Checks types, ranges and names (backend, light_backend, encodings, escapes); the existence of
+// files and devices is checked when the backends open them.
+DriverParams loadDriverParams(const ros::NodeHandle& private_nh, const std::string& default_sim_config);
+
+}  // namespace embedded_calibration_stereo

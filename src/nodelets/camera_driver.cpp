@@ -1,0 +1,367 @@
+// CameraDriver nodelet: publishes stereo frames from a backend (sim, files, v4l2) with their
+// CameraInfo and one calibration_mode message per frame, all with the same stamp; switches the
+// calibration light on a schedule or on request; stores calibrations sent to set_camera_info.
+#include <cv_bridge/cv_bridge.h>
+#include <diagnostic_updater/diagnostic_updater.h>
+#include <image_transport/image_transport.h>
+#include <nodelet/nodelet.h>
+#include <pluginlib/class_list_macros.hpp>
+#include <ros/package.h>
+#include <ros/ros.h>
+#include <sensor_msgs/SetCameraInfo.h>
+#include <std_srvs/SetBool.h>
+
+#include <atomic>
+#include <chrono>
+#include <condition_variable>
+#include <memory>
+#include <mutex>
+#include <thread>
+
+#include "embedded_calibration_stereo/CalibrationMode.h"
+#include "embedded_calibration_stereo/SetRigDrift.h"
+#include "embedded_calibration_stereo/core/config_error.h"
+#include "embedded_calibration_stereo/core/light_schedule.h"
+#include "embedded_calibration_stereo/core/sim/sim_rig.h"
+#include "embedded_calibration_stereo/ros/camera_calibration.h"
+#include "embedded_calibration_stereo/ros/conversions.h"
+#include "embedded_calibration_stereo/ros/driver_params.h"
+#include "embedded_calibration_stereo/ros/frame_source.h"
+#include "embedded_calibration_stereo/ros/light_backend.h"
+
+namespace embedded_calibration_stereo {
+
+// Threads:
+//  - the capture thread (started at the end of onInit, joined in the destructor) owns source_,
+//    light_, the publishers' use and the diagnostics, and takes mutex_ for the shared state
+//    once per frame;
+//  - the manager's callback threads run the services (set_light, set_camera_info, sim/set_drift)
+//    and touch only the shared state under mutex_ (schedule_, left_info_, right_info_, epoch_),
+//    the CameraCalibration objects (thread-safe) and sim_ (thread-safe drift).
+class CameraDriverNodelet : public nodelet::Nodelet {
+ public:
+  ~CameraDriverNodelet() override { stopCapture(); }
+
+ private:
+  void onInit() override {
+    try {
+      initialise();
+    } catch (const std::exception& e) {
+      // Loud: logged as FATAL and rethrown, so that the manager refuses to load the nodelet.
+      NODELET_FATAL("CameraDriver cannot start: %s", e.what());
+      releaseServices();
+      throw;
+    }
+  }
+
+  // nodelet::Loader destroys a failed nodelet's callback queues before the nodelet itself;
+  // a service still advertised then would unregister from a freed queue. Drop them now.
+  void releaseServices() {
+    stopCapture();
+    left_calibration_.reset();  // each holds camera_info_manager's own service
+    right_calibration_.reset();
+    for (ros::ServiceServer* server : {&left_set_info_srv_, &right_set_info_srv_, &set_light_srv_, &set_drift_srv_})
+      server->shutdown();
+  }
+
+  void initialise() {
+    ros::NodeHandle& nh = getNodeHandle();
+    ros::NodeHandle& pnh = getPrivateNodeHandle();
+    const std::string package_path = ros::package::getPath("embedded_calibration_stereo");
+    params_ = loadDriverParams(pnh, package_path.empty() ? "" : package_path + "/config/sim_rig.yaml");
+
+    auto light_level = std::make_shared<std::atomic<double>>(0.0);
+    if (params_.backend == "sim") {
+      try {
+        sim_ = std::make_shared<ecs::SimRig>(ecs::loadSimRigConfig(params_.sim_config));
+      } catch (const std::exception& e) {
+        throw ecs::ConfigError("sim_config", "'" + params_.sim_config + "': " + e.what());
+      }
+      source_ = makeSimFrameSource(sim_, light_level);
+    } else if (params_.backend == "files") {
+      source_ = makeFilesFrameSource(params_.files);
+    } else {
+      source_ = makeV4l2FrameSource(params_.v4l2);
+    }
+    if (params_.light_backend == "sim") {
+      light_ = makeSimLight(light_level);
+    } else if (params_.light_backend == "serial") {
+      light_ = makeSerialLight(params_.serial);
+    } else if (params_.light_backend == "gpio") {
+      light_ = makeGpioLight(params_.gpio);
+    } else {
+      light_ = makeNoLight();
+    }
+    schedule_ = std::make_unique<ecs::LightSchedule>(params_.schedule);
+    loadCalibrations(pnh);
+
+    image_transport::ImageTransport it(nh);
+    left_pub_ = it.advertiseCamera("left/image_raw", 2);
+    right_pub_ = it.advertiseCamera("right/image_raw", 2);
+    mode_pub_ = nh.advertise<CalibrationMode>("calibration_mode", 2);
+    left_set_info_srv_ = nh.advertiseService<sensor_msgs::SetCameraInfo::Request, sensor_msgs::SetCameraInfo::Response>(
+        "left/set_camera_info", [this](auto& req, auto& res) { return setCameraInfo(true, req, res); });
+    right_set_info_srv_ = nh.advertiseService<sensor_msgs::SetCameraInfo::Request, sensor_msgs::SetCameraInfo::Response>(
+        "right/set_camera_info", [this](auto& req, auto& res) { return setCameraInfo(false, req, res); });
+    set_light_srv_ = nh.advertiseService("set_light", &CameraDriverNodelet::setLight, this);
+    if (sim_) {
+      gt_left_info_pub_ = nh.advertise<sensor_msgs::CameraInfo>("ground_truth/left/camera_info", 2);
+      gt_right_info_pub_ = nh.advertise<sensor_msgs::CameraInfo>("ground_truth/right/camera_info", 2);
+      gt_observations_pub_ = nh.advertise<StereoPatternObservation>("ground_truth/observations", 2);
+      gt_left_scene_pub_ = it.advertise("ground_truth/left/image_scene", 2);
+      gt_right_scene_pub_ = it.advertise("ground_truth/right/image_scene", 2);
+      gt_depth_pub_ = it.advertise("ground_truth/left/depth", 2);
+      set_drift_srv_ = nh.advertiseService("sim/set_drift", &CameraDriverNodelet::setDrift, this);
+    }
+    NODELET_INFO("CameraDriver: backend %s, light %s, %.1f fps, calibration epoch %u",
+                 params_.backend.c_str(), params_.light_backend.c_str(), params_.fps, epoch_);
+    diagnostics_ = std::make_unique<diagnostic_updater::Updater>(nh, pnh, getName());
+    diagnostics_->setHardwareID(params_.backend == "v4l2" ? params_.v4l2.left_device : params_.backend);
+    diagnostics_->add("camera_driver", this, &CameraDriverNodelet::diagnose);
+    running_ = true;
+    capture_thread_ = std::thread(&CameraDriverNodelet::captureLoop, this);
+  }
+
+  // Loads both calibrations; without a file, the sim's nominal rig (or an uncalibrated message
+  // carrying only the image size) is used in memory until the first set_camera_info.
+  void loadCalibrations(const ros::NodeHandle& pnh) {
+    sensor_msgs::CameraInfo left_fallback, right_fallback;
+    if (const auto rig = source_->nominalRig()) {
+      std::tie(left_fallback, right_fallback) = toStereoCameraInfo(*rig);
+    } else {
+      const cv::Size size = source_->imageSize();
+      left_fallback.width = right_fallback.width = static_cast<uint32_t>(size.width);
+      left_fallback.height = right_fallback.height = static_cast<uint32_t>(size.height);
+    }
+    // camera_info_manager advertises its own set_camera_info in the handle's namespace: keep
+    // it out of the way under the private namespace; the driver serves the public ones.
+    left_calibration_ = std::make_unique<CameraCalibration>(ros::NodeHandle(pnh, "camera_info_manager/left"),
+                                                            params_.left_camera_name, params_.left_camera_info_url,
+                                                            "left_camera_info_url");
+    right_calibration_ = std::make_unique<CameraCalibration>(ros::NodeHandle(pnh, "camera_info_manager/right"),
+                                                             params_.right_camera_name, params_.right_camera_info_url,
+                                                             "right_camera_info_url");
+    const bool left_loaded = left_calibration_->load(left_fallback);
+    const bool right_loaded = right_calibration_->load(right_fallback);
+    left_info_ = left_calibration_->current();
+    right_info_ = right_calibration_->current();
+    NODELET_INFO("CameraDriver: left calibration %s %s, right calibration %s %s",
+                 left_loaded ? "loaded from" : "not found, will be stored in", left_calibration_->path().c_str(),
+                 right_loaded ? "loaded from" : "not found, will be stored in", right_calibration_->path().c_str());
+  }
+
+  void stopCapture() {
+    {
+      std::lock_guard<std::mutex> lock(stop_mutex_);
+      running_ = false;
+    }
+    stop_cv_.notify_all();
+    if (capture_thread_.joinable()) capture_thread_.join();
+  }
+
+  // Paced by the steady clock: a late frame does not make the next ones burst to catch up.
+  void captureLoop() {
+    using Clock = std::chrono::steady_clock;
+    const auto period = std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(1.0 / params_.fps));
+    const auto start = Clock::now();
+    auto next = start;
+    while (true) {
+      try {
+        captureOne(std::chrono::duration<double>(Clock::now() - start).count());
+      } catch (const std::exception& e) {  // e.g. a decoder or cv_bridge error: skip the frame
+        NODELET_ERROR_THROTTLE(5.0, "CameraDriver: frame dropped: %s", e.what());
+      }
+      next += period;
+      const auto now = Clock::now();
+      if (next < now - period) next = now;
+      std::unique_lock<std::mutex> lock(stop_mutex_);
+      if (stop_cv_.wait_until(lock, next, [this] { return !running_; })) break;
+    }
+  }
+
+  void captureOne(double time_s) {
+    const ros::Time stamp = ros::Time::now();
+    const bool recorded_light = source_->recordsLightState();
+    ecs::LightState light;
+    if (!recorded_light) {
+      {
+        std::lock_guard<std::mutex> lock(mutex_);
+        light = schedule_->step(time_s);
+      }
+      std::string error;
+      if (!light_->apply(light, &error)) NODELET_ERROR_THROTTLE(5.0, "CameraDriver: light: %s", error.c_str());
+    }
+    StereoFrame frame;
+    std::string error;
+    if (!source_->grab(time_s, &frame, &error)) {
+      NODELET_WARN_THROTTLE(5.0, "CameraDriver: no frame from backend %s: %s", params_.backend.c_str(), error.c_str());
+      last_error_ = error;
+      diagnostics_->update();
+      return;
+    }
+    CalibrationModePtr mode = boost::make_shared<CalibrationMode>();
+    sensor_msgs::CameraInfoPtr left_info, right_info;
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      if (recorded_light) light = schedule_->follow(frame.light_on.value_or(false));
+      left_info = boost::make_shared<sensor_msgs::CameraInfo>(left_info_);
+      right_info = boost::make_shared<sensor_msgs::CameraInfo>(right_info_);
+      mode->calibration_epoch = epoch_;
+    }
+    std_msgs::Header left_header, right_header;
+    left_header.stamp = right_header.stamp = stamp;
+    left_header.frame_id = params_.left_frame_id;
+    right_header.frame_id = params_.right_in_left_frame ? params_.left_frame_id : params_.right_frame_id;
+    left_info->header = left_header;
+    right_info->header = right_header;
+    mode->header = left_header;
+    mode->light_on = light.light_on;
+    mode->settled = light.settled;
+    // Messages are never modified after publishing: subscribers in the manager share them.
+    left_pub_.publish(cv_bridge::CvImage(left_header, frame.encoding, frame.left).toImageMsg(), left_info);
+    right_pub_.publish(cv_bridge::CvImage(right_header, frame.encoding, frame.right).toImageMsg(), right_info);
+    mode_pub_.publish(mode);
+    if (frame.truth) publishGroundTruth(*frame.truth, left_header, right_header);
+    ++frames_published_;
+    last_light_on_ = light.light_on;
+    last_error_.clear();
+    diagnostics_->update();
+  }
+
+  // Runs on the capture thread (inside diagnostics_->update()).
+  void diagnose(diagnostic_updater::DiagnosticStatusWrapper& status) {
+    const auto now = std::chrono::steady_clock::now();
+    const double span = std::chrono::duration<double>(now - diagnosed_at_).count();
+    const double rate = diagnosed_at_.time_since_epoch().count() == 0 ? 0.0 : frames_published_ / span;
+    diagnosed_at_ = now;
+    frames_published_ = 0;
+    uint32_t epoch;
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      epoch = epoch_;
+    }
+    if (!last_error_.empty()) {
+      status.summary(diagnostic_msgs::DiagnosticStatus::ERROR, last_error_);
+    } else if (rate < 0.9 * params_.fps) {
+      status.summaryf(diagnostic_msgs::DiagnosticStatus::WARN, "%.1f fps, below %.1f", rate, params_.fps);
+    } else {
+      status.summary(diagnostic_msgs::DiagnosticStatus::OK, "publishing");
+    }
+    status.add("frame rate (fps)", rate);
+    status.add("configured fps", params_.fps);
+    status.add("light on", last_light_on_);
+    status.add("calibration epoch", epoch);
+  }
+
+  // Ground truth costs conversions and copies: only for topics somebody listens to.
+  void publishGroundTruth(const ecs::SimFrame& truth, const std_msgs::Header& left_header,
+                          const std_msgs::Header& right_header) {
+    if (gt_left_info_pub_.getNumSubscribers() > 0 || gt_right_info_pub_.getNumSubscribers() > 0) {
+      auto infos = toStereoCameraInfo(truth.truth);
+      infos.first.header = left_header;
+      infos.second.header = right_header;
+      gt_left_info_pub_.publish(boost::make_shared<sensor_msgs::CameraInfo>(infos.first));
+      gt_right_info_pub_.publish(boost::make_shared<sensor_msgs::CameraInfo>(infos.second));
+    }
+    if (gt_observations_pub_.getNumSubscribers() > 0) {
+      auto observations = boost::make_shared<StereoPatternObservation>(toMsg(truth.observations));
+      observations->header = left_header;
+      gt_observations_pub_.publish(observations);
+    }
+    const std::string& encoding = sim_->config().encoding;
+    if (gt_left_scene_pub_.getNumSubscribers() > 0)
+      gt_left_scene_pub_.publish(cv_bridge::CvImage(left_header, encoding, truth.left_scene).toImageMsg());
+    if (gt_right_scene_pub_.getNumSubscribers() > 0)
+      gt_right_scene_pub_.publish(cv_bridge::CvImage(right_header, encoding, truth.right_scene).toImageMsg());
+    if (gt_depth_pub_.getNumSubscribers() > 0)
+      gt_depth_pub_.publish(cv_bridge::CvImage(left_header, "32FC1", truth.left_depth).toImageMsg());
+  }
+
+  bool setCameraInfo(bool left, sensor_msgs::SetCameraInfo::Request& req, sensor_msgs::SetCameraInfo::Response& res) {
+    CameraCalibration& calibration = left ? *left_calibration_ : *right_calibration_;
+    const cv::Size size = source_->imageSize();
+    if (static_cast<int>(req.camera_info.width) != size.width || static_cast<int>(req.camera_info.height) != size.height) {
+      res.success = false;
+      res.status_message = "rejected: calibration is for " + std::to_string(req.camera_info.width) + "x" +
+                           std::to_string(req.camera_info.height) + " but the images are " +
+                           std::to_string(size.width) + "x" + std::to_string(size.height);
+      NODELET_WARN("CameraDriver: %s set_camera_info %s", left ? "left" : "right", res.status_message.c_str());
+      return true;
+    }
+    std::string reason;
+    res.success = calibration.set(req.camera_info, &reason);
+    res.status_message = reason;
+    if (res.success) {
+      std::lock_guard<std::mutex> lock(mutex_);
+      (left ? left_info_ : right_info_) = calibration.current();
+      ++epoch_;
+      NODELET_INFO("CameraDriver: %s calibration %s, epoch %u", left ? "left" : "right", reason.c_str(), epoch_);
+    } else {
+      NODELET_ERROR("CameraDriver: %s set_camera_info failed, calibration unchanged: %s", left ? "left" : "right",
+                    reason.c_str());
+    }
+    return true;
+  }
+
+  bool setLight(std_srvs::SetBool::Request& req, std_srvs::SetBool::Response& res) {
+    if (source_->recordsLightState()) {
+      res.success = false;
+      res.message = "the files backend replays the light states of files_light_csv";
+      return true;
+    }
+    std::lock_guard<std::mutex> lock(mutex_);
+    schedule_->request(req.data);
+    res.success = true;
+    res.message = req.data ? "light on from the next frame" : "light off from the next frame";
+    return true;
+  }
+
+  bool setDrift(SetRigDrift::Request& req, SetRigDrift::Response& res) {
+    ecs::DriftRequest drift;
+    drift.focal_scale = req.focal_scale;
+    drift.thermal_rate_deg_per_s = req.thermal_rate_deg_per_s;
+    for (int i = 0; i < 3; ++i) {
+      drift.right_rotation_deg[i] = req.right_rotation_deg[i];
+      drift.knock_rotation_deg[i] = req.knock_rotation_deg[i];
+      drift.knock_translation_m[i] = req.knock_translation_m[i];
+    }
+    drift.reset = req.reset;
+    const std::string refusal = sim_->setDrift(drift);
+    res.success = refusal.empty();
+    res.message = res.success ? "drift applied" : refusal;
+    return true;
+  }
+
+  DriverParams params_;
+  std::shared_ptr<ecs::SimRig> sim_;
+  std::unique_ptr<FrameSource> source_;
+  std::unique_ptr<LightBackend> light_;
+  std::unique_ptr<CameraCalibration> left_calibration_, right_calibration_;
+
+  std::mutex mutex_;  // guards the four members below
+  std::unique_ptr<ecs::LightSchedule> schedule_;
+  sensor_msgs::CameraInfo left_info_, right_info_;
+  uint32_t epoch_ = 0;
+
+  image_transport::CameraPublisher left_pub_, right_pub_;
+  ros::Publisher mode_pub_;
+  ros::Publisher gt_left_info_pub_, gt_right_info_pub_, gt_observations_pub_;
+  image_transport::Publisher gt_left_scene_pub_, gt_right_scene_pub_, gt_depth_pub_;
+  ros::ServiceServer left_set_info_srv_, right_set_info_srv_, set_light_srv_, set_drift_srv_;
+
+  // Capture thread only.
+  std::unique_ptr<diagnostic_updater::Updater> diagnostics_;
+  int frames_published_ = 0;
+  bool last_light_on_ = false;
+  std::string last_error_;
+  std::chrono::steady_clock::time_point diagnosed_at_;
+
+  std::mutex stop_mutex_;
+  std::condition_variable stop_cv_;
+  bool running_ = false;  // guarded by stop_mutex_
+  std::thread capture_thread_;
+};
+
+}  // namespace embedded_calibration_stereo
+
+PLUGINLIB_EXPORT_CLASS(embedded_calibration_stereo::CameraDriverNodelet, nodelet::Nodelet)

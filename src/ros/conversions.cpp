@@ -1,0 +1,191 @@
+#include "embedded_calibration_stereo/ros/conversions.h"
+
+#include <cmath>
+#include <opencv2/calib3d.hpp>
+#include <opencv2/core/eigen.hpp>
+#include <sensor_msgs/distortion_models.h>
+
+namespace embedded_calibration_stereo {
+namespace {
+
+cv::Matx33d cameraMatrix(const ecs::PinholeCamera& c) {
+  return cv::Matx33d(c.fx, c.skew, c.cx, 0, c.fy, c.cy, 0, 0, 1);
+}
+
+cv::Mat distortionVector(const ecs::PinholeCamera& c) {
+  return (cv::Mat_<double>(1, 5) << c.dist[0], c.dist[1], c.dist[2], c.dist[3], c.dist[4]);
+}
+
+// Fields shared by the mono and stereo messages: size, model, K, D.
+sensor_msgs::CameraInfo intrinsicsMsg(const ecs::PinholeCamera& camera) {
+  sensor_msgs::CameraInfo info;
+  info.width = static_cast<uint32_t>(camera.width);
+  info.height = static_cast<uint32_t>(camera.height);
+  info.distortion_model = sensor_msgs::distortion_models::PLUMB_BOB;
+  info.D.assign(camera.dist.begin(), camera.dist.end());
+  const cv::Matx33d k = cameraMatrix(camera);
+  for (int i = 0; i < 9; ++i) info.K[i] = k.val[i];
+  return info;
+}
+
+void setRectification(const cv::Mat& r, const cv::Mat& p, sensor_msgs::CameraInfo* info) {
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) info->R[3 * i + j] = r.at<double>(i, j);
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 4; ++j) info->P[4 * i + j] = p.at<double>(i, j);
+}
+
+Eigen::Matrix3d rotationOf(const boost::array<double, 9>& r) {
+  Eigen::Matrix3d m;
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) m(i, j) = r[3 * i + j];
+  return m;
+}
+
+}  // namespace
+
+sensor_msgs::CameraInfo toCameraInfo(const ecs::PinholeCamera& camera) {
+  sensor_msgs::CameraInfo info = intrinsicsMsg(camera);
+  info.R = {1, 0, 0, 0, 1, 0, 0, 0, 1};
+  const cv::Matx33d k = cameraMatrix(camera);
+  for (int i = 0; i < 3; ++i) {
+    for (int j = 0; j < 3; ++j) info.P[4 * i + j] = k(i, j);
+    info.P[4 * i + 3] = 0.0;
+  }
+  return info;
+}
+
+std::pair<sensor_msgs::CameraInfo, sensor_msgs::CameraInfo> toStereoCameraInfo(
+    const ecs::StereoRig& rig) {
+  sensor_msgs::CameraInfo left = intrinsicsMsg(rig.left);
+  sensor_msgs::CameraInfo right = intrinsicsMsg(rig.right);
+  cv::Mat rotation, translation;
+  cv::eigen2cv(Eigen::Matrix3d(rig.right_from_left.rotation()), rotation);
+  cv::eigen2cv(Eigen::Vector3d(rig.right_from_left.translation()), translation);
+  cv::Mat r1, r2, p1, p2, q;
+  // p_right = R p_left + T is exactly stereoRectify's convention. Alpha 0 keeps only valid
+  // pixels; zero disparity at infinity makes cx' equal in both cameras.
+  cv::stereoRectify(cv::Mat(cameraMatrix(rig.left)), distortionVector(rig.left),
+                    cv::Mat(cameraMatrix(rig.right)), distortionVector(rig.right),
+                    cv::Size(rig.left.width, rig.left.height), rotation, translation, r1, r2, p1,
+                    p2, q, cv::CALIB_ZERO_DISPARITY, 0.0);
+  setRectification(r1, p1, &left);
+  setRectification(r2, p2, &right);
+  return {left, right};
+}
+
+bool fromCameraInfo(const sensor_msgs::CameraInfo& info, ecs::PinholeCamera* camera,
+                    std::string* error) {
+  auto fail = [error](const std::string& why) {
+    if (error) *error = why;
+    return false;
+  };
+  if (!info.distortion_model.empty() &&
+      info.distortion_model != sensor_msgs::distortion_models::PLUMB_BOB)
+    return fail("distortion_model '" + info.distortion_model + "' is not plumb_bob");
+  if (info.D.size() != 0 && info.D.size() != 4 && info.D.size() != 5)
+    return fail("D has " + std::to_string(info.D.size()) + " coefficients (plumb_bob takes 4 or 5)");
+  if (info.width == 0 || info.height == 0) return fail("width and height must be > 0");
+  ecs::PinholeCamera c;
+  c.width = static_cast<int>(info.width);
+  c.height = static_cast<int>(info.height);
+  c.fx = info.K[0];
+  c.skew = info.K[1];
+  c.cx = info.K[2];
+  c.fy = info.K[4];
+  c.cy = info.K[5];
+  if (!(c.fx > 0.0) || !(c.fy > 0.0))
+    return fail("focal length K[0]/K[4] must be > 0 (fx=" + std::to_string(c.fx) +
+                ", fy=" + std::to_string(c.fy) + ")");
+  c.dist = {{0, 0, 0, 0, 0}};
+  for (size_t i = 0; i < info.D.size(); ++i) c.dist[i] = info.D[i];
+  const std::string why = c.validate();
+  if (!why.empty()) return fail(why);
+  *camera = c;
+  return true;
+}
+
+bool fromStereoCameraInfo(const sensor_msgs::CameraInfo& left,
+                          const sensor_msgs::CameraInfo& right, ecs::StereoRig* rig,
+                          std::string* error) {
+  ecs::StereoRig result;
+  std::string why;
+  if (!fromCameraInfo(left, &result.left, &why)) {
+    if (error) *error = "left: " + why;
+    return false;
+  }
+  if (!fromCameraInfo(right, &result.right, &why)) {
+    if (error) *error = "right: " + why;
+    return false;
+  }
+  const double fx_rect = right.P[0], fy_rect = right.P[5];
+  if (!(fx_rect > 0.0) || !(fy_rect > 0.0)) {
+    if (error) *error = "right: P has no positive focal length";
+    return false;
+  }
+  const Eigen::Vector3d t_rect(right.P[3] / fx_rect, right.P[7] / fy_rect, right.P[11]);
+  const Eigen::Matrix3d r1 = rotationOf(left.R), r2 = rotationOf(right.R);
+  // p_rect_right = R1 p_left + t_rect and p_right = R2^T p_rect_right.
+  Eigen::Isometry3d right_from_left = Eigen::Isometry3d::Identity();
+  right_from_left.linear() = r2.transpose() * r1;
+  right_from_left.translation() = r2.transpose() * t_rect;
+  result.right_from_left = right_from_left;
+  *rig = result;
+  return true;
+}
+
+BoardObservation toMsg(const ecs::BoardCorners& corners) {
+  BoardObservation msg;
+  msg.board_id = static_cast<uint16_t>(corners.board_id);
+  msg.corner_ids.assign(corners.corner_ids.begin(), corners.corner_ids.end());
+  msg.u = corners.u;
+  msg.v = corners.v;
+  return msg;
+}
+
+ecs::BoardCorners fromMsg(const BoardObservation& msg) {
+  ecs::BoardCorners corners;
+  corners.board_id = msg.board_id;
+  corners.corner_ids.assign(msg.corner_ids.begin(), msg.corner_ids.end());
+  corners.u = msg.u;
+  corners.v = msg.v;
+  return corners;
+}
+
+StereoPatternObservation toMsg(const ecs::StereoObservation& observation) {
+  StereoPatternObservation msg;
+  msg.header.stamp.fromSec(observation.stamp);
+  for (const auto& b : observation.left) msg.left.push_back(toMsg(b));
+  for (const auto& b : observation.right) msg.right.push_back(toMsg(b));
+  return msg;
+}
+
+ecs::StereoObservation fromMsg(const StereoPatternObservation& msg) {
+  ecs::StereoObservation observation;
+  observation.stamp = msg.header.stamp.toSec();
+  for (const auto& b : msg.left) observation.left.push_back(fromMsg(b));
+  for (const auto& b : msg.right) observation.right.push_back(fromMsg(b));
+  return observation;
+}
+
+geometry_msgs::TransformStamped toTransformStamped(const Eigen::Isometry3d& parent_from_child,
+                                                   const std::string& parent_frame,
+                                                   const std::string& child_frame,
+                                                   const ros::Time& stamp) {
+  geometry_msgs::TransformStamped msg;
+  msg.header.stamp = stamp;
+  msg.header.frame_id = parent_frame;
+  msg.child_frame_id = child_frame;
+  const Eigen::Vector3d t = parent_from_child.translation();
+  const Eigen::Quaterniond q(parent_from_child.rotation());
+  msg.transform.translation.x = t.x();
+  msg.transform.translation.y = t.y();
+  msg.transform.translation.z = t.z();
+  msg.transform.rotation.x = q.x();
+  msg.transform.rotation.y = q.y();
+  msg.transform.rotation.z = q.z();
+  msg.transform.rotation.w = q.w();
+  return msg;
+}
+
+}  // namespace embedded_calibration_stereo

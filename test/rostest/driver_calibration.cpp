@@ -1,0 +1,129 @@
+// rostest: calibrations sent to the driver's set_camera_info services.
+#include <gtest/gtest.h>
+#include <sensor_msgs/CameraInfo.h>
+#include <sensor_msgs/SetCameraInfo.h>
+
+#include <fstream>
+
+#include "driver_test_utils.h"
+#include "embedded_calibration_stereo/CalibrationMode.h"
+#include "embedded_calibration_stereo/ros/calibration_file.h"
+
+using embedded_calibration_stereo::CalibrationMode;
+using ecs_test::Collector;
+using sensor_msgs::CameraInfo;
+
+namespace {
+
+const char* kName = "/stereo/camera_driver";
+
+// The CameraInfo published with the calibration_mode of the same stamp (frames are matched by
+// stamp, as consumers do with ExactTime).
+struct Frame {
+  CalibrationMode::ConstPtr mode;
+  CameraInfo::ConstPtr left, right;
+};
+
+std::vector<Frame> matchFrames(Collector<CalibrationMode>& modes, Collector<CameraInfo>& left,
+                               Collector<CameraInfo>& right) {
+  std::vector<Frame> frames;
+  const auto l = left.snapshot(), r = right.snapshot();
+  for (const auto& m : modes.snapshot()) {
+    Frame f{m, nullptr, nullptr};
+    for (const auto& x : l)
+      if (x->header.stamp == m->header.stamp) f.left = x;
+    for (const auto& x : r)
+      if (x->header.stamp == m->header.stamp) f.right = x;
+    if (f.left && f.right) frames.push_back(f);
+  }
+  return frames;
+}
+
+bool callSet(const std::string& side, const CameraInfo& info, sensor_msgs::SetCameraInfo* srv) {
+  srv->request.camera_info = info;
+  return ros::service::call(std::string("/stereo/") + side + "/set_camera_info", *srv);
+}
+
+}  // namespace
+
+TEST(DriverCalibration, SetCameraInfoPersistsAtomicallyAndSurvivesAReload) {
+  ros::NodeHandle nh("/stereo");
+  const ecs_test::TempDir temp("ecs_driver_calibration");
+  const std::string& dir = temp.path;
+  ASSERT_FALSE(dir.empty());
+  { std::ofstream(dir + "/plain_file") << "not a directory"; }
+  const std::string left_path = dir + "/left.yaml";
+  ecs_test::InProcessManager manager;
+  const ecs_test::InProcessManager::Params params = {
+      {"backend", "sim"}, {"fps", 10.0},
+      {"left_camera_info_url", "file://" + left_path},
+      // Unwritable: its parent is a regular file.
+      {"right_camera_info_url", "file://" + dir + "/plain_file/right.yaml"}};
+  ASSERT_TRUE(manager.load(kName, params));
+
+  Collector<CalibrationMode> modes(nh, "calibration_mode");
+  Collector<CameraInfo> left(nh, "left/camera_info"), right(nh, "right/camera_info");
+  ASSERT_TRUE(modes.waitForCount(2, 20.0));
+  ASSERT_TRUE(left.waitForCount(2, 5.0));
+  ASSERT_TRUE(right.waitForCount(2, 5.0));
+  const CameraInfo nominal_left = *left.snapshot().back();
+  const CameraInfo nominal_right = *right.snapshot().back();
+  EXPECT_EQ(modes.snapshot().back()->calibration_epoch, 0u);
+  EXPECT_GT(nominal_left.K[0], 0.0) << "no nominal calibration published before any file exists";
+
+  // 1. Accepted: written to the URL, published with a new epoch from the next frames on.
+  CameraInfo updated = nominal_left;
+  updated.K[0] += 7.5;
+  updated.P[0] += 7.5;
+  sensor_msgs::SetCameraInfo srv;
+  ASSERT_TRUE(callSet("left", updated, &srv));
+  EXPECT_TRUE(srv.response.success) << srv.response.status_message;
+  CameraInfo stored;
+  std::string error;
+  ASSERT_TRUE(embedded_calibration_stereo::readCalibrationFile(left_path, nullptr, &stored, &error)) << error;
+  EXPECT_NEAR(stored.K[0], updated.K[0], 1e-9);
+  ASSERT_TRUE(modes.waitFor([](const auto& m) { return m.back()->calibration_epoch == 1u; }, 5.0));
+  ASSERT_TRUE(left.waitFor([&](const auto& m) { return m.back()->K[0] == updated.K[0]; }, 5.0));
+  // Every frame's epoch matches the CameraInfo published with it.
+  modes.waitForCount(modes.snapshot().size() + 2, 5.0);
+  for (const auto& f : matchFrames(modes, left, right)) {
+    EXPECT_EQ(f.left->K[0], f.mode->calibration_epoch == 0 ? nominal_left.K[0] : updated.K[0])
+        << "epoch " << f.mode->calibration_epoch;
+  }
+
+  // 2. Unwritable URL: false with a reason; the calibration in force and the epoch stay.
+  CameraInfo right_update = nominal_right;
+  right_update.K[0] += 3.0;
+  ASSERT_TRUE(callSet("right", right_update, &srv));
+  EXPECT_FALSE(srv.response.success);
+  EXPECT_NE(srv.response.status_message.find("plain_file"), std::string::npos) << srv.response.status_message;
+  const size_t seen = modes.snapshot().size();
+  ASSERT_TRUE(modes.waitForCount(seen + 3, 5.0));
+  EXPECT_EQ(modes.snapshot().back()->calibration_epoch, 1u);
+  EXPECT_EQ(right.snapshot().back()->K[0], nominal_right.K[0]);
+
+  // 3. Non-positive focal length: refused, the file keeps the accepted calibration.
+  CameraInfo broken = updated;
+  broken.K[0] = 0.0;
+  ASSERT_TRUE(callSet("left", broken, &srv));
+  EXPECT_FALSE(srv.response.success);
+  EXPECT_NE(srv.response.status_message.find("focal"), std::string::npos) << srv.response.status_message;
+  ASSERT_TRUE(embedded_calibration_stereo::readCalibrationFile(left_path, nullptr, &stored, &error)) << error;
+  EXPECT_NEAR(stored.K[0], updated.K[0], 1e-9);
+
+  // 4. Reload: the stored calibration comes back from the URL.
+  ASSERT_TRUE(manager.unload(kName));
+  left.clear();
+  ASSERT_TRUE(manager.load(kName, params));
+  ASSERT_TRUE(left.waitForCount(1, 20.0));
+  EXPECT_NEAR(left.snapshot().back()->K[0], updated.K[0], 1e-9);
+  EXPECT_TRUE(manager.unload(kName));
+}
+
+int main(int argc, char** argv) {
+  testing::InitGoogleTest(&argc, argv);
+  ros::init(argc, argv, "driver_calibration_test");
+  ros::AsyncSpinner spinner(2);
+  spinner.start();
+  return RUN_ALL_TESTS();
+}

@@ -1,0 +1,170 @@
+// rostest: the driver with the sim backend, launched by driver.launch.
+#include <gtest/gtest.h>
+#include <image_geometry/stereo_camera_model.h>
+#include <sensor_msgs/CameraInfo.h>
+#include <sensor_msgs/Image.h>
+#include <std_srvs/SetBool.h>
+
+#include <set>
+
+#include "driver_test_utils.h"
+#include "embedded_calibration_stereo/CalibrationMode.h"
+#include "embedded_calibration_stereo/SetRigDrift.h"
+#include "embedded_calibration_stereo/StereoPatternObservation.h"
+#include "embedded_calibration_stereo/core/sim/sim_rig.h"
+
+using embedded_calibration_stereo::CalibrationMode;
+using ecs_test::Collector;
+
+namespace {
+
+double param(const std::string& name, double fallback) {
+  double v;
+  return ros::param::get("~" + name, v) ? v : fallback;
+}
+
+bool waitForDriver(double timeout_s) {
+  return ros::topic::waitForMessage<CalibrationMode>("calibration_mode", ros::Duration(timeout_s)) != nullptr;
+}
+
+}  // namespace
+
+TEST(DriverSim, PublishesAtTheConfiguredRate) {
+  ros::NodeHandle nh;
+  const double fps = param("fps", 10.0);
+  ASSERT_TRUE(waitForDriver(20.0)) << "no calibration_mode from the driver";
+  Collector<sensor_msgs::Image> left(nh, "left/image_raw");
+  const size_t frames = static_cast<size_t>(3 * fps) + 1;  // about 3 s of frames
+  ASSERT_TRUE(left.waitForCount(frames, 3.0 * 3)) << "fewer than " << frames << " frames";
+  const auto msgs = left.snapshot();
+  const double span = (msgs.back()->header.stamp - msgs.front()->header.stamp).toSec();
+  const double rate = (msgs.size() - 1) / span;
+  std::printf("measured rate %.2f fps over %zu frames (configured %.1f)\n", rate, msgs.size(), fps);
+  EXPECT_NEAR(rate, fps, 0.1 * fps);
+}
+
+TEST(DriverSim, LeftRightAndModeShareStamps) {
+  ros::NodeHandle nh;
+  ASSERT_TRUE(waitForDriver(20.0));
+  Collector<sensor_msgs::Image> left(nh, "left/image_raw"), right(nh, "right/image_raw");
+  Collector<sensor_msgs::CameraInfo> left_info(nh, "left/camera_info"), right_info(nh, "right/camera_info");
+  Collector<CalibrationMode> mode(nh, "calibration_mode");
+  ASSERT_TRUE(mode.waitForCount(12, 10.0));
+  ASSERT_TRUE(left.waitForCount(12, 5.0));
+  ASSERT_TRUE(right.waitForCount(12, 5.0));
+  ASSERT_TRUE(left_info.waitForCount(12, 5.0));
+  ASSERT_TRUE(right_info.waitForCount(12, 5.0));
+  auto stamps = [](const auto& msgs) {
+    std::set<ros::Time> s;
+    for (const auto& m : msgs) s.insert(m->header.stamp);
+    return s;
+  };
+  const auto l = stamps(left.snapshot()), r = stamps(right.snapshot()), li = stamps(left_info.snapshot()),
+             ri = stamps(right_info.snapshot());
+  const auto modes = mode.snapshot();
+  // Subscriptions started at slightly different frames: compare away from the edges.
+  for (size_t i = 2; i + 2 < modes.size(); ++i) {
+    const ros::Time t = modes[i]->header.stamp;
+    EXPECT_TRUE(l.count(t)) << "mode stamp " << t << " has no left image";
+    EXPECT_TRUE(r.count(t)) << "mode stamp " << t << " has no right image";
+    EXPECT_TRUE(li.count(t)) << "mode stamp " << t << " has no left camera_info";
+    EXPECT_TRUE(ri.count(t)) << "mode stamp " << t << " has no right camera_info";
+  }
+  EXPECT_EQ(left.snapshot().front()->header.frame_id, "stereo_left_optical_frame");
+  // stereo_image_proc convention (default right_in_left_frame): one frame id for both cameras.
+  EXPECT_EQ(right.snapshot().front()->header.frame_id, "stereo_left_optical_frame");
+  EXPECT_EQ(right_info.snapshot().front()->header.frame_id, "stereo_left_optical_frame");
+  EXPECT_EQ(left.snapshot().front()->encoding, "mono8");
+}
+
+// Returns how many calibration_mode frames arrived after the call until light_on == on, and
+// checks the settled flags of the frames from the switch on.
+void checkSwitch(Collector<CalibrationMode>& mode, bool on, int settle_frames) {
+  mode.clear();
+  std_srvs::SetBool srv;
+  srv.request.data = on;
+  ASSERT_TRUE(ros::service::call("set_light", srv));
+  EXPECT_TRUE(srv.response.success);
+  ASSERT_TRUE(mode.waitFor(
+      [&](const std::vector<CalibrationMode::ConstPtr>& m) {
+        for (size_t i = 0; i < m.size(); ++i)
+          if (m[i]->light_on == on) return m.size() >= i + settle_frames + 2;
+        return false;
+      },
+      10.0));
+  const auto m = mode.snapshot();
+  size_t first = 0;
+  while (m[first]->light_on != on) ++first;
+  EXPECT_LE(first + 1, 2u) << "light switched only at frame " << first + 1 << " after set_light";
+  EXPECT_FALSE(m[first]->settled) << "first frame after the switch is marked settled";
+  for (int k = 0; k < settle_frames; ++k) EXPECT_FALSE(m[first + k]->settled) << k;
+  EXPECT_TRUE(m[first + settle_frames]->settled);
+  EXPECT_TRUE(m[first + settle_frames + 1]->settled);
+  for (size_t i = first; i < m.size(); ++i) EXPECT_EQ(m[i]->light_on, on);
+}
+
+TEST(DriverSim, SetLightSwitchesWithinTwoFramesAndMarksSettling) {
+  ros::NodeHandle nh;
+  ASSERT_TRUE(waitForDriver(20.0));
+  ASSERT_TRUE(ros::service::waitForService("set_light", ros::Duration(10.0)));
+  Collector<CalibrationMode> mode(nh, "calibration_mode");
+  ASSERT_TRUE(mode.waitForCount(2, 5.0));
+  const int settle = static_cast<int>(param("settle_frames", 2));
+  checkSwitch(mode, true, settle);
+  checkSwitch(mode, false, settle);
+}
+
+TEST(DriverSim, GroundTruthAndDriftService) {
+  ros::NodeHandle nh;
+  ASSERT_TRUE(waitForDriver(20.0));
+  std::string config_path;
+  ASSERT_TRUE(ros::param::get("~sim_config", config_path));
+  const ecs::SimRigConfig config = ecs::loadSimRigConfig(config_path);
+
+  // Published calibration (no file yet: the nominal rig) and the truth both carry Tx.
+  const auto left = ros::topic::waitForMessage<sensor_msgs::CameraInfo>("left/camera_info", ros::Duration(5));
+  const auto right = ros::topic::waitForMessage<sensor_msgs::CameraInfo>("right/camera_info", ros::Duration(5));
+  ASSERT_TRUE(left && right);
+  image_geometry::StereoCameraModel model;
+  ASSERT_TRUE(model.fromCameraInfo(left, right));
+  EXPECT_NEAR(model.baseline(), config.rig.baseline(), 1e-9);
+
+  Collector<sensor_msgs::CameraInfo> gt_left(nh, "ground_truth/left/camera_info"),
+      gt_right(nh, "ground_truth/right/camera_info");
+  Collector<embedded_calibration_stereo::StereoPatternObservation> observations(nh, "ground_truth/observations");
+  Collector<sensor_msgs::Image> depth(nh, "ground_truth/left/depth"), scene(nh, "ground_truth/left/image_scene"),
+      scene_right(nh, "ground_truth/right/image_scene");
+  ASSERT_TRUE(gt_left.waitForCount(1, 5.0));
+  ASSERT_TRUE(gt_right.waitForCount(1, 5.0));
+  ASSERT_TRUE(observations.waitForCount(1, 5.0));
+  ASSERT_TRUE(depth.waitForCount(1, 5.0));
+  ASSERT_TRUE(scene.waitForCount(1, 5.0));
+  ASSERT_TRUE(scene_right.waitForCount(1, 5.0));
+  EXPECT_EQ(depth.snapshot().back()->encoding, "32FC1");
+  EXPECT_EQ(gt_left.snapshot().back()->K[0], config.rig.left.fx);
+  EXPECT_NEAR(gt_right.snapshot().back()->P[3], -gt_right.snapshot().back()->P[0] * config.rig.baseline(), 1e-6);
+
+  // Zoom: the truth's focal length follows the drift request.
+  embedded_calibration_stereo::SetRigDrift drift;
+  drift.request.focal_scale = 1.03;
+  ASSERT_TRUE(ros::service::call("sim/set_drift", drift));
+  ASSERT_TRUE(drift.response.success) << drift.response.message;
+  const double zoomed = 1.03 * config.rig.left.fx;
+  EXPECT_TRUE(gt_left.waitFor(
+      [&](const std::vector<sensor_msgs::CameraInfo::ConstPtr>& m) { return std::abs(m.back()->K[0] - zoomed) < 1e-6; },
+      5.0))
+      << "ground truth fx stays " << gt_left.snapshot().back()->K[0] << ", expected " << zoomed;
+  drift.request = embedded_calibration_stereo::SetRigDrift::Request();
+  drift.request.focal_scale = 1.0;
+  drift.request.reset = true;
+  ASSERT_TRUE(ros::service::call("sim/set_drift", drift));
+  EXPECT_TRUE(drift.response.success);
+}
+
+int main(int argc, char** argv) {
+  testing::InitGoogleTest(&argc, argv);
+  ros::init(argc, argv, "driver_sim_test");
+  ros::AsyncSpinner spinner(2);
+  spinner.start();
+  return RUN_ALL_TESTS();
+}

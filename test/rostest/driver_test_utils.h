@@ -1,0 +1,111 @@
+#pragma once
+// Helpers shared by the driver's rostest nodes: collect messages of a topic and wait on a
+// condition over them with a deadline (never a fixed sleep as synchronisation), and load the
+// driver nodelet in-process.
+#include <nodelet/loader.h>
+#include <ros/ros.h>
+#include <rosgraph_msgs/Log.h>
+
+#include <chrono>
+#include <condition_variable>
+#include <filesystem>
+#include <functional>
+#include <map>
+#include <mutex>
+#include <string>
+#include <vector>
+
+namespace ecs_test {
+
+template <class M>
+class Collector {
+ public:
+  using Ptr = typename M::ConstPtr;
+  Collector(ros::NodeHandle& nh, const std::string& topic, uint32_t queue = 100) {
+    sub_ = nh.subscribe<M>(topic, queue, [this](const Ptr& msg) {
+      {
+        std::lock_guard<std::mutex> lock(mutex_);
+        messages_.push_back(msg);
+      }
+      cv_.notify_all();
+    });
+  }
+  // Waits until `done(messages)` holds; false on timeout.
+  bool waitFor(const std::function<bool(const std::vector<Ptr>&)>& done, double timeout_s) {
+    std::unique_lock<std::mutex> lock(mutex_);
+    return cv_.wait_for(lock, std::chrono::duration<double>(timeout_s), [&] { return done(messages_); });
+  }
+  bool waitForCount(size_t n, double timeout_s) {
+    return waitFor([n](const std::vector<Ptr>& m) { return m.size() >= n; }, timeout_s);
+  }
+  std::vector<Ptr> snapshot() {
+    std::lock_guard<std::mutex> lock(mutex_);
+    return messages_;
+  }
+  void clear() {
+    std::lock_guard<std::mutex> lock(mutex_);
+    messages_.clear();
+  }
+
+ private:
+  ros::Subscriber sub_;
+  std::mutex mutex_;
+  std::condition_variable cv_;
+  std::vector<Ptr> messages_;
+};
+
+// Waits for a /rosout message containing every string of `needles`.
+inline bool waitForLog(Collector<rosgraph_msgs::Log>& log, const std::vector<std::string>& needles,
+                       double timeout_s, std::string* found = nullptr) {
+  return log.waitFor(
+      [&](const std::vector<rosgraph_msgs::Log::ConstPtr>& messages) {
+        for (const auto& m : messages) {
+          bool all = true;
+          for (const auto& n : needles) all = all && m->msg.find(n) != std::string::npos;
+          if (all) {
+            if (found) *found = m->msg;
+            return true;
+          }
+        }
+        return false;
+      },
+      timeout_s);
+}
+
+inline std::string makeTempDir(const std::string& prefix) {
+  std::string pattern = "/tmp/" + prefix + "_XXXXXX";
+  std::vector<char> name(pattern.begin(), pattern.end());
+  name.push_back('\0');
+  return mkdtemp(name.data()) ? std::string(name.data()) : std::string();
+}
+
+// A temporary directory removed with everything in it at the end of the scope.
+struct TempDir {
+  explicit TempDir(const std::string& prefix) : path(makeTempDir(prefix)) {}
+  ~TempDir() {
+    if (!path.empty()) std::filesystem::remove_all(path);
+  }
+  TempDir(const TempDir&) = delete;
+  TempDir& operator=(const TempDir&) = delete;
+  const std::string path;
+};
+
+constexpr const char* kDriverType = "embedded_calibration_stereo/CameraDriver";
+
+// Loads driver nodelets into this process (the test's own nodelet manager).
+class InProcessManager {
+ public:
+  using Params = std::map<std::string, XmlRpc::XmlRpcValue>;
+  // Sets the private parameters of `name` and loads the driver; false when onInit failed.
+  bool load(const std::string& name, const Params& params) {
+    ros::param::del(name);
+    for (const auto& p : params) ros::param::set(name + "/" + p.first, p.second);
+    return loader_.load(name, kDriverType, ros::M_string(), std::vector<std::string>());
+  }
+  bool unload(const std::string& name) { return loader_.unload(name); }
+
+ private:
+  nodelet::Loader loader_{false};
+};
+
+}  // namespace ecs_test
