@@ -25,6 +25,7 @@
 #include <string>
 #include <vector>
 
+#include "embedded_calibration_stereo/core/solution_errors.h"
 #include "embedded_calibration_stereo/core/bundle_adjuster.h"
 #include "embedded_calibration_stereo/core/config_io.h"
 #include "embedded_calibration_stereo/core/synthetic_observations.h"
@@ -63,26 +64,6 @@ struct Setup {
   double prior_m = BundleAdjustmentOptions{}.device_prior_position_m;
   double device_error_m = 0.001, device_error_deg = 0.5;
 };
-
-// |error| / reported sd of fx fy cx cy k1 k2 per camera, baseline, rotation.
-std::vector<double> normalisedErrors(const BundleAdjustmentSummary& s, const StereoRig& truth) {
-  std::vector<double> z;
-  const PinholeCamera* est[2] = {&s.rig.left, &s.rig.right};
-  const PinholeCamera* tru[2] = {&truth.left, &truth.right};
-  const CameraStddev* sd[2] = {&s.left_stddev, &s.right_stddev};
-  for (int c = 0; c < 2; ++c) {
-    z.push_back(std::abs(est[c]->fx - tru[c]->fx) / sd[c]->fx);
-    z.push_back(std::abs(est[c]->fy - tru[c]->fy) / sd[c]->fy);
-    z.push_back(std::abs(est[c]->cx - tru[c]->cx) / sd[c]->cx);
-    z.push_back(std::abs(est[c]->cy - tru[c]->cy) / sd[c]->cy);
-    z.push_back(std::abs(est[c]->dist[0] - tru[c]->dist[0]) / sd[c]->dist[0]);
-    z.push_back(std::abs(est[c]->dist[1] - tru[c]->dist[1]) / sd[c]->dist[1]);
-  }
-  z.push_back(std::abs(s.rig.baseline() - truth.baseline()) / s.baseline_stddev_m);
-  z.push_back(rotationAngleDeg(s.rig.right_from_left.linear(), truth.right_from_left.linear()) /
-              s.rotation_stddev_deg);
-  return z;
-}
 
 void run(const char* label, BoardPoseMode mode, bool from_in_force, int frames,
          const Setup& setup) {
@@ -150,7 +131,7 @@ void run(const char* label, BoardPoseMode mode, bool from_in_force, int frames,
     a.k1_sum += 0.5 * (e.k1[0] + e.k1[1]);
     a.k1_sd += 0.5 * (s.left_stddev.dist[0] + s.right_stddev.dist[0]);
     if (s.covariance_ok)
-      for (double z : normalisedErrors(s, truth)) {
+      for (double z : errorsInReportedStddevs(s, truth)) {
         ++a.compared;
         if (z <= 3.0) ++a.covered;
       }

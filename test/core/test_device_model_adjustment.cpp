@@ -27,6 +27,7 @@
 #include <iostream>
 #include <random>
 
+#include "embedded_calibration_stereo/core/solution_errors.h"
 #include "embedded_calibration_stereo/core/bundle_adjuster.h"
 #include "embedded_calibration_stereo/core/config_io.h"
 #include "embedded_calibration_stereo/core/quality_gate.h"
@@ -76,26 +77,6 @@ BundleAdjustmentSummary solve(const std::vector<StereoObservation>& frames,
   input.image_height = 480;
   input.in_force = std::move(in_force);
   return BundleAdjuster(options, config).Solve(input);
-}
-
-// |error| / reported sd: fx, fy, cx, cy, k1, k2 per camera, baseline, rotation (14 values).
-std::vector<double> normalisedErrors(const BundleAdjustmentSummary& s, const StereoRig& truth) {
-  std::vector<double> z;
-  const PinholeCamera* est[2] = {&s.rig.left, &s.rig.right};
-  const PinholeCamera* tru[2] = {&truth.left, &truth.right};
-  const CameraStddev* sd[2] = {&s.left_stddev, &s.right_stddev};
-  for (int c = 0; c < 2; ++c) {
-    z.push_back(std::abs(est[c]->fx - tru[c]->fx) / sd[c]->fx);
-    z.push_back(std::abs(est[c]->fy - tru[c]->fy) / sd[c]->fy);
-    z.push_back(std::abs(est[c]->cx - tru[c]->cx) / sd[c]->cx);
-    z.push_back(std::abs(est[c]->cy - tru[c]->cy) / sd[c]->cy);
-    z.push_back(std::abs(est[c]->dist[0] - tru[c]->dist[0]) / sd[c]->dist[0]);
-    z.push_back(std::abs(est[c]->dist[1] - tru[c]->dist[1]) / sd[c]->dist[1]);
-  }
-  z.push_back(std::abs(s.rig.baseline() - truth.baseline()) / s.baseline_stddev_m);
-  z.push_back(rotationAngleDeg(s.rig.right_from_left.linear(), truth.right_from_left.linear()) /
-              s.rotation_stddev_deg);
-  return z;
 }
 
 // A prior so loose that it only fixes the gauge: noise-free solves are then exact (the default
@@ -173,7 +154,7 @@ TEST(DeviceModel, TangentialTermsOfTheSimTruthAreRecoveredWhenEstimated) {
   const BundleAdjustmentSummary noisy =
       solve(s.observe(10, 0.2, 3), s.nominal(3), s.drifted(), {}, tangential);
   ASSERT_TRUE(noisy.success && noisy.covariance_ok) << noisy.message;
-  for (double z : normalisedErrors(noisy, s.truth)) EXPECT_LE(z, 4.0);
+  for (double z : errorsInReportedStddevs(noisy, s.truth)) EXPECT_LE(z, 4.0);
   EXPECT_GT(noisy.left_stddev.dist[2], 0.0);
   EXPECT_LE(std::abs(noisy.rig.left.dist[2] - s.truth.left.dist[2]), 4 * noisy.left_stddev.dist[2]);
   // The default model (k1, k2) cannot fit the sim truth exactly.
@@ -206,7 +187,7 @@ TEST(DeviceModel, NoisyFramesAreWithinTheReportedStddevsAndTheGeometryLimits) {
     EXPECT_EQ(r.boards_right, 6);
     EXPECT_NEAR(r.rms_left_px, 0.2 * std::sqrt(2.0), 0.03);
     EXPECT_NEAR(r.residual_sigma_px, 0.2, 0.02);
-    for (double z : normalisedErrors(r, s.truth)) EXPECT_LE(z, 4.0);
+    for (double z : errorsInReportedStddevs(r, s.truth)) EXPECT_LE(z, 4.0);
     for (const auto& [camera, sd] : {std::make_pair(&r.rig.left, &r.left_stddev),
                                      std::make_pair(&r.rig.right, &r.right_stddev)}) {
       EXPECT_LT(sd->fx / camera->fx, limit.fx_rel);
@@ -240,7 +221,7 @@ TEST(DeviceModel, IssueBoundsThatAreMetOverTwentyTrials) {
       const BundleAdjustmentSummary r =
           solve(s.observe(frames, 0.2, 100 + trial), s.nominal(200 + trial), s.truth);
       ASSERT_TRUE(r.success && r.covariance_ok) << r.message;
-      for (double z : normalisedErrors(r, s.truth)) {
+      for (double z : errorsInReportedStddevs(r, s.truth)) {
         ++total;
         if (z <= 3.0) ++inside;
       }
