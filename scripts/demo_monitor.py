@@ -59,8 +59,12 @@ class Monitor:
         self.light_on_frames = 0
         self.mode = None
         self.latest = {}
-        self.first_stamp = None
+        self.first_image_time = None
+        self.last_image_time = None
         self.last_image = None
+        self.last_light_on_image = None
+        self.settled_light_on_stamps = set()  # stamps of settled light-on frames (bounded)
+        self.pending_images = {}  # stamp -> image, until its calibration_mode arrives
         sub = lambda topic, cls, key: rospy.Subscriber(
             ns + "/" + topic, cls, lambda m: self.store(key, m), queue_size=2)
         self.subs = [
@@ -82,11 +86,28 @@ class Monitor:
             self.mode = msg
             if msg.light_on:
                 self.light_on_frames += 1
+            if msg.light_on and msg.settled:
+                image = self.pending_images.pop(msg.header.stamp, None)
+                if image is not None:
+                    self.last_light_on_image = image
+                else:
+                    self.settled_light_on_stamps.add(msg.header.stamp)
+                    if len(self.settled_light_on_stamps) > 100:
+                        self.settled_light_on_stamps.pop()
 
     def on_image(self, msg):
+        now = time.time()
         with self.lock:
             self.frames += 1
+            self.first_image_time = self.first_image_time or now
+            self.last_image_time = now
             self.last_image = msg
+            # The image and its calibration_mode share a stamp but arrive in either order.
+            if msg.header.stamp in self.settled_light_on_stamps:
+                self.settled_light_on_stamps.discard(msg.header.stamp)
+                self.last_light_on_image = msg
+            else:
+                self.pending_images = {msg.header.stamp: msg}
 
     def focal_error_percent(self, side):
         est, gt = self.latest.get(side), self.latest.get("gt_" + side)
@@ -107,7 +128,6 @@ def main():
 
     start = time.time()
     last_frames, last_t = 0, start
-    rates = []
     while not rospy.is_shutdown() and time.time() - start < args.duration:
         time.sleep(2.0)  # progress cadence only; nothing waits on this for correctness
         now = time.time()
@@ -116,8 +136,6 @@ def main():
             mode = mon.mode
             err_l, err_r = mon.focal_error_percent("left"), mon.focal_error_percent("right")
         fps = (frames - last_frames) / (now - last_t)
-        if frames > 0:
-            rates.append(fps)
         last_frames, last_t = frames, now
         print("[%5.1f s] %5.1f fps  light %s  epoch %s  fx error vs truth L %.3f%% R %.3f%%" % (
             now - start, fps, "on " if mode and mode.light_on else "off",
@@ -125,23 +143,27 @@ def main():
 
     with mon.lock:
         latest = dict(mon.latest)
-        image = mon.last_image
+        images = {"left_snapshot.png": mon.last_image,
+                  "left_snapshot_light_on.png": mon.last_light_on_image}
         frames, light_frames = mon.frames, mon.light_on_frames
         mode = mon.mode
+        span = (mon.last_image_time or 0) - (mon.first_image_time or 0)
     for key in ("left", "right", "gt_left", "gt_right"):
         if key in latest:
             name = key.replace("gt_", "ground_truth_")
             with open(os.path.join(args.out, name + ".yaml"), "w") as f:
                 f.write(camera_yaml(latest[key], name))
-    if image is not None and image.encoding in ("mono8", "bgr8", "rgb8"):
+    for file_name, image in images.items():
+        if image is None or image.encoding not in ("mono8", "bgr8", "rgb8"):
+            continue
         channels = 1 if image.encoding == "mono8" else 3
         data = bytes(image.data)
         if channels == 3 and image.encoding == "bgr8":
             data = b"".join(data[i + 2:i + 3] + data[i + 1:i + 2] + data[i:i + 1]
                             for i in range(0, len(data), 3))
-        write_png(os.path.join(args.out, "left_snapshot.png"), image.width, image.height,
-                  channels, data)
-    mean_fps = sum(rates) / len(rates) if rates else 0.0
+        write_png(os.path.join(args.out, file_name), image.width, image.height, channels, data)
+    # Mean over the time images flowed, so start-up does not count against the rate.
+    mean_fps = (frames - 1) / span if frames > 1 and span > 0 else 0.0
     with open(os.path.join(args.out, "status.yaml"), "w") as f:
         f.write("duration_s: %.1f\nframes: %d\nmean_fps: %.2f\nlight_on_frames: %d\n"
                 "calibration_epoch: %s\n" % (time.time() - start, frames, mean_fps, light_frames,
