@@ -1,0 +1,80 @@
+#pragma once
+// The ROS side of one calibration solve for the OnlineCalibrator nodelet: parameters, checking
+// incoming observation messages, solve + quality gate against the calibration in force, and the
+// commit (left|right/set_camera_info of the driver, then the left->right transform on
+// /tf_static). The nodelet keeps the threads, topics and windows; this file keeps the logic.
+#include <ros/ros.h>
+#include <sensor_msgs/CameraInfo.h>
+#include <tf2_ros/static_transform_broadcaster.h>
+
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "embedded_calibration_stereo/CalibrationStatus.h"
+#include "embedded_calibration_stereo/core/bundle_adjuster.h"
+#include "embedded_calibration_stereo/core/calibration_device.h"
+#include "embedded_calibration_stereo/core/observation.h"
+#include "embedded_calibration_stereo/core/quality_gate.h"
+
+namespace embedded_calibration_stereo {
+
+struct CalibratorParams {
+  std::string device_config;  // sim_rig.yaml format: the `device` node
+  std::string left_frame_id = "stereo_left_optical_frame";
+  std::string right_frame_id = "stereo_right_optical_frame";
+  bool auto_calibrate = true;  // solve at the end of every light-on window of the driver
+  int min_frames = 5;          // a light-on window with fewer frames is not solved
+  int max_frames = 30;         // frames kept per window (the first ones)
+  double service_timeout_s = 2.0;  // for each set_light / set_camera_info call
+  ecs::BundleAdjustmentOptions adjustment;
+  ecs::GateOptions gate;
+};
+
+// Reads the private parameters; throws ecs::ConfigError naming a bad one.
+CalibratorParams loadCalibratorParams(const ros::NodeHandle& pnh, const std::string& default_device_config);
+
+// The defects of one observation message that make the calibrator drop it (non-finite
+// coordinates, duplicate ids, ids outside the board, unknown board, mismatched lengths), from
+// the core validator; a board with merely few corners is not a defect. Empty when usable.
+std::vector<std::string> observationDefects(const ecs::StereoObservation& observation,
+                                            const std::vector<ecs::VirtualBoard>& boards);
+
+// CalibrationStatus of a solve (every field filled; intrinsics fx, fy, cx, cy, k1, k2, p1, p2, k3).
+CalibrationStatus makeStatus(const ecs::BundleAdjustmentSummary& summary, const ecs::GateDecision& decision);
+
+// Solve, gate and commit. Threading: only ever used from the calibrator's worker thread (it
+// blocks on service calls and on the solver); the broadcaster and clients are its own.
+class CalibrationSession {
+ public:
+  // `nh`: the head's namespace (the driver's services are looked up there).
+  CalibrationSession(ros::NodeHandle nh, CalibratorParams params, ecs::CalibrationDevice device);
+
+  // `left_info`/`right_info`: the calibration in force (null when none received yet);
+  // `epoch`: its calibration_epoch. Commits unless `dry_run` or rejected. status.accepted is
+  // true only for a committed (or, in a dry run, an acceptable) calibration; a failed
+  // set_camera_info leaves accepted false with the reason "not committed: ..." (the next window
+  // solves again against the unchanged calibration in force: the retry).
+  CalibrationStatus solve(const std::vector<ecs::StereoObservation>& frames,
+                          const sensor_msgs::CameraInfo* left_info, const sensor_msgs::CameraInfo* right_info,
+                          uint32_t epoch, bool dry_run);
+
+  const ecs::CalibrationDevice& device() const { return device_; }
+  const std::vector<ecs::VirtualBoard>& boards() const { return boards_; }
+
+ private:
+  // Empty on success, otherwise why the commit failed (the left calibration is then restored
+  // to `left_in_force` when only the right one was refused).
+  std::string commit(const ecs::StereoRig& rig, const sensor_msgs::CameraInfo& left_in_force);
+  bool callSetCameraInfo(const std::string& side, const sensor_msgs::CameraInfo& info, std::string* error);
+
+  ros::NodeHandle nh_;
+  CalibratorParams params_;
+  ecs::CalibrationDevice device_;
+  std::vector<ecs::VirtualBoard> boards_;
+  ecs::BundleAdjuster adjuster_;
+  ecs::QualityGate gate_;
+  tf2_ros::StaticTransformBroadcaster tf_broadcaster_;
+};
+
+}  // namespace embedded_calibration_stereo

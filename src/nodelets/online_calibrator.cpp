@@ -1,0 +1,353 @@
+// OnlineCalibrator nodelet: collects the board observations of each light-on window (frames
+// whose calibration_mode is light_on && settled, matched by stamp), solves on a worker thread,
+// and on acceptance commits through the driver's set_camera_info services and /tf_static
+// (CalibrationSession). calibration/recalibrate switches the light on, collects, solves,
+// commits unless dry_run or rejected, switches the light off and answers with the status.
+#include <diagnostic_updater/diagnostic_updater.h>
+#include <nodelet/nodelet.h>
+#include <pluginlib/class_list_macros.hpp>
+#include <ros/package.h>
+#include <ros/ros.h>
+#include <std_srvs/SetBool.h>
+
+#include <atomic>
+#include <condition_variable>
+#include <deque>
+#include <future>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <thread>
+
+#include "embedded_calibration_stereo/CalibrationMode.h"
+#include "embedded_calibration_stereo/Recalibrate.h"
+#include "embedded_calibration_stereo/core/config_error.h"
+#include "embedded_calibration_stereo/core/config_io.h"
+#include "embedded_calibration_stereo/ros/calibration_session.h"
+#include "embedded_calibration_stereo/ros/conversions.h"
+
+namespace embedded_calibration_stereo {
+
+// Threads:
+//  - the manager's single-threaded queue of this nodelet runs the subscribers (observations,
+//    calibration_mode, camera_info) and the diagnostics timer;
+//  - the manager's multi-threaded queue runs calibration/recalibrate, which blocks while the
+//    window fills and the worker solves (so the subscribers keep running meanwhile);
+//  - the worker thread (started in onInit, joined in the destructor) alone runs session_.
+// Everything they share is guarded by mutex_; session_->boards() is immutable after onInit.
+class OnlineCalibratorNodelet : public nodelet::Nodelet {
+ public:
+  ~OnlineCalibratorNodelet() override { stopWorker(); }
+
+ private:
+  struct Job {
+    std::vector<ecs::StereoObservation> frames;
+    bool dry_run = false;
+    std::shared_ptr<std::promise<CalibrationStatus>> result;  // null for automatic windows
+  };
+
+  void onInit() override {
+    try {
+      initialise();
+    } catch (const std::exception& e) {
+      NODELET_FATAL("OnlineCalibrator cannot start: %s", e.what());
+      // The manager frees a failed nodelet's callback queues first: unregister everything now.
+      stopWorker();
+      recalibrate_srv_.shutdown();
+      diagnostics_timer_.stop();
+      for (ros::Subscriber* sub : {&observations_sub_, &mode_sub_, &left_info_sub_, &right_info_sub_}) sub->shutdown();
+      throw;
+    }
+  }
+
+  void initialise() {
+    ros::NodeHandle& nh = getNodeHandle();
+    ros::NodeHandle& pnh = getPrivateNodeHandle();
+    const std::string package_path = ros::package::getPath("embedded_calibration_stereo");
+    params_ = loadCalibratorParams(pnh, package_path.empty() ? "" : package_path + "/config/sim_rig.yaml");
+    ecs::CalibrationDevice device;
+    try {
+      cv::FileStorage fs = ecs::openYaml(params_.device_config);
+      device = ecs::loadDevice(fs["device"], "device");
+    } catch (const std::exception& e) {
+      throw ecs::ConfigError("device_config", "'" + params_.device_config + "': " + e.what());
+    }
+    session_ = std::make_unique<CalibrationSession>(nh, params_, device);
+
+    status_pub_ = nh.advertise<CalibrationStatus>("calibration/status", 1, /*latch=*/true);
+    observations_sub_ = nh.subscribe("calibration/observations", 10, &OnlineCalibratorNodelet::onObservation, this);
+    mode_sub_ = nh.subscribe("calibration_mode", 10, &OnlineCalibratorNodelet::onMode, this);
+    left_info_sub_ = nh.subscribe<sensor_msgs::CameraInfo>(
+        "left/camera_info", 1, [this](const sensor_msgs::CameraInfoConstPtr& m) { storeInfo(true, m); });
+    right_info_sub_ = nh.subscribe<sensor_msgs::CameraInfo>(
+        "right/camera_info", 1, [this](const sensor_msgs::CameraInfoConstPtr& m) { storeInfo(false, m); });
+    set_light_client_ = nh.serviceClient<std_srvs::SetBool>("set_light");
+    diagnostics_ = std::make_unique<diagnostic_updater::Updater>(nh, pnh, getName());
+    diagnostics_->setHardwareID("online_calibrator");
+    diagnostics_->add("online_calibrator", this, &OnlineCalibratorNodelet::diagnose);
+    diagnostics_timer_ = nh.createWallTimer(ros::WallDuration(1.0), [this](const ros::WallTimerEvent&) {
+      diagnostics_->update();
+    });
+    worker_ = std::thread(&OnlineCalibratorNodelet::workerLoop, this);
+    recalibrate_srv_ = getMTNodeHandle().advertiseService("calibration/recalibrate",
+                                                          &OnlineCalibratorNodelet::recalibrate, this);
+    NODELET_INFO("OnlineCalibrator: device from %s (%zu virtual boards), observations on %s, %s",
+                 params_.device_config.c_str(), session_->boards().size(), observations_sub_.getTopic().c_str(),
+                 params_.auto_calibrate ? "solving every light-on window" : "solving on request only");
+  }
+
+  void stopWorker() {
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      stopping_ = true;
+    }
+    cv_.notify_all();
+    if (worker_.joinable()) worker_.join();
+    std::lock_guard<std::mutex> lock(mutex_);
+    for (Job& job : jobs_)
+      if (job.result) job.result->set_value(rejectedStatus("calibrator shutting down"));
+    jobs_.clear();
+  }
+
+  void storeInfo(bool left, const sensor_msgs::CameraInfoConstPtr& info) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    (left ? left_info_ : right_info_) = info;
+  }
+
+  void onObservation(const StereoPatternObservationConstPtr& msg) {
+    ecs::StereoObservation observation = fromMsg(*msg);
+    const std::vector<std::string> defects = observationDefects(observation, session_->boards());
+    if (!defects.empty()) {
+      std::string text;
+      for (const std::string& d : defects) text += (text.empty() ? "" : "; ") + d;
+      NODELET_ERROR_THROTTLE(5.0, "OnlineCalibrator: observation dropped on %s: %s",
+                             observations_sub_.getTopic().c_str(), text.c_str());
+      std::lock_guard<std::mutex> lock(mutex_);
+      ++dropped_messages_;
+      return;
+    }
+    if (observation.left.empty() && observation.right.empty()) return;  // no board in this frame
+    std::lock_guard<std::mutex> lock(mutex_);
+    for (const auto& mode : modes_) {
+      if (mode.first == msg->header.stamp) {
+        addToWindow(std::move(observation), msg->header.stamp, mode.second);
+        return;
+      }
+    }
+    pending_.emplace_back(msg->header.stamp, std::move(observation));  // its mode is not here yet
+    if (pending_.size() > kKeptFrames) pending_.pop_front();
+  }
+
+  void onMode(const CalibrationModeConstPtr& mode) {
+    const bool calibrating = mode->light_on && mode->settled;
+    std::optional<Job> job;
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      epoch_ = mode->calibration_epoch;
+      modes_.emplace_back(mode->header.stamp, calibrating);
+      if (modes_.size() > kKeptFrames) modes_.pop_front();
+      for (auto it = pending_.begin(); it != pending_.end(); ++it) {
+        if (it->first == mode->header.stamp) {
+          addToWindow(std::move(it->second), it->first, calibrating);
+          pending_.erase(it);
+          break;
+        }
+      }
+      // The light went off: the window of the driver's schedule is complete.
+      if (!mode->light_on && !request_active_ && !window_.empty()) {
+        window_closed_at_ = mode->header.stamp;
+        if (params_.auto_calibrate && static_cast<int>(window_.size()) >= params_.min_frames)
+          job = Job{std::move(window_), false, nullptr};
+        window_.clear();
+      }
+    }
+    if (job) submit(std::move(*job));
+  }
+
+  // Caller holds mutex_.
+  void addToWindow(ecs::StereoObservation observation, const ros::Time& stamp, bool calibrating) {
+    if (!calibrating || stamp <= window_closed_at_) return;
+    const size_t cap = request_active_ ? request_frames_ : static_cast<size_t>(params_.max_frames);
+    if (window_.size() >= cap) return;
+    observation.stamp = stamp.toSec();
+    window_.push_back(std::move(observation));
+    if (request_active_ && window_.size() >= request_frames_) cv_.notify_all();
+  }
+
+  void submit(Job job) {
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      if (stopping_) {
+        if (job.result) job.result->set_value(rejectedStatus("calibrator shutting down"));
+        return;
+      }
+      jobs_.push_back(std::move(job));
+    }
+    cv_.notify_all();
+  }
+
+  void workerLoop() {
+    while (true) {
+      Job job;
+      sensor_msgs::CameraInfoConstPtr left, right;
+      uint32_t epoch;
+      {
+        std::unique_lock<std::mutex> lock(mutex_);
+        cv_.wait(lock, [this] { return stopping_ || !jobs_.empty(); });
+        if (stopping_) return;
+        job = std::move(jobs_.front());
+        jobs_.pop_front();
+        left = left_info_;
+        right = right_info_;
+        epoch = epoch_;
+      }
+      CalibrationStatus status = session_->solve(job.frames, left.get(), right.get(), epoch, job.dry_run);
+      NODELET_INFO("OnlineCalibrator: %zu frames, %s%s%s%s (rms %.3f / %.3f px, %.0f ms)", job.frames.size(),
+                   job.dry_run ? "dry run, " : "", status.accepted ? "accepted" : "not accepted",
+                   status.reason.empty() ? "" : ": ", status.reason.c_str(), status.rms_left_px,
+                   status.rms_right_px, status.solve_ms);
+      {
+        std::lock_guard<std::mutex> lock(mutex_);
+        last_solve_ = status;
+        last_solve_time_ = ros::WallTime::now();
+        if (status.accepted && !job.dry_run) last_commit_time_ = last_solve_time_;
+        if (!status.accepted) last_rejection_ = status.reason;
+      }
+      if (!job.dry_run) status_pub_.publish(status);  // a dry run is answered, not announced
+      if (job.result) job.result->set_value(status);
+    }
+  }
+
+  bool recalibrate(Recalibrate::Request& req, Recalibrate::Response& res) {
+    const size_t frames = req.frames > 0 ? req.frames : static_cast<size_t>(params_.min_frames);
+    const double timeout_s = req.timeout_s > 0.0 ? req.timeout_s : 10.0;
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      if (request_active_) return answer(&res, false, "busy: another recalibration is collecting");
+      request_active_ = true;
+      request_frames_ = frames;
+      window_.clear();
+      if (!modes_.empty()) window_closed_at_ = modes_.back().first;  // only frames from now on
+    }
+    std::string error;
+    if (!setLight(true, &error)) {
+      std::lock_guard<std::mutex> lock(mutex_);
+      request_active_ = false;
+      return answer(&res, false, "cannot switch the light on: " + error);
+    }
+    Job job;
+    job.dry_run = req.dry_run;
+    {
+      std::unique_lock<std::mutex> lock(mutex_);
+      cv_.wait_for(lock, std::chrono::duration<double>(timeout_s),
+                   [&] { return stopping_ || window_.size() >= frames; });
+      job.frames = std::move(window_);
+      window_.clear();
+      if (!modes_.empty()) window_closed_at_ = modes_.back().first;
+      request_active_ = false;
+    }
+    const bool light_off = setLight(false, &error);
+    if (!light_off) NODELET_ERROR("OnlineCalibrator: cannot switch the light off: %s", error.c_str());
+    if (job.frames.size() < frames) {
+      char text[160];
+      if (job.frames.empty())
+        snprintf(text, sizeof(text), "timeout: no boards seen in %.1f s with the light on", timeout_s);
+      else
+        snprintf(text, sizeof(text), "timeout: only %zu of %zu frames with boards in %.1f s", job.frames.size(),
+                 frames, timeout_s);
+      return answer(&res, false, text);
+    }
+    job.result = std::make_shared<std::promise<CalibrationStatus>>();
+    std::future<CalibrationStatus> result = job.result->get_future();
+    submit(std::move(job));
+    res.status = result.get();
+    res.success = res.status.accepted;
+    res.message = res.status.accepted ? (req.dry_run ? res.status.reason : "committed") : res.status.reason;
+    if (!light_off) res.message += " (light not switched off: " + error + ")";
+    return true;
+  }
+
+  bool answer(Recalibrate::Response* res, bool success, const std::string& message) {
+    res->success = success;
+    res->message = message;
+    res->status = rejectedStatus(message);
+    return true;
+  }
+
+  // Safe with or without mutex_ held.
+  CalibrationStatus rejectedStatus(const std::string& reason) const {
+    CalibrationStatus status;
+    status.header.stamp = ros::Time::now();
+    status.epoch = epoch_;
+    status.reason = reason;
+    return status;
+  }
+
+  bool setLight(bool on, std::string* error) {
+    std_srvs::SetBool srv;
+    srv.request.data = on;
+    if (!set_light_client_.waitForExistence(ros::Duration(params_.service_timeout_s))) {
+      *error = set_light_client_.getService() + " is not available";
+      return false;
+    }
+    if (!set_light_client_.call(srv) || !srv.response.success) {
+      *error = set_light_client_.getService() + " failed: " + srv.response.message;
+      return false;
+    }
+    return true;
+  }
+
+  void diagnose(diagnostic_updater::DiagnosticStatusWrapper& status) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    const ros::WallTime now = ros::WallTime::now();
+    if (!last_solve_) {
+      status.summary(diagnostic_msgs::DiagnosticStatus::OK, "no solve yet");
+    } else if (last_solve_->accepted) {
+      status.summary(diagnostic_msgs::DiagnosticStatus::OK, "last solve accepted");
+    } else {
+      status.summary(diagnostic_msgs::DiagnosticStatus::WARN, "last solve rejected: " + last_solve_->reason);
+    }
+    status.add("last solve age (s)", last_solve_ ? (now - last_solve_time_).toSec() : -1.0);
+    status.add("calibration age (s)", last_commit_time_.isZero() ? -1.0 : (now - last_commit_time_).toSec());
+    status.add("rms left (px)", last_solve_ ? last_solve_->rms_left_px : 0.0);
+    status.add("rms right (px)", last_solve_ ? last_solve_->rms_right_px : 0.0);
+    status.add("solve (ms)", last_solve_ ? last_solve_->solve_ms : 0.0);
+    status.add("last rejection reason", last_rejection_);
+    status.add("calibration epoch", epoch_.load());
+    status.add("frames in window", window_.size());
+    status.add("dropped observation messages", dropped_messages_);
+  }
+
+  static constexpr size_t kKeptFrames = 64;  // modes / unmatched observations remembered
+
+  CalibratorParams params_;
+  std::unique_ptr<CalibrationSession> session_;  // worker thread only (boards(): any thread)
+  ros::Publisher status_pub_;
+  ros::Subscriber observations_sub_, mode_sub_, left_info_sub_, right_info_sub_;
+  ros::ServiceServer recalibrate_srv_;
+  ros::ServiceClient set_light_client_;
+  std::unique_ptr<diagnostic_updater::Updater> diagnostics_;
+  ros::WallTimer diagnostics_timer_;
+
+  std::mutex mutex_;  // guards everything below
+  std::condition_variable cv_;  // jobs_, window_ (request) and stopping_
+  std::deque<std::pair<ros::Time, bool>> modes_;  // recent stamps: light_on && settled
+  std::deque<std::pair<ros::Time, ecs::StereoObservation>> pending_;
+  std::vector<ecs::StereoObservation> window_;
+  ros::Time window_closed_at_;  // frames up to this stamp belong to a finished window
+  bool request_active_ = false;
+  size_t request_frames_ = 0;
+  sensor_msgs::CameraInfoConstPtr left_info_, right_info_;
+  std::atomic<uint32_t> epoch_{0};  // also read without mutex_ (statuses)
+  std::deque<Job> jobs_;
+  bool stopping_ = false;
+  std::optional<CalibrationStatus> last_solve_;
+  ros::WallTime last_solve_time_, last_commit_time_;
+  std::string last_rejection_;
+  uint64_t dropped_messages_ = 0;
+  std::thread worker_;
+};
+
+}  // namespace embedded_calibration_stereo
+
+PLUGINLIB_EXPORT_CLASS(embedded_calibration_stereo::OnlineCalibratorNodelet, nodelet::Nodelet)

@@ -1,0 +1,204 @@
+#include "embedded_calibration_stereo/ros/calibration_session.h"
+
+#include <sensor_msgs/SetCameraInfo.h>
+
+#include <cmath>
+#include <utility>
+
+#include "embedded_calibration_stereo/core/config_error.h"
+#include "embedded_calibration_stereo/core/observation_validator.h"
+#include "embedded_calibration_stereo/ros/conversions.h"
+
+namespace embedded_calibration_stereo {
+namespace {
+
+// Typed private parameters with defaults; a present value of the wrong type or range is an error.
+class ParamReader {
+ public:
+  explicit ParamReader(const ros::NodeHandle& nh) : nh_(nh) {}
+  void read(const std::string& name, std::string* value) const {
+    if (nh_.hasParam(name) && !nh_.getParam(name, *value)) throw ecs::ConfigError(name, "must be a string");
+  }
+  void read(const std::string& name, bool* value) const {
+    if (nh_.hasParam(name) && !nh_.getParam(name, *value)) throw ecs::ConfigError(name, "must be true or false");
+  }
+  void read(const std::string& name, int* value, int min) const {
+    if (nh_.hasParam(name) && !nh_.getParam(name, *value)) throw ecs::ConfigError(name, "must be an integer");
+    if (*value < min) throw ecs::ConfigError(name, "must be >= " + std::to_string(min));
+  }
+  void read(const std::string& name, double* value) const {
+    if (nh_.hasParam(name) && (!nh_.getParam(name, *value) || !std::isfinite(*value)))
+      throw ecs::ConfigError(name, "must be a number");
+    if (*value < 0.0) throw ecs::ConfigError(name, "must be >= 0");
+  }
+
+ private:
+  const ros::NodeHandle& nh_;
+};
+
+void appendIntrinsics(const ecs::PinholeCamera& camera, const ecs::CameraStddev& sd, std::vector<double>* values,
+                      std::vector<double>* stddevs) {
+  *values = {camera.fx, camera.fy, camera.cx, camera.cy};
+  values->insert(values->end(), camera.dist.begin(), camera.dist.end());
+  *stddevs = {sd.fx, sd.fy, sd.cx, sd.cy};
+  stddevs->insert(stddevs->end(), sd.dist.begin(), sd.dist.end());
+}
+
+}  // namespace
+
+CalibratorParams loadCalibratorParams(const ros::NodeHandle& pnh, const std::string& default_device_config) {
+  CalibratorParams p;
+  const ParamReader r(pnh);
+  p.device_config = default_device_config;
+  r.read("device_config", &p.device_config);
+  r.read("left_frame_id", &p.left_frame_id);
+  r.read("right_frame_id", &p.right_frame_id);
+  r.read("auto_calibrate", &p.auto_calibrate);
+  r.read("min_frames", &p.min_frames, 1);
+  r.read("max_frames", &p.max_frames, p.min_frames);
+  r.read("service_timeout_s", &p.service_timeout_s);
+  r.read("loss_scale_px", &p.adjustment.loss_scale_px);
+  r.read("max_rms_px", &p.gate.max_rms_px);
+  r.read("max_epipolar_rms_px", &p.gate.max_epipolar_rms_px);
+  r.read("max_outlier_fraction", &p.gate.max_outlier_fraction);
+  r.read("min_boards_per_camera", &p.gate.min_boards_per_camera, 1);
+  r.read("max_focal_stddev_rel", &p.gate.max_focal_stddev_rel);
+  r.read("max_principal_point_stddev_px", &p.gate.max_principal_point_stddev_px);
+  r.read("max_distortion_stddev", &p.gate.max_distortion_stddev);
+  r.read("max_baseline_stddev_rel", &p.gate.max_baseline_stddev_rel);
+  r.read("max_rotation_stddev_deg", &p.gate.max_rotation_stddev_deg);
+  r.read("min_rms_improvement_rel", &p.gate.min_rms_improvement_rel);
+  r.read("in_force_max_rms_px", &p.gate.in_force_max_rms_px);
+  if (const std::string e = p.adjustment.Check(); !e.empty()) throw ecs::ConfigError("loss_scale_px", e);
+  if (const std::string e = p.gate.Check(); !e.empty()) throw ecs::ConfigError("quality gate", e);
+  return p;
+}
+
+std::vector<std::string> observationDefects(const ecs::StereoObservation& observation,
+                                            const std::vector<ecs::VirtualBoard>& boards) {
+  ecs::ObservationValidationOptions options;
+  // Size and corner count are judged at solve time against the calibration in force; here only
+  // defects of the message itself count.
+  options.image_width = options.image_height = 1 << 20;
+  options.max_outside_image_px = 1 << 20;
+  options.min_corners_per_board = 0;
+  std::vector<std::string> defects = ecs::validateObservations({observation}, boards, options).dropped;
+  // "frame 0 left board 3: ..." -> "left board 3: ..." (there is only one frame here).
+  for (std::string& d : defects)
+    if (d.rfind("frame 0 ", 0) == 0) d.erase(0, 8);
+  return defects;
+}
+
+CalibrationStatus makeStatus(const ecs::BundleAdjustmentSummary& summary, const ecs::GateDecision& decision) {
+  CalibrationStatus status;
+  status.header.stamp = ros::Time::now();
+  status.accepted = decision.accepted;
+  status.reason = decision.accepted ? "" : decision.reason;
+  status.frames_used = static_cast<uint32_t>(summary.frames_used);
+  status.corners_used = static_cast<uint32_t>(summary.corners_used);
+  status.rms_left_px = summary.rms_left_px;
+  status.rms_right_px = summary.rms_right_px;
+  status.epipolar_rms_px = summary.epipolar_rms_px;
+  appendIntrinsics(summary.rig.left, summary.left_stddev, &status.left_intrinsics, &status.left_intrinsics_stddev);
+  appendIntrinsics(summary.rig.right, summary.right_stddev, &status.right_intrinsics, &status.right_intrinsics_stddev);
+  status.baseline_m = summary.rig.baseline();
+  status.baseline_stddev_m = summary.baseline_stddev_m;
+  status.rotation_stddev_deg = summary.rotation_stddev_deg;
+  status.solve_ms = summary.solve_ms;
+  return status;
+}
+
+CalibrationSession::CalibrationSession(ros::NodeHandle nh, CalibratorParams params, ecs::CalibrationDevice device)
+    : nh_(std::move(nh)),
+      params_(std::move(params)),
+      device_(std::move(device)),
+      boards_(device_.virtualBoards()),
+      adjuster_(params_.adjustment, ecs::BundleAdjustmentConfig()),
+      gate_(params_.gate) {}
+
+CalibrationStatus CalibrationSession::solve(const std::vector<ecs::StereoObservation>& frames,
+                                            const sensor_msgs::CameraInfo* left_info,
+                                            const sensor_msgs::CameraInfo* right_info, uint32_t epoch,
+                                            bool dry_run) {
+  if (!left_info || !right_info) {
+    CalibrationStatus status;
+    status.header.stamp = ros::Time::now();
+    status.epoch = epoch;
+    status.reason = "no left/right camera_info received: image size and calibration in force unknown";
+    return status;
+  }
+  ecs::StereoRig in_force;
+  std::string error;
+  const bool have_in_force = fromStereoCameraInfo(*left_info, *right_info, &in_force, &error);
+  ecs::CalibrationInput input;
+  input.frames = &frames;
+  input.device = &device_;
+  input.image_width = static_cast<int>(left_info->width);
+  input.image_height = static_cast<int>(left_info->height);
+  if (have_in_force) input.in_force = in_force;  // otherwise an uncalibrated head: Zhang start
+
+  const ecs::BundleAdjustmentSummary candidate = adjuster_.Solve(input);
+  ecs::BundleAdjustmentSummary in_force_fit;
+  if (have_in_force && candidate.success)
+    in_force_fit = ecs::evaluateFixedCalibration(in_force, frames, boards_, params_.adjustment, &device_);
+  ecs::GateDecision decision;
+  if (!candidate.success) {
+    decision.reason = "solve failed: " + candidate.message;
+  } else {
+    decision = gate_.evaluate(candidate, have_in_force ? &in_force_fit : nullptr);
+  }
+  CalibrationStatus status = makeStatus(candidate, decision);
+  status.epoch = epoch;
+  if (!decision.accepted || dry_run) {
+    if (decision.accepted) status.reason = "dry run: acceptable, not committed";
+    return status;
+  }
+  const std::string commit_error = commit(candidate.rig, *left_info);
+  if (!commit_error.empty()) {
+    status.accepted = false;
+    status.reason = "not committed: " + commit_error;
+    return status;
+  }
+  // The driver increments its epoch once per accepted set_camera_info.
+  status.epoch = epoch + 2;
+  return status;
+}
+
+std::string CalibrationSession::commit(const ecs::StereoRig& rig, const sensor_msgs::CameraInfo& left_in_force) {
+  const auto infos = toStereoCameraInfo(rig);
+  std::string error;
+  if (!callSetCameraInfo("left", infos.first, &error)) return error;
+  if (!callSetCameraInfo("right", infos.second, &error)) {
+    // Never leave a half-updated pair: put the left calibration in force back.
+    std::string restore_error;
+    if (!callSetCameraInfo("left", left_in_force, &restore_error))
+      return error + "; restoring the left calibration failed too: " + restore_error;
+    return error + "; left calibration restored";
+  }
+  tf_broadcaster_.sendTransform(
+      toTransformStamped(rig.leftFromRight(), params_.left_frame_id, params_.right_frame_id, ros::Time::now()));
+  return "";
+}
+
+bool CalibrationSession::callSetCameraInfo(const std::string& side, const sensor_msgs::CameraInfo& info,
+                                           std::string* error) {
+  const std::string name = side + "/set_camera_info";
+  ros::ServiceClient client = nh_.serviceClient<sensor_msgs::SetCameraInfo>(name);
+  sensor_msgs::SetCameraInfo srv;
+  srv.request.camera_info = info;
+  if (!client.waitForExistence(ros::Duration(params_.service_timeout_s))) {
+    *error = client.getService() + " is not available";
+    return false;
+  }
+  if (!client.call(srv)) {
+    *error = client.getService() + " call failed";
+    return false;
+  }
+  if (!srv.response.success) {
+    *error = client.getService() + " refused: " + srv.response.status_message;
+    return false;
+  }
+  return true;
+}
+
+}  // namespace embedded_calibration_stereo

@@ -1,0 +1,124 @@
+// The calibrator's ROS-side helpers that need no master: which observation messages are
+// dropped and why, and the CalibrationStatus filled from a solve.
+#include <gtest/gtest.h>
+#include <ros/time.h>
+
+#include <cmath>
+#include <limits>
+
+#include "embedded_calibration_stereo/core/config_io.h"
+#include "embedded_calibration_stereo/ros/calibration_session.h"
+
+namespace ecsr = embedded_calibration_stereo;
+
+namespace {
+
+std::vector<ecs::VirtualBoard> simBoards() {
+  cv::FileStorage fs = ecs::openYaml(std::string(ECS_SOURCE_DIR) + "/config/sim_rig.yaml");
+  return ecs::loadDevice(fs["device"], "device").virtualBoards();
+}
+
+// Ten corners of the first row of board `id`, on both sides.
+ecs::StereoObservation observation(int id) {
+  ecs::BoardCorners b;
+  b.board_id = id;
+  for (int i = 0; i < 10; ++i) {
+    b.corner_ids.push_back(i);
+    b.u.push_back(100.0f + 10 * i);
+    b.v.push_back(200.0f);
+  }
+  ecs::StereoObservation o;
+  o.left = {b};
+  o.right = {b};
+  return o;
+}
+
+bool anyContains(const std::vector<std::string>& lines, const std::string& needle) {
+  for (const auto& l : lines)
+    if (l.find(needle) != std::string::npos) return true;
+  return false;
+}
+
+}  // namespace
+
+TEST(ObservationDefects, CleanObservationHasNone) {
+  const auto boards = simBoards();
+  ASSERT_GE(boards.size(), 2u);
+  EXPECT_TRUE(ecsr::observationDefects(observation(boards[1].virtual_id), boards).empty());
+  // A board with only a few corners is usable data, not a defect of the message.
+  ecs::StereoObservation few = observation(boards[0].virtual_id);
+  few.left[0].corner_ids.resize(2);
+  few.left[0].u.resize(2);
+  few.left[0].v.resize(2);
+  EXPECT_TRUE(ecsr::observationDefects(few, boards).empty());
+}
+
+TEST(ObservationDefects, NamesEachDefect) {
+  const auto boards = simBoards();
+  const int id = boards[0].virtual_id;
+
+  ecs::StereoObservation nan = observation(id);
+  nan.right[0].v[3] = std::numeric_limits<float>::quiet_NaN();
+  auto defects = ecsr::observationDefects(nan, boards);
+  ASSERT_EQ(defects.size(), 1u);
+  EXPECT_NE(defects[0].find("right"), std::string::npos) << defects[0];
+  EXPECT_NE(defects[0].find("non-finite"), std::string::npos) << defects[0];
+  EXPECT_EQ(defects[0].find("frame 0"), std::string::npos) << "single message: no frame index";
+
+  ecs::StereoObservation duplicate = observation(id);
+  duplicate.left[0].corner_ids[4] = duplicate.left[0].corner_ids[5];
+  EXPECT_TRUE(anyContains(ecsr::observationDefects(duplicate, boards), "duplicate"));
+
+  ecs::StereoObservation outside = observation(id);
+  outside.left[0].corner_ids[0] = boards[0].cornerCount();  // one past the last corner
+  EXPECT_TRUE(anyContains(ecsr::observationDefects(outside, boards), "outside the board"));
+
+  EXPECT_TRUE(anyContains(ecsr::observationDefects(observation(1000), boards), "unknown board"));
+
+  ecs::StereoObservation lengths = observation(id);
+  lengths.left[0].u.pop_back();
+  EXPECT_TRUE(anyContains(ecsr::observationDefects(lengths, boards), "differ in length"));
+}
+
+TEST(MakeStatus, FillsEveryFieldInCameraInfoOrder) {
+  ros::Time::init();
+  ecs::BundleAdjustmentSummary s;
+  s.rig.left.fx = 650;
+  s.rig.left.fy = 651;
+  s.rig.left.cx = 370;
+  s.rig.left.cy = 240;
+  s.rig.left.dist = {-0.28, 0.07, 0.001, -0.002, 0.0};
+  s.rig.right = s.rig.left;
+  s.rig.right.fx = 640;
+  s.rig.right_from_left.translation() << -0.12, 0.0, 0.0;
+  s.left_stddev.fx = 0.5;
+  s.left_stddev.dist[1] = 0.01;
+  s.right_stddev.cy = 0.3;
+  s.frames_used = 10;
+  s.corners_used = 1234;
+  s.rms_left_px = 0.2;
+  s.rms_right_px = 0.25;
+  s.epipolar_rms_px = 0.1;
+  s.baseline_stddev_m = 1e-4;
+  s.rotation_stddev_deg = 0.02;
+  s.solve_ms = 80;
+  ecs::GateDecision rejected{false, "rejected: too few boards"};
+  const auto status = ecsr::makeStatus(s, rejected);
+  EXPECT_FALSE(status.accepted);
+  EXPECT_EQ(status.reason, rejected.reason);
+  EXPECT_EQ(status.frames_used, 10u);
+  EXPECT_EQ(status.corners_used, 1234u);
+  EXPECT_EQ(status.rms_left_px, 0.2);
+  EXPECT_EQ(status.rms_right_px, 0.25);
+  EXPECT_EQ(status.epipolar_rms_px, 0.1);
+  const std::vector<double> left = {650, 651, 370, 240, -0.28, 0.07, 0.001, -0.002, 0.0};
+  EXPECT_EQ(status.left_intrinsics, left);
+  EXPECT_EQ(status.right_intrinsics[0], 640);
+  EXPECT_EQ(status.left_intrinsics_stddev, (std::vector<double>{0.5, 0, 0, 0, 0, 0.01, 0, 0, 0}));
+  EXPECT_EQ(status.right_intrinsics_stddev, (std::vector<double>{0, 0, 0, 0.3, 0, 0, 0, 0, 0}));
+  EXPECT_NEAR(status.baseline_m, 0.12, 1e-12);
+  EXPECT_EQ(status.baseline_stddev_m, 1e-4);
+  EXPECT_EQ(status.rotation_stddev_deg, 0.02);
+  EXPECT_EQ(status.solve_ms, 80);
+  EXPECT_TRUE(ecsr::makeStatus(s, ecs::GateDecision{true, "ignored"}).reason.empty());
+}
