@@ -1,0 +1,296 @@
+// Disparity nodelet: disparity (stereo_msgs/DisparityImage) and points2 (sensor_msgs/PointCloud2)
+// of rectified stereo frames (left|right/image_rect with left|right/camera_info of the same
+// stamp), with stereo_image_proc's topic and parameter names. The matcher is the core's
+// DisparityComputer (sad, bm or sgbm), configured by dynamic_reconfigure (cfg/Disparity.cfg).
+// Lazy: the inputs are subscribed only while someone subscribes to an output.
+#include <cv_bridge/cv_bridge.h>
+#include <dynamic_reconfigure/server.h>
+#include <image_geometry/stereo_camera_model.h>
+#include <image_transport/image_transport.h>
+#include <image_transport/subscriber_filter.h>
+#include <message_filters/subscriber.h>
+#include <message_filters/sync_policies/approximate_time.h>
+#include <message_filters/sync_policies/exact_time.h>
+#include <message_filters/synchronizer.h>
+#include <nodelet/nodelet.h>
+#include <pluginlib/class_list_macros.hpp>
+#include <ros/ros.h>
+#include <sensor_msgs/PointCloud2.h>
+#include <sensor_msgs/point_cloud2_iterator.h>
+#include <stereo_msgs/DisparityImage.h>
+
+#include <cstring>
+#include <memory>
+#include <mutex>
+
+#include "embedded_calibration_stereo/DisparityConfig.h"
+#include "embedded_calibration_stereo/core/disparity.h"
+#include "embedded_calibration_stereo/ros/stereo_input_check.h"
+
+namespace embedded_calibration_stereo {
+
+namespace {
+
+using sensor_msgs::CameraInfo;
+using sensor_msgs::Image;
+
+ecs::DisparityOptions toOptions(const DisparityConfig& c) {
+  ecs::DisparityOptions o;
+  o.algorithm = c.algorithm;
+  o.prefilter_size = c.prefilter_size;
+  o.prefilter_cap = c.prefilter_cap;
+  o.correlation_window_size = c.correlation_window_size;
+  o.min_disparity = c.min_disparity;
+  o.disparity_range = c.disparity_range;
+  o.uniqueness_ratio = c.uniqueness_ratio;
+  o.texture_threshold = c.texture_threshold;
+  o.speckle_size = c.speckle_size;
+  o.speckle_range = c.speckle_range;
+  o.P1 = c.P1;
+  o.P2 = c.P2;
+  o.disp12MaxDiff = c.disp12MaxDiff;
+  o.sgbm_mode = c.fullDP ? "hh" : c.sgbm_mode;  // stereo_image_proc: fullDP = MODE_HH
+  o.left_right_check = c.lr_check;
+  o.subpixel = c.subpixel;
+  o.fill_holes = c.hole_filling;
+  return o;
+}
+
+void toConfig(const ecs::DisparityOptions& o, DisparityConfig* c) {
+  c->algorithm = o.algorithm;
+  c->prefilter_size = o.prefilter_size;
+  c->prefilter_cap = o.prefilter_cap;
+  c->correlation_window_size = o.correlation_window_size;
+  c->min_disparity = o.min_disparity;
+  c->disparity_range = o.disparity_range;
+  c->uniqueness_ratio = o.uniqueness_ratio;
+  c->texture_threshold = o.texture_threshold;
+  c->speckle_size = o.speckle_size;
+  c->speckle_range = o.speckle_range;
+  c->P1 = o.P1;
+  c->P2 = o.P2;
+  c->disp12MaxDiff = o.disp12MaxDiff;
+  if (!c->fullDP) c->sgbm_mode = o.sgbm_mode;
+}
+
+// A mono8 view of a mono8 (shared, no copy) or colour (converted) image.
+cv::Mat monoView(const sensor_msgs::ImageConstPtr& msg) {
+  if (msg->encoding == "mono8") return cv_bridge::toCvShare(msg)->image;
+  return cv_bridge::toCvShare(msg, "mono8")->image;
+}
+
+// RGB of the left pixel packed in a float, as stereo_image_proc's point_cloud2 does.
+float packedRgb(const cv::Mat& image, const std::string& encoding, int u, int v) {
+  uint8_t r, g, b;
+  if (encoding == "mono8") {
+    r = g = b = image.at<uint8_t>(v, u);
+  } else {
+    const cv::Vec3b& p = image.at<cv::Vec3b>(v, u);
+    const bool bgr = encoding == "bgr8";
+    r = p[bgr ? 2 : 0];
+    g = p[1];
+    b = p[bgr ? 0 : 2];
+  }
+  const uint32_t rgb = (uint32_t(r) << 16) | (uint32_t(g) << 8) | uint32_t(b);
+  float packed;
+  std::memcpy(&packed, &rgb, sizeof(packed));
+  return packed;
+}
+
+}  // namespace
+
+// Threads:
+//  - the nodelet's (single-threaded) callback queue runs onInit, connectCb, the
+//    dynamic_reconfigure callback and frameCb;
+//  - computer_mutex_ guards computer_ (replaced by configCb, used by frameCb) so the class stays
+//    correct should the callbacks ever run on a multi-threaded queue;
+//  - connect_mutex_ guards the (un)subscription done by connectCb against onInit.
+class DisparityNodelet : public nodelet::Nodelet {
+ private:
+  using ExactPolicy = message_filters::sync_policies::ExactTime<Image, CameraInfo, Image, CameraInfo>;
+  using ApproximatePolicy = message_filters::sync_policies::ApproximateTime<Image, CameraInfo, Image, CameraInfo>;
+
+  void onInit() override {
+    ros::NodeHandle& nh = getNodeHandle();
+    ros::NodeHandle& pnh = getPrivateNodeHandle();
+    queue_size_ = pnh.param("queue_size", 5);
+    const bool approximate = pnh.param("approximate_sync", false);
+    it_ = std::make_unique<image_transport::ImageTransport>(nh);
+    if (approximate) {
+      approximate_sync_ = std::make_unique<message_filters::Synchronizer<ApproximatePolicy>>(
+          ApproximatePolicy(queue_size_), left_image_sub_, left_info_sub_, right_image_sub_, right_info_sub_);
+      approximate_sync_->registerCallback(&DisparityNodelet::frameCb, this);
+    } else {
+      exact_sync_ = std::make_unique<message_filters::Synchronizer<ExactPolicy>>(
+          ExactPolicy(queue_size_), left_image_sub_, left_info_sub_, right_image_sub_, right_info_sub_);
+      exact_sync_->registerCallback(&DisparityNodelet::frameCb, this);
+    }
+    reconfigure_ = std::make_unique<dynamic_reconfigure::Server<DisparityConfig>>(reconfigure_mutex_, pnh);
+    reconfigure_->setCallback([this](DisparityConfig& config, uint32_t) { configCb(config); });
+
+    std::lock_guard<std::mutex> lock(connect_mutex_);
+    const auto cb = [this](const ros::SingleSubscriberPublisher&) { connectCb(); };
+    disparity_pub_ = nh.advertise<stereo_msgs::DisparityImage>("disparity", 1, cb, cb);
+    points_pub_ = nh.advertise<sensor_msgs::PointCloud2>("points2", 1, cb, cb);
+  }
+
+  void connectCb() {
+    std::lock_guard<std::mutex> lock(connect_mutex_);
+    if (disparity_pub_.getNumSubscribers() + points_pub_.getNumSubscribers() == 0) {
+      left_image_sub_.unsubscribe();
+      left_info_sub_.unsubscribe();
+      right_image_sub_.unsubscribe();
+      right_info_sub_.unsubscribe();
+      subscribed_ = false;
+    } else if (!subscribed_) {
+      subscribed_ = true;
+      ros::NodeHandle& nh = getNodeHandle();
+      const image_transport::TransportHints hints("raw", ros::TransportHints(), getPrivateNodeHandle());
+      left_image_sub_.subscribe(*it_, "left/image_rect", queue_size_, hints);
+      left_info_sub_.subscribe(nh, "left/camera_info", queue_size_);
+      right_image_sub_.subscribe(*it_, "right/image_rect", queue_size_, hints);
+      right_info_sub_.subscribe(nh, "right/camera_info", queue_size_);
+    }
+  }
+
+  // Invalid values are clamped (with a warning) and the clamped values shown in the config.
+  void configCb(DisparityConfig& config) {
+    ecs::DisparityOptions options = toOptions(config);
+    const std::vector<std::string> changes = options.clamp();
+    for (const auto& change : changes) NODELET_WARN("Disparity: parameter clamped: %s", change.c_str());
+    toConfig(options, &config);
+    try {
+      auto computer = std::make_unique<ecs::DisparityComputer>(options);
+      std::lock_guard<std::mutex> lock(computer_mutex_);
+      computer_ = std::move(computer);
+      NODELET_INFO("Disparity: %s, disparities %d..%d, window %d", options.algorithm.c_str(), options.min_disparity,
+                   options.min_disparity + options.disparity_range - 1, options.correlation_window_size);
+    } catch (const std::exception& e) {  // clamp() makes this unreachable unless the core disagrees
+      NODELET_ERROR("Disparity: configuration refused, keeping the previous one: %s", e.what());
+    }
+  }
+
+  void reportError(const std::string& message) {
+    if (errors_.shouldReport(message)) NODELET_ERROR("Disparity: frame dropped: %s", message.c_str());
+  }
+
+  void frameCb(const sensor_msgs::ImageConstPtr& left, const sensor_msgs::CameraInfoConstPtr& left_info,
+               const sensor_msgs::ImageConstPtr& right, const sensor_msgs::CameraInfoConstPtr& right_info) {
+    const std::string left_topic = left_image_sub_.getTopic(), right_topic = right_image_sub_.getTopic();
+    std::string problem = checkImagePair(*left, left_topic, *right, right_topic, {"mono8", "bgr8", "rgb8"});
+    if (problem.empty()) problem = checkCameraInfo(*left_info, left_info_sub_.getTopic(), *left);
+    if (problem.empty()) problem = checkCameraInfo(*right_info, right_info_sub_.getTopic(), *right);
+    if (problem.empty())
+      problem = checkSameFrame(*left_info, left_info_sub_.getTopic(), *right_info, right_info_sub_.getTopic());
+    if (!problem.empty()) return reportError(problem);
+    image_geometry::StereoCameraModel model;
+    model.fromCameraInfo(left_info, right_info);
+
+    cv::Mat disparity;
+    ecs::DisparityOptions options;
+    try {
+      const cv::Mat left_mono = monoView(left), right_mono = monoView(right);
+      std::lock_guard<std::mutex> lock(computer_mutex_);
+      if (!computer_) return;
+      options = computer_->options();
+      disparity = computer_->compute(left_mono, right_mono);
+    } catch (const std::exception& e) {  // e.g. an image narrower than the disparity range
+      return reportError(left_topic + ": " + e.what());
+    }
+    if (disparity_pub_.getNumSubscribers() > 0)
+      disparity_pub_.publish(toDisparityMsg(disparity, options, model, *left_info));
+    if (points_pub_.getNumSubscribers() > 0) points_pub_.publish(toPointCloud(disparity, model, left, *left_info));
+  }
+
+  // stereo_image_proc's DisparityImage: invalid pixels hold min_disparity - 1.
+  static stereo_msgs::DisparityImagePtr toDisparityMsg(const cv::Mat& disparity, const ecs::DisparityOptions& o,
+                                                       const image_geometry::StereoCameraModel& model,
+                                                       const CameraInfo& left_info) {
+    auto msg = boost::make_shared<stereo_msgs::DisparityImage>();
+    msg->header = left_info.header;
+    Image& image = msg->image;
+    image.header = left_info.header;
+    image.height = disparity.rows;
+    image.width = disparity.cols;
+    image.encoding = "32FC1";
+    image.step = image.width * sizeof(float);
+    image.data.resize(static_cast<size_t>(image.step) * image.height);
+    cv::Mat out(disparity.size(), CV_32FC1, image.data.data(), image.step);
+    const float invalid = static_cast<float>(o.min_disparity - 1);
+    for (int v = 0; v < disparity.rows; ++v) {
+      const float* in = disparity.ptr<float>(v);
+      float* row = out.ptr<float>(v);
+      for (int u = 0; u < disparity.cols; ++u) row[u] = ecs::isValidDisparity(in[u]) ? in[u] : invalid;
+    }
+    msg->f = model.right().fx();
+    msg->T = model.baseline();
+    msg->min_disparity = o.min_disparity;
+    msg->max_disparity = o.min_disparity + o.disparity_range - 1;
+    msg->delta_d = o.subpixel ? 1.0f / 16 : 1.0f;
+    // The window where a match is possible, as stereo_image_proc computes it.
+    const int border = o.correlation_window_size / 2;
+    const int left = o.disparity_range + o.min_disparity + border - 1;
+    const int wtf = o.min_disparity >= 0 ? border + o.min_disparity : std::max(border, -o.min_disparity);
+    const int right = disparity.cols - wtf;
+    const int top = border, bottom = disparity.rows - border;
+    msg->valid_window.x_offset = std::max(left, 0);
+    msg->valid_window.y_offset = std::max(top, 0);
+    msg->valid_window.width = std::max(right - left, 0);
+    msg->valid_window.height = std::max(bottom - top, 0);
+    return msg;
+  }
+
+  // xyz (metres, rectified left frame) + rgb; invalid points are NaN (not dense).
+  static sensor_msgs::PointCloud2Ptr toPointCloud(const cv::Mat& disparity,
+                                                  const image_geometry::StereoCameraModel& model,
+                                                  const sensor_msgs::ImageConstPtr& left, const CameraInfo& left_info) {
+    auto cloud = boost::make_shared<sensor_msgs::PointCloud2>();
+    cloud->header = left_info.header;
+    cloud->height = disparity.rows;
+    cloud->width = disparity.cols;
+    cloud->is_bigendian = false;
+    cloud->is_dense = false;
+    sensor_msgs::PointCloud2Modifier modifier(*cloud);
+    modifier.setPointCloud2FieldsByString(2, "xyz", "rgb");
+    const cv::Matx44d Q = model.reprojectionMatrix();
+    const cv::Mat colour = cv_bridge::toCvShare(left)->image;
+    const float nan = std::numeric_limits<float>::quiet_NaN();
+    sensor_msgs::PointCloud2Iterator<float> x(*cloud, "x"), y(*cloud, "y"), z(*cloud, "z"), rgb(*cloud, "rgb");
+    for (int v = 0; v < disparity.rows; ++v) {
+      const float* d = disparity.ptr<float>(v);
+      for (int u = 0; u < disparity.cols; ++u, ++x, ++y, ++z, ++rgb) {
+        // image_geometry's Q is scaled (Q(0,0) = fy * Tx, ...): apply it in full.
+        const cv::Vec4d p = Q * cv::Vec4d(u, v, d[u], 1.0);
+        if (!ecs::isValidDisparity(d[u]) || !(p[2] / p[3] > 0)) {
+          *x = *y = *z = nan;
+        } else {
+          *x = static_cast<float>(p[0] / p[3]);
+          *y = static_cast<float>(p[1] / p[3]);
+          *z = static_cast<float>(p[2] / p[3]);
+        }
+        *rgb = packedRgb(colour, left->encoding, u, v);
+      }
+    }
+    return cloud;
+  }
+
+  int queue_size_ = 5;
+  std::unique_ptr<image_transport::ImageTransport> it_;
+  image_transport::SubscriberFilter left_image_sub_, right_image_sub_;
+  message_filters::Subscriber<CameraInfo> left_info_sub_, right_info_sub_;
+  std::unique_ptr<message_filters::Synchronizer<ExactPolicy>> exact_sync_;
+  std::unique_ptr<message_filters::Synchronizer<ApproximatePolicy>> approximate_sync_;
+  std::mutex connect_mutex_;
+  bool subscribed_ = false;  // guarded by connect_mutex_
+  ros::Publisher disparity_pub_, points_pub_;
+  boost::recursive_mutex reconfigure_mutex_;
+  std::unique_ptr<dynamic_reconfigure::Server<DisparityConfig>> reconfigure_;
+  ErrorThrottle errors_{5.0};
+
+  std::mutex computer_mutex_;
+  std::unique_ptr<ecs::DisparityComputer> computer_;
+};
+
+}  // namespace embedded_calibration_stereo
+
+PLUGINLIB_EXPORT_CLASS(embedded_calibration_stereo::DisparityNodelet, nodelet::Nodelet)

@@ -1,0 +1,284 @@
+// Rectifier nodelet: rectifies each stereo frame (left|right/image_scene with the CameraInfo of
+// the same stamp) into left|right/image_rect with stereo_image_proc's conventions, and publishes
+// the rectification applied on left|right/camera_info_rect (the input K and D with the R and P
+// of the method: identical to camera_info for bouguet, the Fusiello R and P for fusiello; a
+// disparity node must read camera_info_rect when the method is fusiello).
+//
+// Maps are keyed by the CameraInfo content of the frame (ExactTime synchronisation of the images
+// with their CameraInfo), so a frame is always rectified with the calibration it was taken with:
+// when the CameraInfo changes, the new maps are built on a worker thread (std::async) and frames
+// of the new calibration are dropped until they are ready (never rectified with the old maps).
+#include <cv_bridge/cv_bridge.h>
+#include <image_transport/image_transport.h>
+#include <image_transport/subscriber_filter.h>
+#include <message_filters/subscriber.h>
+#include <message_filters/sync_policies/approximate_time.h>
+#include <message_filters/sync_policies/exact_time.h>
+#include <message_filters/synchronizer.h>
+#include <nodelet/nodelet.h>
+#include <pluginlib/class_list_macros.hpp>
+#include <ros/ros.h>
+
+#include <future>
+#include <memory>
+#include <mutex>
+#include <opencv2/calib3d.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "embedded_calibration_stereo/core/rectification.h"
+#include "embedded_calibration_stereo/ros/conversions.h"
+#include "embedded_calibration_stereo/ros/stereo_input_check.h"
+
+namespace embedded_calibration_stereo {
+
+namespace {
+
+using sensor_msgs::CameraInfo;
+using sensor_msgs::Image;
+
+// The calibration a set of maps was built from (headers excluded).
+struct CalibrationKey {
+  CameraInfo left, right;
+  static CameraInfo strip(const CameraInfo& info) {
+    CameraInfo c = info;
+    c.header = std_msgs::Header();
+    return c;
+  }
+  CalibrationKey(const CameraInfo& l, const CameraInfo& r) : left(strip(l)), right(strip(r)) {}
+  bool operator==(const CalibrationKey& o) const { return left == o.left && right == o.right; }
+};
+
+// Remap tables of both cameras and the CameraInfos of the rectification they apply.
+struct StereoMaps {
+  explicit StereoMaps(const CalibrationKey& k) : key(k) {}
+  CalibrationKey key;
+  cv::Mat left_map1, left_map2, right_map1, right_map2;
+  CameraInfo left_rect, right_rect;
+};
+
+cv::Matx33d matx33(const boost::array<double, 9>& a) { return cv::Matx33d(a.data()); }
+cv::Matx34d matx34(const boost::array<double, 12>& a) { return cv::Matx34d(a.data()); }
+
+// The raw camera (K, D) with the rectification actually applied (R, P): image_rect with
+// camera_info_rect is described exactly as image_raw with camera_info (equal to it for bouguet).
+CameraInfo rectifiedInfo(const CameraInfo& raw, const cv::Matx33d& R, const cv::Matx34d& P) {
+  CameraInfo out = raw;
+  for (int i = 0; i < 9; ++i) out.R[i] = R.val[i];
+  for (int i = 0; i < 12; ++i) out.P[i] = P.val[i];
+  return out;
+}
+
+// Bouguet: the CameraInfo's own R and P (as image_proc does), so the maps match the P that
+// stereo_image_proc reads from camera_info. Fusiello: the core computes R and P from the rig.
+std::shared_ptr<const StereoMaps> buildMaps(const CalibrationKey& key, ecs::RectificationMethod method) {
+  auto maps = std::make_shared<StereoMaps>(key);
+  const cv::Size size(key.left.width, key.left.height);
+  cv::Matx33d R1, R2;
+  cv::Matx34d P1, P2;
+  if (method == ecs::RectificationMethod::kBouguet) {
+    R1 = matx33(key.left.R);
+    R2 = matx33(key.right.R);
+    P1 = matx34(key.left.P);
+    P2 = matx34(key.right.P);
+  } else {
+    ecs::StereoRig rig;
+    std::string error;
+    if (!fromStereoCameraInfo(key.left, key.right, &rig, &error)) throw std::invalid_argument(error);
+    ecs::RectificationOptions options;
+    options.method = method;
+    const ecs::RectificationGeometry g = ecs::computeRectificationGeometry(rig, options);
+    R1 = g.R1;
+    R2 = g.R2;
+    P1 = g.P1;
+    P2 = g.P2;
+  }
+  const auto build = [&size](const CameraInfo& info, const cv::Matx33d& R, const cv::Matx34d& P, cv::Mat* m1,
+                             cv::Mat* m2) {
+    cv::initUndistortRectifyMap(matx33(info.K), cv::Mat(info.D), R, P, size, CV_16SC2, *m1, *m2);
+  };
+  build(key.left, R1, P1, &maps->left_map1, &maps->left_map2);
+  build(key.right, R2, P2, &maps->right_map1, &maps->right_map2);
+  maps->left_rect = rectifiedInfo(key.left, R1, P1);
+  maps->right_rect = rectifiedInfo(key.right, R2, P2);
+  return maps;
+}
+
+}  // namespace
+
+// Threads:
+//  - the nodelet's (single-threaded) callback queue runs onInit, connectCb and frameCb; frameCb
+//    reads the publishers and the immutable options, and takes maps_mutex_ for maps_, build_,
+//    building_key_ and failure_;
+//  - a std::async worker runs buildMaps and stores its result under maps_mutex_ (maps_ is a
+//    shared_ptr to immutable maps: a frame keeps its own reference while it is remapped);
+//  - connect_mutex_ guards the (un)subscription done by connectCb against onInit.
+class RectifierNodelet : public nodelet::Nodelet {
+ public:
+  ~RectifierNodelet() override {
+    std::future<void> build;
+    {
+      std::lock_guard<std::mutex> lock(maps_mutex_);
+      build = std::move(build_);
+    }
+    if (build.valid()) build.wait();  // outside the lock: the worker takes it to store its result
+  }
+
+ private:
+  using ExactPolicy = message_filters::sync_policies::ExactTime<Image, CameraInfo, Image, CameraInfo>;
+  using ApproximatePolicy = message_filters::sync_policies::ApproximateTime<Image, CameraInfo, Image, CameraInfo>;
+
+  void onInit() override {
+    ros::NodeHandle& nh = getNodeHandle();
+    ros::NodeHandle& pnh = getPrivateNodeHandle();
+    const std::string method_name = pnh.param<std::string>("rectification_method", "bouguet");
+    try {
+      method_ = ecs::parseRectificationMethod(method_name);
+    } catch (const std::exception& e) {
+      NODELET_FATAL("Rectifier cannot start: rectification_method: %s", e.what());
+      throw;
+    }
+    queue_size_ = pnh.param("queue_size", 5);
+    const bool approximate = pnh.param("approximate_sync", false);
+    it_ = std::make_unique<image_transport::ImageTransport>(nh);
+    if (approximate) {
+      approximate_sync_ = std::make_unique<message_filters::Synchronizer<ApproximatePolicy>>(
+          ApproximatePolicy(queue_size_), left_image_sub_, left_info_sub_, right_image_sub_, right_info_sub_);
+      approximate_sync_->registerCallback(&RectifierNodelet::frameCb, this);
+    } else {
+      exact_sync_ = std::make_unique<message_filters::Synchronizer<ExactPolicy>>(
+          ExactPolicy(queue_size_), left_image_sub_, left_info_sub_, right_image_sub_, right_info_sub_);
+      exact_sync_->registerCallback(&RectifierNodelet::frameCb, this);
+    }
+    std::lock_guard<std::mutex> lock(connect_mutex_);  // connectCb must see the publishers
+    const auto image_cb = [this](const image_transport::SingleSubscriberPublisher&) { connectCb(); };
+    const auto info_cb = [this](const ros::SingleSubscriberPublisher&) { connectCb(); };
+    left_pub_ = it_->advertise("left/image_rect", 1, image_cb, image_cb);
+    right_pub_ = it_->advertise("right/image_rect", 1, image_cb, image_cb);
+    left_info_pub_ = nh.advertise<CameraInfo>("left/camera_info_rect", 1, info_cb, info_cb);
+    right_info_pub_ = nh.advertise<CameraInfo>("right/camera_info_rect", 1, info_cb, info_cb);
+    NODELET_INFO("Rectifier: %s rectification, %s sync, queue %d", method_name.c_str(),
+                 approximate ? "approximate" : "exact", queue_size_);
+  }
+
+  // Subscribes the inputs only while someone listens to an output (image_pipeline's pattern).
+  void connectCb() {
+    std::lock_guard<std::mutex> lock(connect_mutex_);
+    const uint32_t listeners = left_pub_.getNumSubscribers() + right_pub_.getNumSubscribers() +
+                               left_info_pub_.getNumSubscribers() + right_info_pub_.getNumSubscribers();
+    if (listeners == 0) {
+      left_image_sub_.unsubscribe();
+      left_info_sub_.unsubscribe();
+      right_image_sub_.unsubscribe();
+      right_info_sub_.unsubscribe();
+      subscribed_ = false;
+    } else if (!subscribed_) {
+      subscribed_ = true;
+      ros::NodeHandle& nh = getNodeHandle();
+      const image_transport::TransportHints hints("raw", ros::TransportHints(), getPrivateNodeHandle());
+      left_image_sub_.subscribe(*it_, "left/image_scene", queue_size_, hints);
+      left_info_sub_.subscribe(nh, "left/camera_info", queue_size_);
+      right_image_sub_.subscribe(*it_, "right/image_scene", queue_size_, hints);
+      right_info_sub_.subscribe(nh, "right/camera_info", queue_size_);
+    }
+  }
+
+  void reportError(const std::string& message) {
+    if (errors_.shouldReport(message)) NODELET_ERROR("Rectifier: frame dropped: %s", message.c_str());
+  }
+
+  void frameCb(const sensor_msgs::ImageConstPtr& left, const sensor_msgs::CameraInfoConstPtr& left_info,
+               const sensor_msgs::ImageConstPtr& right, const sensor_msgs::CameraInfoConstPtr& right_info) {
+    const std::string left_topic = left_image_sub_.getTopic(), right_topic = right_image_sub_.getTopic();
+    std::string problem = checkImagePair(*left, left_topic, *right, right_topic, {"mono8", "bgr8", "rgb8"});
+    if (problem.empty()) problem = checkCameraInfo(*left_info, left_info_sub_.getTopic(), *left);
+    if (problem.empty()) problem = checkCameraInfo(*right_info, right_info_sub_.getTopic(), *right);
+    if (!problem.empty()) return reportError(problem);
+
+    const std::shared_ptr<const StereoMaps> maps = mapsFor(CalibrationKey(*left_info, *right_info), &problem);
+    if (!maps) {
+      if (!problem.empty()) reportError(left_info_sub_.getTopic() + ", " + right_info_sub_.getTopic() + ": " + problem);
+      return;
+    }
+    try {
+      publishRectified(*left, maps->left_map1, maps->left_map2, left_pub_);
+      publishRectified(*right, maps->right_map1, maps->right_map2, right_pub_);
+    } catch (const std::exception& e) {  // cv_bridge or OpenCV: skip the frame
+      return reportError(left_topic + ": " + e.what());
+    }
+    auto left_rect = boost::make_shared<CameraInfo>(maps->left_rect);
+    auto right_rect = boost::make_shared<CameraInfo>(maps->right_rect);
+    left_rect->header = left_info->header;
+    right_rect->header = right_info->header;
+    left_info_pub_.publish(left_rect);
+    right_info_pub_.publish(right_rect);
+  }
+
+  // The maps of `key` if they are ready; otherwise starts building them (one build at a time)
+  // and returns null (with *problem set when this calibration failed to build).
+  std::shared_ptr<const StereoMaps> mapsFor(const CalibrationKey& key, std::string* problem) {
+    std::lock_guard<std::mutex> lock(maps_mutex_);
+    if (maps_ && maps_->key == key) return maps_;
+    if (failure_ && failure_->first == key) {
+      *problem = failure_->second;
+      return nullptr;
+    }
+    if (build_.valid() && build_.wait_for(std::chrono::seconds(0)) != std::future_status::ready) return nullptr;
+    NODELET_INFO("Rectifier: calibration changed, building %s maps", ecs::toString(method_).c_str());
+    build_ = std::async(std::launch::async, [this, key] {
+      std::shared_ptr<const StereoMaps> maps;
+      std::string error;
+      try {
+        maps = buildMaps(key, method_);
+      } catch (const std::exception& e) {
+        error = std::string("cannot rectify: ") + e.what();
+      }
+      std::lock_guard<std::mutex> lock(maps_mutex_);
+      if (maps) {
+        maps_ = maps;
+      } else {
+        failure_ = std::make_unique<std::pair<CalibrationKey, std::string>>(key, error);
+      }
+    });
+    return nullptr;
+  }
+
+  // Remaps into a new message's own buffer (no extra copy); the message is not touched after
+  // publishing.
+  static void publishRectified(const Image& raw, const cv::Mat& map1, const cv::Mat& map2,
+                               const image_transport::Publisher& pub) {
+    const cv_bridge::CvImageConstPtr in = cv_bridge::toCvShare(raw, boost::shared_ptr<void>());
+    auto out = boost::make_shared<Image>();
+    out->header = raw.header;
+    out->encoding = raw.encoding;
+    out->height = raw.height;
+    out->width = raw.width;
+    out->is_bigendian = raw.is_bigendian;
+    out->step = static_cast<uint32_t>(raw.width * in->image.elemSize());
+    out->data.resize(static_cast<size_t>(out->step) * out->height);
+    cv::Mat rect(in->image.size(), in->image.type(), out->data.data(), out->step);
+    cv::remap(in->image, rect, map1, map2, cv::INTER_LINEAR, cv::BORDER_CONSTANT);
+    pub.publish(out);
+  }
+
+  ecs::RectificationMethod method_ = ecs::RectificationMethod::kBouguet;
+  int queue_size_ = 5;
+  std::unique_ptr<image_transport::ImageTransport> it_;
+  image_transport::SubscriberFilter left_image_sub_, right_image_sub_;
+  message_filters::Subscriber<CameraInfo> left_info_sub_, right_info_sub_;
+  std::unique_ptr<message_filters::Synchronizer<ExactPolicy>> exact_sync_;
+  std::unique_ptr<message_filters::Synchronizer<ApproximatePolicy>> approximate_sync_;
+  std::mutex connect_mutex_;
+  bool subscribed_ = false;  // guarded by connect_mutex_
+  image_transport::Publisher left_pub_, right_pub_;
+  ros::Publisher left_info_pub_, right_info_pub_;
+  ErrorThrottle errors_{5.0};
+
+  std::mutex maps_mutex_;
+  std::shared_ptr<const StereoMaps> maps_;
+  std::future<void> build_;
+  std::unique_ptr<std::pair<CalibrationKey, std::string>> failure_;
+};
+
+}  // namespace embedded_calibration_stereo
+
+PLUGINLIB_EXPORT_CLASS(embedded_calibration_stereo::RectifierNodelet, nodelet::Nodelet)
