@@ -7,11 +7,6 @@
 #include <dynamic_reconfigure/server.h>
 #include <image_geometry/stereo_camera_model.h>
 #include <image_transport/image_transport.h>
-#include <image_transport/subscriber_filter.h>
-#include <message_filters/subscriber.h>
-#include <message_filters/sync_policies/approximate_time.h>
-#include <message_filters/sync_policies/exact_time.h>
-#include <message_filters/synchronizer.h>
 #include <nodelet/nodelet.h>
 #include <pluginlib/class_list_macros.hpp>
 #include <ros/ros.h>
@@ -25,6 +20,7 @@
 
 #include "embedded_calibration_stereo/DisparityConfig.h"
 #include "embedded_calibration_stereo/core/disparity.h"
+#include "embedded_calibration_stereo/ros/stereo_camera_input.h"
 #include "embedded_calibration_stereo/ros/stereo_input_check.h"
 
 namespace embedded_calibration_stereo {
@@ -107,8 +103,6 @@ float packedRgb(const cv::Mat& image, const std::string& encoding, int u, int v)
 //  - connect_mutex_ guards the (un)subscription done by connectCb against onInit.
 class DisparityNodelet : public nodelet::Nodelet {
  private:
-  using ExactPolicy = message_filters::sync_policies::ExactTime<Image, CameraInfo, Image, CameraInfo>;
-  using ApproximatePolicy = message_filters::sync_policies::ApproximateTime<Image, CameraInfo, Image, CameraInfo>;
 
   void onInit() override {
     ros::NodeHandle& nh = getNodeHandle();
@@ -116,15 +110,9 @@ class DisparityNodelet : public nodelet::Nodelet {
     queue_size_ = pnh.param("queue_size", 5);
     const bool approximate = pnh.param("approximate_sync", false);
     it_ = std::make_unique<image_transport::ImageTransport>(nh);
-    if (approximate) {
-      approximate_sync_ = std::make_unique<message_filters::Synchronizer<ApproximatePolicy>>(
-          ApproximatePolicy(queue_size_), left_image_sub_, left_info_sub_, right_image_sub_, right_info_sub_);
-      approximate_sync_->registerCallback(&DisparityNodelet::frameCb, this);
-    } else {
-      exact_sync_ = std::make_unique<message_filters::Synchronizer<ExactPolicy>>(
-          ExactPolicy(queue_size_), left_image_sub_, left_info_sub_, right_image_sub_, right_info_sub_);
-      exact_sync_->registerCallback(&DisparityNodelet::frameCb, this);
-    }
+    input_ = std::make_unique<StereoCameraInput>(
+        approximate, queue_size_,
+        [this](const auto& l, const auto& li, const auto& r, const auto& ri) { frameCb(l, li, r, ri); });
     reconfigure_ = std::make_unique<dynamic_reconfigure::Server<DisparityConfig>>(reconfigure_mutex_, pnh);
     reconfigure_->setCallback([this](DisparityConfig& config, uint32_t) { configCb(config); });
 
@@ -137,19 +125,9 @@ class DisparityNodelet : public nodelet::Nodelet {
   void connectCb() {
     std::lock_guard<std::mutex> lock(connect_mutex_);
     if (disparity_pub_.getNumSubscribers() + points_pub_.getNumSubscribers() == 0) {
-      left_image_sub_.unsubscribe();
-      left_info_sub_.unsubscribe();
-      right_image_sub_.unsubscribe();
-      right_info_sub_.unsubscribe();
-      subscribed_ = false;
-    } else if (!subscribed_) {
-      subscribed_ = true;
-      ros::NodeHandle& nh = getNodeHandle();
-      const image_transport::TransportHints hints("raw", ros::TransportHints(), getPrivateNodeHandle());
-      left_image_sub_.subscribe(*it_, "left/image_rect", queue_size_, hints);
-      left_info_sub_.subscribe(nh, "left/camera_info", queue_size_);
-      right_image_sub_.subscribe(*it_, "right/image_rect", queue_size_, hints);
-      right_info_sub_.subscribe(nh, "right/camera_info", queue_size_);
+      input_->unsubscribe();
+    } else {
+      input_->subscribe(*it_, getNodeHandle(), getPrivateNodeHandle(), "image_rect");
     }
   }
 
@@ -176,12 +154,12 @@ class DisparityNodelet : public nodelet::Nodelet {
 
   void frameCb(const sensor_msgs::ImageConstPtr& left, const sensor_msgs::CameraInfoConstPtr& left_info,
                const sensor_msgs::ImageConstPtr& right, const sensor_msgs::CameraInfoConstPtr& right_info) {
-    const std::string left_topic = left_image_sub_.getTopic(), right_topic = right_image_sub_.getTopic();
+    const std::string left_topic = input_->leftImageTopic(), right_topic = input_->rightImageTopic();
     std::string problem = checkImagePair(*left, left_topic, *right, right_topic, {"mono8", "bgr8", "rgb8"});
-    if (problem.empty()) problem = checkCameraInfo(*left_info, left_info_sub_.getTopic(), *left);
-    if (problem.empty()) problem = checkCameraInfo(*right_info, right_info_sub_.getTopic(), *right);
+    if (problem.empty()) problem = checkCameraInfo(*left_info, input_->leftInfoTopic(), *left);
+    if (problem.empty()) problem = checkCameraInfo(*right_info, input_->rightInfoTopic(), *right);
     if (problem.empty())
-      problem = checkSameFrame(*left_info, left_info_sub_.getTopic(), *right_info, right_info_sub_.getTopic());
+      problem = checkSameFrame(*left_info, input_->leftInfoTopic(), *right_info, input_->rightInfoTopic());
     if (!problem.empty()) return reportError(problem);
     image_geometry::StereoCameraModel model;
     model.fromCameraInfo(left_info, right_info);
@@ -276,12 +254,8 @@ class DisparityNodelet : public nodelet::Nodelet {
 
   int queue_size_ = 5;
   std::unique_ptr<image_transport::ImageTransport> it_;
-  image_transport::SubscriberFilter left_image_sub_, right_image_sub_;
-  message_filters::Subscriber<CameraInfo> left_info_sub_, right_info_sub_;
-  std::unique_ptr<message_filters::Synchronizer<ExactPolicy>> exact_sync_;
-  std::unique_ptr<message_filters::Synchronizer<ApproximatePolicy>> approximate_sync_;
+  std::unique_ptr<StereoCameraInput> input_;  // (un)subscribed under connect_mutex_
   std::mutex connect_mutex_;
-  bool subscribed_ = false;  // guarded by connect_mutex_
   ros::Publisher disparity_pub_, points_pub_;
   boost::recursive_mutex reconfigure_mutex_;
   std::unique_ptr<dynamic_reconfigure::Server<DisparityConfig>> reconfigure_;

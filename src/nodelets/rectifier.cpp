@@ -10,11 +10,6 @@
 // of the new calibration are dropped until they are ready (never rectified with the old maps).
 #include <cv_bridge/cv_bridge.h>
 #include <image_transport/image_transport.h>
-#include <image_transport/subscriber_filter.h>
-#include <message_filters/subscriber.h>
-#include <message_filters/sync_policies/approximate_time.h>
-#include <message_filters/sync_policies/exact_time.h>
-#include <message_filters/synchronizer.h>
 #include <nodelet/nodelet.h>
 #include <pluginlib/class_list_macros.hpp>
 #include <ros/ros.h>
@@ -27,6 +22,7 @@
 
 #include "embedded_calibration_stereo/core/rectification.h"
 #include "embedded_calibration_stereo/ros/conversions.h"
+#include "embedded_calibration_stereo/ros/stereo_camera_input.h"
 #include "embedded_calibration_stereo/ros/stereo_input_check.h"
 
 namespace embedded_calibration_stereo {
@@ -124,8 +120,6 @@ class RectifierNodelet : public nodelet::Nodelet {
   }
 
  private:
-  using ExactPolicy = message_filters::sync_policies::ExactTime<Image, CameraInfo, Image, CameraInfo>;
-  using ApproximatePolicy = message_filters::sync_policies::ApproximateTime<Image, CameraInfo, Image, CameraInfo>;
 
   void onInit() override {
     ros::NodeHandle& nh = getNodeHandle();
@@ -140,15 +134,9 @@ class RectifierNodelet : public nodelet::Nodelet {
     queue_size_ = pnh.param("queue_size", 5);
     const bool approximate = pnh.param("approximate_sync", false);
     it_ = std::make_unique<image_transport::ImageTransport>(nh);
-    if (approximate) {
-      approximate_sync_ = std::make_unique<message_filters::Synchronizer<ApproximatePolicy>>(
-          ApproximatePolicy(queue_size_), left_image_sub_, left_info_sub_, right_image_sub_, right_info_sub_);
-      approximate_sync_->registerCallback(&RectifierNodelet::frameCb, this);
-    } else {
-      exact_sync_ = std::make_unique<message_filters::Synchronizer<ExactPolicy>>(
-          ExactPolicy(queue_size_), left_image_sub_, left_info_sub_, right_image_sub_, right_info_sub_);
-      exact_sync_->registerCallback(&RectifierNodelet::frameCb, this);
-    }
+    input_ = std::make_unique<StereoCameraInput>(
+        approximate, queue_size_,
+        [this](const auto& l, const auto& li, const auto& r, const auto& ri) { frameCb(l, li, r, ri); });
     std::lock_guard<std::mutex> lock(connect_mutex_);  // connectCb must see the publishers
     const auto image_cb = [this](const image_transport::SingleSubscriberPublisher&) { connectCb(); };
     const auto info_cb = [this](const ros::SingleSubscriberPublisher&) { connectCb(); };
@@ -166,19 +154,9 @@ class RectifierNodelet : public nodelet::Nodelet {
     const uint32_t listeners = left_pub_.getNumSubscribers() + right_pub_.getNumSubscribers() +
                                left_info_pub_.getNumSubscribers() + right_info_pub_.getNumSubscribers();
     if (listeners == 0) {
-      left_image_sub_.unsubscribe();
-      left_info_sub_.unsubscribe();
-      right_image_sub_.unsubscribe();
-      right_info_sub_.unsubscribe();
-      subscribed_ = false;
-    } else if (!subscribed_) {
-      subscribed_ = true;
-      ros::NodeHandle& nh = getNodeHandle();
-      const image_transport::TransportHints hints("raw", ros::TransportHints(), getPrivateNodeHandle());
-      left_image_sub_.subscribe(*it_, "left/image_scene", queue_size_, hints);
-      left_info_sub_.subscribe(nh, "left/camera_info", queue_size_);
-      right_image_sub_.subscribe(*it_, "right/image_scene", queue_size_, hints);
-      right_info_sub_.subscribe(nh, "right/camera_info", queue_size_);
+      input_->unsubscribe();
+    } else {
+      input_->subscribe(*it_, getNodeHandle(), getPrivateNodeHandle(), "image_scene");
     }
   }
 
@@ -188,15 +166,15 @@ class RectifierNodelet : public nodelet::Nodelet {
 
   void frameCb(const sensor_msgs::ImageConstPtr& left, const sensor_msgs::CameraInfoConstPtr& left_info,
                const sensor_msgs::ImageConstPtr& right, const sensor_msgs::CameraInfoConstPtr& right_info) {
-    const std::string left_topic = left_image_sub_.getTopic(), right_topic = right_image_sub_.getTopic();
+    const std::string left_topic = input_->leftImageTopic(), right_topic = input_->rightImageTopic();
     std::string problem = checkImagePair(*left, left_topic, *right, right_topic, {"mono8", "bgr8", "rgb8"});
-    if (problem.empty()) problem = checkCameraInfo(*left_info, left_info_sub_.getTopic(), *left);
-    if (problem.empty()) problem = checkCameraInfo(*right_info, right_info_sub_.getTopic(), *right);
+    if (problem.empty()) problem = checkCameraInfo(*left_info, input_->leftInfoTopic(), *left);
+    if (problem.empty()) problem = checkCameraInfo(*right_info, input_->rightInfoTopic(), *right);
     if (!problem.empty()) return reportError(problem);
 
     const std::shared_ptr<const StereoMaps> maps = mapsFor(CalibrationKey(*left_info, *right_info), &problem);
     if (!maps) {
-      if (!problem.empty()) reportError(left_info_sub_.getTopic() + ", " + right_info_sub_.getTopic() + ": " + problem);
+      if (!problem.empty()) reportError(input_->leftInfoTopic() + ", " + input_->rightInfoTopic() + ": " + problem);
       return;
     }
     try {
@@ -263,12 +241,8 @@ class RectifierNodelet : public nodelet::Nodelet {
   ecs::RectificationMethod method_ = ecs::RectificationMethod::kBouguet;
   int queue_size_ = 5;
   std::unique_ptr<image_transport::ImageTransport> it_;
-  image_transport::SubscriberFilter left_image_sub_, right_image_sub_;
-  message_filters::Subscriber<CameraInfo> left_info_sub_, right_info_sub_;
-  std::unique_ptr<message_filters::Synchronizer<ExactPolicy>> exact_sync_;
-  std::unique_ptr<message_filters::Synchronizer<ApproximatePolicy>> approximate_sync_;
+  std::unique_ptr<StereoCameraInput> input_;  // (un)subscribed under connect_mutex_
   std::mutex connect_mutex_;
-  bool subscribed_ = false;  // guarded by connect_mutex_
   image_transport::Publisher left_pub_, right_pub_;
   ros::Publisher left_info_pub_, right_info_pub_;
   ErrorThrottle errors_{5.0};
