@@ -53,26 +53,6 @@ void syntheticPair(cv::Mat* left, cv::Mat* right) {
   cv::remap(texture, *right, map_x, map_y, cv::INTER_LINEAR, cv::BORDER_REFLECT);
 }
 
-ecs::DisparityOptions stock(const std::string& algorithm) {
-  ecs::DisparityOptions o;  // stereo_image_proc Disparity.cfg defaults
-  o.algorithm = algorithm;
-  o.prefilter_size = 9;
-  o.prefilter_cap = 31;
-  o.correlation_window_size = 15;
-  o.disparity_range = 64;
-  o.uniqueness_ratio = 15;
-  o.texture_threshold = 10;
-  o.speckle_size = 100;
-  o.speckle_range = 4;
-  o.P1 = 200;
-  o.P2 = 400;
-  o.disp12MaxDiff = 0;
-  o.sgbm_mode = "sgbm";
-  o.left_right_check = algorithm != "bm";
-  o.fill_holes = false;
-  return o;
-}
-
 // CPU time of this process (all threads), to tell computing cost from waiting on a loaded host.
 double processCpuMs() {
   timespec t;
@@ -129,7 +109,10 @@ int main(int argc, char** argv) {
   sgbm3.P1 = 72;
   sgbm3.P2 = 288;
   run("sgbm 3x3 sgbm_3way tuned (lr, speckle, fill)", sgbm3, left, right, iterations);
-  run("OpenCV StereoBM, stereo_image_proc defaults", stock("bm"), left, right, iterations);
-  run("OpenCV StereoSGBM, stereo_image_proc defaults", stock("sgbm"), left, right, iterations);
+  using Stock = ecs::DisparityOptions;
+  run("OpenCV StereoBM, stereo_image_proc defaults", Stock::stereoImageProcDefaults("bm"), left,
+      right, iterations);
+  run("OpenCV StereoSGBM, stereo_image_proc defaults", Stock::stereoImageProcDefaults("sgbm"),
+      left, right, iterations);
   return 0;
 }

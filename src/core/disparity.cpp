@@ -215,4 +215,25 @@ cv::Mat DisparityComputer::compute(const cv::Mat& left, const cv::Mat& right) {
   return disparity;
 }
 
+DisparityOptions DisparityOptions::stereoImageProcDefaults(const std::string& algorithm) {
+  DisparityOptions o;
+  o.algorithm = algorithm;
+  o.prefilter_size = 9;
+  o.prefilter_cap = 31;
+  o.correlation_window_size = 15;
+  o.min_disparity = 0;
+  o.disparity_range = 64;
+  o.uniqueness_ratio = 15;
+  o.texture_threshold = 10;
+  o.speckle_size = 100;
+  o.speckle_range = 4;
+  o.P1 = 200;
+  o.P2 = 400;
+  o.disp12MaxDiff = 0;
+  o.sgbm_mode = "sgbm";                    // fullDP false
+  o.left_right_check = algorithm != "bm";  // stereo_image_proc sets disp12MaxDiff on SGBM only
+  o.fill_holes = false;
+  return o;
+}
+
 }  // namespace ecs

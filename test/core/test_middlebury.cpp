@@ -43,29 +43,6 @@ MiddleburyPair loadPair(const std::string& name) {
   return p;
 }
 
-// stereo_image_proc's Disparity.cfg defaults (verified in /usr/include/stereo_image_proc/
-// DisparityConfig.h): the "stock" reference the defaults must beat.
-DisparityOptions stockOptions(const std::string& algorithm) {
-  DisparityOptions o;
-  o.algorithm = algorithm;
-  o.prefilter_size = 9;
-  o.prefilter_cap = 31;
-  o.correlation_window_size = 15;
-  o.min_disparity = 0;
-  o.disparity_range = 64;
-  o.uniqueness_ratio = 15;
-  o.texture_threshold = 10;
-  o.speckle_size = 100;
-  o.speckle_range = 4;
-  o.P1 = 200;
-  o.P2 = 400;
-  o.disp12MaxDiff = 0;
-  o.sgbm_mode = "sgbm";                   // fullDP false
-  o.left_right_check = algorithm != "bm";  // stereo_image_proc sets disp12MaxDiff on SGBM only
-  o.fill_holes = false;
-  return o;
-}
-
 class MiddleburyTest : public ::testing::Test {
  protected:
   void SetUp() override {
@@ -98,11 +75,13 @@ class MiddleburyTest : public ::testing::Test {
 TEST_F(MiddleburyTest, DefaultBeatsStockAndMeetsTargets) {
   double ts, td, bm_ts, bm_td, sgbm_ts, sgbm_td;
   report("default (" + DisparityOptions().algorithm + ")", DisparityOptions(), &ts, &td);
-  report("stock stereo_image_proc BM", stockOptions("bm"), &bm_ts, &bm_td);
-  report("stock stereo_image_proc SGBM", stockOptions("sgbm"), &sgbm_ts, &sgbm_td);
+  const DisparityOptions stock_bm = DisparityOptions::stereoImageProcDefaults("bm");
+  const DisparityOptions stock_sgbm = DisparityOptions::stereoImageProcDefaults("sgbm");
+  report("stock stereo_image_proc BM", stock_bm, &bm_ts, &bm_td);
+  report("stock stereo_image_proc SGBM", stock_sgbm, &sgbm_ts, &sgbm_td);
   // With 64 levels the stock matchers leave the 64 leftmost columns invalid, which dominates
   // their Tsukuba figure; with Tsukuba's own range (16) they score as usually quoted.
-  DisparityOptions bm16 = stockOptions("bm"), sgbm16 = stockOptions("sgbm");
+  DisparityOptions bm16 = stock_bm, sgbm16 = stock_sgbm;
   bm16.disparity_range = sgbm16.disparity_range = 16;
   std::printf("[ middlebury ] stock BM / SGBM with disparity_range 16 on tsukuba: %.2f %% / %.2f %%\n",
               badRate(bm16, tsukuba_), badRate(sgbm16, tsukuba_));

@@ -58,6 +58,11 @@ struct DisparityOptions {
   std::string Check() const;
   // Moves every invalid value to the nearest valid one; returns what changed (empty if none).
   std::vector<std::string> clamp();
+
+  // The configuration stock stereo_image_proc runs by default (its Disparity.cfg: 15x15
+  // window, range 64, uniqueness 15, speckle 100/4, SGBM P1 200 / P2 400, no hole filling),
+  // for `algorithm` "bm" or "sgbm": the reference our defaults are measured against.
+  static DisparityOptions stereoImageProcDefaults(const std::string& algorithm);
 };
 
 // Computes disparity maps with one configuration.
