@@ -1,0 +1,274 @@
+// Separator nodelet: removes the lit calibration device from calibration-mode frames so that
+// depth keeps running while the light is on (core/separator.h does the work).
+//
+// Per stereo frame (left|right/image_raw and calibration_mode, ExactTime):
+//  - light off, or light on but not settled (mixed frames), or no template taught for the
+//    frame's calibration epoch: the incoming message pointers are republished unchanged on
+//    left|right/image_scene (zero-copy; depth never stops; a missing template is warned about);
+//  - light on and settled: the separated images, in new messages with the raw headers.
+//
+// Teaching I_C (the device image, only valid for the calibration it was taught under):
+//  - hardware: the `teach` service averages the next teach_frames light-on settled frames; the
+//    scene must be covered (or dark) meanwhile;
+//  - simulator (teach_from_ground_truth): the scene cannot be covered, so I_C is the mean over
+//    teach_frames light-on settled frames of I_E - ground_truth image_scene of the same stamp,
+//    which is the device-only image. It is taught automatically at the first light-on frames and,
+//    with reteach_on_epoch_change, again whenever calibration_epoch differs from the template's
+//    (the device image moves with zoom); on hardware an epoch change is only warned about.
+#include <cv_bridge/cv_bridge.h>
+#include <image_transport/image_transport.h>
+#include <message_filters/subscriber.h>
+#include <message_filters/sync_policies/exact_time.h>
+#include <message_filters/synchronizer.h>
+#include <nodelet/nodelet.h>
+#include <pluginlib/class_list_macros.hpp>
+#include <ros/ros.h>
+#include <std_srvs/Trigger.h>
+
+#include <memory>
+#include <mutex>
+
+#include "embedded_calibration_stereo/CalibrationMode.h"
+#include "embedded_calibration_stereo/core/separator.h"
+#include "embedded_calibration_stereo/ros/stereo_input_check.h"
+
+namespace embedded_calibration_stereo {
+
+namespace {
+
+using sensor_msgs::Image;
+using sensor_msgs::ImageConstPtr;
+
+// Both cameras' separators, immutable once built (frames keep their own reference).
+struct StereoSeparator {
+  StereoSeparator(const ecs::SeparatorOptions& options, ecs::DeviceTemplate left_template,
+                  ecs::DeviceTemplate right_template)
+      : left(options, std::move(left_template)), right(options, std::move(right_template)) {}
+  ecs::ImageSeparator left, right;
+  uint32_t epoch() const { return left.deviceTemplate().calibration_epoch; }
+};
+
+// Running sum of device frames of one teach (both cameras), CV_64F.
+struct TeachAccumulator {
+  bool active = false;
+  uint32_t epoch = 0;
+  int frames = 0;
+  cv::Mat left_sum, right_sum;
+};
+
+// Adds `image - scene` (scene may be empty: the frame itself) to `sum`.
+void accumulate(const cv::Mat& image, const cv::Mat& scene, cv::Mat* sum) {
+  cv::Mat device;
+  image.convertTo(device, CV_64F);
+  if (!scene.empty()) {
+    cv::Mat scene64;
+    scene.convertTo(scene64, CV_64F);
+    device -= scene64;  // noise may make it negative: kept, so the mean stays unbiased
+  }
+  if (sum->empty()) {
+    *sum = device;
+  } else {
+    *sum += device;
+  }
+}
+
+ecs::DeviceTemplate templateFrom(const cv::Mat& sum, int frames, uint32_t epoch) {
+  ecs::DeviceTemplate templ;
+  sum.convertTo(templ.device, CV_32F, 1.0 / frames);
+  templ.calibration_epoch = epoch;
+  templ.frames_averaged = frames;
+  return templ;  // default alpha curve (alpha 1): paper_global_alpha without a taught curve
+}
+
+}  // namespace
+
+// Threads: the nodelet's (single-threaded) callback queue runs onInit, frameCb, truthCb and the
+// teach service; state_mutex_ still guards separator_ and teach_ so that the class stays correct
+// if it is moved to the multi-threaded handle. separator_ points to an immutable StereoSeparator:
+// frameCb takes its own reference and separates outside the lock (both cameras in parallel,
+// ecs::separateStereo). Published messages are never modified after publishing.
+class SeparatorNodelet : public nodelet::Nodelet {
+ private:
+  using FramePolicy = message_filters::sync_policies::ExactTime<Image, Image, CalibrationMode>;
+  using TruthPolicy = message_filters::sync_policies::ExactTime<Image, Image, CalibrationMode, Image, Image>;
+
+  void onInit() override {
+    ros::NodeHandle& nh = getNodeHandle();
+    ros::NodeHandle& pnh = getPrivateNodeHandle();
+    const std::string method = pnh.param<std::string>("method", "regional_alpha");
+    teach_frames_ = pnh.param("teach_frames", 8);
+    teach_from_truth_ = pnh.param("teach_from_ground_truth", false);
+    reteach_on_epoch_change_ = pnh.param("reteach_on_epoch_change", true);
+    const int queue_size = pnh.param("queue_size", 5);
+    try {
+      options_.method = ecs::parseSeparationMethod(method);
+      if (teach_frames_ < 1) throw std::invalid_argument("teach_frames must be >= 1, got " + std::to_string(teach_frames_));
+      if (queue_size < 1) throw std::invalid_argument("queue_size must be >= 1");
+    } catch (const std::exception& e) {
+      NODELET_FATAL("Separator cannot start: %s", e.what());
+      throw;
+    }
+    image_transport::ImageTransport it(nh);
+    left_pub_ = it.advertise("left/image_scene", 2);
+    right_pub_ = it.advertise("right/image_scene", 2);
+    teach_srv_ = nh.advertiseService("teach", &SeparatorNodelet::teachService, this);
+
+    left_sub_.subscribe(nh, "left/image_raw", queue_size);
+    right_sub_.subscribe(nh, "right/image_raw", queue_size);
+    mode_sub_.subscribe(nh, "calibration_mode", queue_size);
+    frame_sync_ = std::make_unique<message_filters::Synchronizer<FramePolicy>>(FramePolicy(queue_size), left_sub_,
+                                                                               right_sub_, mode_sub_);
+    frame_sync_->registerCallback(&SeparatorNodelet::frameCb, this);
+    if (teach_from_truth_) {
+      // The driver converts ground truth only for listeners: a small cost, only in the sim.
+      truth_left_sub_.subscribe(nh, "ground_truth/left/image_scene", queue_size);
+      truth_right_sub_.subscribe(nh, "ground_truth/right/image_scene", queue_size);
+      truth_sync_ = std::make_unique<message_filters::Synchronizer<TruthPolicy>>(
+          TruthPolicy(queue_size), left_sub_, right_sub_, mode_sub_, truth_left_sub_, truth_right_sub_);
+      truth_sync_->registerCallback(&SeparatorNodelet::truthCb, this);
+    }
+    NODELET_INFO("Separator: %s, teach %d frames from %s", method.c_str(), teach_frames_,
+                 teach_from_truth_ ? "ground truth (simulator)" : "the teach service (scene covered)");
+  }
+
+  void reportError(const std::string& message) {
+    if (errors_.shouldReport(message)) NODELET_ERROR("Separator: %s", message.c_str());
+  }
+
+  void reportWarning(const std::string& message) {
+    if (errors_.shouldReport(message)) NODELET_WARN("Separator: %s", message.c_str());
+  }
+
+  void publishRaw(const ImageConstPtr& left, const ImageConstPtr& right) {
+    left_pub_.publish(left);
+    right_pub_.publish(right);
+  }
+
+  void frameCb(const ImageConstPtr& left, const ImageConstPtr& right, const CalibrationMode::ConstPtr& mode) {
+    const std::string problem =
+        checkImagePair(*left, left_sub_.getTopic(), *right, right_sub_.getTopic(), {"mono8", "bgr8"});
+    if (!problem.empty()) return reportError("frame dropped: " + problem);
+    if (!mode->light_on || !mode->settled) return publishRaw(left, right);
+
+    std::shared_ptr<const StereoSeparator> separator;
+    {
+      std::lock_guard<std::mutex> lock(state_mutex_);
+      if (!teach_from_truth_ && teach_.active) addTeachFrame(*left, *right, nullptr, nullptr, mode->calibration_epoch);
+      separator = separator_;
+      if (teach_from_truth_ && (!separator || (reteach_on_epoch_change_ && separator->epoch() != mode->calibration_epoch)))
+        startTeach(mode->calibration_epoch);
+    }
+    if (!separator) {
+      reportWarning("separation not taught yet: republishing the raw light-on frames");
+      return publishRaw(left, right);
+    }
+    if (reteach_on_epoch_change_ && separator->epoch() != mode->calibration_epoch) {
+      reportWarning("template taught under calibration epoch " + std::to_string(separator->epoch()) +
+                    ", frames are epoch " + std::to_string(mode->calibration_epoch) +
+                    (teach_from_truth_ ? ": re-teaching, republishing raw frames meanwhile"
+                                       : ": call teach with the scene covered; republishing raw frames"));
+      return publishRaw(left, right);
+    }
+    try {
+      const cv_bridge::CvImageConstPtr left_in = cv_bridge::toCvShare(left), right_in = cv_bridge::toCvShare(right);
+      auto left_out = makeOutput(*left), right_out = makeOutput(*right);
+      cv::Mat left_scene = wrap(left_out.get()), right_scene = wrap(right_out.get());
+      ecs::separateStereo(separator->left, separator->right, left_in->image, right_in->image, &left_scene,
+                          &right_scene);
+      left_pub_.publish(left_out);
+      right_pub_.publish(right_out);
+    } catch (const std::exception& e) {  // e.g. the image size changed since teaching
+      reportError(left_sub_.getTopic() + ", " + right_sub_.getTopic() + ": cannot separate (" + e.what() +
+                  "); republishing raw frames");
+      publishRaw(left, right);
+    }
+  }
+
+  // A new message with the raw header and layout; wrap() views its buffer so separate() writes
+  // in place (no extra copy).
+  static Image::Ptr makeOutput(const Image& raw) {
+    auto out = boost::make_shared<Image>();
+    out->header = raw.header;
+    out->encoding = raw.encoding;
+    out->height = raw.height;
+    out->width = raw.width;
+    out->is_bigendian = raw.is_bigendian;
+    out->step = raw.width * (raw.encoding == "mono8" ? 1 : 3);
+    out->data.resize(size_t(out->step) * out->height);
+    return out;
+  }
+  static cv::Mat wrap(Image* msg) {
+    return cv::Mat(msg->height, msg->width, msg->encoding == "mono8" ? CV_8UC1 : CV_8UC3, msg->data.data(), msg->step);
+  }
+
+  // Simulator teach: the device image is the light-on frame minus the ground-truth scene.
+  void truthCb(const ImageConstPtr& left, const ImageConstPtr& right, const CalibrationMode::ConstPtr& mode,
+               const ImageConstPtr& left_truth, const ImageConstPtr& right_truth) {
+    if (!mode->light_on || !mode->settled) return;
+    if (checkImagePair(*left, left_sub_.getTopic(), *right, right_sub_.getTopic(), {"mono8", "bgr8"}).size() ||
+        checkImagePair(*left, left_sub_.getTopic(), *left_truth, truth_left_sub_.getTopic(), {left->encoding}).size() ||
+        checkImagePair(*right, right_sub_.getTopic(), *right_truth, truth_right_sub_.getTopic(), {right->encoding}).size())
+      return reportError("ground truth does not match the raw images: cannot teach from it");
+    std::lock_guard<std::mutex> lock(state_mutex_);
+    if (teach_.active) addTeachFrame(*left, *right, left_truth.get(), right_truth.get(), mode->calibration_epoch);
+  }
+
+  // Called with state_mutex_ held.
+  void startTeach(uint32_t epoch) {
+    if (teach_.active && teach_.epoch == epoch) return;
+    teach_ = TeachAccumulator();
+    teach_.active = true;
+    teach_.epoch = epoch;
+    NODELET_INFO("Separator: teaching the device image for calibration epoch %u (%d frames, %s)", epoch, teach_frames_,
+                 teach_from_truth_ ? "light-on frame minus ground-truth scene" : "scene must be covered");
+  }
+
+  // Called with state_mutex_ held. A teach adopts the epoch of its first frame; frames of
+  // another epoch restart it (the device image moved).
+  void addTeachFrame(const Image& left, const Image& right, const Image* left_truth, const Image* right_truth,
+                     uint32_t epoch) {
+    if (teach_.frames == 0) teach_.epoch = epoch;
+    if (epoch != teach_.epoch) startTeach(epoch);
+    const auto view = [](const Image& m) { return cv_bridge::toCvShare(m, boost::shared_ptr<void>())->image; };
+    accumulate(view(left), left_truth ? view(*left_truth) : cv::Mat(), &teach_.left_sum);
+    accumulate(view(right), right_truth ? view(*right_truth) : cv::Mat(), &teach_.right_sum);
+    if (++teach_.frames < teach_frames_) return;
+    try {
+      separator_ = std::make_shared<const StereoSeparator>(options_, templateFrom(teach_.left_sum, teach_.frames, epoch),
+                                                           templateFrom(teach_.right_sum, teach_.frames, epoch));
+      NODELET_INFO("Separator: device image taught from %d frames, calibration epoch %u", teach_.frames, epoch);
+    } catch (const std::exception& e) {
+      reportError(std::string("teach failed: ") + e.what());
+    }
+    teach_ = TeachAccumulator();
+  }
+
+  bool teachService(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& res) {
+    std::lock_guard<std::mutex> lock(state_mutex_);
+    teach_ = TeachAccumulator();
+    teach_.active = true;
+    res.success = true;
+    res.message = "averaging the next " + std::to_string(teach_frames_) + " light-on settled frames" +
+                  (teach_from_truth_ ? " minus the ground-truth scene" : ": keep the scene covered");
+    return true;
+  }
+
+  ecs::SeparatorOptions options_;
+  int teach_frames_ = 8;
+  bool teach_from_truth_ = false, reteach_on_epoch_change_ = true;
+  message_filters::Subscriber<Image> left_sub_, right_sub_, truth_left_sub_, truth_right_sub_;
+  message_filters::Subscriber<CalibrationMode> mode_sub_;
+  std::unique_ptr<message_filters::Synchronizer<FramePolicy>> frame_sync_;
+  std::unique_ptr<message_filters::Synchronizer<TruthPolicy>> truth_sync_;
+  image_transport::Publisher left_pub_, right_pub_;
+  ros::ServiceServer teach_srv_;
+  ErrorThrottle errors_{5.0};
+
+  std::mutex state_mutex_;
+  std::shared_ptr<const StereoSeparator> separator_;
+  TeachAccumulator teach_;
+};
+
+}  // namespace embedded_calibration_stereo
+
+PLUGINLIB_EXPORT_CLASS(embedded_calibration_stereo::SeparatorNodelet, nodelet::Nodelet)

@@ -1,0 +1,373 @@
+// rostest: the Separator nodelet (separator_sim.test). The driver and the Separator are loaded
+// into THIS process (nodelet::Loader), so that the test's subscribers are in the same process as
+// the publishers: roscpp then hands them the published shared pointer itself (intraprocess, no
+// serialisation), and pointer identity of image_raw and image_scene can be checked.
+#include <gtest/gtest.h>
+#include <nodelet/loader.h>
+#include <sensor_msgs/CameraInfo.h>
+#include <sensor_msgs/SetCameraInfo.h>
+#include <std_srvs/SetBool.h>
+#include <std_srvs/Trigger.h>
+
+#include <cmath>
+#include <opencv2/core.hpp>
+
+#include "depth_test_utils.h"
+#include "driver_test_utils.h"
+#include "embedded_calibration_stereo/CalibrationMode.h"
+
+using embedded_calibration_stereo::CalibrationMode;
+using ecs_test::Collector;
+using sensor_msgs::Image;
+
+namespace {
+
+constexpr int kTeachFrames = 4;
+std::unique_ptr<nodelet::Loader> loader;  // created in main, after ros::init
+ecs_test::TempDir calibration_dir("ecs_separator_sim");
+
+void setParams(const std::string& name, const ecs_test::InProcessManager::Params& params) {
+  for (const auto& p : params) ros::param::set(name + "/" + p.first, p.second);
+}
+
+// The simulated driver and a Separator teaching from ground truth, in namespace /sim.
+bool loadSimPipeline() {
+  static bool loaded = false;
+  if (loaded) return true;
+  setParams("/sim/camera_driver", {{"backend", "sim"},
+                                   {"sim_config", std::string(ECS_SOURCE_DIR) + "/config/sim_rig.yaml"},
+                                   {"fps", 10.0},
+                                   {"settle_frames", 2},
+                                   {"calibration_period_s", 0.0},
+                                   {"left_camera_info_url", "file://" + calibration_dir.path + "/left.yaml"},
+                                   {"right_camera_info_url", "file://" + calibration_dir.path + "/right.yaml"}});
+  setParams("/sim/separator", {{"teach_from_ground_truth", true}, {"teach_frames", kTeachFrames}});
+  loaded = loader->load("/sim/camera_driver", "embedded_calibration_stereo/CameraDriver", ros::M_string(), {}) &&
+           loader->load("/sim/separator", "embedded_calibration_stereo/Separator", ros::M_string(), {});
+  return loaded;
+}
+
+// Polls `done` every 10 ms until it holds; false after timeout_s (for publisher connections,
+// which have no event to wait on).
+bool waitUntil(const std::function<bool()>& done, double timeout_s) {
+  const ros::WallTime deadline = ros::WallTime::now() + ros::WallDuration(timeout_s);
+  while (!done()) {
+    if (ros::WallTime::now() > deadline) return false;
+    ros::WallDuration(0.01).sleep();
+  }
+  return true;
+}
+
+double psnr(const cv::Mat& a, const cv::Mat& b) {
+  const double mse = cv::norm(a, b, cv::NORM_L2SQR) / double(a.total() * a.channels());
+  return 10.0 * std::log10(255.0 * 255.0 / std::max(mse, 1e-12));
+}
+
+cv::Mat view(const Image& m) {
+  return cv::Mat(m.height, m.width, m.encoding == "mono8" ? CV_8UC1 : CV_8UC3, const_cast<uint8_t*>(m.data.data()),
+                 m.step);
+}
+
+}  // namespace
+
+// Light off: image_scene is the very message published on image_raw (same object address).
+TEST(SeparatorSim, DepthModeRepublishesTheRawPointers) {
+  ros::NodeHandle nh("/sim");
+  Collector<Image> raw(nh, "left/image_raw", 200), scene(nh, "left/image_scene", 200);
+  Collector<Image> right_raw(nh, "right/image_raw", 200), right_scene(nh, "right/image_scene", 200);
+  ASSERT_TRUE(loadSimPipeline());
+  int checked = 0;
+  ASSERT_TRUE(scene.waitFor(
+      [&](const std::vector<Image::ConstPtr>& m) {
+        checked = 0;
+        const auto raws = raw.snapshot();
+        for (const auto& s : m) checked += ecs_test::findByStamp(raws, s->header.stamp) != nullptr;
+        return checked >= 5;
+      },
+      20.0))
+      << "fewer than 5 image_scene frames with their image_raw";
+  ASSERT_TRUE(right_scene.waitForCount(5, 5.0));
+  const auto raws = raw.snapshot(), right_raws = right_raw.snapshot();
+  int identical = 0, right_identical = 0;
+  for (const auto& s : scene.snapshot()) {
+    const auto r = ecs_test::findByStamp(raws, s->header.stamp);
+    if (!r) continue;
+    EXPECT_EQ(s.get(), r.get()) << "left image_scene at " << s->header.stamp << " is a copy";
+    identical += s.get() == r.get();
+  }
+  for (const auto& s : right_scene.snapshot()) {
+    const auto r = ecs_test::findByStamp(right_raws, s->header.stamp);
+    if (r) right_identical += s.get() == r.get();
+  }
+  std::printf("depth mode: %d left and %d right image_scene messages are the image_raw objects themselves\n",
+              identical, right_identical);
+  EXPECT_GE(identical, 5);
+  EXPECT_GE(right_identical, 3);
+}
+
+// Light on: after teaching from ground truth, image_scene is a new message with the raw header
+// whose pixels match the simulator's scene-only image of the same stamp.
+TEST(SeparatorSim, CalibrationModePublishesTheSeparatedScene) {
+  ros::NodeHandle nh("/sim");
+  Collector<Image> raw(nh, "left/image_raw", 300), scene(nh, "left/image_scene", 300);
+  Collector<Image> truth(nh, "ground_truth/left/image_scene", 300);
+  Collector<Image> right_raw(nh, "right/image_raw", 300), right_scene(nh, "right/image_scene", 300);
+  Collector<Image> right_truth(nh, "ground_truth/right/image_scene", 300);
+  Collector<CalibrationMode> modes(nh, "calibration_mode", 300);
+  ASSERT_TRUE(loadSimPipeline());
+  ASSERT_TRUE(modes.waitForCount(2, 20.0));
+  std_srvs::SetBool light;
+  light.request.data = true;
+  ASSERT_TRUE(ros::service::call("/sim/set_light", light));
+  ASSERT_TRUE(light.response.success) << light.response.message;
+
+  // Separated frames: image_scene of a light-on settled stamp that is not the raw object.
+  const auto separated = [&](Collector<Image>& raws, Collector<Image>& truths, const std::vector<Image::ConstPtr>& m) {
+    std::vector<std::pair<Image::ConstPtr, Image::ConstPtr>> out;  // (raw, scene)
+    const auto r = raws.snapshot(), t = truths.snapshot();
+    const auto md = modes.snapshot();
+    for (const auto& s : m) {
+      const auto source = ecs_test::findByStamp(r, s->header.stamp);
+      const auto mode = ecs_test::findByStamp(md, s->header.stamp);
+      if (source && mode && mode->light_on && mode->settled && source.get() != s.get() &&
+          ecs_test::findByStamp(t, s->header.stamp))
+        out.emplace_back(source, s);
+    }
+    return out;
+  };
+  ASSERT_TRUE(scene.waitFor([&](const std::vector<Image::ConstPtr>& m) { return separated(raw, truth, m).size() >= 5; },
+                            40.0))
+      << "fewer than 5 separated light-on frames";
+  ASSERT_TRUE(right_scene.waitFor(
+      [&](const std::vector<Image::ConstPtr>& m) { return separated(right_raw, right_truth, m).size() >= 3; }, 10.0));
+  light.request.data = false;
+  EXPECT_TRUE(ros::service::call("/sim/set_light", light));
+
+  // Light-on settled frames before the template existed went out raw (depth never stops).
+  int raw_light_on = 0;
+  for (const auto& s : scene.snapshot()) {
+    const auto mode = ecs_test::findByStamp(modes.snapshot(), s->header.stamp);
+    const auto source = ecs_test::findByStamp(raw.snapshot(), s->header.stamp);
+    raw_light_on += mode && mode->light_on && source && source.get() == s.get();
+  }
+  EXPECT_GE(raw_light_on, kTeachFrames) << "light-on frames during the teach were not republished raw";
+
+  for (auto* side : {"left", "right"}) {
+    const bool left = std::string(side) == "left";
+    const auto frames = left ? separated(raw, truth, scene.snapshot()) : separated(right_raw, right_truth, right_scene.snapshot());
+    const auto truths = (left ? truth : right_truth).snapshot();
+    double worst = 1e9, sum = 0, worst_raw = 0;
+    for (const auto& f : frames) {
+      const Image& r = *f.first;
+      const Image& s = *f.second;
+      EXPECT_EQ(s.header.stamp, r.header.stamp);
+      EXPECT_EQ(s.header.frame_id, r.header.frame_id);
+      EXPECT_EQ(s.header.seq, r.header.seq);
+      EXPECT_EQ(s.encoding, r.encoding);
+      ASSERT_EQ(s.width, r.width);
+      ASSERT_EQ(s.height, r.height);
+      const auto t = ecs_test::findByStamp(truths, s.header.stamp);
+      const double p = psnr(view(s), view(*t));
+      worst = std::min(worst, p);
+      sum += p;
+      worst_raw = std::max(worst_raw, psnr(view(r), view(*t)));
+    }
+    std::printf("%s image_scene vs ground truth over %zu separated frames: PSNR mean %.1f dB, worst %.1f dB "
+                "(raw light-on frames: at best %.1f dB)\n",
+                side, frames.size(), sum / frames.size(), worst, worst_raw);
+    EXPECT_GE(worst, 35.0) << side;
+    EXPECT_LT(worst_raw, worst) << "the raw frames are as close to the scene: nothing was separated";
+  }
+}
+
+// After a calibration change (left/set_camera_info: epoch + 1) the template of the old epoch is
+// not used: the Separator re-teaches from ground truth and separates frames of the new epoch.
+// Runs after the calibration-mode test (light switched on again here).
+TEST(SeparatorSim, ReteachesAfterACalibrationEpochChange) {
+  ros::NodeHandle nh("/sim");
+  Collector<Image> raw(nh, "left/image_raw", 300), scene(nh, "left/image_scene", 300);
+  Collector<Image> truth(nh, "ground_truth/left/image_scene", 300);
+  Collector<CalibrationMode> modes(nh, "calibration_mode", 300);
+  Collector<sensor_msgs::CameraInfo> info(nh, "left/camera_info", 10);
+  Collector<rosgraph_msgs::Log> log(nh, "/rosout", 1000);
+  ASSERT_TRUE(loadSimPipeline());
+  ASSERT_TRUE(info.waitForCount(1, 20.0));
+  ASSERT_TRUE(modes.waitForCount(1, 5.0));
+  const uint32_t old_epoch = modes.snapshot().back()->calibration_epoch;
+  sensor_msgs::SetCameraInfo set_info;
+  set_info.request.camera_info = *info.snapshot().back();
+  set_info.request.camera_info.K[0] += 1.0;
+  ASSERT_TRUE(ros::service::call("/sim/left/set_camera_info", set_info));
+  ASSERT_TRUE(set_info.response.success) << set_info.response.status_message;
+  std_srvs::SetBool light;
+  light.request.data = true;
+  ASSERT_TRUE(ros::service::call("/sim/set_light", light));
+  // A separated frame (not the raw object) of a newer epoch, with its ground truth.
+  Image::ConstPtr separated, separated_truth;
+  ASSERT_TRUE(scene.waitFor(
+      [&](const std::vector<Image::ConstPtr>& m) {
+        const auto r = raw.snapshot(), t = truth.snapshot();
+        const auto md = modes.snapshot();
+        for (const auto& s : m) {
+          const auto mode = ecs_test::findByStamp(md, s->header.stamp);
+          const auto source = ecs_test::findByStamp(r, s->header.stamp);
+          separated_truth = ecs_test::findByStamp(t, s->header.stamp);
+          if (mode && source && separated_truth && mode->calibration_epoch > old_epoch && source.get() != s.get()) {
+            separated = s;
+            return true;
+          }
+        }
+        return false;
+      },
+      40.0))
+      << "no separated frame of the new calibration epoch";
+  light.request.data = false;
+  EXPECT_TRUE(ros::service::call("/sim/set_light", light));
+  std::string found;
+  EXPECT_TRUE(ecs_test::waitForLog(log, {"Separator: device image taught", "epoch " + std::to_string(old_epoch + 1)},
+                                   5.0, &found));
+  const double p = psnr(view(*separated), view(*separated_truth));
+  std::printf("after the epoch change: '%s'; PSNR %.1f dB\n", found.c_str(), p);
+  EXPECT_GE(p, 35.0);
+}
+
+// The hardware teach path: `teach` averages the next light-on settled frames (here the device
+// alone, as with the scene covered); later light-on frames (scene + device) come out as the scene.
+TEST(SeparatorTeachService, TeachesFromCoveredSceneFrames) {
+  ros::NodeHandle nh("/hw");
+  Collector<Image> scene(nh, "left/image_scene", 50);
+  ros::Publisher left_pub = nh.advertise<Image>("left/image_raw", 5);
+  ros::Publisher right_pub = nh.advertise<Image>("right/image_raw", 5);
+  ros::Publisher mode_pub = nh.advertise<CalibrationMode>("calibration_mode", 5);
+  ros::param::set("/hw/separator/teach_frames", 3);
+  ASSERT_TRUE(loader->load("/hw/separator", "embedded_calibration_stereo/Separator", ros::M_string(), {}));
+  ASSERT_TRUE(waitUntil(
+      [&] { return left_pub.getNumSubscribers() && right_pub.getNumSubscribers() && mode_pub.getNumSubscribers(); },
+      10.0));
+  std_srvs::Trigger teach;
+  ASSERT_TRUE(ros::service::call("/hw/teach", teach));
+  EXPECT_TRUE(teach.response.success) << teach.response.message;
+
+  // Device: a 8 px checkerboard of 0 / 90 over 128x96; scene: a random texture in 20..150.
+  cv::Mat device(96, 128, CV_8UC1), scene_image(96, 128, CV_8UC1);
+  for (int v = 0; v < device.rows; ++v)
+    for (int u = 0; u < device.cols; ++u) device.at<uint8_t>(v, u) = ((u / 8 + v / 8) % 2) * 90;
+  cv::RNG rng(3);
+  rng.fill(scene_image, cv::RNG::UNIFORM, 20, 151);
+  uint32_t sec = 200;
+  const auto publish = [&](const cv::Mat& image) {
+    const ros::Time stamp(++sec, 0);
+    for (auto* pub : {&left_pub, &right_pub}) {
+      auto msg = boost::make_shared<Image>();
+      msg->header.stamp = stamp;
+      msg->encoding = "mono8";
+      msg->width = image.cols;
+      msg->height = image.rows;
+      msg->step = image.cols;
+      msg->data.assign(image.datastart, image.dataend);
+      pub->publish(msg);
+    }
+    auto mode = boost::make_shared<CalibrationMode>();
+    mode->header.stamp = stamp;
+    mode->light_on = mode->settled = true;
+    mode_pub.publish(mode);
+    return stamp;
+  };
+  const auto published = [&](const ros::Time& stamp) {
+    return scene.waitFor([&](const std::vector<Image::ConstPtr>& m) { return ecs_test::findByStamp(m, stamp) != nullptr; },
+                         10.0);
+  };
+  for (int i = 0; i < 3; ++i) ASSERT_TRUE(published(publish(device))) << "teach frame " << i << " not republished";
+  const cv::Mat mixed = scene_image + device;
+  const ros::Time stamp = publish(mixed);
+  ASSERT_TRUE(published(stamp));
+  const auto out = ecs_test::findByStamp(scene.snapshot(), stamp);
+  const double p = psnr(view(*out), scene_image), p_raw = psnr(mixed, scene_image);
+  std::printf("teach service: separated PSNR %.1f dB vs the scene (raw %.1f dB)\n", p, p_raw);
+  EXPECT_GE(p, 35.0);
+  loader->unload("/hw/separator");
+}
+
+// Crafted frames on a Separator without driver: mismatched sizes and encodings, and an
+// unsupported encoding, are refused with an error naming the topic and produce no output; a
+// valid frame afterwards still goes through (no crash, no stuck state).
+TEST(SeparatorBadInput, MismatchedFramesAreReportedAndDropped) {
+  ros::NodeHandle nh("/bad");
+  Collector<rosgraph_msgs::Log> log(nh, "/rosout", 1000);
+  Collector<Image> scene(nh, "left/image_scene", 50);
+  ros::Publisher left_pub = nh.advertise<Image>("left/image_raw", 5);
+  ros::Publisher right_pub = nh.advertise<Image>("right/image_raw", 5);
+  ros::Publisher mode_pub = nh.advertise<CalibrationMode>("calibration_mode", 5);
+  ASSERT_TRUE(loader->load("/bad/separator", "embedded_calibration_stereo/Separator", ros::M_string(), {}));
+  ASSERT_TRUE(waitUntil(
+      [&] { return left_pub.getNumSubscribers() && right_pub.getNumSubscribers() && mode_pub.getNumSubscribers(); },
+      10.0));
+
+  uint32_t sec = 100;
+  const auto publish = [&](const std::string& left_encoding, int left_width, const std::string& right_encoding,
+                           int right_width) {
+    const ros::Time stamp(++sec, 0);
+    for (int side = 0; side < 2; ++side) {
+      auto image = boost::make_shared<Image>();
+      image->header.stamp = stamp;
+      image->header.frame_id = "cam";
+      image->encoding = side == 0 ? left_encoding : right_encoding;
+      image->width = side == 0 ? left_width : right_width;
+      image->height = 60;
+      image->step = image->width * (image->encoding == "bgr8" ? 3 : image->encoding == "32FC1" ? 4 : 1);
+      image->data.assign(size_t(image->step) * image->height, 50);
+      (side == 0 ? left_pub : right_pub).publish(image);
+    }
+    auto mode = boost::make_shared<CalibrationMode>();
+    mode->header.stamp = stamp;
+    mode->light_on = false;
+    mode->settled = true;
+    mode_pub.publish(mode);
+    return stamp;
+  };
+  std::vector<ros::Time> bad;
+  std::string found;
+  bad.push_back(publish("mono8", 80, "mono8", 40));
+  EXPECT_TRUE(ecs_test::waitForLog(log, {"Separator", "/bad/", "image_raw", "size"}, 10.0, &found))
+      << "no error naming the topic for a size mismatch";
+  std::printf("size mismatch: %s\n", found.c_str());
+  bad.push_back(publish("mono8", 80, "bgr8", 80));
+  EXPECT_TRUE(ecs_test::waitForLog(log, {"Separator", "/bad/", "image_raw", "bgr8"}, 10.0, &found))
+      << "no error naming the topic for an encoding mismatch";
+  std::printf("encoding mismatch: %s\n", found.c_str());
+  bad.push_back(publish("32FC1", 80, "32FC1", 80));
+  EXPECT_TRUE(ecs_test::waitForLog(log, {"Separator", "/bad/", "image_raw", "32FC1"}, 10.0, &found))
+      << "no error naming the topic for an unsupported encoding";
+  std::printf("unsupported encoding: %s\n", found.c_str());
+
+  const ros::Time good = publish("mono8", 80, "mono8", 80);
+  ASSERT_TRUE(scene.waitFor([&](const std::vector<Image::ConstPtr>& m) { return ecs_test::findByStamp(m, good) != nullptr; },
+                            10.0))
+      << "a valid frame after the bad ones did not go through";
+  for (const auto& stamp : bad) EXPECT_FALSE(ecs_test::findByStamp(scene.snapshot(), stamp)) << "bad frame published";
+  loader->unload("/bad/separator");
+}
+
+// An unknown method or a teach_frames below 1 refuses to load (FATAL naming the parameter).
+TEST(SeparatorBadInput, BadParametersRefuseToLoad) {
+  ros::param::set("/badparam/separator/method", std::string("global"));
+  EXPECT_FALSE(loader->load("/badparam/separator", "embedded_calibration_stereo/Separator", ros::M_string(), {}));
+  ros::param::del("/badparam/separator/method");
+  ros::param::set("/badparam/separator/teach_frames", 0);
+  EXPECT_FALSE(loader->load("/badparam/separator", "embedded_calibration_stereo/Separator", ros::M_string(), {}));
+  ros::param::del("/badparam/separator/teach_frames");
+  EXPECT_TRUE(loader->load("/badparam/separator", "embedded_calibration_stereo/Separator", ros::M_string(), {}))
+      << "control: the defaults load";
+  loader->unload("/badparam/separator");
+}
+
+int main(int argc, char** argv) {
+  testing::InitGoogleTest(&argc, argv);
+  ros::init(argc, argv, "separator_sim_test");
+  ros::AsyncSpinner spinner(2);
+  spinner.start();
+  loader = std::make_unique<nodelet::Loader>(false);
+  const int result = RUN_ALL_TESTS();
+  loader.reset();  // unload the nodelets while ROS is still up
+  return result;
+}
