@@ -1,0 +1,32 @@
+#pragma once
+// Teaching step of the PatternTracker nodelet: teaches both cameras of the device from one
+// light-on stereo frame (with a light-off frame when available) and stores the prior file
+// atomically, so a reader never sees a half-written prior.
+//
+// Threading: a pure function of its arguments (called on the nodelet's worker thread); the two
+// cameras are taught concurrently.
+#include <string>
+
+#include "embedded_calibration_stereo/core/board_teacher.h"
+#include "embedded_calibration_stereo/core/sim/sim_rig.h"
+
+namespace embedded_calibration_stereo {
+
+// What teaching hands back: a stereo prior (left, right) already written to the file, or an error.
+struct TeachOutcome {
+  ecs::PatternPrior prior;
+  std::string error;  // empty on success
+  std::string notes;  // the teacher's notes of both cameras
+  double ms = 0.0;    // wall time of teaching and writing
+};
+
+// Teaches left and right with the device's virtual boards seen by the nominal cameras of
+// `device` (as track_pattern teach --device does), then writes `path` through a temporary file
+// in the same directory and a rename (creating missing directories). Never throws.
+TeachOutcome teachStereoPrior(const ecs::TeachFrame& left, const ecs::TeachFrame& right, ecs::ColorOrder order,
+                              const ecs::SimRigConfig& device, const std::string& path);
+
+// $ROS_HOME/ecs_pattern_prior.yaml, or ~/.ros/ecs_pattern_prior.yaml without ROS_HOME.
+std::string defaultPatternPriorFile();
+
+}  // namespace embedded_calibration_stereo
