@@ -108,6 +108,7 @@ class Monitor:
         ]
         self.disparities = 0
         self.last_disparity = None
+        self.light_off_since = None  # wall time of the last light on -> off switch
 
     def store(self, key, msg):
         with self.lock:
@@ -115,6 +116,8 @@ class Monitor:
 
     def on_mode(self, msg):
         with self.lock:
+            if self.mode is not None and self.mode.light_on and not msg.light_on:
+                self.light_off_since = time.time()
             self.mode = msg
             if msg.light_on:
                 self.light_on_frames += 1
@@ -158,21 +161,27 @@ def main():
     parser.add_argument("--out", required=True)
     parser.add_argument("--ns", default="stereo")
     parser.add_argument("--drift-at", type=float, default=None,
-                        help="seconds after start of the drift (default: a third of the run)")
+                        help="seconds after start of the drift (default: 3 s after the first light "
+                             "window that ends after a quarter of the run)")
     args = parser.parse_args(rospy.myargv()[1:])
     rospy.init_node("demo_monitor", anonymous=True)
     os.makedirs(args.out, exist_ok=True)
     mon = Monitor("/" + args.ns.strip("/"))
 
-    drift_at = args.drift_at if args.drift_at is not None else args.duration / 3.0
+    drift_at = args.drift_at  # None: chosen between two light windows, so its effect shows
     drifted = False
     timeline = []  # (t, fx error L %, fx error R %, baseline error %, epoch)
     start = time.time()
     last_frames, last_disp, last_t = 0, 0, start
     while not rospy.is_shutdown() and time.time() - start < args.duration:
-        time.sleep(2.0)  # progress cadence only; nothing waits on this for correctness
+        time.sleep(0.25)  # progress cadence only; nothing waits on this for correctness
         now = time.time()
-        if not drifted and now - start >= drift_at:
+        if drift_at is None:
+            with mon.lock:
+                off_since = mon.light_off_since
+            if off_since is not None and off_since - start >= args.duration / 4.0:
+                drift_at = off_since - start + 3.0
+        if not drifted and drift_at is not None and now - start >= drift_at:
             drifted = True
             try:
                 service = "/" + args.ns.strip("/") + "/sim/set_drift"
@@ -183,6 +192,8 @@ def main():
                     now - start, "ok" if answer.success else answer.message), flush=True)
             except (rospy.ROSException, rospy.ServiceException) as e:
                 print("demo: could not drift the rig: %s" % e, flush=True)
+        if now - last_t < 2.0:
+            continue
         with mon.lock:
             frames, disparities = mon.frames, mon.disparities
             mode = mon.mode
@@ -233,6 +244,7 @@ def main():
     # Mean over the time images flowed, so start-up does not count against the rate.
     mean_fps = (frames - 1) / span if frames > 1 and span > 0 else 0.0
     status = latest.get("status")
+    drift_at = drift_at if drifted else float("nan")
     before = [r for r in timeline if drifted and r[0] < drift_at]
     after = [r for r in timeline if drifted and r[0] >= drift_at]
     worst_after = max((max(r[1:4]) for r in after), default=float("nan"))
