@@ -22,6 +22,7 @@
 
 #include "embedded_calibration_stereo/core/rectification.h"
 #include "embedded_calibration_stereo/ros/conversions.h"
+#include "embedded_calibration_stereo/ros/output_image.h"
 #include "embedded_calibration_stereo/ros/stereo_camera_input.h"
 #include "embedded_calibration_stereo/ros/stereo_input_check.h"
 
@@ -225,17 +226,9 @@ class RectifierNodelet : public nodelet::Nodelet {
   static void publishRectified(const Image& raw, const cv::Mat& map1, const cv::Mat& map2,
                                const image_transport::Publisher& pub) {
     const cv_bridge::CvImageConstPtr in = cv_bridge::toCvShare(raw, boost::shared_ptr<void>());
-    auto out = boost::make_shared<Image>();
-    out->header = raw.header;
-    out->encoding = raw.encoding;
-    out->height = raw.height;
-    out->width = raw.width;
-    out->is_bigendian = raw.is_bigendian;
-    out->step = static_cast<uint32_t>(raw.width * in->image.elemSize());
-    out->data.resize(static_cast<size_t>(out->step) * out->height);
-    cv::Mat rect(in->image.size(), in->image.type(), out->data.data(), out->step);
-    cv::remap(in->image, rect, map1, map2, cv::INTER_LINEAR, cv::BORDER_CONSTANT);
-    pub.publish(out);
+    const OutputImage out = newImageLike(raw);
+    cv::remap(in->image, out.view, map1, map2, cv::INTER_LINEAR, cv::BORDER_CONSTANT);
+    pub.publish(out.msg);
   }
 
   ecs::RectificationMethod method_ = ecs::RectificationMethod::kBouguet;

@@ -30,6 +30,7 @@
 
 #include "embedded_calibration_stereo/CalibrationMode.h"
 #include "embedded_calibration_stereo/core/separator.h"
+#include "embedded_calibration_stereo/ros/output_image.h"
 #include "embedded_calibration_stereo/ros/stereo_input_check.h"
 
 namespace embedded_calibration_stereo {
@@ -171,34 +172,17 @@ class SeparatorNodelet : public nodelet::Nodelet {
     }
     try {
       const cv_bridge::CvImageConstPtr left_in = cv_bridge::toCvShare(left), right_in = cv_bridge::toCvShare(right);
-      auto left_out = makeOutput(*left), right_out = makeOutput(*right);
-      cv::Mat left_scene = wrap(left_out.get()), right_scene = wrap(right_out.get());
+      const OutputImage left_out = newImageLike(*left), right_out = newImageLike(*right);
+      cv::Mat left_scene = left_out.view, right_scene = right_out.view;
       ecs::separateStereo(separator->left, separator->right, left_in->image, right_in->image, &left_scene,
                           &right_scene);
-      left_pub_.publish(left_out);
-      right_pub_.publish(right_out);
+      left_pub_.publish(left_out.msg);
+      right_pub_.publish(right_out.msg);
     } catch (const std::exception& e) {  // e.g. the image size changed since teaching
       reportError(left_sub_.getTopic() + ", " + right_sub_.getTopic() + ": cannot separate (" + e.what() +
                   "); republishing raw frames");
       publishRaw(left, right);
     }
-  }
-
-  // A new message with the raw header and layout; wrap() views its buffer so separate() writes
-  // in place (no extra copy).
-  static Image::Ptr makeOutput(const Image& raw) {
-    auto out = boost::make_shared<Image>();
-    out->header = raw.header;
-    out->encoding = raw.encoding;
-    out->height = raw.height;
-    out->width = raw.width;
-    out->is_bigendian = raw.is_bigendian;
-    out->step = raw.width * (raw.encoding == "mono8" ? 1 : 3);
-    out->data.resize(size_t(out->step) * out->height);
-    return out;
-  }
-  static cv::Mat wrap(Image* msg) {
-    return cv::Mat(msg->height, msg->width, msg->encoding == "mono8" ? CV_8UC1 : CV_8UC3, msg->data.data(), msg->step);
   }
 
   // Simulator teach: the device image is the light-on frame minus the ground-truth scene.
