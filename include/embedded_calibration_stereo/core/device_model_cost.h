@@ -71,17 +71,8 @@ class DeviceCornerReprojectionCost {
     const int first_plane = right_ ? 3 : 2;
     Eigen::Matrix<T, 3, 1> p =
         virtualDeviceCornerInRig(blocks[1], corner_, blocks + first_plane, planes_);
-    if (right_) {
-      T p_right[3];
-      ceres::AngleAxisRotatePoint(blocks[2], p.data(), p_right);
-      for (int i = 0; i < 3; ++i) p[i] = p_right[i] + blocks[2][3 + i];
-    }
-    if (!(p[2] > T(0.0))) return false;  // behind the camera: not a valid evaluation point
-    T pixel[2];
-    projectPlumbBob(blocks[0], p.data(), pixel);
-    residual[0] = pixel[0] - T(pixel_.x());
-    residual[1] = pixel[1] - T(pixel_.y());
-    return true;
+    if (right_) p = rightFromLeft(blocks[2], p);
+    return pixelResidual(blocks[0], p, pixel_, residual);
   }
 
  private:

@@ -44,6 +44,28 @@ void projectPlumbBob(const T* intrinsics, const T* point, T* pixel) {
   pixel[1] = intrinsics[kFy] * yd + intrinsics[kCy];
 }
 
+// A point in the left optical frame -> the right optical frame, through extrinsics[6].
+template <typename T>
+Eigen::Matrix<T, 3, 1> rightFromLeft(const T* extrinsics, const Eigen::Matrix<T, 3, 1>& p_left) {
+  Eigen::Matrix<T, 3, 1> p_right;
+  ceres::AngleAxisRotatePoint(extrinsics, p_left.data(), p_right.data());
+  for (int i = 0; i < 3; ++i) p_right[i] += extrinsics[3 + i];
+  return p_right;
+}
+
+// Predicted minus observed pixel of a point in a camera's optical frame. False for a point
+// behind the camera: not a valid evaluation point, Ceres backs off.
+template <typename T>
+bool pixelResidual(const T* intrinsics, const Eigen::Matrix<T, 3, 1>& point,
+                   const Eigen::Vector2d& observed, T* residual) {
+  if (!(point[2] > T(0.0))) return false;
+  T pixel[2];
+  projectPlumbBob(intrinsics, point.data(), pixel);
+  residual[0] = pixel[0] - T(observed.x());
+  residual[1] = pixel[1] - T(observed.y());
+  return true;
+}
+
 // Board corner (local board coordinates) -> point in the left optical (rig) frame.
 template <typename T>
 Eigen::Matrix<T, 3, 1> boardCornerInRig(const T* board_pose, const Eigen::Vector3d& corner) {
@@ -68,13 +90,7 @@ class LeftCornerReprojectionCost {
 
   template <typename T>
   bool operator()(const T* intrinsics, const T* board_pose, T* residual) const {
-    const Eigen::Matrix<T, 3, 1> p = boardCornerInRig(board_pose, corner_);
-    if (!(p[2] > T(0.0))) return false;  // behind the camera: not a valid evaluation point
-    T pixel[2];
-    projectPlumbBob(intrinsics, p.data(), pixel);
-    residual[0] = pixel[0] - T(pixel_.x());
-    residual[1] = pixel[1] - T(pixel_.y());
-    return true;
+    return pixelResidual(intrinsics, boardCornerInRig(board_pose, corner_), pixel_, residual);
   }
 
  private:
@@ -100,15 +116,7 @@ class RightCornerReprojectionCost {
   bool operator()(const T* intrinsics, const T* board_pose, const T* extrinsics,
                   T* residual) const {
     const Eigen::Matrix<T, 3, 1> p_left = boardCornerInRig(board_pose, corner_);
-    T p_right[3];
-    ceres::AngleAxisRotatePoint(extrinsics, p_left.data(), p_right);
-    for (int i = 0; i < 3; ++i) p_right[i] += extrinsics[3 + i];
-    if (!(p_right[2] > T(0.0))) return false;
-    T pixel[2];
-    projectPlumbBob(intrinsics, p_right, pixel);
-    residual[0] = pixel[0] - T(pixel_.x());
-    residual[1] = pixel[1] - T(pixel_.y());
-    return true;
+    return pixelResidual(intrinsics, rightFromLeft(extrinsics, p_left), pixel_, residual);
   }
 
  private:
