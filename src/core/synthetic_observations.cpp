@@ -165,4 +165,13 @@ RigErrors compareRigs(const StereoRig& estimate, const StereoRig& truth) {
   return e;
 }
 
+StereoRig driftedRig(const StereoRig& truth, double focal_scale,
+                     const Eigen::Vector3d& rotation_deg) {
+  StereoRig rig = truth;
+  rig.left = rig.left.withFocalScale(focal_scale);
+  rig.right = rig.right.withFocalScale(focal_scale);
+  rig.right_from_left.linear() = rotationFromVectorDeg(rotation_deg) * rig.right_from_left.linear();
+  return rig;
+}
+
 }  // namespace ecs

@@ -39,13 +39,7 @@ struct Scenario {
   }
   // The calibration in force after a 5 % zoom and a 0.3 deg knock of the right camera.
   StereoRig perturbed() const {
-    StereoRig rig = truth;
-    rig.left = rig.left.withFocalScale(1.05);
-    rig.right = rig.right.withFocalScale(1.05);
-    rig.right_from_left.linear() =
-        rotationFromVectorDeg(Eigen::Vector3d(0.1, 0.3, -0.05).normalized() * 0.3) *
-        rig.right_from_left.linear();
-    return rig;
+    return driftedRig(truth, 1.05, Eigen::Vector3d(0.1, 0.3, -0.05).normalized() * 0.3);
   }
 };
 

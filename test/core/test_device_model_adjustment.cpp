@@ -56,13 +56,7 @@ struct SimScenario {
   }
   CalibrationDevice nominal(uint64_t seed) const { return perturbDevice(device, 0.001, 0.5, seed); }
   StereoRig drifted() const {  // 5 % zoom and a 0.3 deg knock of the right camera
-    StereoRig rig = truth;
-    rig.left = rig.left.withFocalScale(1.05);
-    rig.right = rig.right.withFocalScale(1.05);
-    rig.right_from_left.linear() =
-        rotationFromVectorDeg(Eigen::Vector3d(0.1, 0.3, -0.05).normalized() * 0.3) *
-        rig.right_from_left.linear();
-    return rig;
+    return driftedRig(truth, 1.05, Eigen::Vector3d(0.1, 0.3, -0.05).normalized() * 0.3);
   }
 };
 

@@ -26,12 +26,7 @@ struct Scenario {
     return generateSyntheticObservations(truth, only ? *only : boards, o);
   }
   StereoRig drifted() const {  // 5 % zoom and a 0.3 deg knock
-    StereoRig rig = truth;
-    rig.left = rig.left.withFocalScale(1.05);
-    rig.right = rig.right.withFocalScale(1.05);
-    rig.right_from_left.linear() =
-        rotationFromVectorDeg(Eigen::Vector3d(0.0, 0.3, 0.0)) * rig.right_from_left.linear();
-    return rig;
+    return driftedRig(truth, 1.05, Eigen::Vector3d(0.0, 0.3, 0.0));
   }
   BundleAdjustmentSummary solve(const std::vector<StereoObservation>& frames,
                                 const StereoRig& in_force) const {
