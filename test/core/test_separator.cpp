@@ -208,38 +208,12 @@ TEST_F(SeparatorSimTest, StaleTemplateAfterZoomAndReteach) {
   EXPECT_GE(retaught, 35.0);
 }
 
-// True disparity of the rectified left image from the raw depth map.
-cv::Mat trueDisparity(const SimFrame& frame, const RectificationMaps& maps) {
-  const RectificationGeometry& g = maps.geometry();
-  cv::Mat depth = frame.left_depth.clone();
-  cv::patchNaNs(depth, 0.0);
-  depth.setTo(0.0f, depth > 1e6);
-  cv::Mat rect_depth;
-  cv::remap(depth, rect_depth, maps.leftMap1(), maps.leftMap2(), cv::INTER_NEAREST,
-            cv::BORDER_CONSTANT, 0);
-  const double f = g.P1(0, 0), cx = g.P1(0, 2), cy = g.P1(1, 2), fy = g.P1(1, 1);
-  const double baseline = g.baseline();
-  const cv::Matx33d raw_from_rect = g.R1.t();
-  cv::Mat disparity(rect_depth.size(), CV_32F, cv::Scalar(0));
-  for (int v = 0; v < rect_depth.rows; ++v) {
-    for (int u = 0; u < rect_depth.cols; ++u) {
-      const float z_raw = rect_depth.at<float>(v, u);
-      if (!(z_raw > 0)) continue;
-      // The raw z of a point on the rectified ray (x, y, 1) * z_rect is z_rect * (R1^T ray).z.
-      const cv::Vec3d ray = raw_from_rect * cv::Vec3d((u - cx) / f, (v - cy) / fy, 1.0);
-      const double z_rect = z_raw / ray[2];
-      disparity.at<float>(v, u) = static_cast<float>(f * baseline / z_rect);
-    }
-  }
-  return disparity;
-}
-
 TEST_F(SeparatorSimTest, DisparityFromSeparatedFramesMatchesLightOff) {
   const SimRig rig(*config_);
   const SimFrame off = rig.render(0.0, 0.0, 21);
   const SimFrame on = rig.render(0.0, 1.0, 22);
   const RectificationMaps maps = RectificationMaps::build(on.truth, RectificationOptions());
-  const cv::Mat truth = trueDisparity(on, maps);
+  const cv::Mat truth = rectifiedDisparityFromDepth(on.left_depth, maps);
   DisparityComputer matcher{DisparityOptions()};
   const auto bad = [&](const cv::Mat& left, const cv::Mat& right) {
     const auto rect = maps.rectify(left, right);

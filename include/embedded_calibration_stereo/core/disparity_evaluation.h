@@ -3,6 +3,8 @@
 #include <opencv2/core.hpp>
 #include <string>
 
+#include "embedded_calibration_stereo/core/rectification.h"
+
 namespace ecs {
 
 struct BadPixelStats {
@@ -21,5 +23,12 @@ BadPixelStats evaluateBadPixels(const cv::Mat& disparity, const cv::Mat& ground_
 // the Middlebury convention (value / scale = disparity, 0 = unknown). Throws std::runtime_error
 // when the file cannot be read.
 cv::Mat loadScaledGroundTruth(const std::string& path, double scale);
+
+// The true disparity of the rectified left image, from a depth map of the raw left image
+// (CV_32FC1, z in metres; <= 0, NaN or > 1e6 = no depth) and the maps it is rectified with:
+// d = f' * B / z_rect, where z_rect is the depth along the rectified optical axis. Pixels without
+// depth are 0 (unknown, the evaluateBadPixels convention). Nearest-neighbour lookup, so depth
+// edges are not blended. Throws std::invalid_argument when the depth map does not fit the maps.
+cv::Mat rectifiedDisparityFromDepth(const cv::Mat& left_depth, const RectificationMaps& maps);
 
 }  // namespace ecs
