@@ -9,6 +9,10 @@
 namespace ecs {
 namespace sim {
 
+namespace {
+constexpr size_t kMaxMipLevels = 8;
+}  // namespace
+
 cv::Mat makeNoiseTexture(int width, int height, int seed) {
   // Octaves of uniform noise from texel size up to 16 texels, upsampled smoothly and summed:
   // fine octaves give sub-metre detail for matching, coarse ones avoid a flat, repetitive look.
@@ -49,7 +53,12 @@ SceneRenderer::SceneRenderer(const SimSceneConfig& config) : enabled_(config.ena
     tp.normal = p.u_axis.cross(p.v_axis).normalized();
     const int w = static_cast<int>(std::ceil(p.width_m / p.texel_m)) + 2;
     const int h = static_cast<int>(std::ceil(p.height_m / p.texel_m)) + 2;
-    tp.texture = makeNoiseTexture(w, h, p.texture_seed);
+    tp.mips.push_back(makeNoiseTexture(w, h, p.texture_seed));
+    while (tp.mips.size() < kMaxMipLevels && std::min(tp.mips.back().cols, tp.mips.back().rows) >= 4) {
+      cv::Mat next;
+      cv::pyrDown(tp.mips.back(), next);
+      tp.mips.push_back(next);
+    }
     planes_.push_back(tp);
   }
 }
@@ -66,6 +75,20 @@ inline float sampleBilinear(const cv::Mat& tex, float x, float y) {
   return (1 - fy) * ((1 - fx) * r0[0] + fx * r0[1]) + fy * ((1 - fx) * r1[0] + fx * r1[1]);
 }
 
+// Texture value at level-0 texel coordinates (x, y) for a pixel footprint of `footprint` texels:
+// blends the two mip levels around log2(footprint); level 0 alone when a pixel covers less than a
+// texel.
+inline float sampleTrilinear(const std::vector<cv::Mat>& mips, float x, float y, float footprint) {
+  if (!(footprint > 1.0f)) return sampleBilinear(mips[0], x, y);
+  const float level = std::min(std::log2(footprint), static_cast<float>(mips.size() - 1));
+  const int l0 = static_cast<int>(level);
+  const int l1 = std::min(l0 + 1, static_cast<int>(mips.size()) - 1);
+  const float w = level - l0;
+  const float s0 = 1.0f / static_cast<float>(1 << l0), s1 = 1.0f / static_cast<float>(1 << l1);
+  const float v0 = sampleBilinear(mips[l0], x * s0, y * s0);
+  return w > 0.0f ? (1 - w) * v0 + w * sampleBilinear(mips[l1], x * s1, y * s1) : v0;
+}
+
 // A plane expressed as linear forms of the camera ray m = (x, y, 1), so that a pixel costs a
 // handful of multiply-adds per plane: t = numerator / (n.m), a = a0 + t (u.m), b = b0 + t (v.m).
 struct PlaneInCamera {
@@ -73,6 +96,22 @@ struct PlaneInCamera {
   float numerator, a0, b0, width, height;
   cv::Rect box;  // pixels that can see the plane
 };
+
+// Footprint of one pixel on a plane, in metres: the larger of the plane displacements (measured
+// along the plane's u and v axes) of the hit point t * m when the ray m = (x, y, 1) moves to the
+// next column (dmx) and to the next row (dmy). dP = t (dm - m (n.dm) / (n.m)).
+inline float pixelFootprint(const PlaneInCamera& pc, float t, float x, float y, float dmx0, float dmx1,
+                            float dmy0, float dmy1) {
+  const float nm = pc.n[0] * x + pc.n[1] * y + pc.n[2];
+  const auto extent = [&](float d0, float d1) {
+    const float k = (pc.n[0] * d0 + pc.n[1] * d1) / nm;
+    const float p0 = t * (d0 - x * k), p1 = t * (d1 - y * k), p2 = -t * k;
+    const float da = pc.u[0] * p0 + pc.u[1] * p1 + pc.u[2] * p2;
+    const float db = pc.v[0] * p0 + pc.v[1] * p1 + pc.v[2] * p2;
+    return std::sqrt(da * da + db * db);
+  };
+  return std::max(extent(dmx0, dmx1), extent(dmy0, dmy1));
+}
 
 // Image bounding box of a rectangle, from samples of its outline; the whole image when part of
 // it is behind the camera or outside the cone the image sees (distortion does not invert there).
@@ -190,6 +229,11 @@ void SceneRenderer::render(const CameraRays& rays, const Eigen::Isometry3d& rig_
     for (int row = range.start; row < range.end; ++row) {
       const float* x = rays.x.ptr<float>(row);
       const float* y = rays.y.ptr<float>(row);
+      // The neighbouring row's rays give the vertical pixel step (the previous one at the bottom).
+      const int other_row = row + 1 < H ? row + 1 : row - 1;
+      const float row_sign = row + 1 < H ? 1.0f : -1.0f;
+      const float* xn = rays.x.ptr<float>(other_row);
+      const float* yn = rays.y.ptr<float>(other_row);
       std::fill(best_t.begin(), best_t.end(), inf);
       std::fill(best_plane.begin(), best_plane.end(), -1);
       for (int p = 0; p < static_cast<int>(planes.size()); ++p) {
@@ -207,7 +251,13 @@ void SceneRenderer::render(const CameraRays& rays, const Eigen::Isometry3d& rig_
           if (depth) depth[col] = inf;
           continue;
         }
-        out[col] = sampleBilinear(planes_[p].texture, best_a[col] * inv_texel[p], best_b[col] * inv_texel[p]);
+        const int next_col = col + 1 < W ? col + 1 : col - 1;
+        const float col_sign = col + 1 < W ? 1.0f : -1.0f;
+        const float footprint =
+            pixelFootprint(planes[p], best_t[col], x[col], y[col], col_sign * (x[next_col] - x[col]),
+                           col_sign * (y[next_col] - y[col]), row_sign * (xn[col] - x[col]),
+                           row_sign * (yn[col] - y[col])) * inv_texel[p];
+        out[col] = sampleTrilinear(planes_[p].mips, best_a[col] * inv_texel[p], best_b[col] * inv_texel[p], footprint);
         if (depth)
           depth[col] = static_cast<float>(C.z() + best_t[col] * (rz.x() * x[col] + rz.y() * y[col] + rz.z()));
       }

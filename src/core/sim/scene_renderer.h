@@ -2,6 +2,9 @@
 // The simulated rig's 3D scene: textured planar rectangles ray cast per pixel. Each plane
 // carries a procedural multi-scale noise texture defined ON the plane (generated once from its
 // texture_seed), so both cameras see the same surface and stereo matching has real detail.
+// Textures are sampled from mip levels chosen by each pixel's footprint on the plane (trilinear):
+// a far or grazing surface (the floor) would otherwise alias, and a frame re-rendered after a
+// zoom or a knock would not match the earlier frame resampled, as it does through a real lens.
 //
 // Threading: immutable after construction; render() may be called from any thread.
 #include <Eigen/Geometry>
@@ -28,7 +31,9 @@ class SceneRenderer {
   struct TexturedPlane {
     ScenePlane plane;
     Eigen::Vector3d normal;
-    cv::Mat texture;  // CV_32F grey levels, one texel per texel_m, texel (i, j) at (i, j)*texel_m
+    // Mip levels of the texture (CV_32F grey levels): level 0 has one texel per texel_m, texel
+    // (i, j) at (i, j) * texel_m; level k+1 is level k low-passed and halved (cv::pyrDown).
+    std::vector<cv::Mat> mips;
   };
   bool enabled_;
   std::vector<TexturedPlane> planes_;
