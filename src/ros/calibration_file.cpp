@@ -1,5 +1,7 @@
 #include "embedded_calibration_stereo/ros/calibration_file.h"
 
+#include "embedded_calibration_stereo/core/atomic_file.h"
+
 #include <camera_calibration_parsers/parse.h>
 #include <camera_calibration_parsers/parse_ini.h>
 #include <camera_calibration_parsers/parse_yml.h>
@@ -78,19 +80,6 @@ bool makeDirectories(const std::string& dir) {
   return mkdir(dir.c_str(), 0755) == 0 || errno == EEXIST;
 }
 
-bool writeAll(int fd, const std::string& data) {
-  size_t written = 0;
-  while (written < data.size()) {
-    const ssize_t n = ::write(fd, data.data() + written, data.size() - written);
-    if (n < 0) {
-      if (errno == EINTR) continue;
-      return false;
-    }
-    written += static_cast<size_t>(n);
-  }
-  return true;
-}
-
 }  // namespace
 
 bool resolveCalibrationUrl(const std::string& url, const std::string& camera_name,
@@ -136,37 +125,10 @@ bool writeCalibrationFileAtomic(const std::string& path, const std::string& came
 
   const std::string dir = directoryOf(path);
   if (!makeDirectories(dir)) return fail(errnoText("cannot create directory '" + dir + "'"));
-  // Same directory as the target: rename() is atomic only within one file system.
-  std::string tmp = path + ".tmp.XXXXXX";
-  std::vector<char> tmp_name(tmp.begin(), tmp.end());
-  tmp_name.push_back('\0');
-  const int fd = mkstemp(tmp_name.data());
-  if (fd < 0) return fail(errnoText("cannot create a temporary file in '" + dir + "'"));
-  tmp.assign(tmp_name.data());
-  auto abandon = [&](const std::string& why) {
-    const std::string reason = errnoText(why);
-    ::close(fd);
-    ::unlink(tmp.c_str());
-    return fail(reason);
-  };
-  if (fchmod(fd, 0644) != 0) return abandon("cannot set permissions of '" + tmp + "'");
-  if (!writeAll(fd, text.str())) return abandon("cannot write '" + tmp + "'");
-  if (fsync(fd) != 0) return abandon("cannot fsync '" + tmp + "'");
-  if (::close(fd) != 0) {
-    const std::string reason = errnoText("cannot close '" + tmp + "'");
-    ::unlink(tmp.c_str());
-    return fail(reason);
-  }
-  if (::rename(tmp.c_str(), path.c_str()) != 0) {
-    const std::string reason = errnoText("cannot rename '" + tmp + "' to '" + path + "'");
-    ::unlink(tmp.c_str());
-    return fail(reason);
-  }
-  // Persist the directory entry too; failure here cannot be undone, the file is complete.
-  const int dir_fd = ::open(dir.c_str(), O_RDONLY | O_DIRECTORY);
-  if (dir_fd >= 0) {
-    fsync(dir_fd);
-    ::close(dir_fd);
+  try {
+    ecs::writeFileAtomically(path, text.str());
+  } catch (const std::exception& e) {
+    return fail(e.what());
   }
   return true;
 }
