@@ -3,6 +3,9 @@
 // and on acceptance commits through the driver's set_camera_info services and /tf_static
 // (CalibrationSession). calibration/recalibrate switches the light on, collects, solves,
 // commits unless dry_run or rejected, switches the light off and answers with the status.
+// For a bag replay (launch/replay.launch: no driver, use_sim_time) the parameter commit:=none
+// solves and gates every window as usual but commits nowhere except /tf_static; only header
+// stamps (sim time) order the frames, and solve durations are wall time.
 #include <diagnostic_updater/diagnostic_updater.h>
 #include <nodelet/nodelet.h>
 #include <pluginlib/class_list_macros.hpp>
@@ -91,9 +94,10 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
     worker_ = std::thread(&OnlineCalibratorNodelet::workerLoop, this);
     recalibrate_srv_ = getMTNodeHandle().advertiseService("calibration/recalibrate",
                                                           &OnlineCalibratorNodelet::recalibrate, this);
-    NODELET_INFO("OnlineCalibrator: device from %s (%zu virtual boards), observations on %s, %s",
+    NODELET_INFO("OnlineCalibrator: device from %s (%zu virtual boards), observations on %s, %s, commit to %s",
                  params_.device_config.c_str(), session_->boards().size(), observations_sub_.getTopic().c_str(),
-                 params_.auto_calibrate ? "solving every light-on window" : "solving on request only");
+                 params_.auto_calibrate ? "solving every light-on window" : "solving on request only",
+                 params_.commit == CommitTarget::kDriver ? "the driver" : "none (tf_static only)");
   }
 
   void stopWorker() {
@@ -143,6 +147,7 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
     std::optional<Job> job;
     {
       std::lock_guard<std::mutex> lock(mutex_);
+      if (!modes_.empty() && mode->header.stamp < modes_.back().first) forgetFramesAfterTimeJump(mode->header.stamp);
       epoch_ = mode->calibration_epoch;
       modes_.emplace_back(mode->header.stamp, calibrating);
       if (modes_.size() > kKeptFrames) modes_.pop_front();
@@ -162,6 +167,18 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
       }
     }
     if (job) submit(std::move(*job));
+  }
+
+  // Caller holds mutex_. Stamps went backwards (a bag replayed again, a restarted sim clock):
+  // the frames remembered so far belong to another timeline and window_closed_at_ would hide
+  // every new frame.
+  void forgetFramesAfterTimeJump(const ros::Time& stamp) {
+    NODELET_WARN("OnlineCalibrator: calibration_mode stamp went back from %.3f to %.3f s; window restarted",
+                 modes_.back().first.toSec(), stamp.toSec());
+    modes_.clear();
+    pending_.clear();
+    window_.clear();
+    window_closed_at_ = ros::Time();
   }
 
   // Caller holds mutex_.
@@ -210,7 +227,8 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
         std::lock_guard<std::mutex> lock(mutex_);
         last_solve_ = status;
         last_solve_time_ = ros::WallTime::now();
-        if (status.accepted && !job.dry_run) last_commit_time_ = last_solve_time_;
+        if (status.accepted && !job.dry_run && params_.commit == CommitTarget::kDriver)
+          last_commit_time_ = last_solve_time_;
         if (!status.accepted) last_rejection_ = status.reason;
       }
       if (!job.dry_run) status_pub_.publish(status);  // a dry run is answered, not announced
@@ -262,7 +280,8 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
     submit(std::move(job));
     res.status = result.get();
     res.success = res.status.accepted;
-    res.message = res.status.accepted ? (req.dry_run ? res.status.reason : "committed") : res.status.reason;
+    // An accepted status has an empty reason only when committed to the driver.
+    res.message = res.status.accepted && res.status.reason.empty() ? "committed" : res.status.reason;
     if (!light_off) res.message += " (light not switched off: " + error + ")";
     return true;
   }

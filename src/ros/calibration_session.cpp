@@ -46,6 +46,12 @@ void appendIntrinsics(const ecs::PinholeCamera& camera, const ecs::CameraStddev&
 
 }  // namespace
 
+CommitTarget parseCommitTarget(const std::string& name) {
+  if (name == "driver") return CommitTarget::kDriver;
+  if (name == "none") return CommitTarget::kNone;
+  throw ecs::ConfigError("commit", "must be 'driver' or 'none', got '" + name + "'");
+}
+
 CalibratorParams loadCalibratorParams(const ros::NodeHandle& pnh, const std::string& default_device_config) {
   CalibratorParams p;
   const ParamReader r(pnh);
@@ -57,6 +63,11 @@ CalibratorParams loadCalibratorParams(const ros::NodeHandle& pnh, const std::str
   r.read("min_frames", &p.min_frames, 1);
   r.read("max_frames", &p.max_frames, p.min_frames);
   r.read("service_timeout_s", &p.service_timeout_s);
+  std::string commit = "driver";
+  r.read("commit", &commit);
+  p.commit = parseCommitTarget(commit);
+  r.read("estimate_tangential", &p.terms.estimate_tangential);
+  r.read("estimate_k3", &p.terms.estimate_k3);
   r.read("loss_scale_px", &p.adjustment.loss_scale_px);
   r.read("max_rms_px", &p.gate.max_rms_px);
   r.read("max_epipolar_rms_px", &p.gate.max_epipolar_rms_px);
@@ -113,7 +124,7 @@ CalibrationSession::CalibrationSession(ros::NodeHandle nh, CalibratorParams para
       params_(std::move(params)),
       device_(std::move(device)),
       boards_(device_.virtualBoards()),
-      adjuster_(params_.adjustment, ecs::BundleAdjustmentConfig()),
+      adjuster_(params_.adjustment, params_.terms),
       gate_(params_.gate) {}
 
 CalibrationStatus CalibrationSession::solve(const std::vector<ecs::StereoObservation>& frames,
@@ -153,6 +164,13 @@ CalibrationStatus CalibrationSession::solve(const std::vector<ecs::StereoObserva
     if (decision.accepted) status.reason = "dry run: acceptable, not committed";
     return status;
   }
+  if (params_.commit == CommitTarget::kNone) {
+    // A replay has no driver to commit to: announce the accepted geometry on /tf_static only,
+    // and say in the status that no camera_info changed (the epoch in force stays `epoch`).
+    broadcastTransform(candidate.rig);
+    status.reason = kAcceptedNotCommittedReason;
+    return status;
+  }
   const std::string commit_error = commit(candidate.rig, *left_info);
   if (!commit_error.empty()) {
     status.accepted = false;
@@ -175,9 +193,13 @@ std::string CalibrationSession::commit(const ecs::StereoRig& rig, const sensor_m
       return error + "; restoring the left calibration failed too: " + restore_error;
     return error + "; left calibration restored";
   }
+  broadcastTransform(rig);
+  return "";
+}
+
+void CalibrationSession::broadcastTransform(const ecs::StereoRig& rig) {
   tf_broadcaster_.sendTransform(
       toTransformStamped(rig.leftFromRight(), params_.left_frame_id, params_.right_frame_id, ros::Time::now()));
-  return "";
 }
 
 bool CalibrationSession::callSetCameraInfo(const std::string& side, const sensor_msgs::CameraInfo& info,

@@ -2,7 +2,8 @@
 // The ROS side of one calibration solve for the OnlineCalibrator nodelet: parameters, checking
 // incoming observation messages, solve + quality gate against the calibration in force, and the
 // commit (left|right/set_camera_info of the driver, then the left->right transform on
-// /tf_static). The nodelet keeps the threads, topics and windows; this file keeps the logic.
+// /tf_static; or, with commit "none" for a bag replay without driver, the transform only).
+// The nodelet keeps the threads, topics and windows; this file keeps the logic.
 #include <ros/ros.h>
 #include <sensor_msgs/CameraInfo.h>
 #include <tf2_ros/static_transform_broadcaster.h>
@@ -19,6 +20,18 @@
 
 namespace embedded_calibration_stereo {
 
+// Where an accepted calibration goes.
+enum class CommitTarget {
+  kDriver,  // the driver's left|right/set_camera_info, then /tf_static
+  kNone,    // nowhere but /tf_static (bag replay: the camera_info comes from the bag)
+};
+
+// Reads "driver" | "none"; throws ecs::ConfigError otherwise.
+CommitTarget parseCommitTarget(const std::string& name);
+
+// status.reason of a calibration accepted by the gate but, with commit "none", committed nowhere.
+constexpr const char* kAcceptedNotCommittedReason = "accepted (commit: none): gate passed, not committed to a driver";
+
 struct CalibratorParams {
   std::string device_config;  // sim_rig.yaml format: the `device` node
   std::string left_frame_id = "stereo_left_optical_frame";
@@ -26,8 +39,10 @@ struct CalibratorParams {
   bool auto_calibrate = true;  // solve at the end of every light-on window of the driver
   int min_frames = 5;          // a light-on window with fewer frames is not solved
   int max_frames = 30;         // frames kept per window (the first ones)
-  double service_timeout_s = 2.0;  // for each set_light / set_camera_info call
+  double service_timeout_s = 2.0;  // for each set_light / set_camera_info call (wall time)
+  CommitTarget commit = CommitTarget::kDriver;
   ecs::BundleAdjustmentOptions adjustment;
+  ecs::BundleAdjustmentConfig terms;  // which distortion terms are estimated (k1 k2 by default)
   ecs::GateOptions gate;
 };
 
@@ -54,7 +69,9 @@ class CalibrationSession {
   // `epoch`: its calibration_epoch. Commits unless `dry_run` or rejected. status.accepted is
   // true only for a committed (or, in a dry run, an acceptable) calibration; a failed
   // set_camera_info leaves accepted false with the reason "not committed: ..." (the next window
-  // solves again against the unchanged calibration in force: the retry).
+  // solves again against the unchanged calibration in force: the retry). With commit "none" an
+  // acceptable calibration is published on /tf_static only: status.accepted is true, its reason
+  // kAcceptedNotCommittedReason and its epoch `epoch` (still in force: nothing was committed).
   CalibrationStatus solve(const std::vector<ecs::StereoObservation>& frames,
                           const sensor_msgs::CameraInfo* left_info, const sensor_msgs::CameraInfo* right_info,
                           uint32_t epoch, bool dry_run);
@@ -66,6 +83,7 @@ class CalibrationSession {
   // Empty on success, otherwise why the commit failed (the left calibration is then restored
   // to `left_in_force` when only the right one was refused).
   std::string commit(const ecs::StereoRig& rig, const sensor_msgs::CameraInfo& left_in_force);
+  void broadcastTransform(const ecs::StereoRig& rig);  // left->right on /tf_static
   bool callSetCameraInfo(const std::string& side, const sensor_msgs::CameraInfo& info, std::string* error);
 
   ros::NodeHandle nh_;
