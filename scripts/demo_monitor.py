@@ -1,10 +1,13 @@
 #!/usr/bin/env python3
-"""Watches a running head (the demo) for a set time: prints a progress line every two seconds,
-injects a drift into the simulated rig (a 5 % zoom and a 0.3 deg rotation of the right camera)
-and writes the results folder (calibration YAMLs, status, calibration-error timeline, image and
-disparity snapshots) at the end.
+"""Watches a running head (the demo) for a set time, drives the simulated rig through a drift
+script (a 5 % zoom step, a slow thermal rotation of the right camera, a knock), prints a progress
+line every two seconds and writes the results folder at the end: calibration YAMLs, status,
+calibration-error timeline (CSV and PNG plot with the drift events), image and disparity
+snapshots, and a final report saying whether the calibration after the drift is within the
+calibrator's bounds (issue 4) of ground truth.
 
-Usage: demo_monitor.py --duration S --out DIR [--ns stereo] [--drift-at S]
+Usage: demo_monitor.py --duration S --out DIR [--ns stereo] [--zoom-at S]
+Times count from the first camera frame.
 """
 import argparse
 import math
@@ -21,6 +24,13 @@ from sensor_msgs.msg import CameraInfo, Image
 from stereo_msgs.msg import DisparityImage
 from embedded_calibration_stereo.msg import CalibrationMode, CalibrationStatus
 from embedded_calibration_stereo.srv import SetRigDrift, SetRigDriftRequest
+
+# The calibrator's accuracy bounds (issue 4), per error key of calibration_errors().
+BOUNDS = {
+    "fx_pct": (0.05, "%"), "fy_pct": (0.05, "%"), "cx_px": (0.3, "px"), "cy_px": (0.3, "px"),
+    "k1": (0.005, ""), "baseline_pct": (0.1, "%"), "rotation_deg": (0.01, "deg"),
+}
+ERROR_KEYS = list(BOUNDS)
 
 
 def write_png(path, width, height, channels, data):
@@ -54,14 +64,44 @@ def colourise_disparity(msg):
     return (rgb * 255).astype(np.uint8).tobytes(), float(valid.mean())
 
 
+def _rotation(values):
+    return np.array(values, dtype=float).reshape(3, 3)
+
+
+def stereo_geometry(left, right):
+    """right_from_left rotation and baseline (m) of a rectified CameraInfo pair (Bouguet R, P):
+    p_rect = R1 p_left, p_rect = R2 p_right, so right_from_left = R2^T R1."""
+    rotation = _rotation(right.R).T @ _rotation(left.R)
+    t_rect = np.array([right.P[3] / right.P[0], right.P[7] / right.P[5], right.P[11]])
+    return rotation, float(np.linalg.norm(t_rect))
+
+
 def calibration_errors(est, gt):
-    """fx error (%) of each camera and baseline error (%) of a published pair vs the truth."""
-    if est[0] is None or est[1] is None or gt[0] is None or gt[1] is None or gt[0].K[0] == 0:
+    """Errors of a published CameraInfo pair against the truth, worst of both cameras:
+    fx, fy (%), cx, cy (px), k1 (absolute), baseline (%), stereo rotation (deg)."""
+    if any(m is None for m in est + gt) or gt[0].K[0] == 0 or est[1].P[0] == 0 or gt[1].P[0] == 0:
         return None
-    fx = [100.0 * abs(e.K[0] - g.K[0]) / g.K[0] for e, g in zip(est, gt)]
-    baseline = lambda right: -right.P[3] / right.P[0] if right.P[0] else float("nan")
-    b_err = 100.0 * abs(baseline(est[1]) - baseline(gt[1])) / baseline(gt[1])
-    return fx[0], fx[1], b_err
+    pairs = list(zip(est, gt))
+    errors = {
+        "fx_pct": max(100.0 * abs(e.K[0] - g.K[0]) / g.K[0] for e, g in pairs),
+        "fy_pct": max(100.0 * abs(e.K[4] - g.K[4]) / g.K[4] for e, g in pairs),
+        "cx_px": max(abs(e.K[2] - g.K[2]) for e, g in pairs),
+        "cy_px": max(abs(e.K[5] - g.K[5]) for e, g in pairs),
+        "k1": max(abs((e.D[0] if e.D else 0.0) - (g.D[0] if g.D else 0.0)) for e, g in pairs),
+    }
+    r_est, b_est = stereo_geometry(*est)
+    r_gt, b_gt = stereo_geometry(*gt)
+    errors["baseline_pct"] = 100.0 * abs(b_est - b_gt) / b_gt
+    cos_angle = np.clip((np.trace(r_est @ r_gt.T) - 1.0) / 2.0, -1.0, 1.0)
+    errors["rotation_deg"] = math.degrees(math.acos(cos_angle))
+    return errors
+
+
+def format_errors(errors):
+    errors = {k: (v if abs(v) >= 1e-9 else 0.0) for k, v in errors.items()}  # no 1e-14 noise
+    unit = lambda k: BOUNDS[k][1] if BOUNDS[k][1] in ("%", "") else " " + BOUNDS[k][1]
+    return "  ".join("%s %.3g%s" % (k.rsplit("_", 1)[0] if BOUNDS[k][1] else k, errors[k], unit(k))
+                     for k in ERROR_KEYS)
 
 
 def camera_yaml(info, name):
@@ -77,6 +117,74 @@ def camera_yaml(info, name):
             "projection_matrix:\n" + matrix(3, 4, info.P))
 
 
+class DriftScript:
+    """The demo's drift events on the sim/set_drift service (absolute requests: each call
+    replaces the previous drift state except the knock, which is added once). The thermal
+    rotation and the knock follow the zoom (zoom_at s, default a third of the run) at fixed
+    fractions of the run: with the demo's 10 s light period, runs of 60 s or more see a full
+    light window after the knock. An event fires only while the light is off, so no
+    calibration window mixes two rigs. Runs on the main thread only."""
+
+    THERMAL_RATE_DEG_PER_S = 0.01
+    ZOOM = 1.05
+
+    def __init__(self, ns, duration, zoom_at):
+        self.service = ns + "/sim/set_drift"
+        thermal_start = zoom_at + 0.2 * duration
+        thermal_stop = zoom_at + 0.35 * duration
+        self.thermal_deg = self.THERMAL_RATE_DEG_PER_S * (thermal_stop - thermal_start)
+        self.pending = [
+            (zoom_at, "zoom", "5 % zoom step (both cameras)", self._zoom),
+            (thermal_start, "thermal start", "thermal rotation of the right camera starts, %.3f deg/s"
+             % self.THERMAL_RATE_DEG_PER_S, self._thermal_start),
+            (thermal_stop, "thermal stop", "thermal rotation stops (about %.2f deg reached)" % self.thermal_deg,
+             self._thermal_stop),
+            (zoom_at + 0.45 * duration, "knock", "knock: 0.07 deg and 1 mm extrinsic change", self._knock),
+        ]
+        self.fired = []  # (t, short name)
+        self.thermal_started_at = None
+        self.held_rotation_deg = 0.0  # right-camera rotation (y) reached when the ramp stopped
+
+    def _zoom(self, t):
+        return SetRigDriftRequest(focal_scale=self.ZOOM)
+
+    def _thermal_start(self, t):
+        self.thermal_started_at = t
+        return SetRigDriftRequest(focal_scale=self.ZOOM, thermal_rate_deg_per_s=self.THERMAL_RATE_DEG_PER_S)
+
+    def _thermal_stop(self, t):
+        # Holds the rotation reached (y axis, as the thermal drift turns), rate back to zero.
+        self.held_rotation_deg = self.THERMAL_RATE_DEG_PER_S * (t - self.thermal_started_at)
+        return self._held()
+
+    def _held(self):
+        return SetRigDriftRequest(focal_scale=self.ZOOM, right_rotation_deg=[0.0, self.held_rotation_deg, 0.0])
+
+    def _knock(self, t):
+        request = self._held()
+        request.knock_rotation_deg = [0.04, -0.03, 0.05]
+        request.knock_translation_m = [0.0008, 0.0003, -0.0005]
+        return request
+
+    def last_event_time(self):
+        return self.fired[-1][0] if self.fired else None
+
+    def step(self, t, light_on):
+        """Fires the next due event; returns its progress line or None."""
+        if not self.pending or t < self.pending[0][0] or light_on:
+            return None
+        _, name, description, make = self.pending.pop(0)
+        request = make(t)
+        try:
+            rospy.wait_for_service(self.service, 5.0)
+            answer = rospy.ServiceProxy(self.service, SetRigDrift)(request)
+            outcome = "ok" if answer.success else "refused: " + answer.message
+        except (rospy.ROSException, rospy.ServiceException) as e:
+            outcome = "failed: %s" % e
+        self.fired.append((t, name))
+        return "[%5.1f s] DRIFT: %s (%s)" % (t, description, outcome)
+
+
 class Monitor:
     """Callbacks run on rospy's subscriber threads; the main thread reads under self.lock."""
 
@@ -89,9 +197,14 @@ class Monitor:
         self.first_image_time = None
         self.last_image_time = None
         self.last_image = None
-        self.last_light_on_image = None
-        self.settled_light_on_stamps = set()  # stamps of settled light-on frames (bounded)
-        self.pending_images = {}  # stamp -> image, until its calibration_mode arrives
+        self.last_light_off_image = None  # the scene alone
+        self.last_light_on_image = None   # settled: the boards over the scene
+        # The image and its calibration_mode share a stamp but arrive in either order: each
+        # waits here (a few, bounded) for its partner.
+        self.unpaired_images = {}
+        self.unpaired_modes = {}
+        self.disparities = 0
+        self.last_disparity = None
         sub = lambda topic, cls, key: rospy.Subscriber(
             ns + "/" + topic, cls, lambda m: self.store(key, m), queue_size=2)
         self.subs = [
@@ -106,29 +219,34 @@ class Monitor:
                              buff_size=2 ** 24),
             sub("calibration/status", CalibrationStatus, "status"),
         ]
-        self.disparities = 0
-        self.last_disparity = None
-        self.light_off_since = None  # wall time of the last light on -> off switch
 
     def store(self, key, msg):
         with self.lock:
             self.latest[key] = msg
 
+    def classify(self, image, mode):
+        """Called with self.lock held, for an image and the calibration_mode of its stamp."""
+        if not mode.light_on:
+            self.last_light_off_image = image
+        elif mode.settled:
+            self.last_light_on_image = image
+
+    @staticmethod
+    def keep_last(unpaired, limit=10):
+        while len(unpaired) > limit:
+            unpaired.pop(next(iter(unpaired)))
+
     def on_mode(self, msg):
         with self.lock:
-            if self.mode is not None and self.mode.light_on and not msg.light_on:
-                self.light_off_since = time.time()
             self.mode = msg
             if msg.light_on:
                 self.light_on_frames += 1
-            if msg.light_on and msg.settled:
-                image = self.pending_images.pop(msg.header.stamp, None)
-                if image is not None:
-                    self.last_light_on_image = image
-                else:
-                    self.settled_light_on_stamps.add(msg.header.stamp)
-                    if len(self.settled_light_on_stamps) > 100:
-                        self.settled_light_on_stamps.pop()
+            image = self.unpaired_images.pop(msg.header.stamp, None)
+            if image is not None:
+                self.classify(image, msg)
+            else:
+                self.unpaired_modes[msg.header.stamp] = msg
+                self.keep_last(self.unpaired_modes)
 
     def on_image(self, msg):
         now = time.time()
@@ -137,12 +255,12 @@ class Monitor:
             self.first_image_time = self.first_image_time or now
             self.last_image_time = now
             self.last_image = msg
-            # The image and its calibration_mode share a stamp but arrive in either order.
-            if msg.header.stamp in self.settled_light_on_stamps:
-                self.settled_light_on_stamps.discard(msg.header.stamp)
-                self.last_light_on_image = msg
+            mode = self.unpaired_modes.pop(msg.header.stamp, None)
+            if mode is not None:
+                self.classify(msg, mode)
             else:
-                self.pending_images = {msg.header.stamp: msg}
+                self.unpaired_images[msg.header.stamp] = msg
+                self.keep_last(self.unpaired_images)
 
     def on_disparity(self, msg):
         with self.lock:
@@ -155,66 +273,82 @@ class Monitor:
         return calibration_errors((get("left"), get("right")), (get("gt_left"), get("gt_right")))
 
 
-def main():
-    parser = argparse.ArgumentParser()
-    parser.add_argument("--duration", type=float, default=60.0)
-    parser.add_argument("--out", required=True)
-    parser.add_argument("--ns", default="stereo")
-    parser.add_argument("--drift-at", type=float, default=None,
-                        help="seconds after start of the drift (default: 3 s after the first light "
-                             "window that ends after a quarter of the run)")
-    args = parser.parse_args(rospy.myargv()[1:])
-    rospy.init_node("demo_monitor", anonymous=True)
-    os.makedirs(args.out, exist_ok=True)
-    mon = Monitor("/" + args.ns.strip("/"))
+def plot_errors(path, timeline, events, epochs):
+    """PNG plot of each error against time (log scale), its bound dashed, drift events as
+    vertical lines and calibration commits (epoch changes) as dotted lines. False when
+    matplotlib is missing."""
+    try:
+        import matplotlib
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError:
+        return False
+    t = np.array([row[0] for row in timeline])
+    panels = [("focal length error (%)", ["fx_pct", "fy_pct"]),
+              ("principal point error (px)", ["cx_px", "cy_px"]),
+              ("baseline error (%)", ["baseline_pct"]),
+              ("stereo rotation error (deg)", ["rotation_deg"])]
+    fig, axes = plt.subplots(len(panels), 1, figsize=(12, 10), sharex=True)
+    for ax, (title, keys) in zip(axes, panels):
+        for key, colour in zip(keys, ("tab:blue", "tab:purple")):
+            values = np.array([row[1][key] for row in timeline])
+            per_camera = key not in ("baseline_pct", "rotation_deg")
+            ax.semilogy(t, np.maximum(values, 1e-6), color=colour, linewidth=1.5,
+                        label=key.rsplit("_", 1)[0] + (" (worse camera)" if per_camera else ""))
+        ax.axhline(BOUNDS[keys[0]][0], color="red", linestyle="--", linewidth=1, label="bound (issue 4)")
+        for i, (te, name) in enumerate(events):
+            ax.axvline(te, color="black", linestyle="-.", linewidth=1.2, label="drift event" if i == 0 else None)
+            if ax is axes[0]:
+                ax.annotate(name, (te, 1.02 + 0.1 * (i % 2)), xycoords=("data", "axes fraction"),
+                            ha="center", va="bottom", fontsize=9)
+        for i, te in enumerate(epochs):
+            ax.axvline(te, color="tab:green", linestyle=":", linewidth=1.2,
+                       label="calibration committed" if i == 0 else None)
+        ax.set_ylabel(title, fontsize=9)
+        ax.grid(True, which="major", alpha=0.3)
+        ax.legend(loc="center left", bbox_to_anchor=(1.01, 0.5), fontsize=8)
+    axes[-1].set_xlabel("time since the first frame (s)")
+    fig.suptitle("Calibration error of the published CameraInfo against ground truth "
+                 "(log scale, errors below 1e-6 drawn at 1e-6)", y=0.995)
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+    return True
 
-    drift_at = args.drift_at  # None: chosen between two light windows, so its effect shows
-    drifted = False
-    timeline = []  # (t, fx error L %, fx error R %, baseline error %, epoch)
-    start = time.time()
-    last_frames, last_disp, last_t = 0, 0, start
-    while not rospy.is_shutdown() and time.time() - start < args.duration:
-        time.sleep(0.25)  # progress cadence only; nothing waits on this for correctness
-        now = time.time()
-        if drift_at is None:
-            with mon.lock:
-                off_since = mon.light_off_since
-            if off_since is not None and off_since - start >= args.duration / 4.0:
-                drift_at = off_since - start + 3.0
-        if not drifted and drift_at is not None and now - start >= drift_at:
-            drifted = True
-            try:
-                service = "/" + args.ns.strip("/") + "/sim/set_drift"
-                rospy.wait_for_service(service, 5.0)
-                request = SetRigDriftRequest(focal_scale=1.05, right_rotation_deg=[0.0, 0.3, 0.0])
-                answer = rospy.ServiceProxy(service, SetRigDrift)(request)
-                print("[%5.1f s] DRIFT: 5 %% zoom and 0.3 deg right-camera rotation (%s)" % (
-                    now - start, "ok" if answer.success else answer.message), flush=True)
-            except (rospy.ROSException, rospy.ServiceException) as e:
-                print("demo: could not drift the rig: %s" % e, flush=True)
-        if now - last_t < 2.0:
-            continue
-        with mon.lock:
-            frames, disparities = mon.frames, mon.disparities
-            mode = mon.mode
-            errors = mon.errors()
-        fps = (frames - last_frames) / (now - last_t)
-        dps = (disparities - last_disp) / (now - last_t)
-        last_frames, last_disp, last_t = frames, disparities, now
-        epoch = mode.calibration_epoch if mode else -1
-        if errors:
-            timeline.append((now - start,) + errors + (epoch,))
-        print("[%5.1f s] %5.1f fps  disparity %5.1f Hz  light %s  epoch %s  calibration error vs truth:"
-              " fx L %s R %s baseline %s" % (
-                  now - start, fps, dps, "on " if mode and mode.light_on else "off",
-                  epoch if mode else "-",
-                  *(("%.3f%%" % e) if errors else "-" for e in (errors or (0, 0, 0)))), flush=True)
 
+def verdict(timeline, script, epochs):
+    """Final errors against the bounds; the calibration counts as 'after the drift' only if a
+    commit came after the last drift event. Returns (lines, bounds_met)."""
+    lines = []
+    last_event = script.last_event_time()
+    if script.pending:
+        lines.append("not every drift event fired (run too short?): %s" %
+                     ", ".join(event[1] for event in script.pending))
+    if last_event is None or not timeline:
+        return lines + ["no drift or no calibration error measured: nothing to judge"], False
+    commits_after = [t for t in epochs if t > last_event]
+    final = timeline[-1][1]
+    met = bool(commits_after) and not script.pending
+    lines.append("calibration committed after the last drift event (%s at %.1f s): %s" % (
+        script.fired[-1][1], last_event,
+        ", ".join("%.1f s" % t for t in commits_after) if commits_after else "NONE"))
+    lines.append("final calibration error vs ground truth (worst of both cameras) and issue 4's bounds:")
+    for key in ERROR_KEYS:
+        bound, unit = BOUNDS[key]
+        ok = final[key] <= bound
+        met = met and ok
+        lines.append("  %-13s %10.5f %-3s  bound %-6g %s" % (key, final[key], unit, bound, "ok" if ok else "EXCEEDED"))
+    lines.append("RESULT: calibration after the drift is %s" % (
+        "WITHIN the calibrator's bounds" if met else "NOT within the calibrator's bounds"))
+    return lines, met
+
+
+def write_results(out, mon, timeline, script, epochs, duration, report_lines, bounds_met):
     with mon.lock:
         disparity = mon.last_disparity
         disparities = mon.disparities
         latest = dict(mon.latest)
-        images = {"left_snapshot.png": mon.last_image,
+        images = {"left_snapshot.png": mon.last_light_off_image or mon.last_image,
                   "left_snapshot_light_on.png": mon.last_light_on_image}
         frames, light_frames = mon.frames, mon.light_on_frames
         mode = mon.mode
@@ -222,7 +356,7 @@ def main():
     for key in ("left", "right", "gt_left", "gt_right"):
         if key in latest:
             name = key.replace("gt_", "ground_truth_")
-            with open(os.path.join(args.out, name + ".yaml"), "w") as f:
+            with open(os.path.join(out, name + ".yaml"), "w") as f:
                 f.write(camera_yaml(latest[key], name))
     for file_name, image in images.items():
         if image is None or image.encoding not in ("mono8", "bgr8", "rgb8"):
@@ -230,47 +364,121 @@ def main():
         channels = 1 if image.encoding == "mono8" else 3
         data = bytes(image.data)
         if channels == 3 and image.encoding == "bgr8":
-            data = b"".join(data[i + 2:i + 3] + data[i + 1:i + 2] + data[i:i + 1]
-                            for i in range(0, len(data), 3))
-        write_png(os.path.join(args.out, file_name), image.width, image.height, channels, data)
+            data = np.frombuffer(data, np.uint8).reshape(-1, 3)[:, ::-1].tobytes()
+        write_png(os.path.join(out, file_name), image.width, image.height, channels, data)
     if disparity is not None:
-        rgb, valid_fraction = colourise_disparity(disparity)
-        write_png(os.path.join(args.out, "disparity.png"), disparity.image.width,
+        rgb, _ = colourise_disparity(disparity)
+        write_png(os.path.join(out, "disparity.png"), disparity.image.width,
                   disparity.image.height, 3, rgb)
-    with open(os.path.join(args.out, "calibration_error.csv"), "w") as f:
-        f.write("time_s,fx_error_left_percent,fx_error_right_percent,baseline_error_percent,epoch\n")
-        for row in timeline:
-            f.write("%.1f,%.4f,%.4f,%.4f,%d\n" % row)
+    with open(os.path.join(out, "calibration_error.csv"), "w") as f:
+        f.write("time_s,epoch,%s\n" % ",".join(ERROR_KEYS))
+        for t, errors, epoch in timeline:
+            f.write("%.2f,%d,%s\n" % (t, epoch, ",".join("%.6g" % errors[k] for k in ERROR_KEYS)))
+    with open(os.path.join(out, "drift_events.csv"), "w") as f:
+        f.write("time_s,event\n" + "".join("%.2f,%s\n" % e for e in script.fired))
+    plotted = timeline and plot_errors(os.path.join(out, "calibration_error.png"), timeline,
+                                       script.fired, epochs)
     # Mean over the time images flowed, so start-up does not count against the rate.
     mean_fps = (frames - 1) / span if frames > 1 and span > 0 else 0.0
     status = latest.get("status")
-    drift_at = drift_at if drifted else float("nan")
-    before = [r for r in timeline if drifted and r[0] < drift_at]
-    after = [r for r in timeline if drifted and r[0] >= drift_at]
-    worst_after = max((max(r[1:4]) for r in after), default=float("nan"))
-    final = timeline[-1] if timeline else None
-    with open(os.path.join(args.out, "status.yaml"), "w") as f:
+    final = timeline[-1][1] if timeline else None
+    with open(os.path.join(out, "status.yaml"), "w") as f:
         f.write("duration_s: %.1f\nframes: %d\nmean_fps: %.2f\nlight_on_frames: %d\n"
-                "disparity_images: %d\ncalibration_epoch: %s\ndrift_at_s: %.1f\n"
-                "worst_error_after_drift_percent: %.4f\n" % (
-                    time.time() - start, frames, mean_fps, light_frames, disparities,
-                    mode.calibration_epoch if mode else "null", drift_at, worst_after))
+                "disparity_images: %d\nmean_disparity_hz: %.2f\ncalibration_epoch: %s\n" % (
+                    duration, frames, mean_fps, light_frames, disparities,
+                    disparities / span if span > 0 else 0.0, mode.calibration_epoch if mode else "null"))
+        f.write("drift_events:\n" + "".join("  - {time_s: %.1f, event: \"%s\"}\n" % e for e in script.fired))
+        f.write("calibration_commits_s: [%s]\n" % ", ".join("%.1f" % t for t in epochs))
         if final:
-            f.write("final_fx_error_left_percent: %.4f\nfinal_fx_error_right_percent: %.4f\n"
-                    "final_baseline_error_percent: %.4f\n" % final[1:4])
+            f.write("final_error:\n" + "".join("  %s: %.6g\n" % (k, final[k]) for k in ERROR_KEYS))
+        f.write("bounds:\n" + "".join("  %s: %g\n" % (k, BOUNDS[k][0]) for k in ERROR_KEYS))
+        f.write("bounds_met_after_drift: %s\n" % str(bounds_met).lower())
         if status is not None:
             f.write("last_calibration_status:\n  epoch: %d\n  accepted: %s\n  reason: \"%s\"\n"
-                    "  frames_used: %d\n  rms_left_px: %.4f\n  rms_right_px: %.4f\n"
-                    "  solve_ms: %.1f\n" % (status.epoch, str(status.accepted).lower(),
-                                             status.reason.replace('"', "'"), status.frames_used,
-                                             status.rms_left_px, status.rms_right_px, status.solve_ms))
-    print("demo: %d frames, mean %.1f fps, %d disparity images, %d frames with the light on" % (
-        frames, mean_fps, disparities, light_frames), flush=True)
-    if before:
-        print("demo: calibration error before the drift: fx L %.3f%% R %.3f%% baseline %.3f%%" % before[-1][1:4])
-    if after:
-        print("demo: worst error after the drift: %.3f%%; final: fx L %.3f%% R %.3f%% baseline %.3f%% (epoch %d)" % (
-            (worst_after,) + final[1:5]), flush=True)
+                    "  frames_used: %d\n  corners_used: %d\n  rms_left_px: %.4f\n  rms_right_px: %.4f\n"
+                    "  epipolar_rms_px: %.4f\n  baseline_m: %.6f\n  baseline_stddev_m: %.6f\n"
+                    "  rotation_stddev_deg: %.6f\n  solve_ms: %.1f\n" % (
+                        status.epoch, str(status.accepted).lower(), status.reason.replace('"', "'"),
+                        status.frames_used, status.corners_used, status.rms_left_px,
+                        status.rms_right_px, status.epipolar_rms_px, status.baseline_m,
+                        status.baseline_stddev_m, status.rotation_stddev_deg, status.solve_ms))
+    summary = ["%d frames, mean %.1f fps, %d disparity images (%.1f Hz), %d frames with the light on, "
+               "%d calibration commits" % (frames, mean_fps, disparities,
+                                            disparities / span if span > 0 else 0.0, light_frames, len(epochs))]
+    if not plotted:
+        summary.append("no calibration_error.png: %s" % ("python3-matplotlib is not installed"
+                                                          if timeline else "no error measured"))
+    with open(os.path.join(out, "report.txt"), "w") as f:
+        f.write("\n".join(summary + report_lines) + "\n")
+    return summary, frames
+
+
+def main():
+    parser = argparse.ArgumentParser()
+    parser.add_argument("--duration", type=float, default=60.0, help="seconds from the first frame")
+    parser.add_argument("--out", required=True)
+    parser.add_argument("--ns", default="stereo")
+    parser.add_argument("--zoom-at", type=float, default=None,
+                        help="seconds of the zoom step (default: a third of the run); the thermal "
+                             "rotation and the knock follow at fixed fractions of the run")
+    parser.add_argument("--startup-timeout", type=float, default=120.0)
+    args = parser.parse_args(rospy.myargv()[1:])
+    rospy.init_node("demo_monitor", anonymous=True)
+    os.makedirs(args.out, exist_ok=True)
+    ns = "/" + args.ns.strip("/")
+    mon = Monitor(ns)
+
+    wait_start = time.time()
+    while not rospy.is_shutdown() and time.time() - wait_start < args.startup_timeout:
+        with mon.lock:
+            t0 = mon.first_image_time
+        if t0 is not None:
+            break
+        time.sleep(0.1)  # start-up poll; the images' arrival is the event waited for
+    if t0 is None:
+        print("demo: no camera frame within %.0f s; see roslaunch.log" % args.startup_timeout, flush=True)
+        return 1
+    script = DriftScript(ns, args.duration,
+                         args.zoom_at if args.zoom_at is not None else args.duration / 3.0)
+    timeline = []  # (t, errors dict, epoch)
+    epochs = []  # times at which the calibration in force changed
+    last_epoch, last_status = None, None
+    last_frames, last_disp, last_print = 0, 0, 0.0
+    t = 0.0
+    while not rospy.is_shutdown() and t < args.duration:
+        time.sleep(0.25)  # sampling cadence only; nothing waits on this for correctness
+        t = time.time() - t0
+        with mon.lock:
+            frames, disparities, mode = mon.frames, mon.disparities, mon.mode
+            errors, status = mon.errors(), mon.latest.get("status")
+        epoch = mode.calibration_epoch if mode else -1
+        if last_epoch is not None and epoch != last_epoch and (not epochs or t - epochs[-1] > 1.0):
+            epochs.append(t)  # a commit changes the epoch twice (left, right): one mark
+        last_epoch = epoch
+        if status is not None and status is not last_status:
+            last_status = status
+            print("[%5.1f s] CALIBRATION epoch %d %s, rms %.3f/%.3f px, %d frames, %.0f ms%s" % (
+                t, status.epoch, "accepted" if status.accepted else "rejected", status.rms_left_px,
+                status.rms_right_px, status.frames_used, status.solve_ms,
+                "" if status.accepted else ": " + status.reason), flush=True)
+        line = script.step(t, mode is None or mode.light_on)
+        if line:
+            print(line, flush=True)
+        if errors:
+            timeline.append((t, errors, epoch))
+        if t - last_print < 2.0:
+            continue
+        span = t - last_print
+        fps, dps = (frames - last_frames) / span, (disparities - last_disp) / span
+        last_frames, last_disp, last_print = frames, disparities, t
+        print("[%5.1f s] %5.1f fps  disparity %5.1f Hz  light %s  epoch %s  error vs truth: %s" % (
+            t, fps, dps, "on " if mode and mode.light_on else "off", epoch if mode else "-",
+            format_errors(errors) if errors else "-"), flush=True)
+
+    report_lines, bounds_met = verdict(timeline, script, epochs)
+    summary, frames = write_results(args.out, mon, timeline, script, epochs, t, report_lines, bounds_met)
+    for line in summary + report_lines:
+        print("demo: " + line, flush=True)
     print("demo: results in %s" % args.out, flush=True)
     return 0 if frames > 0 else 1
 
