@@ -113,9 +113,25 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
     jobs_.clear();
   }
 
+  // Keeps the latest CameraInfo of each side. The first complete pair's geometry goes on
+  // /tf_static at once, so that tf (rviz, points2 users) has the right camera before the first
+  // commit; every commit replaces it.
   void storeInfo(bool left, const sensor_msgs::CameraInfoConstPtr& info) {
-    std::lock_guard<std::mutex> lock(mutex_);
-    (left ? left_info_ : right_info_) = info;
+    sensor_msgs::CameraInfoConstPtr left_info, right_info;
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      (left ? left_info_ : right_info_) = info;
+      if (in_force_tf_sent_ || !left_info_ || !right_info_) return;
+      in_force_tf_sent_ = true;
+      left_info = left_info_;
+      right_info = right_info_;
+    }
+    ecs::StereoRig rig;
+    std::string error;
+    if (fromStereoCameraInfo(*left_info, *right_info, &rig, &error))
+      session_->broadcastTransform(rig);
+    else
+      NODELET_WARN("OnlineCalibrator: no tf from the calibration in force yet: %s", error.c_str());
   }
 
   void onObservation(const StereoPatternObservationConstPtr& msg) {
@@ -357,6 +373,7 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
   bool request_active_ = false;
   size_t request_frames_ = 0;
   sensor_msgs::CameraInfoConstPtr left_info_, right_info_;
+  bool in_force_tf_sent_ = false;  // the calibration in force went on /tf_static (storeInfo)
   std::atomic<uint32_t> epoch_{0};  // also read without mutex_ (statuses)
   std::deque<Job> jobs_;
   bool stopping_ = false;

@@ -198,6 +198,7 @@ std::string CalibrationSession::commit(const ecs::StereoRig& rig, const sensor_m
 }
 
 void CalibrationSession::broadcastTransform(const ecs::StereoRig& rig) {
+  std::lock_guard<std::mutex> lock(tf_mutex_);
   tf_broadcaster_.sendTransform(
       toTransformStamped(rig.leftFromRight(), params_.left_frame_id, params_.right_frame_id, ros::Time::now()));
 }

@@ -5,6 +5,8 @@
 // /tf_static; or, with commit "none" for a bag replay without driver, the transform only).
 // The nodelet keeps the threads, topics and windows; this file keeps the logic.
 #include <ros/ros.h>
+
+#include <mutex>
 #include <sensor_msgs/CameraInfo.h>
 #include <tf2_ros/static_transform_broadcaster.h>
 
@@ -58,8 +60,9 @@ std::vector<std::string> observationDefects(const ecs::StereoObservation& observ
 // CalibrationStatus of a solve (every field filled; intrinsics fx, fy, cx, cy, k1, k2, p1, p2, k3).
 CalibrationStatus makeStatus(const ecs::BundleAdjustmentSummary& summary, const ecs::GateDecision& decision);
 
-// Solve, gate and commit. Threading: only ever used from the calibrator's worker thread (it
-// blocks on service calls and on the solver); the broadcaster and clients are its own.
+// Solve, gate and commit. Threading: solve() runs on the calibrator's worker thread only (it
+// blocks on service calls and on the solver); broadcastTransform() may also be called from a
+// subscriber callback (the calibration in force at start-up), so the broadcaster is guarded.
 class CalibrationSession {
  public:
   // `nh`: the head's namespace (the driver's services are looked up there).
@@ -76,6 +79,9 @@ class CalibrationSession {
                           const sensor_msgs::CameraInfo* left_info, const sensor_msgs::CameraInfo* right_info,
                           uint32_t epoch, bool dry_run);
 
+  // The left->right optical transform of `rig` on /tf_static (also sent at every commit).
+  void broadcastTransform(const ecs::StereoRig& rig);
+
   const ecs::CalibrationDevice& device() const { return device_; }
   const std::vector<ecs::VirtualBoard>& boards() const { return boards_; }
 
@@ -83,7 +89,6 @@ class CalibrationSession {
   // Empty on success, otherwise why the commit failed (the left calibration is then restored
   // to `left_in_force` when only the right one was refused).
   std::string commit(const ecs::StereoRig& rig, const sensor_msgs::CameraInfo& left_in_force);
-  void broadcastTransform(const ecs::StereoRig& rig);  // left->right on /tf_static
   bool callSetCameraInfo(const std::string& side, const sensor_msgs::CameraInfo& info, std::string* error);
 
   ros::NodeHandle nh_;
@@ -92,6 +97,7 @@ class CalibrationSession {
   std::vector<ecs::VirtualBoard> boards_;
   ecs::BundleAdjuster adjuster_;
   ecs::QualityGate gate_;
+  std::mutex tf_mutex_;  // guards tf_broadcaster_
   tf2_ros::StaticTransformBroadcaster tf_broadcaster_;
 };
 
