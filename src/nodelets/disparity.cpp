@@ -3,6 +3,8 @@
 // stamp), with stereo_image_proc's topic and parameter names. The matcher is the core's
 // DisparityComputer (sad, bm or sgbm), configured by dynamic_reconfigure (cfg/Disparity.cfg).
 // Lazy: the inputs are subscribed only while someone subscribes to an output.
+// Diagnostics (StageDiagnostics): rates, latency, algorithm and range, time per frame and input
+// copies (colour inputs are converted to mono8, a copy; mono8 inputs must be shared).
 #include <cv_bridge/cv_bridge.h>
 #include <dynamic_reconfigure/server.h>
 #include <image_geometry/stereo_camera_model.h>
@@ -14,12 +16,14 @@
 #include <sensor_msgs/point_cloud2_iterator.h>
 #include <stereo_msgs/DisparityImage.h>
 
+#include <chrono>
 #include <cstring>
 #include <memory>
 #include <mutex>
 
 #include "embedded_calibration_stereo/DisparityConfig.h"
 #include "embedded_calibration_stereo/core/disparity.h"
+#include "embedded_calibration_stereo/ros/stage_diagnostics.h"
 #include "embedded_calibration_stereo/ros/stereo_camera_input.h"
 #include "embedded_calibration_stereo/ros/stereo_input_check.h"
 
@@ -100,7 +104,8 @@ float packedRgb(const cv::Mat& image, const std::string& encoding, int u, int v)
 //    dynamic_reconfigure callback and frameCb;
 //  - computer_mutex_ guards computer_ (replaced by configCb, used by frameCb) so the class stays
 //    correct should the callbacks ever run on a multi-threaded queue;
-//  - connect_mutex_ guards the (un)subscription done by connectCb against onInit.
+//  - connect_mutex_ guards the (un)subscription done by connectCb against onInit;
+//  - diagnostics_ reports on a wall timer of the callback queue and guards its own counters.
 class DisparityNodelet : public nodelet::Nodelet {
  private:
 
@@ -113,6 +118,7 @@ class DisparityNodelet : public nodelet::Nodelet {
     input_ = std::make_unique<StereoCameraInput>(
         approximate, queue_size_,
         [this](const auto& l, const auto& li, const auto& r, const auto& ri) { frameCb(l, li, r, ri); });
+    diagnostics_ = std::make_unique<StageDiagnostics>(nh, pnh, "disparity");
     reconfigure_ = std::make_unique<dynamic_reconfigure::Server<DisparityConfig>>(reconfigure_mutex_, pnh);
     reconfigure_->setCallback([this](DisparityConfig& config, uint32_t) { configCb(config); });
 
@@ -141,6 +147,9 @@ class DisparityNodelet : public nodelet::Nodelet {
       auto computer = std::make_unique<ecs::DisparityComputer>(options);
       std::lock_guard<std::mutex> lock(computer_mutex_);
       computer_ = std::move(computer);
+      diagnostics_->set("algorithm", options.algorithm);
+      diagnostics_->set("disparities", std::to_string(options.min_disparity) + ".." +
+                                           std::to_string(options.min_disparity + options.disparity_range - 1));
       NODELET_INFO("Disparity: %s, disparities %d..%d, window %d", options.algorithm.c_str(), options.min_disparity,
                    options.min_disparity + options.disparity_range - 1, options.correlation_window_size);
     } catch (const std::exception& e) {  // clamp() makes this unreachable unless the core disagrees
@@ -154,6 +163,8 @@ class DisparityNodelet : public nodelet::Nodelet {
 
   void frameCb(const sensor_msgs::ImageConstPtr& left, const sensor_msgs::CameraInfoConstPtr& left_info,
                const sensor_msgs::ImageConstPtr& right, const sensor_msgs::CameraInfoConstPtr& right_info) {
+    diagnostics_->frameIn();
+    const auto start = std::chrono::steady_clock::now();
     const std::string left_topic = input_->leftImageTopic(), right_topic = input_->rightImageTopic();
     std::string problem = checkImagePair(*left, left_topic, *right, right_topic, {"mono8", "bgr8", "rgb8"});
     if (problem.empty()) problem = checkCameraInfo(*left_info, input_->leftInfoTopic(), *left);
@@ -168,6 +179,8 @@ class DisparityNodelet : public nodelet::Nodelet {
     ecs::DisparityOptions options;
     try {
       const cv::Mat left_mono = monoView(left), right_mono = monoView(right);
+      diagnostics_->checkShared(left_mono, *left);
+      diagnostics_->checkShared(right_mono, *right);
       std::lock_guard<std::mutex> lock(computer_mutex_);
       if (!computer_) return;
       options = computer_->options();
@@ -178,6 +191,8 @@ class DisparityNodelet : public nodelet::Nodelet {
     if (disparity_pub_.getNumSubscribers() > 0)
       disparity_pub_.publish(toDisparityMsg(disparity, options, model, *left_info));
     if (points_pub_.getNumSubscribers() > 0) points_pub_.publish(toPointCloud(disparity, model, left, *left_info));
+    diagnostics_->framePublished(
+        left->header.stamp, std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count());
   }
 
   // stereo_image_proc's DisparityImage: invalid pixels hold min_disparity - 1.
@@ -260,6 +275,7 @@ class DisparityNodelet : public nodelet::Nodelet {
   boost::recursive_mutex reconfigure_mutex_;
   std::unique_ptr<dynamic_reconfigure::Server<DisparityConfig>> reconfigure_;
   ErrorThrottle errors_{5.0};
+  std::unique_ptr<StageDiagnostics> diagnostics_;  // created in onInit, before any callback
 
   std::mutex computer_mutex_;
   std::unique_ptr<ecs::DisparityComputer> computer_;

@@ -8,21 +8,27 @@
 // with their CameraInfo), so a frame is always rectified with the calibration it was taken with:
 // when the CameraInfo changes, the new maps are built on a worker thread (std::async) and frames
 // of the new calibration are dropped until they are ready (never rectified with the old maps).
+// Diagnostics (StageDiagnostics): rates, latency, method, maps state, the calibration epoch of
+// the last rectified frame (from calibration_mode, for the report only) and input copies.
 #include <cv_bridge/cv_bridge.h>
 #include <image_transport/image_transport.h>
 #include <nodelet/nodelet.h>
 #include <pluginlib/class_list_macros.hpp>
 #include <ros/ros.h>
 
+#include <chrono>
+#include <deque>
 #include <future>
 #include <memory>
 #include <mutex>
 #include <opencv2/calib3d.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "embedded_calibration_stereo/CalibrationMode.h"
 #include "embedded_calibration_stereo/core/rectification.h"
 #include "embedded_calibration_stereo/ros/conversions.h"
 #include "embedded_calibration_stereo/ros/output_image.h"
+#include "embedded_calibration_stereo/ros/stage_diagnostics.h"
 #include "embedded_calibration_stereo/ros/stereo_camera_input.h"
 #include "embedded_calibration_stereo/ros/stereo_input_check.h"
 
@@ -108,7 +114,9 @@ std::shared_ptr<const StereoMaps> buildMaps(const CalibrationKey& key, ecs::Rect
 //    building_key_ and failure_;
 //  - a std::async worker runs buildMaps and stores its result under maps_mutex_ (maps_ is a
 //    shared_ptr to immutable maps: a frame keeps its own reference while it is remapped);
-//  - connect_mutex_ guards the (un)subscription done by connectCb against onInit.
+//  - connect_mutex_ guards the (un)subscription done by connectCb against onInit;
+//  - modeCb (callback queue) and frameCb share epochs_ under epochs_mutex_; diagnostics_ reports
+//    on a wall timer of the callback queue and guards its own counters.
 class RectifierNodelet : public nodelet::Nodelet {
  public:
   ~RectifierNodelet() override {
@@ -145,6 +153,12 @@ class RectifierNodelet : public nodelet::Nodelet {
     right_pub_ = it_->advertise("right/image_rect", 1, image_cb, image_cb);
     left_info_pub_ = nh.advertise<CameraInfo>("left/camera_info_rect", 1, info_cb, info_cb);
     right_info_pub_ = nh.advertise<CameraInfo>("right/camera_info_rect", 1, info_cb, info_cb);
+    diagnostics_ = std::make_unique<StageDiagnostics>(nh, pnh, "rectifier");
+    diagnostics_->set("method", method_name);
+    diagnostics_->set("maps", "none yet");
+    // Only to name the epoch of the maps in the diagnostics (frames are matched to maps by their
+    // CameraInfo, never by this).
+    mode_sub_ = nh.subscribe("calibration_mode", 10, &RectifierNodelet::modeCb, this);
     NODELET_INFO("Rectifier: %s rectification, %s sync, queue %d", method_name.c_str(),
                  approximate ? "approximate" : "exact", queue_size_);
   }
@@ -165,8 +179,24 @@ class RectifierNodelet : public nodelet::Nodelet {
     if (errors_.shouldReport(message)) NODELET_ERROR("Rectifier: frame dropped: %s", message.c_str());
   }
 
+  void modeCb(const CalibrationMode::ConstPtr& mode) {
+    std::lock_guard<std::mutex> lock(epochs_mutex_);
+    epochs_.emplace_back(mode->header.stamp, mode->calibration_epoch);
+    if (epochs_.size() > 30) epochs_.pop_front();
+  }
+
+  // The calibration epoch of the frame of `stamp`, or "" when its calibration_mode was not seen.
+  std::string epochOf(const ros::Time& stamp) {
+    std::lock_guard<std::mutex> lock(epochs_mutex_);
+    for (const auto& e : epochs_)
+      if (e.first == stamp) return std::to_string(e.second);
+    return "";
+  }
+
   void frameCb(const sensor_msgs::ImageConstPtr& left, const sensor_msgs::CameraInfoConstPtr& left_info,
                const sensor_msgs::ImageConstPtr& right, const sensor_msgs::CameraInfoConstPtr& right_info) {
+    diagnostics_->frameIn();
+    const auto start = std::chrono::steady_clock::now();
     const std::string left_topic = input_->leftImageTopic(), right_topic = input_->rightImageTopic();
     std::string problem = checkImagePair(*left, left_topic, *right, right_topic, {"mono8", "bgr8", "rgb8"});
     if (problem.empty()) problem = checkCameraInfo(*left_info, input_->leftInfoTopic(), *left);
@@ -175,6 +205,7 @@ class RectifierNodelet : public nodelet::Nodelet {
 
     const std::shared_ptr<const StereoMaps> maps = mapsFor(CalibrationKey(*left_info, *right_info), &problem);
     if (!maps) {
+      diagnostics_->set("maps", problem.empty() ? "building" : "failed: " + problem);
       if (!problem.empty()) reportError(input_->leftInfoTopic() + ", " + input_->rightInfoTopic() + ": " + problem);
       return;
     }
@@ -190,6 +221,11 @@ class RectifierNodelet : public nodelet::Nodelet {
     right_rect->header = right_info->header;
     left_info_pub_.publish(left_rect);
     right_info_pub_.publish(right_rect);
+    diagnostics_->framePublished(
+        left->header.stamp, std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count());
+    diagnostics_->set("maps", "ready");
+    const std::string epoch = epochOf(left->header.stamp);
+    if (!epoch.empty()) diagnostics_->set("calibration epoch", epoch);
   }
 
   // The maps of `key` if they are ready; otherwise starts building them (one build at a time)
@@ -214,6 +250,7 @@ class RectifierNodelet : public nodelet::Nodelet {
       std::lock_guard<std::mutex> lock(maps_mutex_);
       if (maps) {
         maps_ = maps;
+        diagnostics_->set("maps built", std::to_string(++maps_built_));
       } else {
         failure_ = std::make_unique<std::pair<CalibrationKey, std::string>>(key, error);
       }
@@ -223,9 +260,10 @@ class RectifierNodelet : public nodelet::Nodelet {
 
   // Remaps into a new message's own buffer (no extra copy); the message is not touched after
   // publishing.
-  static void publishRectified(const Image& raw, const cv::Mat& map1, const cv::Mat& map2,
-                               const image_transport::Publisher& pub) {
+  void publishRectified(const Image& raw, const cv::Mat& map1, const cv::Mat& map2,
+                        const image_transport::Publisher& pub) {
     const cv_bridge::CvImageConstPtr in = cv_bridge::toCvShare(raw, boost::shared_ptr<void>());
+    diagnostics_->checkShared(in->image, raw);
     const OutputImage out = newImageLike(raw);
     cv::remap(in->image, out.view, map1, map2, cv::INTER_LINEAR, cv::BORDER_CONSTANT);
     pub.publish(out.msg);
@@ -239,11 +277,16 @@ class RectifierNodelet : public nodelet::Nodelet {
   image_transport::Publisher left_pub_, right_pub_;
   ros::Publisher left_info_pub_, right_info_pub_;
   ErrorThrottle errors_{5.0};
+  std::unique_ptr<StageDiagnostics> diagnostics_;  // created in onInit, before any callback
+  ros::Subscriber mode_sub_;
+  std::mutex epochs_mutex_;
+  std::deque<std::pair<ros::Time, uint32_t>> epochs_;  // (stamp, calibration_epoch), newest last
 
   std::mutex maps_mutex_;
   std::shared_ptr<const StereoMaps> maps_;
   std::future<void> build_;
   std::unique_ptr<std::pair<CalibrationKey, std::string>> failure_;
+  uint64_t maps_built_ = 0;  // under maps_mutex_
 };
 
 }  // namespace embedded_calibration_stereo

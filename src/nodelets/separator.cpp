@@ -15,6 +15,8 @@
 //    which is the device-only image. It is taught automatically at the first light-on frames and,
 //    with reteach_on_epoch_change, again whenever calibration_epoch differs from the template's
 //    (the device image moves with zoom); on hardware an epoch change is only warned about.
+// Diagnostics (StageDiagnostics): rates, latency, mode (passthrough and why, or separating),
+// method, template epoch and input copies (must stay 0).
 #include <cv_bridge/cv_bridge.h>
 #include <image_transport/image_transport.h>
 #include <message_filters/subscriber.h>
@@ -25,12 +27,14 @@
 #include <ros/ros.h>
 #include <std_srvs/Trigger.h>
 
+#include <chrono>
 #include <memory>
 #include <mutex>
 
 #include "embedded_calibration_stereo/CalibrationMode.h"
 #include "embedded_calibration_stereo/core/separator.h"
 #include "embedded_calibration_stereo/ros/output_image.h"
+#include "embedded_calibration_stereo/ros/stage_diagnostics.h"
 #include "embedded_calibration_stereo/ros/stereo_input_check.h"
 
 namespace embedded_calibration_stereo {
@@ -87,7 +91,8 @@ ecs::DeviceTemplate templateFrom(const cv::Mat& sum, int frames, uint32_t epoch)
 // teach service; state_mutex_ still guards separator_ and teach_ so that the class stays correct
 // if it is moved to the multi-threaded handle. separator_ points to an immutable StereoSeparator:
 // frameCb takes its own reference and separates outside the lock (both cameras in parallel,
-// ecs::separateStereo). Published messages are never modified after publishing.
+// ecs::separateStereo). Published messages are never modified after publishing. diagnostics_
+// reports on a wall timer of the same queue and guards its own counters.
 class SeparatorNodelet : public nodelet::Nodelet {
  private:
   using FramePolicy = message_filters::sync_policies::ExactTime<Image, Image, CalibrationMode>;
@@ -113,6 +118,9 @@ class SeparatorNodelet : public nodelet::Nodelet {
     left_pub_ = it.advertise("left/image_scene", 2);
     right_pub_ = it.advertise("right/image_scene", 2);
     teach_srv_ = nh.advertiseService("teach", &SeparatorNodelet::teachService, this);
+    diagnostics_ = std::make_unique<StageDiagnostics>(nh, pnh, "separator");
+    diagnostics_->set("method", method);
+    diagnostics_->set("template epoch", "none (not taught)");
 
     left_sub_.subscribe(nh, "left/image_raw", queue_size);
     right_sub_.subscribe(nh, "right/image_raw", queue_size);
@@ -140,16 +148,22 @@ class SeparatorNodelet : public nodelet::Nodelet {
     if (errors_.shouldReport(message)) NODELET_WARN("Separator: %s", message.c_str());
   }
 
-  void publishRaw(const ImageConstPtr& left, const ImageConstPtr& right) {
+  // `why`: the mode shown in the diagnostics.
+  void publishRaw(const ImageConstPtr& left, const ImageConstPtr& right, const char* why) {
     left_pub_.publish(left);
     right_pub_.publish(right);
+    diagnostics_->set("mode", std::string("passthrough (") + why + ")");
+    diagnostics_->framePublished(left->header.stamp, 0.0);
   }
 
   void frameCb(const ImageConstPtr& left, const ImageConstPtr& right, const CalibrationMode::ConstPtr& mode) {
     const std::string problem =
         checkImagePair(*left, left_sub_.getTopic(), *right, right_sub_.getTopic(), {"mono8", "bgr8"});
+    diagnostics_->frameIn();
+    diagnostics_->set("light on", mode->light_on ? "true" : "false");
     if (!problem.empty()) return reportError("frame dropped: " + problem);
-    if (!mode->light_on || !mode->settled) return publishRaw(left, right);
+    if (!mode->light_on) return publishRaw(left, right, "light off");
+    if (!mode->settled) return publishRaw(left, right, "light changing");
 
     std::shared_ptr<const StereoSeparator> separator;
     {
@@ -161,27 +175,33 @@ class SeparatorNodelet : public nodelet::Nodelet {
     }
     if (!separator) {
       reportWarning("separation not taught yet: republishing the raw light-on frames");
-      return publishRaw(left, right);
+      return publishRaw(left, right, "not taught");
     }
     if (reteach_on_epoch_change_ && separator->epoch() != mode->calibration_epoch) {
       reportWarning("template taught under calibration epoch " + std::to_string(separator->epoch()) +
                     ", frames are epoch " + std::to_string(mode->calibration_epoch) +
                     (teach_from_truth_ ? ": re-teaching, republishing raw frames meanwhile"
                                        : ": call teach with the scene covered; republishing raw frames"));
-      return publishRaw(left, right);
+      return publishRaw(left, right, "template of another epoch");
     }
     try {
+      const auto start = std::chrono::steady_clock::now();
       const cv_bridge::CvImageConstPtr left_in = cv_bridge::toCvShare(left), right_in = cv_bridge::toCvShare(right);
+      diagnostics_->checkShared(left_in->image, *left);
+      diagnostics_->checkShared(right_in->image, *right);
       const OutputImage left_out = newImageLike(*left), right_out = newImageLike(*right);
       cv::Mat left_scene = left_out.view, right_scene = right_out.view;
       ecs::separateStereo(separator->left, separator->right, left_in->image, right_in->image, &left_scene,
                           &right_scene);
       left_pub_.publish(left_out.msg);
       right_pub_.publish(right_out.msg);
+      diagnostics_->set("mode", "separating");
+      diagnostics_->framePublished(left->header.stamp,
+                                   std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count());
     } catch (const std::exception& e) {  // e.g. the image size changed since teaching
       reportError(left_sub_.getTopic() + ", " + right_sub_.getTopic() + ": cannot separate (" + e.what() +
                   "); republishing raw frames");
-      publishRaw(left, right);
+      publishRaw(left, right, "separation failed");
     }
   }
 
@@ -221,6 +241,7 @@ class SeparatorNodelet : public nodelet::Nodelet {
       separator_ = std::make_shared<const StereoSeparator>(options_, templateFrom(teach_.left_sum, teach_.frames, epoch),
                                                            templateFrom(teach_.right_sum, teach_.frames, epoch));
       NODELET_INFO("Separator: device image taught from %d frames, calibration epoch %u", teach_.frames, epoch);
+      diagnostics_->set("template epoch", std::to_string(epoch));
     } catch (const std::exception& e) {
       reportError(std::string("teach failed: ") + e.what());
     }
@@ -247,6 +268,7 @@ class SeparatorNodelet : public nodelet::Nodelet {
   image_transport::Publisher left_pub_, right_pub_;
   ros::ServiceServer teach_srv_;
   ErrorThrottle errors_{5.0};
+  std::unique_ptr<StageDiagnostics> diagnostics_;  // created in onInit, before any callback
 
   std::mutex state_mutex_;
   std::shared_ptr<const StereoSeparator> separator_;
