@@ -9,6 +9,7 @@
 #include <diagnostic_updater/diagnostic_updater.h>
 #include <nodelet/nodelet.h>
 #include <pluginlib/class_list_macros.hpp>
+#include <ros/callback_queue.h>
 #include <ros/package.h>
 #include <ros/ros.h>
 #include <std_srvs/SetBool.h>
@@ -34,13 +35,19 @@ namespace embedded_calibration_stereo {
 // Threads:
 //  - the manager's single-threaded queue of this nodelet runs the subscribers (observations,
 //    calibration_mode, camera_info) and the diagnostics timer;
-//  - the manager's multi-threaded queue runs calibration/recalibrate, which blocks while the
-//    window fills and the worker solves (so the subscribers keep running meanwhile);
+//  - calibration/recalibrate runs on this nodelet's own service queue and spinner thread: it
+//    blocks while the window fills and the worker solves (up to timeout_s), and on the manager's
+//    shared pool it would hold one of its worker threads that long (with 4 threads, the
+//    tracker and the depth nodelets then fell behind and dropped frames during the call);
 //  - the worker thread (started in onInit, joined in the destructor) alone runs session_.
 // Everything they share is guarded by mutex_; session_->boards() is immutable after onInit.
 class OnlineCalibratorNodelet : public nodelet::Nodelet {
  public:
-  ~OnlineCalibratorNodelet() override { stopWorker(); }
+  ~OnlineCalibratorNodelet() override {
+    stopWorker();  // a recalibrate call in progress sees stopping_ and returns
+    if (service_spinner_) service_spinner_->stop();
+    recalibrate_srv_.shutdown();
+  }
 
  private:
   struct Job {
@@ -56,6 +63,7 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
       NODELET_FATAL("OnlineCalibrator cannot start: %s", e.what());
       // The manager frees a failed nodelet's callback queues first: unregister everything now.
       stopWorker();
+      if (service_spinner_) service_spinner_->stop();
       recalibrate_srv_.shutdown();
       diagnostics_timer_.stop();
       for (ros::Subscriber* sub : {&observations_sub_, &mode_sub_, &left_info_sub_, &right_info_sub_}) sub->shutdown();
@@ -92,8 +100,11 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
       diagnostics_->update();
     });
     worker_ = std::thread(&OnlineCalibratorNodelet::workerLoop, this);
-    recalibrate_srv_ = getMTNodeHandle().advertiseService("calibration/recalibrate",
-                                                          &OnlineCalibratorNodelet::recalibrate, this);
+    ros::NodeHandle service_nh(nh);
+    service_nh.setCallbackQueue(&service_queue_);
+    recalibrate_srv_ = service_nh.advertiseService("calibration/recalibrate", &OnlineCalibratorNodelet::recalibrate, this);
+    service_spinner_ = std::make_unique<ros::AsyncSpinner>(1, &service_queue_);
+    service_spinner_->start();
     NODELET_INFO("OnlineCalibrator: device from %s (%zu virtual boards), observations on %s, %s, commit to %s",
                  params_.device_config.c_str(), session_->boards().size(), observations_sub_.getTopic().c_str(),
                  params_.auto_calibrate ? "solving every light-on window" : "solving on request only",
@@ -360,6 +371,8 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
   ros::Publisher status_pub_;
   ros::Subscriber observations_sub_, mode_sub_, left_info_sub_, right_info_sub_;
   ros::ServiceServer recalibrate_srv_;
+  ros::CallbackQueue service_queue_;  // calibration/recalibrate only (see the class comment)
+  std::unique_ptr<ros::AsyncSpinner> service_spinner_;
   ros::ServiceClient set_light_client_;
   std::unique_ptr<diagnostic_updater::Updater> diagnostics_;
   ros::WallTimer diagnostics_timer_;
