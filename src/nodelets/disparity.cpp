@@ -165,10 +165,7 @@ class DisparityNodelet : public nodelet::Nodelet {
                const sensor_msgs::ImageConstPtr& right, const sensor_msgs::CameraInfoConstPtr& right_info) {
     diagnostics_->frameIn();
     const auto start = std::chrono::steady_clock::now();
-    const std::string left_topic = input_->leftImageTopic(), right_topic = input_->rightImageTopic();
-    std::string problem = checkImagePair(*left, left_topic, *right, right_topic, {"mono8", "bgr8", "rgb8"});
-    if (problem.empty()) problem = checkCameraInfo(*left_info, input_->leftInfoTopic(), *left);
-    if (problem.empty()) problem = checkCameraInfo(*right_info, input_->rightInfoTopic(), *right);
+    std::string problem = input_->checkFrame(*left, *left_info, *right, *right_info);
     if (problem.empty())
       problem = checkSameFrame(*left_info, input_->leftInfoTopic(), *right_info, input_->rightInfoTopic());
     if (!problem.empty()) return reportError(problem);
@@ -186,7 +183,7 @@ class DisparityNodelet : public nodelet::Nodelet {
       options = computer_->options();
       disparity = computer_->compute(left_mono, right_mono);
     } catch (const std::exception& e) {  // e.g. an image narrower than the disparity range
-      return reportError(left_topic + ": " + e.what());
+      return reportError(input_->leftImageTopic() + ": " + e.what());
     }
     if (disparity_pub_.getNumSubscribers() > 0)
       disparity_pub_.publish(toDisparityMsg(disparity, options, model, *left_info));

@@ -197,10 +197,7 @@ class RectifierNodelet : public nodelet::Nodelet {
                const sensor_msgs::ImageConstPtr& right, const sensor_msgs::CameraInfoConstPtr& right_info) {
     diagnostics_->frameIn();
     const auto start = std::chrono::steady_clock::now();
-    const std::string left_topic = input_->leftImageTopic(), right_topic = input_->rightImageTopic();
-    std::string problem = checkImagePair(*left, left_topic, *right, right_topic, {"mono8", "bgr8", "rgb8"});
-    if (problem.empty()) problem = checkCameraInfo(*left_info, input_->leftInfoTopic(), *left);
-    if (problem.empty()) problem = checkCameraInfo(*right_info, input_->rightInfoTopic(), *right);
+    std::string problem = input_->checkFrame(*left, *left_info, *right, *right_info);
     if (!problem.empty()) return reportError(problem);
 
     const std::shared_ptr<const StereoMaps> maps = mapsFor(CalibrationKey(*left_info, *right_info), &problem);
@@ -213,7 +210,7 @@ class RectifierNodelet : public nodelet::Nodelet {
       publishRectified(*left, maps->left_map1, maps->left_map2, left_pub_);
       publishRectified(*right, maps->right_map1, maps->right_map2, right_pub_);
     } catch (const std::exception& e) {  // cv_bridge or OpenCV: skip the frame
-      return reportError(left_topic + ": " + e.what());
+      return reportError(input_->leftImageTopic() + ": " + e.what());
     }
     auto left_rect = boost::make_shared<CameraInfo>(maps->left_rect);
     auto right_rect = boost::make_shared<CameraInfo>(maps->right_rect);

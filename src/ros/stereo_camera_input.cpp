@@ -1,5 +1,7 @@
 #include "embedded_calibration_stereo/ros/stereo_camera_input.h"
 
+#include "embedded_calibration_stereo/ros/stereo_input_check.h"
+
 #include <utility>
 
 namespace embedded_calibration_stereo {
@@ -34,6 +36,15 @@ void StereoCameraInput::unsubscribe() {
   right_image_.unsubscribe();
   right_info_.unsubscribe();
   subscribed_ = false;
+}
+
+std::string StereoCameraInput::checkFrame(const Image& left, const CameraInfo& left_info, const Image& right,
+                                          const CameraInfo& right_info) const {
+  std::string problem =
+      checkImagePair(left, leftImageTopic(), right, rightImageTopic(), {"mono8", "bgr8", "rgb8"});
+  if (problem.empty()) problem = checkCameraInfo(left_info, leftInfoTopic(), left);
+  if (problem.empty()) problem = checkCameraInfo(right_info, rightInfoTopic(), right);
+  return problem;
 }
 
 }  // namespace embedded_calibration_stereo

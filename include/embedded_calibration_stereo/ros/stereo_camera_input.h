@@ -44,6 +44,11 @@ class StereoCameraInput {
   std::string leftInfoTopic() const { return left_info_.getTopic(); }
   std::string rightInfoTopic() const { return right_info_.getTopic(); }
 
+  // The first problem of a synchronised frame, named by these topics (stereo_input_check.h):
+  // an image pair of mono8, bgr8 or rgb8, and each CameraInfo matching its image; "" if none.
+  std::string checkFrame(const sensor_msgs::Image& left, const sensor_msgs::CameraInfo& left_info,
+                         const sensor_msgs::Image& right, const sensor_msgs::CameraInfo& right_info) const;
+
  private:
   using Image = sensor_msgs::Image;
   using CameraInfo = sensor_msgs::CameraInfo;
