@@ -31,10 +31,7 @@ TeachOutcome teachStereoPrior(const ecs::TeachFrame& left, const ecs::TeachFrame
       for (const std::string& note : r->notes) out.notes += (out.notes.empty() ? "" : "; ") + note;
     const std::filesystem::path target(path);
     if (target.has_parent_path()) std::filesystem::create_directories(target.parent_path());
-    // cv::FileStorage picks the format from the extension: the temporary name keeps ".yaml".
-    const std::string temp = path + ".tmp.yaml";
-    ecs::writePatternPrior(temp, out.prior);
-    std::filesystem::rename(temp, target);
+    ecs::writePatternPrior(path, out.prior);  // atomic
   } catch (const std::exception& e) {
     out.error = e.what();
   }

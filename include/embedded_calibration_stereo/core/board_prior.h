@@ -58,7 +58,8 @@ struct PatternPrior {
   std::string validate() const;
 };
 
-// Throw ConfigError naming the file and the offending entry.
+// Throw ConfigError naming the file and the offending entry. The file is replaced atomically
+// (writeFileAtomically).
 void writePatternPrior(const std::string& path, const PatternPrior& prior);
 PatternPrior readPatternPrior(const std::string& path);
 

@@ -2,6 +2,7 @@
 
 #include <cmath>
 
+#include "embedded_calibration_stereo/core/atomic_file.h"
 #include "embedded_calibration_stereo/core/config_error.h"
 #include "embedded_calibration_stereo/core/config_io.h"
 
@@ -59,13 +60,8 @@ std::string PatternPrior::validate() const {
 void writePatternPrior(const std::string& path, const PatternPrior& prior) {
   const std::string problem = prior.validate();
   if (!problem.empty()) throw ConfigError(path, "refusing to write an invalid prior: " + problem);
-  cv::FileStorage fs;
-  try {
-    fs.open(path, cv::FileStorage::WRITE | cv::FileStorage::FORMAT_YAML);
-  } catch (const cv::Exception& e) {
-    throw ConfigError(path, std::string("cannot write: ") + e.what());
-  }
-  if (!fs.isOpened()) throw ConfigError(path, "cannot open for writing");
+  // Serialised in memory, then written atomically: a reader never sees half a prior.
+  cv::FileStorage fs(".yaml", cv::FileStorage::WRITE | cv::FileStorage::MEMORY | cv::FileStorage::FORMAT_YAML);
   fs << "format"
      << "ecs_pattern_prior"
      << "version" << 1 << "cameras"
@@ -94,6 +90,11 @@ void writePatternPrior(const std::string& path, const PatternPrior& prior) {
        << "}";
   }
   fs << "]";
+  try {
+    writeFileAtomically(path, fs.releaseAndGetString());
+  } catch (const std::exception& e) {
+    throw ConfigError(path, std::string("cannot write: ") + e.what());
+  }
 }
 
 namespace {
