@@ -18,6 +18,16 @@ def cases(path):
 def failed_case(case):
     return case.find("failure") is not None or case.find("error") is not None
 
+def failure_text(found):
+    """What the failed cases say (rostest: "did not generate test results", a process died)."""
+    texts = []
+    for case in found:
+        for tag in ("failure", "error"):
+            for f in case.findall(tag):
+                text = " ".join(filter(None, [f.get("message"), f.get("type"), (f.text or "").strip()]))
+                texts.append(" ".join(text.split())[:400])
+    return "; ".join(texts)
+
 # gtest-*.xml: one case per gtest; rosunit-*.xml: the cases of a rostest's gtest node.
 # rostest-*.xml holds one case per launch file: it counts only when the launch itself failed
 # (a node died, no result) and none of its cases says so already.
@@ -49,7 +59,8 @@ for path in sorted(glob.glob(os.path.join(folder, "rostest-*.xml"))):
     explained = any(name[:-len(".xml")].endswith(node) for node in rosunit_failed)
     if launch_failed and not explained:
         failed += 1
-        failures.append(f"{name}: the rostest itself failed (see its XML)")
+        why = error or failure_text(found) or "no test case"
+        failures.append(f"{name}: the rostest itself failed: {why}")
 for f in failures:
     print("FAILED:", f)
 print(f"COUNTS {passed} {failed} {skipped}")

@@ -30,6 +30,11 @@ class Collector {
       cv_.notify_all();
     });
   }
+  // The subscription ends before the members its callback touches are destroyed: the spinner
+  // threads may be delivering a message right now (shutdown waits for that callback).
+  ~Collector() { sub_.shutdown(); }
+  Collector(const Collector&) = delete;
+  Collector& operator=(const Collector&) = delete;
   // Waits until `done(messages)` holds; false on timeout.
   bool waitFor(const std::function<bool(const std::vector<Ptr>&)>& done, double timeout_s) {
     std::unique_lock<std::mutex> lock(mutex_);

@@ -40,6 +40,7 @@ class DisparityStamps {
  public:
   explicit DisparityStamps(ros::NodeHandle& nh)
       : sub_(nh.subscribe("disparity", 30, &DisparityStamps::add, this)) {}
+  ~DisparityStamps() { sub_.shutdown(); }  // before mutex_ and stamps_ go (see Collector)
   std::set<ros::Time> snapshot() {
     std::lock_guard<std::mutex> lock(mutex_);
     return stamps_;
