@@ -1,5 +1,5 @@
 // Disparity throughput at 752x480 with 64 disparity levels on 2 threads, for the default
-// configuration, the own "sad" matcher and OpenCV StereoBM/StereoSGBM configured as
+// configuration, the own "sad" matcher (and its kernel alone per instruction set) and OpenCV StereoBM/StereoSGBM configured as
 // stereo_image_proc's defaults. Input: Teddy (ECS_SHARED_DATA_DIR) resized to 752x480 when it is
 // found (in DATA_DIR, else $ECS_SHARED_DATA_DIR, else /work/shared/data), else a synthetic
 // random-texture pair with a slanted disparity ramp.
@@ -11,12 +11,14 @@
 #include <cstdio>
 #include <cstdlib>
 #include <ctime>
+#include <functional>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 #include <string>
 #include <vector>
 
 #include "embedded_calibration_stereo/core/disparity.h"
+#include "embedded_calibration_stereo/core/sad_matcher.h"
 
 namespace {
 
@@ -60,15 +62,14 @@ double processCpuMs() {
   return t.tv_sec * 1e3 + t.tv_nsec * 1e-6;
 }
 
-void run(const std::string& label, const ecs::DisparityOptions& options, const cv::Mat& left,
-         const cv::Mat& right, int iterations) {
-  ecs::DisparityComputer computer(options);
-  for (int i = 0; i < 3; ++i) computer.compute(left, right);  // warm up buffers and threads
+// Times f() (after 3 warm-up calls: buffers and threads) and prints one line.
+void timeIt(const std::string& label, const std::function<void()>& f, int iterations) {
+  for (int i = 0; i < 3; ++i) f();
   std::vector<double> ms;
   const double cpu0 = processCpuMs();
   for (int i = 0; i < iterations; ++i) {
     const auto t0 = std::chrono::steady_clock::now();
-    const cv::Mat d = computer.compute(left, right);
+    f();
     ms.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0)
                      .count());
   }
@@ -77,6 +78,12 @@ void run(const std::string& label, const ecs::DisparityOptions& options, const c
   const double median = ms[ms.size() / 2];
   std::printf("%-46s wall median %6.2f ms (%6.1f fps)  best %6.2f ms (%6.1f fps)  cpu %6.2f ms/frame\n",
               label.c_str(), median, 1000.0 / median, ms[0], 1000.0 / ms[0], cpu_ms);
+}
+
+void run(const std::string& label, const ecs::DisparityOptions& options, const cv::Mat& left,
+         const cv::Mat& right, int iterations) {
+  ecs::DisparityComputer computer(options);
+  timeIt(label, [&] { computer.compute(left, right); }, iterations);
 }
 
 }  // namespace
@@ -102,6 +109,18 @@ int main(int argc, char** argv) {
   sad_only.fill_holes = false;
   sad_only.speckle_size = 0;
   run("sad matcher alone (no lr, speckle, fill)", sad_only, left, right, iterations);
+  // The matcher of the default (lr and uniqueness on, no speckle filter or filling) per kernel.
+  for (const std::string& kernel : ecs::sadKernelNames()) {
+    ecs::SadMatcherParams p;
+    p.window_size = defaults.correlation_window_size;
+    p.num_disparities = defaults.disparity_range;
+    p.prefilter_cap = defaults.prefilter_cap;
+    p.uniqueness_ratio = defaults.uniqueness_ratio;
+    p.left_right_tolerance = defaults.disp12MaxDiff;
+    p.kernel = kernel;
+    timeIt("sad kernel " + kernel + " (lr, uniqueness)",
+           [&] { ecs::computeSadDisparity16(left, right, p); }, iterations);
+  }
   ecs::DisparityOptions sgbm3 = defaults;
   sgbm3.algorithm = "sgbm";
   sgbm3.sgbm_mode = "sgbm_3way";

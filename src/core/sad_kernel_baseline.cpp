@@ -1,0 +1,5 @@
+// The sad kernel with the build's own universal intrinsics: SSE2 on x86-64, NEON on ARM, the
+// scalar code elsewhere. Always built; the fallback when no wider kernel fits the CPU.
+#define SAD_KERNEL_GETTER baselineKernel
+#define SAD_KERNEL_NAME "baseline"
+#include "sad_kernel.inl"

@@ -1,0 +1,153 @@
+// The sad matcher's kernels (sad_matcher.h): each one against a brute-force reference written
+// from the definition, and the wide kernels bit-identical to the baseline one with every filter
+// on, over sizes that leave partial pixel blocks and negative minimum disparities.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cstring>
+#include <random>
+#include <stdexcept>
+
+#include <opencv2/imgproc.hpp>
+
+#include "embedded_calibration_stereo/core/sad_matcher.h"
+
+namespace ecs {
+namespace {
+
+// Random texture, smoothed a little so that matching is meaningful, plus a horizontal shift.
+void randomPair(cv::Size size, int shift, unsigned seed, cv::Mat* left, cv::Mat* right) {
+  cv::Mat wide(size.height, size.width + std::abs(shift), CV_8U);
+  cv::RNG rng(seed);
+  rng.fill(wide, cv::RNG::UNIFORM, 0, 256);
+  cv::GaussianBlur(wide, wide, cv::Size(3, 3), 0.8);
+  const int off = std::abs(shift);
+  *left = wide(cv::Rect(shift >= 0 ? off : 0, 0, size.width, size.height)).clone();
+  *right = wide(cv::Rect(shift >= 0 ? 0 : off, 0, size.width, size.height)).clone();
+  cv::Mat noise(size, CV_8U);
+  rng.fill(noise, cv::RNG::UNIFORM, 0, 6);
+  *right += noise;  // so that costs are not all zero at the true shift
+}
+
+// x-Sobel clipped to +-cap, shifted to 0..2cap: the matcher's documented prefilter.
+cv::Mat prefilter(const cv::Mat& image, int cap) {
+  cv::Mat dx;
+  cv::Sobel(image, dx, CV_16S, 1, 0, 3, 1, 0, cv::BORDER_REPLICATE);
+  cv::Mat out;
+  cv::Mat(cv::min(cv::max(dx, -cap), cap)).convertTo(out, CV_8U, 1.0, cap);
+  return out;
+}
+
+// Winner-take-all SAD from the definition: replicated borders, lowest disparity on ties,
+// invalid where the matched right pixel falls outside the image. No sub-pixel, uniqueness or
+// left-right check.
+cv::Mat bruteForce(const cv::Mat& left, const cv::Mat& right, const SadMatcherParams& p) {
+  const cv::Mat l = prefilter(left, p.prefilter_cap), r = prefilter(right, p.prefilter_cap);
+  const int W = left.cols, H = left.rows, radius = p.window_size / 2;
+  const auto at = [](const cv::Mat& m, int y, int x) {
+    return static_cast<int>(m.at<uint8_t>(std::clamp(y, 0, m.rows - 1), std::clamp(x, 0, m.cols - 1)));
+  };
+  cv::Mat out(left.size(), CV_16S);
+  for (int y = 0; y < H; ++y)
+    for (int x = 0; x < W; ++x) {
+      int best = INT32_MAX, best_d = 0;
+      for (int d = p.min_disparity; d < p.min_disparity + p.num_disparities; ++d) {
+        int cost = 0;
+        for (int j = -radius; j <= radius; ++j)
+          for (int i = -radius; i <= radius; ++i)
+            cost += std::abs(at(l, y + j, x + i) - at(r, y + j, x + i - d));
+        if (cost < best) {
+          best = cost;
+          best_d = d;
+        }
+      }
+      const bool inside = x - best_d >= 0 && x - best_d < W;
+      out.at<int16_t>(y, x) = static_cast<int16_t>((inside ? best_d : p.min_disparity - 1) * 16);
+    }
+  return out;
+}
+
+bool identical(const cv::Mat& a, const cv::Mat& b) {
+  return a.size() == b.size() && a.type() == b.type() && a.isContinuous() && b.isContinuous() &&
+         std::memcmp(a.data, b.data, a.total() * a.elemSize()) == 0;
+}
+
+struct KernelCase {
+  int width, height, shift, window, min_disparity, num_disparities;
+};
+
+std::vector<KernelCase> cases() {
+  return {{101, 37, 9, 5, 0, 32}, {75, 29, -4, 7, -16, 32}, {133, 23, 21, 3, 2, 48},
+          {90, 31, 5, 15, 0, 16}};
+}
+
+TEST(SadKernelTest, EveryKernelEqualsTheBruteForceWinner) {
+  for (const std::string& kernel : sadKernelNames())
+    for (const KernelCase& c : cases()) {
+      cv::Mat left, right;
+      randomPair(cv::Size(c.width, c.height), c.shift, 7 + c.width, &left, &right);
+      SadMatcherParams p;
+      p.kernel = kernel;
+      p.window_size = c.window;
+      p.min_disparity = c.min_disparity;
+      p.num_disparities = c.num_disparities;
+      p.uniqueness_ratio = 0;
+      p.left_right_check = false;
+      p.subpixel = false;
+      const cv::Mat expected = bruteForce(left, right, p);
+      const cv::Mat got = computeSadDisparity16(left, right, p);
+      cv::Mat differ;
+      cv::compare(got, expected, differ, cv::CMP_NE);
+      EXPECT_EQ(cv::countNonZero(differ), 0)
+          << kernel << " " << c.width << "x" << c.height << " window " << c.window << " disparities "
+          << c.min_disparity << "+" << c.num_disparities;
+    }
+}
+
+TEST(SadKernelTest, WideKernelsEqualTheBaselineWithEveryFilterOn) {
+  const std::vector<std::string> kernels = sadKernelNames();
+  ASSERT_EQ(kernels.front(), "baseline");
+  if (kernels.size() == 1) GTEST_SKIP() << "only the baseline kernel runs on this machine";
+  std::vector<KernelCase> all = cases();
+  all.push_back({752, 480, 23, 11, 0, 64});  // the product's frame size and defaults
+  for (const KernelCase& c : all)
+    for (const double uniqueness : {0.0, 5.0, 15.0}) {
+      cv::Mat left, right;
+      randomPair(cv::Size(c.width, c.height), c.shift, 99 + c.height, &left, &right);
+      SadMatcherParams p;
+      p.window_size = c.window;
+      p.min_disparity = c.min_disparity;
+      p.num_disparities = c.num_disparities;
+      p.uniqueness_ratio = uniqueness;
+      p.left_right_check = true;
+      p.subpixel = true;
+      p.kernel = "baseline";
+      const cv::Mat baseline = computeSadDisparity16(left, right, p);
+      int valid = 0;
+      for (int i = 0; i < static_cast<int>(baseline.total()); ++i)
+        valid += baseline.at<int16_t>(i) >= c.min_disparity * 16;
+      EXPECT_GT(valid, baseline.total() / 20) << "too few matches to compare";
+      for (size_t k = 1; k < kernels.size(); ++k) {
+        p.kernel = kernels[k];
+        EXPECT_TRUE(identical(computeSadDisparity16(left, right, p), baseline))
+            << kernels[k] << " differs from baseline, " << c.width << "x" << c.height
+            << " uniqueness " << uniqueness;
+      }
+    }
+}
+
+TEST(SadKernelTest, AutoTakesTheWidestAndUnknownKernelsAreRefused) {
+  cv::Mat left, right;
+  randomPair(cv::Size(120, 40), 6, 3, &left, &right);
+  SadMatcherParams p;
+  p.num_disparities = 32;
+  p.kernel = sadKernelNames().back();
+  const cv::Mat widest = computeSadDisparity16(left, right, p);
+  p.kernel = "auto";
+  EXPECT_TRUE(identical(computeSadDisparity16(left, right, p), widest));
+  p.kernel = "avx512";
+  EXPECT_THROW(computeSadDisparity16(left, right, p), std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace ecs
