@@ -3,7 +3,7 @@
 // instruction set, which defines SAD_KERNEL_GETTER (the function returning its Kernel) and
 // SAD_KERNEL_NAME first. Everything but the getter has internal linkage, and nothing here calls
 // a std:: template: see sad_kernel.h for why. Every instruction set gives identical results
-// (test_disparity checks it).
+// (test_sad_kernels checks it).
 //
 // Per row band: the per-disparity column sums of the window are updated by one entering and one
 // leaving row, and the window sums by one entering and one leaving column (running box sums),
