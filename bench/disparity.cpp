@@ -1,8 +1,9 @@
 // Disparity throughput at 752x480 with 64 disparity levels on 2 threads, for the default
-// configuration, the own "sad" matcher (and its kernel alone per instruction set) and OpenCV StereoBM/StereoSGBM configured as
-// stereo_image_proc's defaults. Input: Teddy (ECS_SHARED_DATA_DIR) resized to 752x480 when it is
-// found (in DATA_DIR, else $ECS_SHARED_DATA_DIR, else /work/shared/data), else a synthetic
-// random-texture pair with a slanted disparity ramp.
+// configuration, the own "sad" matcher (and its kernel alone per instruction set) and OpenCV
+// StereoBM/StereoSGBM configured as stereo_image_proc's defaults. Input: Teddy
+// (ECS_SHARED_DATA_DIR) resized to 752x480 when it is found (in DATA_DIR, else
+// $ECS_SHARED_DATA_DIR, else /work/shared/data), else a synthetic random-texture pair with a
+// slanted disparity ramp.
 // Wall times suffer when other processes share the cores; the CPU time per frame (all threads)
 // shows the computing cost itself.
 // Usage: bench_disparity [iterations] [threads] [DATA_DIR]
@@ -111,12 +112,7 @@ int main(int argc, char** argv) {
   run("sad matcher alone (no lr, speckle, fill)", sad_only, left, right, iterations);
   // The matcher of the default (lr and uniqueness on, no speckle filter or filling) per kernel.
   for (const std::string& kernel : ecs::sadKernelNames()) {
-    ecs::SadMatcherParams p;
-    p.window_size = defaults.correlation_window_size;
-    p.num_disparities = defaults.disparity_range;
-    p.prefilter_cap = defaults.prefilter_cap;
-    p.uniqueness_ratio = defaults.uniqueness_ratio;
-    p.left_right_tolerance = defaults.disp12MaxDiff;
+    ecs::SadMatcherParams p = defaults.sadMatcherParams();
     p.kernel = kernel;
     timeIt("sad kernel " + kernel + " (lr, uniqueness)",
            [&] { ecs::computeSadDisparity16(left, right, p); }, iterations);

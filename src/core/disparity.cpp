@@ -176,16 +176,7 @@ cv::Mat DisparityComputer::compute(const cv::Mat& left, const cv::Mat& right) {
 
   cv::Mat disp16;
   if (algorithm_ == DisparityAlgorithm::kSad) {
-    SadMatcherParams p;
-    p.window_size = o.correlation_window_size;
-    p.min_disparity = o.min_disparity;
-    p.num_disparities = o.disparity_range;
-    p.prefilter_cap = o.prefilter_cap;
-    p.uniqueness_ratio = o.uniqueness_ratio;
-    p.left_right_check = o.left_right_check;
-    p.left_right_tolerance = std::max(1, o.disp12MaxDiff);
-    p.subpixel = o.subpixel;
-    disp16 = computeSadDisparity16(left, right, p);
+    disp16 = computeSadDisparity16(left, right, o.sadMatcherParams());
     if (o.speckle_size > 0)
       cv::filterSpeckles(disp16, (o.min_disparity - 1) * cv::StereoMatcher::DISP_SCALE,
                          o.speckle_size, o.speckle_range * cv::StereoMatcher::DISP_SCALE);
@@ -213,6 +204,19 @@ cv::Mat DisparityComputer::compute(const cv::Mat& left, const cv::Mat& right) {
   });
   if (o.fill_holes) fillDisparityHoles(&disparity);
   return disparity;
+}
+
+SadMatcherParams DisparityOptions::sadMatcherParams() const {
+  SadMatcherParams p;
+  p.window_size = correlation_window_size;
+  p.min_disparity = min_disparity;
+  p.num_disparities = disparity_range;
+  p.prefilter_cap = prefilter_cap;
+  p.uniqueness_ratio = uniqueness_ratio;
+  p.left_right_check = left_right_check;
+  p.left_right_tolerance = std::max(1, disp12MaxDiff);
+  p.subpixel = subpixel;
+  return p;
 }
 
 DisparityOptions DisparityOptions::stereoImageProcDefaults(const std::string& algorithm) {

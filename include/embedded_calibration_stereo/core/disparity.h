@@ -18,6 +18,8 @@
 #include <string>
 #include <vector>
 
+#include "embedded_calibration_stereo/core/sad_matcher.h"
+
 namespace ecs {
 
 constexpr float kInvalidDisparity = std::numeric_limits<float>::quiet_NaN();
@@ -63,6 +65,10 @@ struct DisparityOptions {
   // window, range 64, uniqueness 15, speckle 100/4, SGBM P1 200 / P2 400, no hole filling),
   // for `algorithm` "bm" or "sgbm": the reference our defaults are measured against.
   static DisparityOptions stereoImageProcDefaults(const std::string& algorithm);
+
+  // The "sad" matcher's parameters these options stand for (the matcher alone: the speckle
+  // filter and hole filling are DisparityComputer's steps after it).
+  SadMatcherParams sadMatcherParams() const;
 };
 
 // Computes disparity maps with one configuration.
