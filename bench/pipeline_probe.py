@@ -3,9 +3,8 @@
 
   live   --duration S --warmup S       frames per second and latency of /stereo/disparity while
                                         the whole simulated head runs; also reads /diagnostics.
-  replay --bag FILE --in-flight N      closed-loop replay of the recorded raw images + camera_info
-                                        into /stereo, rectify + disparity throughput.
-Prints one JSON object on stdout.
+
+Prints one JSON object on stdout. (The replay of part 3 is bench/nodelets/replay_feeder.cpp.)
 
 Disparity is received as rospy.AnyMsg (not deserialised: the probe stays cheap); its header stamp
 is read from the first bytes of the serialised message (Header: seq, stamp.secs, stamp.nsecs).
@@ -14,7 +13,6 @@ import argparse
 import json
 import statistics
 import struct
-import sys
 import threading
 import time
 
@@ -121,98 +119,14 @@ def live(args):
     print(json.dumps(result))
 
 
-def replay(args):
-    import rosbag
-    from sensor_msgs.msg import CameraInfo, Image
-    rospy.init_node('bench_replay_probe', anonymous=True)
-    # The bag's stereo frames, complete ones only, in stamp order (loaded before timing).
-    frames = {}
-    topics = ['/stereo/left/image_raw', '/stereo/right/image_raw', '/stereo/left/camera_info',
-              '/stereo/right/camera_info']
-    with rosbag.Bag(args.bag) as bag:
-        for topic, msg, _ in bag.read_messages(topics=topics):
-            frames.setdefault(msg.header.stamp.to_nsec(), {})[topic] = msg
-    stamps = sorted(s for s, f in frames.items() if len(f) == 4)
-    pubs = {t: rospy.Publisher(t, Image if 'image' in t else CameraInfo, queue_size=args.in_flight + 2)
-            for t in topics}
-    cond = threading.Condition()
-    received = {}  # stamp ns -> wall arrival
-
-    def cb(raw):
-        now = time.time()
-        with cond:
-            received[stamp_of(raw)] = now
-            cond.notify_all()
-
-    sub = rospy.Subscriber('/stereo/disparity', rospy.AnyMsg, cb, queue_size=10, buff_size=1 << 24, tcp_nodelay=True)
-    diagnostics = DiagnosticsLog()  # ours only: the stock nodelets publish none
-    deadline = time.time() + 30
-    while time.time() < deadline and (sub.get_num_connections() == 0 or
-                                      any(p.get_num_connections() == 0 for p in pubs.values())):
-        time.sleep(0.05)  # connections: no event to wait on
-    if sub.get_num_connections() == 0:
-        sys.exit('replay: the pipeline did not connect')
-    time.sleep(0.5)  # the lazy nodelets subscribe their inputs in a chain: let it settle
-
-    sent = {}  # stamp -> wall time published
-    in_flight = []
-    measured_from = None
-    warmup = args.warmup_frames
-    for i, stamp in enumerate(stamps):
-        with cond:
-            while True:
-                in_flight = [s for s in in_flight if s not in received]
-                # Dropped by the pipeline (counted below): older than a frame already answered
-                # (both pipelines answer in stamp order: their ExactTime synchronisers discard
-                # older incomplete frames), or unanswered after the timeout.
-                newest = max(received) if received else -1
-                now = time.time()
-                expired = [s for s in in_flight if s < newest or now - sent[s] > args.timeout]
-                for s in expired:
-                    in_flight.remove(s)
-                if len(in_flight) < args.in_flight:
-                    break
-                cond.wait(0.01)
-        if i == warmup:
-            measured_from = time.time()
-        frame = frames[stamp]
-        for t in topics[2:] + topics[:2]:  # camera_info first
-            pubs[t].publish(frame[t])
-        sent[stamp] = time.time()
-        in_flight.append(stamp)
-    with cond:
-        cond.wait_for(lambda: all(s in received for s in in_flight), timeout=args.timeout)
-    measured = [s for s in stamps[warmup:] if s in received]
-    end = max(received[s] for s in measured) if measured else time.time()
-    latencies = [received[s] - sent[s] for s in measured]
-    print(json.dumps({
-        'frames_offered': len(stamps) - warmup,
-        'disparity_frames': len(measured),
-        'dropped': len(stamps) - warmup - len(measured),
-        'seconds': end - measured_from,
-        'fps': len(measured) / (end - measured_from),
-        'latency_ms': summary_ms(latencies),
-        'in_flight': args.in_flight,
-        'frame_time_ms': {name: statistics.median(numbers(diagnostics.find('stereo/%s:' % name),
-                                                          'frame time mean (ms)') or [float('nan')])
-                          for name in ('rectifier', 'disparity')},
-        'loadavg': float(open('/proc/loadavg').read().split()[0]),
-    }))
-
-
 def main():
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = parser.add_subparsers(dest='mode', required=True)
     p = sub.add_parser('live')
     p.add_argument('--duration', type=float, default=20.0)
     p.add_argument('--warmup', type=float, default=10.0)
-    p = sub.add_parser('replay')
-    p.add_argument('--bag', required=True)
-    p.add_argument('--in-flight', type=int, default=2)
-    p.add_argument('--warmup-frames', type=int, default=10)
-    p.add_argument('--timeout', type=float, default=1.0)
     args = parser.parse_args(rospy.myargv()[1:])
-    live(args) if args.mode == 'live' else replay(args)
+    live(args)
 
 
 if __name__ == '__main__':

@@ -161,6 +161,12 @@ DisparityComputer::DisparityComputer(const DisparityOptions& options) : options_
 }
 
 cv::Mat DisparityComputer::compute(const cv::Mat& left, const cv::Mat& right) {
+  cv::Mat disparity;
+  compute(left, right, &disparity);
+  return disparity;
+}
+
+void DisparityComputer::compute(const cv::Mat& left, const cv::Mat& right, cv::Mat* disparity_out) {
   if (left.empty() || right.empty())
     throw std::invalid_argument("disparity: empty input image");
   if (left.type() != CV_8UC1 || right.type() != CV_8UC1)
@@ -174,18 +180,19 @@ cv::Mat DisparityComputer::compute(const cv::Mat& left, const cv::Mat& right) {
     throw std::invalid_argument("disparity: image width " + std::to_string(left.cols) +
                                 " too small for disparity_range + window");
 
-  cv::Mat disp16;
+  cv::Mat& disp16 = disparity16_;
   if (algorithm_ == DisparityAlgorithm::kSad) {
-    disp16 = computeSadDisparity16(left, right, o.sadMatcherParams());
+    computeSadDisparity16(left, right, o.sadMatcherParams(), &disp16);
     if (o.speckle_size > 0)
-      cv::filterSpeckles(disp16, (o.min_disparity - 1) * cv::StereoMatcher::DISP_SCALE,
-                         o.speckle_size, o.speckle_range * cv::StereoMatcher::DISP_SCALE);
+      speckle_filter_.apply(&disp16, (o.min_disparity - 1) * cv::StereoMatcher::DISP_SCALE,
+                            o.speckle_size, o.speckle_range * cv::StereoMatcher::DISP_SCALE);
   } else {
     matcher_->compute(left, right, disp16);
   }
 
   // Fixed point (1/16 px) -> float pixels; OpenCV marks invalid as below min_disparity.
-  cv::Mat disparity(disp16.size(), CV_32FC1);
+  disparity_out->create(disp16.size(), CV_32FC1);  // keeps a buffer of this size and type
+  cv::Mat& disparity = *disparity_out;
   const int invalid_below = o.min_disparity * cv::StereoMatcher::DISP_SCALE;
   const bool subpixel = o.subpixel;
   cv::parallel_for_(cv::Range(0, disp16.rows), [&](const cv::Range& rows) {
@@ -203,7 +210,6 @@ cv::Mat DisparityComputer::compute(const cv::Mat& left, const cv::Mat& right) {
     }
   });
   if (o.fill_holes) fillDisparityHoles(&disparity);
-  return disparity;
 }
 
 SadMatcherParams DisparityOptions::sadMatcherParams() const {

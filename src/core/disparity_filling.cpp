@@ -36,16 +36,29 @@ void fillRow(float* d, uint8_t* mask, int W) {
 void fillDisparityHoles(cv::Mat* disparity) {
   cv::Mat& disp = *disparity;
   if (disp.type() != CV_32FC1) throw std::invalid_argument("fillDisparityHoles: need CV_32FC1");
-  cv::Mat filled_mask(disp.size(), CV_8U, cv::Scalar(0));
+  // Work images kept per calling thread between calls (fresh pages cost page faults every
+  // frame); named by reference so that the parallel workers use the caller's.
+  thread_local cv::Mat thread_filled_mask, thread_median;
+  cv::Mat& filled_mask = thread_filled_mask;
+  cv::Mat& median = thread_median;
+  filled_mask.create(disp.size(), CV_8U);
+  filled_mask.setTo(0);
   cv::parallel_for_(cv::Range(0, disp.rows), [&](const cv::Range& rows) {
     for (int y = rows.start; y < rows.end; ++y)
       fillRow(disp.ptr<float>(y), filled_mask.ptr<uint8_t>(y), disp.cols);
   });
   // Rows filled independently disagree at run ends; a median over the filled pixels evens them.
-  cv::Mat median;
   cv::medianBlur(disp, median, 3);
   // (Next to a row left all invalid the median may be NaN: keep the row fill there.)
-  median.copyTo(disp, filled_mask & (median == median));
+  cv::parallel_for_(cv::Range(0, disp.rows), [&](const cv::Range& rows) {
+    for (int y = rows.start; y < rows.end; ++y) {
+      const uint8_t* filled = filled_mask.ptr<uint8_t>(y);
+      const float* m = median.ptr<float>(y);
+      float* d = disp.ptr<float>(y);
+      for (int x = 0; x < disp.cols; ++x)
+        if (filled[x] && m[x] == m[x]) d[x] = m[x];
+    }
+  });
 }
 
 }  // namespace ecs

@@ -13,14 +13,22 @@ namespace ecs {
 namespace {
 
 // x-Sobel response clipped to +-cap and shifted to 0..2*cap (StereoBM's XSOBEL prefilter):
-// insensitive to the brightness offset between the cameras.
-cv::Mat prefilterXSobel(const cv::Mat& img, int cap) {
-  cv::Mat dx;
-  cv::Sobel(img, dx, CV_16S, 1, 0, 3, 1, 0, cv::BORDER_REPLICATE);
-  cv::Mat clipped = cv::min(cv::max(dx, -cap), cap);
-  cv::Mat out;
-  clipped.convertTo(out, CV_8U, 1.0, cap);
-  return out;
+// insensitive to the brightness offset between the cameras. dx: work buffer.
+void prefilterXSobel(const cv::Mat& img, int cap, cv::Mat* dx, cv::Mat* out) {
+  cv::Sobel(img, *dx, CV_16S, 1, 0, 3, 1, 0, cv::BORDER_REPLICATE);
+  cv::max(*dx, -cap, *dx);
+  cv::min(*dx, cap, *dx);
+  dx->convertTo(*out, CV_8U, 1.0, cap);
+}
+
+// The images of one call, kept per thread between calls: fresh pages for a few megabytes of
+// temporaries cost page faults on every frame (they measured ~10 % of the whole pipeline's time).
+struct Workspace {
+  cv::Mat dx, left_filtered, right_filtered, left_padded, right_padded, right_rev;
+};
+Workspace& threadWorkspace() {
+  thread_local Workspace workspace;
+  return workspace;
 }
 
 bool cpuHasAvx2() {
@@ -63,6 +71,13 @@ std::vector<std::string> sadKernelNames() {
 
 cv::Mat computeSadDisparity16(const cv::Mat& left, const cv::Mat& right,
                               const SadMatcherParams& params) {
+  cv::Mat out;
+  computeSadDisparity16(left, right, params, &out);
+  return out;
+}
+
+void computeSadDisparity16(const cv::Mat& left, const cv::Mat& right, const SadMatcherParams& params,
+                           cv::Mat* disparity) {
   if (left.empty() || left.type() != CV_8UC1 || right.type() != CV_8UC1)
     throw std::invalid_argument("sad matcher: images must be non-empty mono8 (CV_8UC1)");
   if (left.size() != right.size())
@@ -91,18 +106,20 @@ cv::Mat computeSadDisparity16(const cv::Mat& left, const cv::Mat& right,
   p.left_right_tolerance = params.left_right_tolerance;
   p.subpixel = params.subpixel;
   const int r = p.radius;
-  cv::Mat left_padded, right_padded, right_rev;
-  cv::copyMakeBorder(prefilterXSobel(left, params.prefilter_cap), left_padded, r, r, r, r,
+  Workspace& w = threadWorkspace();
+  prefilterXSobel(left, params.prefilter_cap, &w.dx, &w.left_filtered);
+  prefilterXSobel(right, params.prefilter_cap, &w.dx, &w.right_filtered);
+  cv::copyMakeBorder(w.left_filtered, w.left_padded, r, r, r, r, cv::BORDER_REPLICATE);
+  cv::copyMakeBorder(w.right_filtered, w.right_padded, r, r, p.right_pad_left, right_pad_right,
                      cv::BORDER_REPLICATE);
-  cv::copyMakeBorder(prefilterXSobel(right, params.prefilter_cap), right_padded, r, r,
-                     p.right_pad_left, right_pad_right, cv::BORDER_REPLICATE);
-  cv::flip(right_padded, right_rev, 1);
-  p.left = left_padded.ptr<uint8_t>();
-  p.left_step = left_padded.step;
-  p.right_rev = right_rev.ptr<uint8_t>();
-  p.right_step = right_rev.step;
+  cv::flip(w.right_padded, w.right_rev, 1);
+  p.left = w.left_padded.ptr<uint8_t>();
+  p.left_step = w.left_padded.step;
+  p.right_rev = w.right_rev.ptr<uint8_t>();
+  p.right_step = w.right_rev.step;
 
-  cv::Mat out(left.size(), CV_16SC1);
+  disparity->create(left.size(), CV_16SC1);
+  cv::Mat& out = *disparity;
   const size_t scratch_elements = kernel.scratch_elements(p);
   // A few bands per thread balance the load; each band re-reads 2r rows to start its sums.
   const int bands = std::max(1, std::min(p.height / 16, cv::getNumThreads() * 2));
@@ -113,7 +130,6 @@ cv::Mat computeSadDisparity16(const cv::Mat& left, const cv::Mat& right,
       kernel.match_band(p, y0, y1, out.ptr<int16_t>(), out.step1(), scratch);
     }
   }, bands);
-  return out;
 }
 
 }  // namespace ecs

@@ -172,6 +172,9 @@ class DisparityNodelet : public nodelet::Nodelet {
     image_geometry::StereoCameraModel model;
     model.fromCameraInfo(left_info, right_info);
 
+    // The matcher writes straight into the outgoing message's buffer (NaN where invalid); the
+    // cloud is made from it, then invalid pixels get stereo_image_proc's value, then both go out.
+    stereo_msgs::DisparityImagePtr disparity_msg;
     cv::Mat disparity;
     ecs::DisparityOptions options;
     try {
@@ -181,37 +184,37 @@ class DisparityNodelet : public nodelet::Nodelet {
       std::lock_guard<std::mutex> lock(computer_mutex_);
       if (!computer_) return;
       options = computer_->options();
-      disparity = computer_->compute(left_mono, right_mono);
+      disparity_msg = newDisparityMsg(left_mono.size(), options, model, *left_info, &disparity);
+      computer_->compute(left_mono, right_mono, &disparity);
     } catch (const std::exception& e) {  // e.g. an image narrower than the disparity range
       return reportError(input_->leftImageTopic() + ": " + e.what());
     }
-    if (disparity_pub_.getNumSubscribers() > 0)
-      disparity_pub_.publish(toDisparityMsg(disparity, options, model, *left_info));
-    if (points_pub_.getNumSubscribers() > 0) points_pub_.publish(toPointCloud(disparity, model, left, *left_info));
+    sensor_msgs::PointCloud2Ptr cloud;
+    if (points_pub_.getNumSubscribers() > 0) cloud = toPointCloud(disparity, model, left, *left_info);
+    if (disparity_pub_.getNumSubscribers() > 0) {
+      markInvalid(&disparity, static_cast<float>(options.min_disparity - 1));
+      disparity_pub_.publish(disparity_msg);
+    }
+    if (cloud) points_pub_.publish(cloud);
     diagnostics_->framePublished(
         left->header.stamp, std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count());
   }
 
-  // stereo_image_proc's DisparityImage: invalid pixels hold min_disparity - 1.
-  static stereo_msgs::DisparityImagePtr toDisparityMsg(const cv::Mat& disparity, const ecs::DisparityOptions& o,
-                                                       const image_geometry::StereoCameraModel& model,
-                                                       const CameraInfo& left_info) {
+  // stereo_image_proc's DisparityImage (32FC1) for an image of `size`, its pixels not yet
+  // written; *pixels is set to a header over them.
+  static stereo_msgs::DisparityImagePtr newDisparityMsg(cv::Size size, const ecs::DisparityOptions& o,
+                                                        const image_geometry::StereoCameraModel& model,
+                                                        const CameraInfo& left_info, cv::Mat* pixels) {
     auto msg = boost::make_shared<stereo_msgs::DisparityImage>();
     msg->header = left_info.header;
     Image& image = msg->image;
     image.header = left_info.header;
-    image.height = disparity.rows;
-    image.width = disparity.cols;
+    image.height = size.height;
+    image.width = size.width;
     image.encoding = "32FC1";
     image.step = image.width * sizeof(float);
     image.data.resize(static_cast<size_t>(image.step) * image.height);
-    cv::Mat out(disparity.size(), CV_32FC1, image.data.data(), image.step);
-    const float invalid = static_cast<float>(o.min_disparity - 1);
-    for (int v = 0; v < disparity.rows; ++v) {
-      const float* in = disparity.ptr<float>(v);
-      float* row = out.ptr<float>(v);
-      for (int u = 0; u < disparity.cols; ++u) row[u] = ecs::isValidDisparity(in[u]) ? in[u] : invalid;
-    }
+    *pixels = cv::Mat(size, CV_32FC1, image.data.data(), image.step);
     msg->f = model.right().fx();
     msg->T = model.baseline();
     msg->min_disparity = o.min_disparity;
@@ -221,14 +224,17 @@ class DisparityNodelet : public nodelet::Nodelet {
     const int border = o.correlation_window_size / 2;
     const int left = o.disparity_range + o.min_disparity + border - 1;
     const int wtf = o.min_disparity >= 0 ? border + o.min_disparity : std::max(border, -o.min_disparity);
-    const int right = disparity.cols - wtf;
-    const int top = border, bottom = disparity.rows - border;
+    const int right = size.width - wtf;
+    const int top = border, bottom = size.height - border;
     msg->valid_window.x_offset = std::max(left, 0);
     msg->valid_window.y_offset = std::max(top, 0);
     msg->valid_window.width = std::max(right - left, 0);
     msg->valid_window.height = std::max(bottom - top, 0);
     return msg;
   }
+
+  // stereo_image_proc's convention: invalid pixels hold min_disparity - 1 (the core's are NaN).
+  static void markInvalid(cv::Mat* disparity, float invalid) { cv::patchNaNs(*disparity, invalid); }
 
   // xyz (metres, rectified left frame) + rgb; invalid points are NaN (not dense).
   static sensor_msgs::PointCloud2Ptr toPointCloud(const cv::Mat& disparity,

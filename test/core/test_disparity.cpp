@@ -184,6 +184,25 @@ TEST(DisparityTest, SadResultDoesNotDependOnThreadCount) {
       << "bit patterns differ (NaN != NaN, hence memcmp)";
 }
 
+// The nodelet hands compute() a header over the outgoing message's buffer: it must be written
+// in place, with the same result as a fresh output, for every algorithm.
+TEST(DisparityTest, WritesIntoAPreallocatedBufferInPlace) {
+  cv::Mat left, right;
+  renderPlane(9.3, cv::Size(240, 100), &left, &right);
+  for (const char* algorithm : {"sad", "bm", "sgbm"}) {
+    DisparityOptions o;
+    o.algorithm = algorithm;
+    o.clamp();
+    DisparityComputer computer(o);
+    const cv::Mat fresh = computer.compute(left, right);
+    std::vector<float> buffer(left.total(), -123.0f);
+    cv::Mat out(left.size(), CV_32FC1, buffer.data());
+    computer.compute(left, right, &out);
+    EXPECT_EQ(out.data, reinterpret_cast<uchar*>(buffer.data())) << algorithm << ": buffer replaced";
+    EXPECT_EQ(std::memcmp(buffer.data(), fresh.data, fresh.total() * fresh.elemSize()), 0) << algorithm;
+  }
+}
+
 TEST(DisparityTest, RejectsWrongInput) {
   DisparityComputer computer{DisparityOptions()};
   const cv::Mat gray(120, 320, CV_8UC1, cv::Scalar(0)), color(120, 320, CV_8UC3);

@@ -19,6 +19,7 @@
 #include <vector>
 
 #include "embedded_calibration_stereo/core/sad_matcher.h"
+#include "embedded_calibration_stereo/core/speckle_filter.h"
 
 namespace ecs {
 
@@ -83,11 +84,16 @@ class DisparityComputer {
   // left, right: rectified CV_8UC1 images of one size (at least disparity_range + window wide).
   // Throws std::invalid_argument for other types or mismatched sizes.
   cv::Mat compute(const cv::Mat& left, const cv::Mat& right);
+  // The same into *disparity, which is written in place when it already is CV_32FC1 of the
+  // images' size (e.g. a header over an outgoing message's buffer: no copy to publish it).
+  void compute(const cv::Mat& left, const cv::Mat& right, cv::Mat* disparity);
 
  private:
   DisparityOptions options_;
   DisparityAlgorithm algorithm_;
   cv::Ptr<cv::StereoMatcher> matcher_;  // bm/sgbm
+  SpeckleFilter speckle_filter_;        // sad (bm/sgbm filter inside OpenCV)
+  cv::Mat disparity16_;                 // the matcher's fixed-point output, reused between frames
 };
 
 }  // namespace ecs

@@ -17,8 +17,8 @@
 // built as well and chosen at run time when the CPU has AVX2. Results are identical whatever
 // the kernel and the number of threads.
 //
-// Threading: computeSadDisparity16 is reentrant: its only state is scratch memory kept per
-// thread (thread_local) between calls.
+// Threading: computeSadDisparity16 is reentrant: its only state is scratch memory and work
+// images kept per thread (thread_local) between calls.
 #include <opencv2/core.hpp>
 #include <string>
 #include <vector>
@@ -46,5 +46,8 @@ std::vector<std::string> sadKernelNames();
 // on bad input or parameters, or a kernel this machine cannot run.
 cv::Mat computeSadDisparity16(const cv::Mat& left, const cv::Mat& right,
                               const SadMatcherParams& params);
+// The same into *disparity, reusing its buffer when it already has the size and type.
+void computeSadDisparity16(const cv::Mat& left, const cv::Mat& right, const SadMatcherParams& params,
+                           cv::Mat* disparity);
 
 }  // namespace ecs
