@@ -60,6 +60,9 @@ double percentile(std::vector<double> v, double q) {
 class ReplayFeeder : public nodelet::Nodelet {
  public:
   ~ReplayFeeder() override {
+    // Subscribers first: a callback delivered during destruction would use the members below.
+    disparity_sub_.shutdown();
+    diagnostics_sub_.shutdown();
     stop_ = true;
     arrived_.notify_all();
     if (thread_.joinable()) thread_.join();
