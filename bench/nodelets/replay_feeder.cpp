@@ -7,7 +7,9 @@
 // 360 kB images in and a 1.4 MB disparity out to every frame of both pipelines alike, which
 // shrinks the measured difference between them.
 //
-// Parameters (private): bag (file), in_flight (stereo frames published and not yet answered by a
+// Parameters (private): bag (file), passes (times the bag is replayed, default 1: later passes
+// are copies restamped after the previous pass, so that a run lasts long enough to average out
+// the machine's slow spells), in_flight (stereo frames published and not yet answered by a
 // disparity, default 1), warmup_frames (10, not measured), timeout (s, 1: a frame unanswered this
 // long counts as dropped), result_file (written atomically when done).
 // Topics (node namespace): publishes left|right/image_raw + camera_info, subscribes disparity
@@ -80,6 +82,7 @@ class ReplayFeeder : public nodelet::Nodelet {
     if (bag_file.empty() || result_file_.empty())
       throw std::runtime_error("ReplayFeeder: parameters ~bag and ~result_file are required");
     loadBag(bag_file);
+    repeatFrames(std::max(1, pnh.param("passes", 1)));
     if (frames_.size() <= static_cast<size_t>(warmup_frames_))
       throw std::runtime_error("ReplayFeeder: " + bag_file + " has too few complete stereo frames");
 
@@ -107,6 +110,33 @@ class ReplayFeeder : public nodelet::Nodelet {
     }
     for (const auto& entry : by_stamp)
       if (entry.second.complete()) frames_.push_back(entry.second);
+  }
+
+  // Appends passes - 1 copies of the loaded frames, each stamped one bag span (plus one frame
+  // interval) after the previous pass.
+  void repeatFrames(int passes) {
+    if (frames_.size() < 2 || passes < 2) return;
+    const size_t n = frames_.size();
+    frames_.reserve(n * passes);  // no reallocation while the loop below reads frames_[i]
+    const ros::Time first = frames_.front().left->header.stamp, last = frames_.back().left->header.stamp;
+    const ros::Duration span = (last - first) + (last - first) * (1.0 / (n - 1));
+    for (int pass = 1; pass < passes; ++pass)
+      for (size_t i = 0; i < n; ++i) {
+        const StereoFrame& f = frames_[i];
+        const ros::Duration offset = span * pass;
+        StereoFrame copy;
+        copy.left = restamped(*f.left, offset);
+        copy.right = restamped(*f.right, offset);
+        copy.left_info = restamped(*f.left_info, offset);
+        copy.right_info = restamped(*f.right_info, offset);
+        frames_.push_back(copy);
+      }
+  }
+  template <class M>
+  static boost::shared_ptr<const M> restamped(const M& m, const ros::Duration& offset) {
+    auto copy = boost::make_shared<M>(m);
+    copy->header.stamp += offset;
+    return copy;
   }
 
   void disparityCb(const stereo_msgs::DisparityImageConstPtr& msg) {

@@ -199,12 +199,17 @@ void DisparityComputer::compute(const cv::Mat& left, const cv::Mat& right, cv::M
     for (int y = rows.start; y < rows.end; ++y) {
       const short* s = disp16.ptr<short>(y);
       float* d = disparity.ptr<float>(y);
-      for (int x = 0; x < disp16.cols; ++x) {
-        if (s[x] < invalid_below) {
-          d[x] = kInvalidDisparity;
-        } else {
-          const float v = s[x] * (1.0f / cv::StereoMatcher::DISP_SCALE);
-          d[x] = subpixel ? v : std::round(v);
+      // Selects rather than branches, so that the compiler vectorises the loops.
+      constexpr float kScale = 1.0f / cv::StereoMatcher::DISP_SCALE;
+      if (subpixel) {
+        for (int x = 0; x < disp16.cols; ++x) {
+          const float v = s[x] * kScale;
+          d[x] = s[x] < invalid_below ? kInvalidDisparity : v;
+        }
+      } else {
+        for (int x = 0; x < disp16.cols; ++x) {
+          const float v = std::round(s[x] * kScale);
+          d[x] = s[x] < invalid_below ? kInvalidDisparity : v;
         }
       }
     }

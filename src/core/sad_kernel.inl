@@ -274,6 +274,78 @@ CV_ALWAYS_INLINE void blockWinners(const int16_t* t, int stride, int D, double u
   }
 }
 
+#if CV_SIMD
+// round(8 * (prev - next) / denom), denom = prev + next - 2 best, where denom > 0, else 0: the
+// parabola's vertex in 1/16 px from the winner, with the scalar code's float operations and
+// rounding (to nearest even), so that every kernel gives the same output.
+CV_ALWAYS_INLINE cv::v_int32 vertexOffset(const cv::v_int32& prev, const cv::v_int32& next, const cv::v_int32& best) {
+  const cv::v_int32 denom = prev + next - (best + best);
+  const cv::v_float32 offset =
+      cv::v_cvt_f32(prev - next) * cv::vx_setall_f32(kDispScale * 0.5f) / cv::v_cvt_f32(denom);
+  return cv::v_select(denom > cv::vx_setzero_s32(), cv::v_round(offset), cv::vx_setzero_s32());
+}
+#endif
+
+// One output row from the winners: invalid where the match falls outside the right image, the
+// uniqueness test fails or the right image's winner disagrees (left_right_check); otherwise
+// the winner's disparity in 1/16 px, moved to the vertex of the parabola through its
+// neighbours' costs (subpixel). Vectorised across pixels, except the left-right lookup (a
+// gather) and the row's last W % kLanes pixels.
+CV_ALWAYS_INLINE void finishRow(const Problem& p, const Scratch& b, const int16_t* rk, int D, int16_t* dst) {
+  const int W = p.width, tol = p.left_right_tolerance;
+  const int16_t invalid = static_cast<int16_t>((p.min_disp - 1) * kDispScale);
+  const bool check_unique = p.uniqueness_ratio > 0;
+  int x = 0;
+#if CV_SIMD
+  int16_t lane_index[kLanes];
+  for (int j = 0; j < kLanes; ++j) lane_index[j] = static_cast<int16_t>(j);
+  const cv::v_int16 iota = cv::vx_load(lane_index), zero = cv::vx_setzero_s16();
+  const cv::v_int16 min_disp = cv::vx_setall_s16(static_cast<int16_t>(p.min_disp));
+  const cv::v_int16 width = cv::vx_setall_s16(static_cast<int16_t>(W));
+  const cv::v_int16 last_k = cv::vx_setall_s16(static_cast<int16_t>(D - 1));
+  for (; x + kLanes <= W; x += kLanes) {
+    const cv::v_int16 k = cv::vx_load(b.best_k + x);
+    const cv::v_int16 d = k + min_disp;
+    const cv::v_int16 xr = (cv::vx_setall_s16(static_cast<int16_t>(x)) + iota) - d;
+    cv::v_int16 ok = (xr >= zero) & (xr < width);
+    if (check_unique) ok = ok & (cv::vx_load(b.within + x) <= zero);
+    cv::v_int16 d16 = d << 4;  // * kDispScale
+    if (p.subpixel) {
+      cv::v_int32 prev0, prev1, next0, next1, best0, best1;
+      cv::v_expand(cv::vx_load(b.prev + x), prev0, prev1);
+      cv::v_expand(cv::vx_load(b.next + x), next0, next1);
+      cv::v_expand(cv::vx_load(b.best + x), best0, best1);
+      const cv::v_int16 offset = cv::v_pack(vertexOffset(prev0, next0, best0), vertexOffset(prev1, next1, best1));
+      d16 = d16 + (offset & ((k > zero) & (k < last_k)));
+    }
+    cv::v_store(dst + x, cv::v_select(ok, d16, cv::vx_setall_s16(invalid)));
+  }
+  if (p.left_right_check)
+    for (int xv = 0; xv < x; ++xv) {
+      const int k = b.best_k[xv], xr = xv - p.min_disp - k;
+      if (xr >= 0 && xr < W && absInt(rk[xr] - k) > tol) dst[xv] = invalid;
+    }
+#endif
+  for (; x < W; ++x) {
+    const int k = b.best_k[x];
+    const int d = p.min_disp + k;
+    const int xr = x - d;
+    const bool ok = xr >= 0 && xr < W && (!check_unique || b.within[x] <= 0) &&
+                    (!p.left_right_check || absInt(rk[xr] - k) <= tol);
+    if (!ok) {
+      dst[x] = invalid;
+      continue;
+    }
+    int d16 = d * kDispScale;
+    if (p.subpixel && k > 0 && k < D - 1) {
+      const int denom = b.prev[x] + b.next[x] - 2 * b.best[x];
+      if (denom > 0)  // vertex of the parabola, (prev - next) / (2 denom) px from k
+        d16 += cvRound(kDispScale * 0.5f * (b.prev[x] - b.next[x]) / static_cast<float>(denom));
+    }
+    dst[x] = static_cast<int16_t>(d16);
+  }
+}
+
 size_t scratchElements(const Problem& p) {
   Scratch unused;
   return layOut(p, nullptr, &unused);
@@ -285,7 +357,6 @@ template <int kFixedD>
 void matchBandFor(const Problem& p, int y0, int y1, int16_t* out, size_t out_step, int16_t* memory) {
   const int W = p.width, D = kFixedD > 0 ? kFixedD : p.ndisp, r = p.radius;
   const int Wa = roundUp(W, kLanes);
-  const int16_t invalid = static_cast<int16_t>((p.min_disp - 1) * kDispScale);
   Scratch b;
   layOut(p, memory, &b);
   std::memset(b.col, 0, sizeof(int16_t) * static_cast<size_t>(p.padded_width) * D);
@@ -349,27 +420,7 @@ void matchBandFor(const Problem& p, int y0, int y1, int16_t* out, size_t out_ste
                       rcost - p.min_disp - k, rk - p.min_disp - k);
     }
 
-    // Per pixel: validity, uniqueness, left-right agreement, parabola sub-pixel.
-    const int tol = p.left_right_tolerance;
-    const bool check_unique = p.uniqueness_ratio > 0;
-    for (int x = 0; x < W; ++x) {
-      const int k = b.best_k[x];
-      const int d = p.min_disp + k;
-      const int xr = x - d;
-      const bool ok = xr >= 0 && xr < W && (!check_unique || b.within[x] <= 0) &&
-                      (!p.left_right_check || absInt(rk[xr] - k) <= tol);
-      if (!ok) {
-        dst[x] = invalid;
-        continue;
-      }
-      int d16 = d * kDispScale;
-      if (p.subpixel && k > 0 && k < D - 1) {
-        const int denom = b.prev[x] + b.next[x] - 2 * b.best[x];
-        if (denom > 0)  // vertex of the parabola, (prev - next) / (2 denom) px from k
-          d16 += cvRound(kDispScale * 0.5f * (b.prev[x] - b.next[x]) / static_cast<float>(denom));
-      }
-      dst[x] = static_cast<int16_t>(d16);
-    }
+    finishRow(p, b, rk, D, dst);
   }
 }
 

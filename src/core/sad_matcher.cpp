@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cstdint>
+#include <opencv2/core/hal/intrin.hpp>
 #include <opencv2/imgproc.hpp>
 #include <stdexcept>
 #include <string>
@@ -12,19 +13,87 @@
 namespace ecs {
 namespace {
 
-// x-Sobel response clipped to +-cap and shifted to 0..2*cap (StereoBM's XSOBEL prefilter):
-// insensitive to the brightness offset between the cameras. dx: work buffer.
-void prefilterXSobel(const cv::Mat& img, int cap, cv::Mat* dx, cv::Mat* out) {
-  cv::Sobel(img, *dx, CV_16S, 1, 0, 3, 1, 0, cv::BORDER_REPLICATE);
-  cv::max(*dx, -cap, *dx);
-  cv::min(*dx, cap, *dx);
-  dx->convertTo(*out, CV_8U, 1.0, cap);
+// One row of the prefilter: the 3x3 x-Sobel response of `row` (neighbours `above` and `below`,
+// borders replicated) clipped to +-cap and shifted to 0..2*cap, as cv::Sobel(CV_16S, dx = 1,
+// BORDER_REPLICATE) + clipping + convertTo give (StereoBM's XSOBEL prefilter: insensitive to the
+// brightness offset between the cameras). Written to out[x], or to out[width - 1 - x] when
+// `mirrored`. colsum: width + 2 work elements.
+void prefilterRow(const uint8_t* above, const uint8_t* row, const uint8_t* below, int width, int cap,
+                  bool mirrored, int16_t* colsum, uint8_t* out) {
+  int16_t* s = colsum + 1;  // vertical [1 2 1] sums; s[-1] and s[width] replicate the ends
+  int x = 0;
+#if CV_SIMD128
+  for (; x + 16 <= width; x += 16) {
+    cv::v_uint16x8 a0, a1, b0, b1, c0, c1;
+    cv::v_expand(cv::v_load(above + x), a0, a1);
+    cv::v_expand(cv::v_load(row + x), b0, b1);
+    cv::v_expand(cv::v_load(below + x), c0, c1);
+    cv::v_store(s + x, cv::v_reinterpret_as_s16(a0 + (b0 << 1) + c0));
+    cv::v_store(s + x + 8, cv::v_reinterpret_as_s16(a1 + (b1 << 1) + c1));
+  }
+#endif
+  for (; x < width; ++x) s[x] = static_cast<int16_t>(above[x] + 2 * row[x] + below[x]);
+  s[-1] = s[0];
+  s[width] = s[width - 1];
+  x = 0;
+#if CV_SIMD128
+  const cv::v_int16x8 lo = cv::v_setall_s16(static_cast<int16_t>(-cap)), hi = cv::v_setall_s16(static_cast<int16_t>(cap));
+  for (; x + 16 <= width; x += 16) {
+    const cv::v_int16x8 d0 = cv::v_load(s + x + 1) - cv::v_load(s + x - 1);
+    const cv::v_int16x8 d1 = cv::v_load(s + x + 9) - cv::v_load(s + x + 7);
+    const cv::v_uint8x16 v = cv::v_pack_u(cv::v_min(cv::v_max(d0, lo), hi) + hi, cv::v_min(cv::v_max(d1, lo), hi) + hi);
+    if (mirrored)
+      cv::v_store(out + width - 16 - x, cv::v_reverse(v));
+    else
+      cv::v_store(out + x, v);
+  }
+#endif
+  for (; x < width; ++x) {
+    const int d = s[x + 1] - s[x - 1];
+    out[mirrored ? width - 1 - x : x] = static_cast<uint8_t>((d < -cap ? -cap : (d > cap ? cap : d)) + cap);
+  }
 }
 
-// The images of one call, kept per thread between calls: fresh pages for a few megabytes of
-// temporaries cost page faults on every frame (they measured ~10 % of the whole pipeline's time).
+// The matcher's two inputs in one parallel pass over the rows: the prefiltered left image
+// padded by `radius` on every side, and the prefiltered right image padded by `radius` rows and
+// by right_pad_left / right_pad_right columns, then mirrored left-right (borders replicated, as
+// cv::copyMakeBorder(BORDER_REPLICATE) of the prefiltered image would give).
+void prefilterAndPad(const cv::Mat& left, const cv::Mat& right, int cap, int radius, int right_pad_left,
+                     int right_pad_right, cv::Mat* left_padded, cv::Mat* right_rev) {
+  const int W = left.cols, H = left.rows, padded_rows = H + 2 * radius;
+  left_padded->create(padded_rows, W + 2 * radius, CV_8U);
+  right_rev->create(padded_rows, W + right_pad_left + right_pad_right, CV_8U);
+  cv::parallel_for_(cv::Range(0, 2 * padded_rows), [&](const cv::Range& range) {
+    thread_local std::vector<int16_t> colsum;
+    colsum.resize(W + 2);
+    for (int i = range.start; i < range.end; ++i) {
+      const bool is_left = i < padded_rows;
+      const cv::Mat& image = is_left ? left : right;
+      const int py = is_left ? i : i - padded_rows;
+      const int y = std::clamp(py - radius, 0, H - 1);  // padding rows repeat the edge rows
+      const uint8_t* row = image.ptr<uint8_t>(y);
+      const uint8_t* above = image.ptr<uint8_t>(std::max(y - 1, 0));
+      const uint8_t* below = image.ptr<uint8_t>(std::min(y + 1, H - 1));
+      if (is_left) {
+        uint8_t* dst = left_padded->ptr<uint8_t>(py);
+        prefilterRow(above, row, below, W, cap, false, colsum.data(), dst + radius);
+        std::fill(dst, dst + radius, dst[radius]);
+        std::fill(dst + radius + W, dst + 2 * radius + W, dst[radius + W - 1]);
+      } else {
+        uint8_t* dst = right_rev->ptr<uint8_t>(py);
+        uint8_t* mirrored = dst + right_pad_right;  // the row's last pixel first
+        prefilterRow(above, row, below, W, cap, true, colsum.data(), mirrored);
+        std::fill(dst, mirrored, mirrored[0]);
+        std::fill(mirrored + W, mirrored + W + right_pad_left, mirrored[W - 1]);
+      }
+    }
+  });
+}
+
+// The padded images, kept per thread between calls: fresh pages for them would cost page faults
+// on every frame (allocations measured ~10 % of the whole pipeline's time).
 struct Workspace {
-  cv::Mat dx, left_filtered, right_filtered, left_padded, right_padded, right_rev;
+  cv::Mat left_padded, right_rev;
 };
 Workspace& threadWorkspace() {
   thread_local Workspace workspace;
@@ -105,14 +174,9 @@ void computeSadDisparity16(const cv::Mat& left, const cv::Mat& right, const SadM
   p.left_right_check = params.left_right_check;
   p.left_right_tolerance = params.left_right_tolerance;
   p.subpixel = params.subpixel;
-  const int r = p.radius;
   Workspace& w = threadWorkspace();
-  prefilterXSobel(left, params.prefilter_cap, &w.dx, &w.left_filtered);
-  prefilterXSobel(right, params.prefilter_cap, &w.dx, &w.right_filtered);
-  cv::copyMakeBorder(w.left_filtered, w.left_padded, r, r, r, r, cv::BORDER_REPLICATE);
-  cv::copyMakeBorder(w.right_filtered, w.right_padded, r, r, p.right_pad_left, right_pad_right,
-                     cv::BORDER_REPLICATE);
-  cv::flip(w.right_padded, w.right_rev, 1);
+  prefilterAndPad(left, right, params.prefilter_cap, p.radius, p.right_pad_left, right_pad_right, &w.left_padded,
+                  &w.right_rev);
   p.left = w.left_padded.ptr<uint8_t>();
   p.left_step = w.left_padded.step;
   p.right_rev = w.right_rev.ptr<uint8_t>();

@@ -10,6 +10,8 @@
 #include <fstream>
 #include <random>
 
+#include <opencv2/imgproc.hpp>
+
 #include "embedded_calibration_stereo/core/disparity.h"
 #include "embedded_calibration_stereo/core/disparity_evaluation.h"
 #include "embedded_calibration_stereo/core/disparity_filling.h"
@@ -267,6 +269,67 @@ TEST(DisparityFillingTest, TakesTheFartherNeighbourAndExtendsBorders) {
   EXPECT_FLOAT_EQ(d.at<float>(2, 0), 30);   // left border: nearest valid
   EXPECT_FLOAT_EQ(d.at<float>(2, 6), 10);   // between 30 and 10: background
   EXPECT_FLOAT_EQ(d.at<float>(2, 11), 10);  // right border
+}
+
+// fillDisparityHoles from its definition, in one thread: every run of invalid pixels of a row
+// takes the smaller valid value at its ends (or the one at the image border), then the filled
+// pixels take the whole map's 3x3 median (cv::medianBlur) where that is not NaN.
+cv::Mat fillHolesReference(const cv::Mat& in) {
+  cv::Mat d = in.clone(), filled(in.size(), CV_8U, cv::Scalar(0));
+  for (int y = 0; y < d.rows; ++y) {
+    float* row = d.ptr<float>(y);
+    for (int x = 0; x < d.cols;) {
+      if (isValidDisparity(row[x])) {
+        ++x;
+        continue;
+      }
+      int end = x;
+      while (end < d.cols && !isValidDisparity(row[end])) ++end;
+      const bool has_left = x > 0, has_right = end < d.cols;
+      if (has_left || has_right) {
+        const float v = has_left && has_right ? std::min(row[x - 1], row[end]) : (has_left ? row[x - 1] : row[end]);
+        for (int i = x; i < end; ++i) {
+          row[i] = v;
+          filled.at<uint8_t>(y, i) = 1;
+        }
+      }
+      x = end;
+    }
+  }
+  cv::Mat median;
+  cv::medianBlur(d, median, 3);
+  for (int y = 0; y < d.rows; ++y)
+    for (int x = 0; x < d.cols; ++x)
+      if (filled.at<uint8_t>(y, x) && isValidDisparity(median.at<float>(y, x)))
+        d.at<float>(y, x) = median.at<float>(y, x);
+  return d;
+}
+
+TEST(DisparityFillingTest, EqualsTheDefinitionWhateverTheNumberOfThreads) {
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<float> value(1, 60);
+  std::uniform_int_distribution<int> run(1, 12);
+  cv::Mat in(97, 131, CV_32F);
+  for (int y = 0; y < in.rows; ++y) {
+    float* row = in.ptr<float>(y);
+    for (int x = 0; x < in.cols; ++x) row[x] = value(rng);
+    for (int holes = 0; holes < 6; ++holes)  // runs of holes, some at the row ends
+      for (int x = run(rng) * 10, end = std::min(x + run(rng), in.cols); x < end; ++x) row[x] = kInvalidDisparity;
+    if (y % 23 == 5) std::fill(row, row + in.cols, kInvalidDisparity);  // a row without any match
+  }
+  const cv::Mat expected = fillHolesReference(in);
+  const int threads = cv::getNumThreads();
+  for (const int n : {1, 2, 3, 4}) {
+    cv::setNumThreads(n);
+    cv::Mat got = in.clone();
+    fillDisparityHoles(&got);
+    EXPECT_EQ(std::memcmp(got.data, expected.data, got.total() * got.elemSize()), 0) << n << " threads";
+  }
+  cv::setNumThreads(threads);
+  int filled = 0;
+  for (size_t i = 0; i < in.total(); ++i)
+    filled += !isValidDisparity(in.at<float>(static_cast<int>(i))) && isValidDisparity(expected.at<float>(static_cast<int>(i)));
+  EXPECT_GT(filled, static_cast<int>(in.total()) / 20) << "too few filled pixels to compare";
 }
 
 TEST(DisparityEvaluationTest, InvalidCountsAsBadAndUnknownIsSkipped) {

@@ -1,13 +1,16 @@
-// The sad matcher's kernels (sad_matcher.h): each one against a brute-force reference written
-// from the definition, and the wide kernels bit-identical to the baseline one with every filter
-// on, over sizes that leave partial pixel blocks and negative minimum disparities.
+// The sad matcher's kernels (sad_matcher.h): each one against brute-force references written
+// from the definition (the winner alone; then with uniqueness, left-right check and sub-pixel
+// vertex), and the wide kernels bit-identical to the baseline one with every filter on, over
+// sizes that leave partial pixel blocks and negative minimum disparities.
 #include <gtest/gtest.h>
 
 #include <algorithm>
 #include <cstring>
 #include <random>
 #include <stdexcept>
+#include <vector>
 
+#include <opencv2/core/fast_math.hpp>  // cvRound
 #include <opencv2/imgproc.hpp>
 
 #include "embedded_calibration_stereo/core/sad_matcher.h"
@@ -67,6 +70,61 @@ cv::Mat bruteForce(const cv::Mat& left, const cv::Mat& right, const SadMatcherPa
   return out;
 }
 
+// The whole matcher from its definition (sad_matcher.h): brute-force window costs; winner k
+// (lowest on ties); uniqueness (no index but k and its two neighbours costs at most
+// best + int(best * ratio / 100)); left-right check (the right pixel's own winner, over the left
+// pixels inside the image, within the tolerance of k); parabola vertex through the costs at
+// k - 1, k, k + 1, rounded to 1/16 px with cvRound as the documented formula
+// 16 * d + round(8 * (prev - next) / (prev + next - 2 best)).
+cv::Mat bruteForceWithFilters(const cv::Mat& left, const cv::Mat& right, const SadMatcherParams& p) {
+  const cv::Mat l = prefilter(left, p.prefilter_cap), r = prefilter(right, p.prefilter_cap);
+  const int W = left.cols, H = left.rows, radius = p.window_size / 2, D = p.num_disparities;
+  constexpr int kMaxCost = 0x7FFF;
+  const auto at = [](const cv::Mat& m, int y, int x) {
+    return static_cast<int>(m.at<uint8_t>(std::clamp(y, 0, m.rows - 1), std::clamp(x, 0, m.cols - 1)));
+  };
+  cv::Mat out(left.size(), CV_16S);
+  std::vector<int> cost(static_cast<size_t>(W) * D);  // [x][k] of one row
+  for (int y = 0; y < H; ++y) {
+    for (int x = 0; x < W; ++x)
+      for (int k = 0; k < D; ++k) {
+        int c = 0;
+        for (int j = -radius; j <= radius; ++j)
+          for (int i = -radius; i <= radius; ++i)
+            c += std::abs(at(l, y + j, x + i) - at(r, y + j, x + i - p.min_disparity - k));
+        cost[x * D + k] = c;
+      }
+    // The right image's winner at xr: the lowest cost over the left pixels x = xr + d inside.
+    std::vector<int> right_best(W, kMaxCost), right_k(W, 0);
+    for (int x = 0; x < W; ++x)
+      for (int k = 0; k < D; ++k) {
+        const int xr = x - p.min_disparity - k;
+        if (xr >= 0 && xr < W && cost[x * D + k] < right_best[xr]) {
+          right_best[xr] = cost[x * D + k];
+          right_k[xr] = k;
+        }
+      }
+    for (int x = 0; x < W; ++x) {
+      const int* c = &cost[x * D];
+      const int k = static_cast<int>(std::min_element(c, c + D) - c);
+      const int best = c[k], prev = k > 0 ? c[k - 1] : kMaxCost, next = k < D - 1 ? c[k + 1] : kMaxCost;
+      const int xr = x - p.min_disparity - k;
+      bool ok = xr >= 0 && xr < W;
+      if (p.uniqueness_ratio > 0) {
+        const int thresh = std::min(best + static_cast<int>(best * static_cast<float>(p.uniqueness_ratio / 100.0)),
+                                    kMaxCost - 1);
+        for (int i = 0; i < D; ++i) ok = ok && (std::abs(i - k) <= 1 || c[i] > thresh);
+      }
+      if (p.left_right_check) ok = ok && std::abs(right_k[xr] - k) <= p.left_right_tolerance;
+      int d16 = (p.min_disparity + k) * 16;
+      if (p.subpixel && k > 0 && k < D - 1 && prev + next - 2 * best > 0)
+        d16 += cvRound(8.0f * (prev - next) / static_cast<float>(prev + next - 2 * best));
+      out.at<int16_t>(y, x) = static_cast<int16_t>(ok ? d16 : (p.min_disparity - 1) * 16);
+    }
+  }
+  return out;
+}
+
 bool identical(const cv::Mat& a, const cv::Mat& b) {
   return a.size() == b.size() && a.type() == b.type() && a.isContinuous() && b.isContinuous() &&
          std::memcmp(a.data, b.data, a.total() * a.elemSize()) == 0;
@@ -102,6 +160,39 @@ TEST(SadKernelTest, EveryKernelEqualsTheBruteForceWinner) {
           << kernel << " " << c.width << "x" << c.height << " window " << c.window << " disparities "
           << c.min_disparity << "+" << c.num_disparities;
     }
+}
+
+TEST(SadKernelTest, EveryKernelEqualsTheBruteForceWithEveryFilterOn) {
+  for (const std::string& kernel : sadKernelNames())
+    for (const KernelCase& c : cases())
+      for (const double uniqueness : {0.0, 10.0}) {
+        cv::Mat left, right;
+        randomPair(cv::Size(c.width, c.height), c.shift, 11 + c.width, &left, &right);
+        SadMatcherParams p;
+        p.kernel = kernel;
+        p.window_size = c.window;
+        p.min_disparity = c.min_disparity;
+        p.num_disparities = c.num_disparities;
+        p.uniqueness_ratio = uniqueness;
+        p.left_right_check = true;
+        p.left_right_tolerance = 1;
+        p.subpixel = true;
+        const cv::Mat expected = bruteForceWithFilters(left, right, p);
+        int valid = 0, fractional = 0;
+        for (int i = 0; i < static_cast<int>(expected.total()); ++i) {
+          const int16_t v = expected.at<int16_t>(i);
+          valid += v >= c.min_disparity * 16 - 8;
+          fractional += v >= c.min_disparity * 16 - 8 && v % 16 != 0;
+        }
+        ASSERT_GT(valid, static_cast<int>(expected.total()) / 4) << "too few matches to compare";
+        ASSERT_GT(fractional, valid / 4) << "too few sub-pixel values to compare";
+        const cv::Mat got = computeSadDisparity16(left, right, p);
+        cv::Mat differ;
+        cv::compare(got, expected, differ, cv::CMP_NE);
+        EXPECT_EQ(cv::countNonZero(differ), 0)
+            << kernel << " " << c.width << "x" << c.height << " window " << c.window << " disparities "
+            << c.min_disparity << "+" << c.num_disparities << " uniqueness " << uniqueness;
+      }
 }
 
 TEST(SadKernelTest, WideKernelsEqualTheBaselineWithEveryFilterOn) {

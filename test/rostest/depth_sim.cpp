@@ -21,11 +21,22 @@ using stereo_msgs::DisparityImage;
 TEST(DepthSim, ImageRectHasTheRawHeaderAndEncoding) {
   ros::NodeHandle nh;
   Collector<Image> raw(nh, "left/image_raw", 50), left(nh, "left/image_rect"), right(nh, "right/image_rect");
-  ASSERT_TRUE(left.waitForCount(3, 20.0)) << "no left/image_rect";
-  ASSERT_TRUE(right.waitForCount(3, 5.0)) << "no right/image_rect";
-  const auto rect = left.snapshot().back();
-  const auto source = ecs_test::findByStamp(raw.snapshot(), rect->header.stamp);
-  ASSERT_TRUE(source) << "image_rect stamp matches no image_raw";
+  // The test's image_raw subscription may connect after the Rectifier's: wait for a rectified
+  // frame whose raw frame this test received too.
+  Image::ConstPtr rect, source;
+  ASSERT_TRUE(left.waitFor(
+      [&](const std::vector<Image::ConstPtr>& rects) {
+        for (const auto& r : rects)
+          if ((source = ecs_test::findByStamp(raw.snapshot(), r->header.stamp))) {
+            rect = r;
+            return true;
+          }
+        return false;
+      },
+      20.0))
+      << "no left/image_rect whose stamp matches a received left/image_raw (" << left.snapshot().size()
+      << " image_rect, " << raw.snapshot().size() << " image_raw received)";
+  ASSERT_TRUE(right.waitForCount(1, 5.0)) << "no right/image_rect";
   EXPECT_EQ(rect->header.frame_id, source->header.frame_id);
   EXPECT_EQ(rect->encoding, source->encoding);
   EXPECT_EQ(rect->width, source->width);
