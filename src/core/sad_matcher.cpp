@@ -37,7 +37,8 @@ void prefilterRow(const uint8_t* above, const uint8_t* row, const uint8_t* below
   s[width] = s[width - 1];
   x = 0;
 #if CV_SIMD128
-  const cv::v_int16x8 lo = cv::v_setall_s16(static_cast<int16_t>(-cap)), hi = cv::v_setall_s16(static_cast<int16_t>(cap));
+  const cv::v_int16x8 lo = cv::v_setall_s16(static_cast<int16_t>(-cap));
+  const cv::v_int16x8 hi = cv::v_setall_s16(static_cast<int16_t>(cap));
   for (; x + 16 <= width; x += 16) {
     const cv::v_int16x8 d0 = cv::v_load(s + x + 1) - cv::v_load(s + x - 1);
     const cv::v_int16x8 d1 = cv::v_load(s + x + 9) - cv::v_load(s + x + 7);

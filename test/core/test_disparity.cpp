@@ -327,8 +327,8 @@ TEST(DisparityFillingTest, EqualsTheDefinitionWhateverTheNumberOfThreads) {
   }
   cv::setNumThreads(threads);
   int filled = 0;
-  for (size_t i = 0; i < in.total(); ++i)
-    filled += !isValidDisparity(in.at<float>(static_cast<int>(i))) && isValidDisparity(expected.at<float>(static_cast<int>(i)));
+  for (int i = 0; i < static_cast<int>(in.total()); ++i)
+    filled += !isValidDisparity(in.at<float>(i)) && isValidDisparity(expected.at<float>(i));
   EXPECT_GT(filled, static_cast<int>(in.total()) / 20) << "too few filled pixels to compare";
 }
 
