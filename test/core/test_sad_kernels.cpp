@@ -1,6 +1,6 @@
-// The sad matcher's kernels (sad_matcher.h): each one against brute-force references written
+// The sad matcher's kernels (sad_matcher.h): each one against a brute-force reference written
 // from the definition (the winner alone; then with uniqueness, left-right check and sub-pixel
-// vertex), and the wide kernels bit-identical to the baseline one with every filter on, over
+// vertex on), and the wide kernels bit-identical to the baseline one with every filter on, over
 // sizes that leave partial pixel blocks and negative minimum disparities.
 #include <gtest/gtest.h>
 
@@ -8,6 +8,7 @@
 #include <cstring>
 #include <random>
 #include <stdexcept>
+#include <string>
 #include <vector>
 
 #include <opencv2/core/fast_math.hpp>  // cvRound
@@ -41,42 +42,14 @@ cv::Mat prefilter(const cv::Mat& image, int cap) {
   return out;
 }
 
-// Winner-take-all SAD from the definition: replicated borders, lowest disparity on ties,
-// invalid where the matched right pixel falls outside the image. No sub-pixel, uniqueness or
-// left-right check.
-cv::Mat bruteForce(const cv::Mat& left, const cv::Mat& right, const SadMatcherParams& p) {
-  const cv::Mat l = prefilter(left, p.prefilter_cap), r = prefilter(right, p.prefilter_cap);
-  const int W = left.cols, H = left.rows, radius = p.window_size / 2;
-  const auto at = [](const cv::Mat& m, int y, int x) {
-    return static_cast<int>(m.at<uint8_t>(std::clamp(y, 0, m.rows - 1), std::clamp(x, 0, m.cols - 1)));
-  };
-  cv::Mat out(left.size(), CV_16S);
-  for (int y = 0; y < H; ++y)
-    for (int x = 0; x < W; ++x) {
-      int best = INT32_MAX, best_d = 0;
-      for (int d = p.min_disparity; d < p.min_disparity + p.num_disparities; ++d) {
-        int cost = 0;
-        for (int j = -radius; j <= radius; ++j)
-          for (int i = -radius; i <= radius; ++i)
-            cost += std::abs(at(l, y + j, x + i) - at(r, y + j, x + i - d));
-        if (cost < best) {
-          best = cost;
-          best_d = d;
-        }
-      }
-      const bool inside = x - best_d >= 0 && x - best_d < W;
-      out.at<int16_t>(y, x) = static_cast<int16_t>((inside ? best_d : p.min_disparity - 1) * 16);
-    }
-  return out;
-}
-
 // The whole matcher from its definition (sad_matcher.h): brute-force window costs; winner k
 // (lowest on ties); uniqueness (no index but k and its two neighbours costs at most
 // best + int(best * ratio / 100)); left-right check (the right pixel's own winner, over the left
 // pixels inside the image, within the tolerance of k); parabola vertex through the costs at
 // k - 1, k, k + 1, rounded to 1/16 px with cvRound as the documented formula
-// 16 * d + round(8 * (prev - next) / (prev + next - 2 best)).
-cv::Mat bruteForceWithFilters(const cv::Mat& left, const cv::Mat& right, const SadMatcherParams& p) {
+// 16 * d + round(8 * (prev - next) / (prev + next - 2 best)). With uniqueness 0 and the check and
+// sub-pixel off: the plain winner, invalid where the matched right pixel falls outside the image.
+cv::Mat bruteForce(const cv::Mat& left, const cv::Mat& right, const SadMatcherParams& p) {
   const cv::Mat l = prefilter(left, p.prefilter_cap), r = prefilter(right, p.prefilter_cap);
   const int W = left.cols, H = left.rows, radius = p.window_size / 2, D = p.num_disparities;
   constexpr int kMaxCost = 0x7FFF;
@@ -139,26 +112,38 @@ std::vector<KernelCase> cases() {
           {90, 31, 5, 15, 0, 16}};
 }
 
+// The case's window and disparities; every other parameter at its default.
+SadMatcherParams paramsOf(const KernelCase& c) {
+  SadMatcherParams p;
+  p.window_size = c.window;
+  p.min_disparity = c.min_disparity;
+  p.num_disparities = c.num_disparities;
+  return p;
+}
+
+std::string describe(const KernelCase& c) {
+  return std::to_string(c.width) + "x" + std::to_string(c.height) + " window " + std::to_string(c.window) +
+         " disparities " + std::to_string(c.min_disparity) + "+" + std::to_string(c.num_disparities);
+}
+
+int countDifferent(const cv::Mat& a, const cv::Mat& b) {
+  cv::Mat differ;
+  cv::compare(a, b, differ, cv::CMP_NE);
+  return cv::countNonZero(differ);
+}
+
 TEST(SadKernelTest, EveryKernelEqualsTheBruteForceWinner) {
   for (const std::string& kernel : sadKernelNames())
     for (const KernelCase& c : cases()) {
       cv::Mat left, right;
       randomPair(cv::Size(c.width, c.height), c.shift, 7 + c.width, &left, &right);
-      SadMatcherParams p;
+      SadMatcherParams p = paramsOf(c);
       p.kernel = kernel;
-      p.window_size = c.window;
-      p.min_disparity = c.min_disparity;
-      p.num_disparities = c.num_disparities;
       p.uniqueness_ratio = 0;
       p.left_right_check = false;
       p.subpixel = false;
-      const cv::Mat expected = bruteForce(left, right, p);
-      const cv::Mat got = computeSadDisparity16(left, right, p);
-      cv::Mat differ;
-      cv::compare(got, expected, differ, cv::CMP_NE);
-      EXPECT_EQ(cv::countNonZero(differ), 0)
-          << kernel << " " << c.width << "x" << c.height << " window " << c.window << " disparities "
-          << c.min_disparity << "+" << c.num_disparities;
+      EXPECT_EQ(countDifferent(computeSadDisparity16(left, right, p), bruteForce(left, right, p)), 0)
+          << kernel << " " << describe(c);
     }
 }
 
@@ -168,16 +153,13 @@ TEST(SadKernelTest, EveryKernelEqualsTheBruteForceWithEveryFilterOn) {
       for (const double uniqueness : {0.0, 10.0}) {
         cv::Mat left, right;
         randomPair(cv::Size(c.width, c.height), c.shift, 11 + c.width, &left, &right);
-        SadMatcherParams p;
+        SadMatcherParams p = paramsOf(c);
         p.kernel = kernel;
-        p.window_size = c.window;
-        p.min_disparity = c.min_disparity;
-        p.num_disparities = c.num_disparities;
         p.uniqueness_ratio = uniqueness;
         p.left_right_check = true;
         p.left_right_tolerance = 1;
         p.subpixel = true;
-        const cv::Mat expected = bruteForceWithFilters(left, right, p);
+        const cv::Mat expected = bruteForce(left, right, p);
         int valid = 0, fractional = 0;
         for (int i = 0; i < static_cast<int>(expected.total()); ++i) {
           const int16_t v = expected.at<int16_t>(i);
@@ -186,12 +168,8 @@ TEST(SadKernelTest, EveryKernelEqualsTheBruteForceWithEveryFilterOn) {
         }
         ASSERT_GT(valid, static_cast<int>(expected.total()) / 4) << "too few matches to compare";
         ASSERT_GT(fractional, valid / 4) << "too few sub-pixel values to compare";
-        const cv::Mat got = computeSadDisparity16(left, right, p);
-        cv::Mat differ;
-        cv::compare(got, expected, differ, cv::CMP_NE);
-        EXPECT_EQ(cv::countNonZero(differ), 0)
-            << kernel << " " << c.width << "x" << c.height << " window " << c.window << " disparities "
-            << c.min_disparity << "+" << c.num_disparities << " uniqueness " << uniqueness;
+        EXPECT_EQ(countDifferent(computeSadDisparity16(left, right, p), expected), 0)
+            << kernel << " " << describe(c) << " uniqueness " << uniqueness;
       }
 }
 
@@ -205,10 +183,7 @@ TEST(SadKernelTest, WideKernelsEqualTheBaselineWithEveryFilterOn) {
     for (const double uniqueness : {0.0, 5.0, 15.0}) {
       cv::Mat left, right;
       randomPair(cv::Size(c.width, c.height), c.shift, 99 + c.height, &left, &right);
-      SadMatcherParams p;
-      p.window_size = c.window;
-      p.min_disparity = c.min_disparity;
-      p.num_disparities = c.num_disparities;
+      SadMatcherParams p = paramsOf(c);
       p.uniqueness_ratio = uniqueness;
       p.left_right_check = true;
       p.subpixel = true;
@@ -221,8 +196,7 @@ TEST(SadKernelTest, WideKernelsEqualTheBaselineWithEveryFilterOn) {
       for (size_t k = 1; k < kernels.size(); ++k) {
         p.kernel = kernels[k];
         EXPECT_TRUE(identical(computeSadDisparity16(left, right, p), baseline))
-            << kernels[k] << " differs from baseline, " << c.width << "x" << c.height
-            << " uniqueness " << uniqueness;
+            << kernels[k] << " differs from baseline, " << describe(c) << " uniqueness " << uniqueness;
       }
     }
 }
