@@ -5,6 +5,7 @@
 #include <opencv2/imgproc.hpp>
 #include <stdexcept>
 #include <vector>
+#include "parallel_pieces.h"
 
 namespace ecs {
 
@@ -57,7 +58,7 @@ void fillDisparityHoles(cv::Mat* disparity) {
   // cv::medianBlur of the whole map would see them), reading row_filled and writing disp, so
   // that the stripes need no ordering. Next to a row left all invalid the median may be NaN:
   // the row fill stays there.
-  const int stripes = std::max(1, std::min(cv::getNumThreads(), disp.rows / 16));
+  const int stripes = parallelPieces(disp.rows, 16);
   cv::parallel_for_(cv::Range(0, stripes), [&](const cv::Range& range) {
     thread_local cv::Mat median;
     for (int s = range.start; s < range.end; ++s) {

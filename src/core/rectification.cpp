@@ -125,6 +125,19 @@ RectificationGeometry computeRectificationGeometry(const StereoRig& rig,
                                                          : fusiello(rig);
 }
 
+void remapStereoPair(const cv::Mat& left_in, const cv::Mat& right_in, const cv::Mat& left_map1,
+                     const cv::Mat& left_map2, const cv::Mat& right_map1, const cv::Mat& right_map2,
+                     cv::Mat* left_out, cv::Mat* right_out) {
+  const cv::Mat* in[2] = {&left_in, &right_in};
+  const cv::Mat* map1[2] = {&left_map1, &right_map1};
+  const cv::Mat* map2[2] = {&left_map2, &right_map2};
+  cv::Mat* out[2] = {left_out, right_out};
+  cv::parallel_for_(cv::Range(0, 2), [&](const cv::Range& images) {
+    for (int i = images.start; i < images.end; ++i)  // nested: cv::remap runs on this thread
+      cv::remap(*in[i], *out[i], *map1[i], *map2[i], cv::INTER_LINEAR, cv::BORDER_CONSTANT);
+  }, 2);
+}
+
 RectificationMaps RectificationMaps::build(const StereoRig& rig,
                                            const RectificationOptions& options) {
   RectificationMaps maps;
@@ -147,10 +160,8 @@ void RectificationMaps::rectify(const cv::Mat& left_raw, const cv::Mat& right_ra
   if (left_rect->data == left_raw.data || right_rect->data == right_raw.data ||
       left_rect == right_rect)
     throw std::invalid_argument("rectify: outputs must be distinct and not alias the inputs");
-  cv::remap(left_raw, *left_rect, left_map1_, left_map2_, cv::INTER_LINEAR,
-            cv::BORDER_CONSTANT);
-  cv::remap(right_raw, *right_rect, right_map1_, right_map2_, cv::INTER_LINEAR,
-            cv::BORDER_CONSTANT);
+  remapStereoPair(left_raw, right_raw, left_map1_, left_map2_, right_map1_, right_map2_, left_rect,
+                  right_rect);
 }
 
 std::pair<cv::Mat, cv::Mat> RectificationMaps::rectify(const cv::Mat& left_raw,

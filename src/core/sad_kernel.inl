@@ -41,23 +41,30 @@ int roundUp(int v, int multiple) { return (v + multiple - 1) / multiple * multip
 int rightBase(const Problem& p, int xi) {
   return p.right_width - 1 - p.right_pad_left + p.min_disp - xi + p.radius;
 }
-// Room either side of the right-winner arrays for the shifted writes of keepLowerCost.
-int rightPad(const Problem& p) { return p.ndisp + absInt(p.min_disp) + kLanes; }
+// The transposed sums' rows [k][x] hold x in [-sumsPadLeft, Wa + sumsPadRight): the pads cost
+// kMaxCost, so that the right-winner search reads any x = xr + min_disp + k (xr in [0, Wa))
+// without a bounds check.
+int sumsPadLeft(const Problem& p) { return roundUp(p.min_disp < 0 ? -p.min_disp : 0, kLanes); }
+int sumsPadRight(const Problem& p) {
+  return roundUp(p.min_disp + p.ndisp > 0 ? p.min_disp + p.ndisp : 0, kLanes);
+}
+int sumsStride(const Problem& p) {
+  return sumsPadLeft(p) + roundUp(p.width, kLanes) + sumsPadRight(p);
+}
 
 // Views into the caller's scratch memory for one band.
 struct Scratch {
   int16_t* col;     // [padded x][k] vertical window sums
   int16_t* sums;    // (kLanes + 1) x D: window sums of the pixel before the block, then the block
-  int16_t* sums_t;  // [k][x] window sums of the row (x padded to Wa)
+  int16_t* sums_t;  // [k][x] window sums of the row, row stride sumsStride (x from -sumsPadLeft)
   int16_t *best, *best_k, *prev, *next, *within;  // [x] per pixel: see blockWinners
-  int16_t *right_cost, *right_k;  // right-image winner, indexed xr + rightPad
+  int16_t* right_k;  // [xr] right-image winner
   int16_t* filler;  // D x kMaxCost, the sums of pixels past the image's end
 };
 
 // Lays Scratch out from base (nullptr: only counts); returns the int16 elements used.
 size_t layOut(const Problem& p, int16_t* base, Scratch* s) {
   const size_t D = static_cast<size_t>(p.ndisp), Wa = static_cast<size_t>(roundUp(p.width, kLanes));
-  const size_t right = static_cast<size_t>(p.width + 2 * rightPad(p));
   size_t used = 0;
   auto take = [&](size_t n) {
     int16_t* at = base ? base + used : nullptr;
@@ -66,14 +73,14 @@ size_t layOut(const Problem& p, int16_t* base, Scratch* s) {
   };
   s->col = take(static_cast<size_t>(p.padded_width) * D);
   s->sums = take((kLanes + 1) * D);
-  s->sums_t = take(D * Wa);
+  s->sums_t = take(D * static_cast<size_t>(sumsStride(p)));
+  if (s->sums_t) s->sums_t += sumsPadLeft(p);
   s->best = take(Wa);
   s->best_k = take(Wa);
   s->prev = take(Wa);
   s->next = take(Wa);
   s->within = take(Wa);
-  s->right_cost = take(right);
-  s->right_k = take(right);
+  s->right_k = take(Wa);
   s->filler = take(D);
   return used;
 }
@@ -179,23 +186,51 @@ CV_ALWAYS_INLINE void transpose8(const int16_t* const* rows, int D, int16_t* dst
 #endif
 }
 
-// Where cost[x] < best[x]: best[x] = cost[x], best_k[x] = k. n is a multiple of kLanes.
-inline void keepLowerCost(const int16_t* cost, int16_t k, int n, int16_t* best, int16_t* best_k) {
+// Right winner of every right pixel xr in [0, Wa): the k (lowest on ties, as for the left
+// winners) minimising t[k * stride + xr + min_disp + k], the sums of the left pixel that xr
+// matches at k. Each vector of right pixels keeps its minimum in registers over all k (two
+// vectors at a time, to overlap their dependency chains); stores only its result.
+CV_ALWAYS_INLINE void rightWinners(const int16_t* t, int stride, int Wa, int D, int min_disp,
+                                   int16_t* right_k) {
+  const size_t diagonal = static_cast<size_t>(stride) + 1;  // from (k, x) to (k + 1, x + 1)
 #if CV_SIMD
-  const cv::v_int16 kv = cv::vx_setall_s16(k);
-  for (int x = 0; x < n; x += kLanes) {
-    const cv::v_int16 c = cv::vx_load(cost + x), b = cv::vx_load(best + x);
-    // Callers pass k in increasing order, so max() with (better ? k : 0) selects k: one
-    // instruction fewer than a select on SSE2.
-    cv::v_store(best_k + x, cv::v_max(cv::vx_load(best_k + x), (c < b) & kv));
-    cv::v_store(best + x, cv::v_min(c, b));
+  const cv::v_int16 one = cv::vx_setall_s16(1);
+  int xr = 0;
+  for (; xr + 2 * kLanes <= Wa; xr += 2 * kLanes) {
+    const int16_t* c = t + xr + min_disp;
+    cv::v_int16 best0 = cv::vx_setall_s16(kMaxCost), best1 = best0;
+    cv::v_int16 k0 = cv::vx_setzero_s16(), k1 = k0, kv = k0;
+    for (int k = 0; k < D; ++k, c += diagonal, kv = kv + one) {
+      const cv::v_int16 c0 = cv::vx_load(c), c1 = cv::vx_load(c + kLanes);
+      k0 = cv::v_max(k0, (c0 < best0) & kv);  // k increases: max() selects it
+      best0 = cv::v_min(c0, best0);
+      k1 = cv::v_max(k1, (c1 < best1) & kv);
+      best1 = cv::v_min(c1, best1);
+    }
+    cv::v_store(right_k + xr, k0);
+    cv::v_store(right_k + xr + kLanes, k1);
+  }
+  for (; xr < Wa; xr += kLanes) {
+    const int16_t* c = t + xr + min_disp;
+    cv::v_int16 best = cv::vx_setall_s16(kMaxCost), bk = cv::vx_setzero_s16(), kv = bk;
+    for (int k = 0; k < D; ++k, c += diagonal, kv = kv + one) {
+      const cv::v_int16 cost = cv::vx_load(c);
+      bk = cv::v_max(bk, (cost < best) & kv);
+      best = cv::v_min(cost, best);
+    }
+    cv::v_store(right_k + xr, bk);
   }
 #else
-  for (int x = 0; x < n; ++x)
-    if (cost[x] < best[x]) {
-      best[x] = cost[x];
-      best_k[x] = k;
-    }
+  for (int xr = 0; xr < Wa; ++xr) {
+    int16_t best = kMaxCost, bk = 0;
+    const int16_t* c = t + xr + min_disp;
+    for (int k = 0; k < D; ++k, c += diagonal)
+      if (*c < best) {
+        best = *c;
+        bk = static_cast<int16_t>(k);
+      }
+    right_k[xr] = bk;
+  }
 #endif
 }
 
@@ -363,14 +398,17 @@ void matchBandFor(const Problem& p, int y0, int y1, int16_t* out, size_t out_ste
   for (int k = 0; k < D; ++k) b.filler[k] = kMaxCost;
   int16_t* col = b.col;
   int16_t* st = b.sums_t;
+  const int st_stride = sumsStride(p);
+  for (int k = 0; k < D; ++k) {  // the pads; the rows' [0, Wa) is written for every row
+    int16_t* row = st + static_cast<size_t>(k) * st_stride;
+    for (int x = -sumsPadLeft(p); x < 0; ++x) row[x] = kMaxCost;
+    for (int x = Wa; x < Wa + sumsPadRight(p); ++x) row[x] = kMaxCost;
+  }
 
   for (int pr = y0; pr <= y0 + 2 * r; ++pr) {
     const RowStep start = rowStep(p, pr, -1);
     for (int xi = 0; xi < p.padded_width; ++xi) updateColumn(p, start, xi, D, col);
   }
-  const int pad = rightPad(p);
-  int16_t* rcost = b.right_cost + pad;
-  int16_t* rk = b.right_k + pad;
   for (int y = y0; y < y1; ++y) {
     // Each column moves down one row just before the window first uses it in this row, so the
     // column sums are touched while in L1 rather than in a pass of their own.
@@ -403,24 +441,16 @@ void matchBandFor(const Problem& p, int y0, int y1, int16_t* out, size_t out_ste
                     col + static_cast<size_t>(x - 1) * D, D, sx);
       }
       std::memcpy(s, s + static_cast<size_t>(kLanes) * D, sizeof(int16_t) * D);
-      for (int g = 0; g < kLanes; g += 8) transpose8(rows + g, D, st + x0 + g, Wa);
-      blockWinners(st + x0, Wa, D, p.uniqueness_ratio, b, x0);
+      for (int g = 0; g < kLanes; g += 8) transpose8(rows + g, D, st + x0 + g, st_stride);
+      blockWinners(st + x0, st_stride, D, p.uniqueness_ratio, b, x0);
     }
 
-    // Right winner of every right pixel xr = x - min_disp - k from the same sums, for the
-    // left-right check. (A pass of its own: done per block, each k's shifted store would overlap
-    // the next k's load and stall store forwarding, which measured 1.5x slower.)
-    if (p.left_right_check) {
-      for (int i = 0; i < W + 2 * pad; ++i) {
-        b.right_cost[i] = kMaxCost;
-        b.right_k[i] = 0;
-      }
-      for (int k = 0; k < D; ++k)
-        keepLowerCost(st + static_cast<size_t>(k) * Wa, static_cast<int16_t>(k), Wa,
-                      rcost - p.min_disp - k, rk - p.min_disp - k);
-    }
+    // Right winner of every right pixel from the same sums, for the left-right check: a pass of
+    // its own over the row's transposed sums (per block, the diagonal reads would reach into
+    // blocks not yet summed).
+    if (p.left_right_check) rightWinners(st, st_stride, Wa, D, p.min_disp, b.right_k);
 
-    finishRow(p, b, rk, D, dst);
+    finishRow(p, b, b.right_k, D, dst);
   }
 }
 

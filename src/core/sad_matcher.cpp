@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "sad_kernel.h"
+#include "parallel_pieces.h"
 
 namespace ecs {
 namespace {
@@ -186,8 +187,8 @@ void computeSadDisparity16(const cv::Mat& left, const cv::Mat& right, const SadM
   disparity->create(left.size(), CV_16SC1);
   cv::Mat& out = *disparity;
   const size_t scratch_elements = kernel.scratch_elements(p);
-  // A few bands per thread balance the load; each band re-reads 2r rows to start its sums.
-  const int bands = std::max(1, std::min(p.height / 16, cv::getNumThreads() * 2));
+  // Each band re-reads 2r rows to start its sums.
+  const int bands = parallelPieces(p.height, 16);
   cv::parallel_for_(cv::Range(0, bands), [&](const cv::Range& range) {
     int16_t* scratch = threadScratch(scratch_elements).data();
     for (int b = range.start; b < range.end; ++b) {

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cstdlib>
 #include <stdexcept>
+#include "parallel_pieces.h"
 
 namespace ecs {
 
@@ -95,7 +96,7 @@ void SpeckleFilter::apply(cv::Mat* disparity, int new_value, int max_speckle_siz
 
   // Horizontal stripes of rows run in parallel; the union-find forests of different stripes
   // stay disjoint until the seams are linked, serially.
-  const int stripes = std::max(1, std::min(cv::getNumThreads(), rows / 32));
+  const int stripes = parallelPieces(rows, 32);
   const auto stripe_rows = [rows, stripes](int s) { return cv::Range(rows * s / stripes, rows * (s + 1) / stripes); };
   stripe_runs_.resize(stripes);
   stripe_codes_.resize(stripes);

@@ -22,7 +22,6 @@
 #include <memory>
 #include <mutex>
 #include <opencv2/calib3d.hpp>
-#include <opencv2/imgproc.hpp>
 
 #include "embedded_calibration_stereo/CalibrationMode.h"
 #include "embedded_calibration_stereo/core/rectification.h"
@@ -207,8 +206,7 @@ class RectifierNodelet : public nodelet::Nodelet {
       return;
     }
     try {
-      publishRectified(*left, maps->left_map1, maps->left_map2, left_pub_);
-      publishRectified(*right, maps->right_map1, maps->right_map2, right_pub_);
+      publishRectified(*left, *right, *maps);
     } catch (const std::exception& e) {  // cv_bridge or OpenCV: skip the frame
       return reportError(input_->leftImageTopic() + ": " + e.what());
     }
@@ -255,15 +253,19 @@ class RectifierNodelet : public nodelet::Nodelet {
     return nullptr;
   }
 
-  // Remaps into a new message's own buffer (no extra copy); the message is not touched after
-  // publishing.
-  void publishRectified(const Image& raw, const cv::Mat& map1, const cv::Mat& map2,
-                        const image_transport::Publisher& pub) {
-    const cv_bridge::CvImageConstPtr in = cv_bridge::toCvShare(raw, boost::shared_ptr<void>());
-    diagnostics_->checkShared(in->image, raw);
-    const OutputImage out = newImageLike(raw);
-    cv::remap(in->image, out.view, map1, map2, cv::INTER_LINEAR, cv::BORDER_CONSTANT);
-    pub.publish(out.msg);
+  // Remaps both images into new messages' own buffers (no extra copy; side by side, see
+  // ecs::remapStereoPair), then publishes them; a message is not touched after publishing.
+  void publishRectified(const Image& left, const Image& right, const StereoMaps& maps) {
+    const boost::shared_ptr<void> no_owner;  // the callers hold the messages
+    const cv_bridge::CvImageConstPtr left_in = cv_bridge::toCvShare(left, no_owner);
+    const cv_bridge::CvImageConstPtr right_in = cv_bridge::toCvShare(right, no_owner);
+    diagnostics_->checkShared(left_in->image, left);
+    diagnostics_->checkShared(right_in->image, right);
+    OutputImage left_out = newImageLike(left), right_out = newImageLike(right);
+    ecs::remapStereoPair(left_in->image, right_in->image, maps.left_map1, maps.left_map2,
+                         maps.right_map1, maps.right_map2, &left_out.view, &right_out.view);
+    left_pub_.publish(left_out.msg);
+    right_pub_.publish(right_out.msg);
   }
 
   ecs::RectificationMethod method_ = ecs::RectificationMethod::kBouguet;

@@ -191,6 +191,45 @@ INSTANTIATE_TEST_SUITE_P(BothMethods, RectificationTest,
                            return toString(info.param);
                          });
 
+// The pair remap (the Rectifier nodelet's, into the outgoing messages' buffers) equals
+// cv::remap of each image alone, bit for bit, and writes into preallocated outputs in place,
+// whatever the number of threads.
+TEST(RemapStereoPairTest, EqualsRemapOfEachImageWrittenInPlace) {
+  const RectificationMaps maps = RectificationMaps::build(testRig(), RectificationOptions());
+  cv::Mat left(480, 752, CV_8U), right(480, 752, CV_8U);
+  cv::RNG rng(5);
+  rng.fill(left, cv::RNG::UNIFORM, 0, 256);
+  rng.fill(right, cv::RNG::UNIFORM, 0, 256);
+  cv::Mat expected_left, expected_right;
+  cv::remap(left, expected_left, maps.leftMap1(), maps.leftMap2(), cv::INTER_LINEAR,
+            cv::BORDER_CONSTANT);
+  cv::remap(right, expected_right, maps.rightMap1(), maps.rightMap2(), cv::INTER_LINEAR,
+            cv::BORDER_CONSTANT);
+  const auto remapPair = [&](cv::Mat* left_out, cv::Mat* right_out) {
+    remapStereoPair(left, right, maps.leftMap1(), maps.leftMap2(), maps.rightMap1(),
+                    maps.rightMap2(), left_out, right_out);
+  };
+  const int threads = cv::getNumThreads();
+  for (const int n : {1, 2, 4}) {
+    cv::setNumThreads(n);
+    cv::Mat left_out(left.size(), CV_8U, cv::Scalar(7));
+    cv::Mat right_out(right.size(), CV_8U, cv::Scalar(7));
+    const uchar* left_buffer = left_out.data;
+    const uchar* right_buffer = right_out.data;
+    remapPair(&left_out, &right_out);
+    EXPECT_EQ(left_out.data, left_buffer) << n << " threads: not written in place";
+    EXPECT_EQ(right_out.data, right_buffer) << n << " threads: not written in place";
+    EXPECT_EQ(cv::norm(left_out, expected_left, cv::NORM_INF), 0) << n << " threads";
+    EXPECT_EQ(cv::norm(right_out, expected_right, cv::NORM_INF), 0) << n << " threads";
+  }
+  cv::setNumThreads(threads);
+  // Empty outputs are allocated.
+  cv::Mat left_new, right_new;
+  remapPair(&left_new, &right_new);
+  EXPECT_EQ(cv::norm(left_new, expected_left, cv::NORM_INF), 0);
+  EXPECT_EQ(cv::norm(right_new, expected_right, cv::NORM_INF), 0);
+}
+
 TEST(RectificationGeometryTest, FusielloGivesBothCamerasTheSameIntrinsics) {
   RectificationOptions options;
   options.method = RectificationMethod::kFusiello;

@@ -47,6 +47,18 @@ struct RectificationOptions {
 RectificationGeometry computeRectificationGeometry(const StereoRig& rig,
                                                    const RectificationOptions& options);
 
+// Remaps a stereo pair through its tables (as cv::initUndistortRectifyMap makes them;
+// INTER_LINEAR, constant black border) into *left_out and *right_out, which are written in place
+// when they already have the right size and type. The two images run side by side, one thread
+// each, in one cv::parallel_for_ region: OpenCV parallelises one region at a time per process (a
+// region started while another thread's runs executes serially), so one short region per frame,
+// rather than one per image, leaves the regions of the other stages of a nodelet manager
+// parallel more often; and one image per thread costs less CPU than remap's split of one image
+// (bench_rectify: 1.3 ms of CPU per pair against 1.5-2.1 ms).
+void remapStereoPair(const cv::Mat& left_in, const cv::Mat& right_in, const cv::Mat& left_map1,
+                     const cv::Mat& left_map2, const cv::Mat& right_map1, const cv::Mat& right_map2,
+                     cv::Mat* left_out, cv::Mat* right_out);
+
 class RectificationMaps {
  public:
   // Builds the geometry and the cv::initUndistortRectifyMap tables in fixed-point form
