@@ -25,10 +25,10 @@
 #include <string>
 #include <vector>
 
-#include "embedded_calibration_stereo/core/solution_errors.h"
-#include "embedded_calibration_stereo/core/bundle_adjuster.h"
-#include "embedded_calibration_stereo/core/config_io.h"
-#include "embedded_calibration_stereo/core/synthetic_observations.h"
+#include "embedded_calibration_stereo/test_support/solution_errors.h"
+#include "embedded_calibration_stereo/core/calibration/bundle_adjuster.h"
+#include "embedded_calibration_stereo/core/geometry/config_io.h"
+#include "embedded_calibration_stereo/test_support/synthetic_observations.h"
 
 namespace {
 

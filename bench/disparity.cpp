@@ -18,8 +18,8 @@
 #include <string>
 #include <vector>
 
-#include "embedded_calibration_stereo/core/disparity.h"
-#include "embedded_calibration_stereo/core/sad_matcher.h"
+#include "embedded_calibration_stereo/core/depth/disparity.h"
+#include "embedded_calibration_stereo/core/depth/sad_matcher.h"
 
 namespace {
 

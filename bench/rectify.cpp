@@ -9,7 +9,7 @@
 #include <opencv2/core.hpp>
 #include <vector>
 
-#include "embedded_calibration_stereo/core/rectification.h"
+#include "embedded_calibration_stereo/core/depth/rectification.h"
 
 namespace {
 

@@ -14,7 +14,7 @@
 #include <string>
 #include <vector>
 
-#include "embedded_calibration_stereo/core/separator.h"
+#include "embedded_calibration_stereo/core/depth/separator.h"
 #include "embedded_calibration_stereo/core/sim/sim_rig.h"
 
 namespace {

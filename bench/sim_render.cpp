@@ -12,7 +12,7 @@
 #include <string>
 #include <vector>
 
-#include "embedded_calibration_stereo/core/config_error.h"
+#include "embedded_calibration_stereo/core/geometry/config_error.h"
 #include "embedded_calibration_stereo/core/sim/sim_rig.h"
 
 namespace {

@@ -16,8 +16,8 @@
 #include <string>
 #include <vector>
 
-#include "embedded_calibration_stereo/core/board_teacher.h"
-#include "embedded_calibration_stereo/core/pattern_tracker.h"
+#include "embedded_calibration_stereo/core/tracker/board_teacher.h"
+#include "embedded_calibration_stereo/core/tracker/pattern_tracker.h"
 #include "embedded_calibration_stereo/core/sim/sim_rig.h"
 
 using namespace ecs;

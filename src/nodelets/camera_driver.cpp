@@ -20,8 +20,8 @@
 
 #include "embedded_calibration_stereo/CalibrationMode.h"
 #include "embedded_calibration_stereo/SetRigDrift.h"
-#include "embedded_calibration_stereo/core/config_error.h"
-#include "embedded_calibration_stereo/core/light_schedule.h"
+#include "embedded_calibration_stereo/core/geometry/config_error.h"
+#include "embedded_calibration_stereo/core/calibration/light_schedule.h"
 #include "embedded_calibration_stereo/core/sim/sim_rig.h"
 #include "embedded_calibration_stereo/ros/camera_calibration.h"
 #include "embedded_calibration_stereo/ros/conversions.h"

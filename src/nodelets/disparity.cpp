@@ -22,7 +22,7 @@
 #include <mutex>
 
 #include "embedded_calibration_stereo/DisparityConfig.h"
-#include "embedded_calibration_stereo/core/disparity.h"
+#include "embedded_calibration_stereo/core/depth/disparity.h"
 #include "embedded_calibration_stereo/ros/stage_diagnostics.h"
 #include "embedded_calibration_stereo/ros/stereo_camera_input.h"
 #include "embedded_calibration_stereo/ros/stereo_input_check.h"

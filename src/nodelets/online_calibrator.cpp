@@ -25,8 +25,8 @@
 
 #include "embedded_calibration_stereo/CalibrationMode.h"
 #include "embedded_calibration_stereo/Recalibrate.h"
-#include "embedded_calibration_stereo/core/config_error.h"
-#include "embedded_calibration_stereo/core/config_io.h"
+#include "embedded_calibration_stereo/core/geometry/config_error.h"
+#include "embedded_calibration_stereo/core/geometry/config_io.h"
 #include "embedded_calibration_stereo/ros/calibration_session.h"
 #include "embedded_calibration_stereo/ros/conversions.h"
 

@@ -30,7 +30,7 @@
 
 #include "embedded_calibration_stereo/CalibrationMode.h"
 #include "embedded_calibration_stereo/StereoPatternObservation.h"
-#include "embedded_calibration_stereo/core/pattern_tracker.h"
+#include "embedded_calibration_stereo/core/tracker/pattern_tracker.h"
 #include "embedded_calibration_stereo/ros/conversions.h"
 #include "embedded_calibration_stereo/ros/tracker_teaching.h"
 

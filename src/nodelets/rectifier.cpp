@@ -24,7 +24,7 @@
 #include <opencv2/calib3d.hpp>
 
 #include "embedded_calibration_stereo/CalibrationMode.h"
-#include "embedded_calibration_stereo/core/rectification.h"
+#include "embedded_calibration_stereo/core/depth/rectification.h"
 #include "embedded_calibration_stereo/ros/conversions.h"
 #include "embedded_calibration_stereo/ros/output_image.h"
 #include "embedded_calibration_stereo/ros/stage_diagnostics.h"

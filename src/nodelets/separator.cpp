@@ -32,7 +32,7 @@
 #include <mutex>
 
 #include "embedded_calibration_stereo/CalibrationMode.h"
-#include "embedded_calibration_stereo/core/separator.h"
+#include "embedded_calibration_stereo/core/depth/separator.h"
 #include "embedded_calibration_stereo/ros/output_image.h"
 #include "embedded_calibration_stereo/ros/stage_diagnostics.h"
 #include "embedded_calibration_stereo/ros/stereo_input_check.h"

@@ -1,6 +1,6 @@
 #include "embedded_calibration_stereo/ros/calibration_file.h"
 
-#include "embedded_calibration_stereo/core/atomic_file.h"
+#include "embedded_calibration_stereo/core/geometry/atomic_file.h"
 
 #include <camera_calibration_parsers/parse.h>
 #include <camera_calibration_parsers/parse_ini.h>

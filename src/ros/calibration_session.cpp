@@ -5,8 +5,8 @@
 #include <cmath>
 #include <utility>
 
-#include "embedded_calibration_stereo/core/config_error.h"
-#include "embedded_calibration_stereo/core/observation_validator.h"
+#include "embedded_calibration_stereo/core/geometry/config_error.h"
+#include "embedded_calibration_stereo/core/calibration/observation_validator.h"
 #include "embedded_calibration_stereo/ros/conversions.h"
 
 namespace embedded_calibration_stereo {

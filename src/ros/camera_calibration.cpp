@@ -2,7 +2,7 @@
 
 #include <sys/stat.h>
 
-#include "embedded_calibration_stereo/core/config_error.h"
+#include "embedded_calibration_stereo/core/geometry/config_error.h"
 #include "embedded_calibration_stereo/ros/calibration_file.h"
 #include "embedded_calibration_stereo/ros/conversions.h"
 

@@ -2,7 +2,7 @@
 
 #include <cmath>
 
-#include "embedded_calibration_stereo/core/config_error.h"
+#include "embedded_calibration_stereo/core/geometry/config_error.h"
 
 namespace embedded_calibration_stereo {
 namespace {

@@ -1,5 +1,5 @@
 // The gpio light backend: one output line of a GPIO chip through the libgpiod v1 C API.
-#include "embedded_calibration_stereo/core/config_error.h"
+#include "embedded_calibration_stereo/core/geometry/config_error.h"
 #include "embedded_calibration_stereo/ros/light_backend.h"
 
 #ifdef ECS_HAVE_GPIOD

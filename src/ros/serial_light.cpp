@@ -7,7 +7,7 @@
 #include <cerrno>
 #include <cstring>
 
-#include "embedded_calibration_stereo/core/config_error.h"
+#include "embedded_calibration_stereo/core/geometry/config_error.h"
 #include "embedded_calibration_stereo/ros/light_backend.h"
 
 namespace embedded_calibration_stereo {

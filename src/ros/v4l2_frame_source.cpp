@@ -4,7 +4,7 @@
 
 #include <opencv2/videoio.hpp>
 
-#include "embedded_calibration_stereo/core/config_error.h"
+#include "embedded_calibration_stereo/core/geometry/config_error.h"
 #include "embedded_calibration_stereo/ros/frame_source.h"
 
 namespace embedded_calibration_stereo {

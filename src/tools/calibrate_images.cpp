@@ -24,9 +24,9 @@
 #include <string>
 #include <vector>
 
-#include "embedded_calibration_stereo/core/board_calibration.h"
-#include "embedded_calibration_stereo/core/board_calibration_report.h"
-#include "embedded_calibration_stereo/core/camera_info_yaml.h"
+#include "embedded_calibration_stereo/core/calibration/board_calibration.h"
+#include "embedded_calibration_stereo/core/calibration/board_calibration_report.h"
+#include "embedded_calibration_stereo/core/geometry/camera_info_yaml.h"
 
 using namespace ecs;
 

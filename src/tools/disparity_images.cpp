@@ -7,9 +7,9 @@
 #include <opencv2/imgcodecs.hpp>
 #include <string>
 
-#include "embedded_calibration_stereo/core/disparity.h"
-#include "embedded_calibration_stereo/core/disparity_evaluation.h"
-#include "embedded_calibration_stereo/core/pfm_io.h"
+#include "embedded_calibration_stereo/core/depth/disparity.h"
+#include "embedded_calibration_stereo/core/depth/disparity_evaluation.h"
+#include "embedded_calibration_stereo/core/geometry/pfm_io.h"
 
 namespace {
 

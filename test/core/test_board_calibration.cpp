@@ -20,10 +20,10 @@
 #include <opencv2/imgproc.hpp>
 #include <sstream>
 
-#include "embedded_calibration_stereo/core/board_calibration.h"
-#include "embedded_calibration_stereo/core/board_calibration_report.h"
-#include "embedded_calibration_stereo/core/camera_info_yaml.h"
-#include "embedded_calibration_stereo/core/flat_board_images.h"
+#include "embedded_calibration_stereo/core/calibration/board_calibration.h"
+#include "embedded_calibration_stereo/core/calibration/board_calibration_report.h"
+#include "embedded_calibration_stereo/core/geometry/camera_info_yaml.h"
+#include "embedded_calibration_stereo/test_support/flat_board_images.h"
 #include "embedded_calibration_stereo/core/sim/sim_rig.h"
 
 namespace ecs {

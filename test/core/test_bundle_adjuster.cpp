@@ -18,10 +18,10 @@
 #include <iostream>
 #include <random>
 
-#include "embedded_calibration_stereo/core/solution_errors.h"
-#include "embedded_calibration_stereo/core/bundle_adjuster.h"
-#include "embedded_calibration_stereo/core/corner_tracks.h"
-#include "embedded_calibration_stereo/core/synthetic_observations.h"
+#include "embedded_calibration_stereo/test_support/solution_errors.h"
+#include "embedded_calibration_stereo/core/calibration/bundle_adjuster.h"
+#include "embedded_calibration_stereo/core/calibration/corner_tracks.h"
+#include "embedded_calibration_stereo/test_support/synthetic_observations.h"
 
 namespace ecs {
 namespace {

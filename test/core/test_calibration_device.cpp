@@ -2,8 +2,8 @@
 // image of its physical corner, with the same id, and virtual poses must stay proper rotations.
 #include <gtest/gtest.h>
 
-#include "embedded_calibration_stereo/core/calibration_device.h"
-#include "embedded_calibration_stereo/core/config_io.h"
+#include "embedded_calibration_stereo/core/geometry/calibration_device.h"
+#include "embedded_calibration_stereo/core/geometry/config_io.h"
 
 namespace ecs {
 namespace {

@@ -5,8 +5,8 @@
 #include <opencv2/calib3d.hpp>
 #include <random>
 
-#include "embedded_calibration_stereo/core/camera_model.h"
-#include "embedded_calibration_stereo/core/stereo_rig.h"
+#include "embedded_calibration_stereo/core/geometry/camera_model.h"
+#include "embedded_calibration_stereo/core/geometry/stereo_rig.h"
 
 namespace ecs {
 namespace {

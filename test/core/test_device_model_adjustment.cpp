@@ -27,11 +27,11 @@
 #include <iostream>
 #include <random>
 
-#include "embedded_calibration_stereo/core/solution_errors.h"
-#include "embedded_calibration_stereo/core/bundle_adjuster.h"
-#include "embedded_calibration_stereo/core/config_io.h"
-#include "embedded_calibration_stereo/core/quality_gate.h"
-#include "embedded_calibration_stereo/core/synthetic_observations.h"
+#include "embedded_calibration_stereo/test_support/solution_errors.h"
+#include "embedded_calibration_stereo/core/calibration/bundle_adjuster.h"
+#include "embedded_calibration_stereo/core/geometry/config_io.h"
+#include "embedded_calibration_stereo/core/calibration/quality_gate.h"
+#include "embedded_calibration_stereo/test_support/synthetic_observations.h"
 
 namespace ecs {
 namespace {

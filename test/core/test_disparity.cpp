@@ -12,10 +12,10 @@
 
 #include <opencv2/imgproc.hpp>
 
-#include "embedded_calibration_stereo/core/disparity.h"
-#include "embedded_calibration_stereo/core/disparity_evaluation.h"
-#include "embedded_calibration_stereo/core/disparity_filling.h"
-#include "embedded_calibration_stereo/core/pfm_io.h"
+#include "embedded_calibration_stereo/core/depth/disparity.h"
+#include "embedded_calibration_stereo/core/depth/disparity_evaluation.h"
+#include "embedded_calibration_stereo/core/depth/disparity_filling.h"
+#include "embedded_calibration_stereo/core/geometry/pfm_io.h"
 
 namespace ecs {
 namespace {

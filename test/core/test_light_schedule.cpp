@@ -3,7 +3,7 @@
 
 #include <vector>
 
-#include "embedded_calibration_stereo/core/light_schedule.h"
+#include "embedded_calibration_stereo/core/calibration/light_schedule.h"
 
 namespace {
 

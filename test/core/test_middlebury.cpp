@@ -8,8 +8,8 @@
 #include <opencv2/imgcodecs.hpp>
 #include <sys/stat.h>
 
-#include "embedded_calibration_stereo/core/disparity.h"
-#include "embedded_calibration_stereo/core/disparity_evaluation.h"
+#include "embedded_calibration_stereo/core/depth/disparity.h"
+#include "embedded_calibration_stereo/core/depth/disparity_evaluation.h"
 
 namespace ecs {
 namespace {

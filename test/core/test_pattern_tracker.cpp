@@ -10,10 +10,10 @@
 #include <opencv2/imgproc.hpp>
 #include <stdexcept>
 
-#include "embedded_calibration_stereo/core/board_prior.h"
-#include "embedded_calibration_stereo/core/board_teacher.h"
-#include "embedded_calibration_stereo/core/config_error.h"
-#include "embedded_calibration_stereo/core/pattern_tracker.h"
+#include "embedded_calibration_stereo/core/tracker/board_prior.h"
+#include "embedded_calibration_stereo/core/tracker/board_teacher.h"
+#include "embedded_calibration_stereo/core/geometry/config_error.h"
+#include "embedded_calibration_stereo/core/tracker/pattern_tracker.h"
 #include "embedded_calibration_stereo/core/sim/sim_rig.h"
 
 namespace ecs {

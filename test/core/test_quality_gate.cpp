@@ -7,8 +7,8 @@
 
 #include <random>
 
-#include "embedded_calibration_stereo/core/quality_gate.h"
-#include "embedded_calibration_stereo/core/synthetic_observations.h"
+#include "embedded_calibration_stereo/core/calibration/quality_gate.h"
+#include "embedded_calibration_stereo/test_support/synthetic_observations.h"
 
 namespace ecs {
 namespace {

@@ -7,7 +7,7 @@
 #include <opencv2/imgproc.hpp>
 #include <random>
 
-#include "embedded_calibration_stereo/core/rectification.h"
+#include "embedded_calibration_stereo/core/depth/rectification.h"
 
 namespace ecs {
 namespace {

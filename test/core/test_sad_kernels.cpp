@@ -14,7 +14,7 @@
 #include <opencv2/core/fast_math.hpp>  // cvRound
 #include <opencv2/imgproc.hpp>
 
-#include "embedded_calibration_stereo/core/sad_matcher.h"
+#include "embedded_calibration_stereo/core/depth/sad_matcher.h"
 
 namespace ecs {
 namespace {

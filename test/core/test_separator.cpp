@@ -10,10 +10,10 @@
 #include <string>
 #include <vector>
 
-#include "embedded_calibration_stereo/core/disparity.h"
-#include "embedded_calibration_stereo/core/disparity_evaluation.h"
-#include "embedded_calibration_stereo/core/rectification.h"
-#include "embedded_calibration_stereo/core/separator.h"
+#include "embedded_calibration_stereo/core/depth/disparity.h"
+#include "embedded_calibration_stereo/core/depth/disparity_evaluation.h"
+#include "embedded_calibration_stereo/core/depth/rectification.h"
+#include "embedded_calibration_stereo/core/depth/separator.h"
 #include "embedded_calibration_stereo/core/sim/sim_rig.h"
 
 namespace ecs {

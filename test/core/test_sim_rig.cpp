@@ -13,7 +13,7 @@
 #include <string>
 #include <thread>
 
-#include "embedded_calibration_stereo/core/config_error.h"
+#include "embedded_calibration_stereo/core/geometry/config_error.h"
 #include "embedded_calibration_stereo/core/sim/sim_rig.h"
 
 namespace ecs {

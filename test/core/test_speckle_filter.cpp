@@ -7,8 +7,8 @@
 #include <opencv2/calib3d.hpp>
 #include <opencv2/imgproc.hpp>
 
-#include "embedded_calibration_stereo/core/sad_matcher.h"
-#include "embedded_calibration_stereo/core/speckle_filter.h"
+#include "embedded_calibration_stereo/core/depth/sad_matcher.h"
+#include "embedded_calibration_stereo/core/depth/speckle_filter.h"
 
 namespace ecs {
 namespace {

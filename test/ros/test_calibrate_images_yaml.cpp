@@ -6,8 +6,8 @@
 
 #include <filesystem>
 
-#include "embedded_calibration_stereo/core/camera_info_yaml.h"
-#include "embedded_calibration_stereo/core/config_io.h"
+#include "embedded_calibration_stereo/core/geometry/camera_info_yaml.h"
+#include "embedded_calibration_stereo/core/geometry/config_io.h"
 
 namespace {
 

@@ -6,7 +6,7 @@
 #include <cmath>
 #include <limits>
 
-#include "embedded_calibration_stereo/core/config_io.h"
+#include "embedded_calibration_stereo/core/geometry/config_io.h"
 #include "embedded_calibration_stereo/ros/calibration_session.h"
 
 namespace ecsr = embedded_calibration_stereo;

@@ -8,7 +8,7 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/videoio.hpp>
 
-#include "embedded_calibration_stereo/core/config_error.h"
+#include "embedded_calibration_stereo/core/geometry/config_error.h"
 #include "embedded_calibration_stereo/ros/frame_source.h"
 
 using namespace embedded_calibration_stereo;

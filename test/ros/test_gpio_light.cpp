@@ -2,7 +2,7 @@
 // checked; each names its parameter.
 #include <gtest/gtest.h>
 
-#include "embedded_calibration_stereo/core/config_error.h"
+#include "embedded_calibration_stereo/core/geometry/config_error.h"
 #include "embedded_calibration_stereo/ros/light_backend.h"
 
 using namespace embedded_calibration_stereo;

@@ -6,7 +6,7 @@
 #include <pty.h>
 #include <unistd.h>
 
-#include "embedded_calibration_stereo/core/config_error.h"
+#include "embedded_calibration_stereo/core/geometry/config_error.h"
 #include "embedded_calibration_stereo/ros/light_backend.h"
 
 using namespace embedded_calibration_stereo;

@@ -20,7 +20,7 @@
 #include "embedded_calibration_stereo/CalibrationStatus.h"
 #include "embedded_calibration_stereo/Recalibrate.h"
 #include "embedded_calibration_stereo/SetRigDrift.h"
-#include "embedded_calibration_stereo/core/stereo_rig.h"
+#include "embedded_calibration_stereo/core/geometry/stereo_rig.h"
 #include "embedded_calibration_stereo/ros/conversions.h"
 
 using embedded_calibration_stereo::CalibrationMode;

@@ -15,7 +15,7 @@
 #include "driver_test_utils.h"
 #include "embedded_calibration_stereo/CalibrationMode.h"
 #include "embedded_calibration_stereo/StereoPatternObservation.h"
-#include "embedded_calibration_stereo/core/board_prior.h"
+#include "embedded_calibration_stereo/core/tracker/board_prior.h"
 
 using embedded_calibration_stereo::BoardObservation;
 using embedded_calibration_stereo::CalibrationMode;

@@ -15,10 +15,10 @@
 #include <vector>
 
 #include "embedded_calibration_stereo/CalibrationStatus.h"
-#include "embedded_calibration_stereo/core/bundle_adjuster.h"
-#include "embedded_calibration_stereo/core/calibration_device.h"
-#include "embedded_calibration_stereo/core/observation.h"
-#include "embedded_calibration_stereo/core/quality_gate.h"
+#include "embedded_calibration_stereo/core/calibration/bundle_adjuster.h"
+#include "embedded_calibration_stereo/core/geometry/calibration_device.h"
+#include "embedded_calibration_stereo/core/geometry/observation.h"
+#include "embedded_calibration_stereo/core/calibration/quality_gate.h"
 
 namespace embedded_calibration_stereo {
 

@@ -18,9 +18,9 @@
 
 #include "embedded_calibration_stereo/BoardObservation.h"
 #include "embedded_calibration_stereo/StereoPatternObservation.h"
-#include "embedded_calibration_stereo/core/camera_model.h"
-#include "embedded_calibration_stereo/core/observation.h"
-#include "embedded_calibration_stereo/core/stereo_rig.h"
+#include "embedded_calibration_stereo/core/geometry/camera_model.h"
+#include "embedded_calibration_stereo/core/geometry/observation.h"
+#include "embedded_calibration_stereo/core/geometry/stereo_rig.h"
 
 namespace embedded_calibration_stereo {
 

@@ -6,7 +6,7 @@
 
 #include <string>
 
-#include "embedded_calibration_stereo/core/light_schedule.h"
+#include "embedded_calibration_stereo/core/calibration/light_schedule.h"
 #include "embedded_calibration_stereo/ros/frame_source.h"
 #include "embedded_calibration_stereo/ros/light_backend.h"
 

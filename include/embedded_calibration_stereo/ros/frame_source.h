@@ -16,7 +16,7 @@
 #include <string>
 
 #include "embedded_calibration_stereo/core/sim/sim_rig.h"
-#include "embedded_calibration_stereo/core/stereo_rig.h"
+#include "embedded_calibration_stereo/core/geometry/stereo_rig.h"
 
 namespace embedded_calibration_stereo {
 

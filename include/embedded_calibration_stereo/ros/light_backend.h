@@ -10,7 +10,7 @@
 #include <memory>
 #include <string>
 
-#include "embedded_calibration_stereo/core/light_schedule.h"
+#include "embedded_calibration_stereo/core/calibration/light_schedule.h"
 #include "embedded_calibration_stereo/ros/frame_source.h"
 
 namespace embedded_calibration_stereo {

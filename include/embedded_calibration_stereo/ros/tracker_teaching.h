@@ -7,7 +7,7 @@
 // cameras are taught concurrently.
 #include <string>
 
-#include "embedded_calibration_stereo/core/board_teacher.h"
+#include "embedded_calibration_stereo/core/tracker/board_teacher.h"
 #include "embedded_calibration_stereo/core/sim/sim_rig.h"
 
 namespace embedded_calibration_stereo {

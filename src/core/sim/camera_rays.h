@@ -7,7 +7,7 @@
 // Threading: plain data; computeCameraRays() uses cv::parallel_for_ internally.
 #include <opencv2/core.hpp>
 
-#include "embedded_calibration_stereo/core/camera_model.h"
+#include "embedded_calibration_stereo/core/geometry/camera_model.h"
 
 namespace ecs {
 namespace sim {

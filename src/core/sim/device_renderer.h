@@ -16,7 +16,7 @@
 #include <vector>
 
 #include "camera_rays.h"
-#include "embedded_calibration_stereo/core/calibration_device.h"
+#include "embedded_calibration_stereo/core/geometry/calibration_device.h"
 
 namespace ecs {
 namespace sim {

@@ -7,7 +7,7 @@
 
 #include "camera_rays.h"
 #include "device_renderer.h"
-#include "embedded_calibration_stereo/core/config_error.h"
+#include "embedded_calibration_stereo/core/geometry/config_error.h"
 #include "scene_renderer.h"
 
 namespace ecs {

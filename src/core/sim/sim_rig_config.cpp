@@ -3,8 +3,8 @@
 #include <limits>
 #include <utility>
 
-#include "embedded_calibration_stereo/core/config_error.h"
-#include "embedded_calibration_stereo/core/config_io.h"
+#include "embedded_calibration_stereo/core/geometry/config_error.h"
+#include "embedded_calibration_stereo/core/geometry/config_io.h"
 #include "embedded_calibration_stereo/core/sim/sim_rig.h"
 
 namespace ecs {

@@ -4,7 +4,7 @@
 #include <opencv2/core.hpp>
 #include <vector>
 
-#include "embedded_calibration_stereo/core/board_prior.h"
+#include "embedded_calibration_stereo/core/tracker/board_prior.h"
 
 namespace ecs {
 namespace tracker {

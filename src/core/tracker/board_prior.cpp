@@ -1,10 +1,10 @@
-#include "embedded_calibration_stereo/core/board_prior.h"
+#include "embedded_calibration_stereo/core/tracker/board_prior.h"
 
 #include <cmath>
 
-#include "embedded_calibration_stereo/core/atomic_file.h"
-#include "embedded_calibration_stereo/core/config_error.h"
-#include "embedded_calibration_stereo/core/config_io.h"
+#include "embedded_calibration_stereo/core/geometry/atomic_file.h"
+#include "embedded_calibration_stereo/core/geometry/config_error.h"
+#include "embedded_calibration_stereo/core/geometry/config_io.h"
 
 namespace ecs {
 

@@ -1,6 +1,6 @@
 // Teaching: bootstrap detection with findChessboardCornersSB, identification and prior learning
 // (see board_teacher.h).
-#include "embedded_calibration_stereo/core/board_teacher.h"
+#include "embedded_calibration_stereo/core/tracker/board_teacher.h"
 
 #include <algorithm>
 #include <cmath>

@@ -7,8 +7,8 @@
 #include <stdexcept>
 
 #include "board_geometry.h"
-#include "embedded_calibration_stereo/core/config_error.h"
-#include "embedded_calibration_stereo/core/pattern_tracker.h"
+#include "embedded_calibration_stereo/core/geometry/config_error.h"
+#include "embedded_calibration_stereo/core/tracker/pattern_tracker.h"
 
 namespace ecs {
 

@@ -1,11 +1,11 @@
 // TrackerOptions::check, grey conversion and the stereo PatternTracker.
-#include "embedded_calibration_stereo/core/pattern_tracker.h"
+#include "embedded_calibration_stereo/core/tracker/pattern_tracker.h"
 
 #include <cmath>
 #include <opencv2/imgproc.hpp>
 #include <stdexcept>
 
-#include "embedded_calibration_stereo/core/config_error.h"
+#include "embedded_calibration_stereo/core/geometry/config_error.h"
 
 namespace ecs {
 

@@ -1,4 +1,4 @@
-#include "embedded_calibration_stereo/core/scene_background.h"
+#include "embedded_calibration_stereo/core/tracker/scene_background.h"
 
 #include <cmath>
 #include <opencv2/imgproc.hpp>

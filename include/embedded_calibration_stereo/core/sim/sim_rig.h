@@ -19,9 +19,9 @@
 #include <string>
 #include <vector>
 
-#include "embedded_calibration_stereo/core/calibration_device.h"
-#include "embedded_calibration_stereo/core/observation.h"
-#include "embedded_calibration_stereo/core/stereo_rig.h"
+#include "embedded_calibration_stereo/core/geometry/calibration_device.h"
+#include "embedded_calibration_stereo/core/geometry/observation.h"
+#include "embedded_calibration_stereo/core/geometry/stereo_rig.h"
 
 namespace ecs {
 

@@ -1,0 +1,205 @@
+#pragma once
+// Stereo bundle adjustment over the virtual calibration boards (Ceres), in the shape of
+// COLMAP's BundleAdjuster: Options (solver behaviour, with Check()), Config (which parameter
+// blocks are estimated and which are held), Solve(), Summary.
+//
+// Estimated: per camera fx, fy, cx, cy (skew fixed at zero) and the configured plumb_bob terms
+// (k1, k2 by default; p1, p2 and k3 optional), right_from_left, and the board poses. Metric
+// scale comes from the known square size. Residuals are corner reprojection errors (px) under
+// a robust loss (Cauchy by default: with a tenth of the corners displaced by 5 px in every
+// frame, 10 frames, Huber at 1 px left cx 17 px off, Cauchy at 1 px 4 px; on clean data both
+// give the least-squares figures).
+//
+// Board poses (BoardPoseMode): the embedded device is fixed to the left camera, so every
+// frame sees the same virtual boards and only the noise differs.
+// - kDeviceModel: the rigid device model. One rig_from_device for all frames, the known board
+//   layout (Chessboard::device_from_board, held) and the mirror planes of each copy
+//   (MirrorPlane, refined by default): a virtual corner is the physical corner placed by the
+//   device pose and reflected by its copy's chain of planes (device_model_cost.h). Needs
+//   CalibrationInput::device. Initialised from a kSharedAcrossFrames solve, to whose virtual
+//   boards the nominal device is aligned first (device_model_adjustment.h).
+// - kSharedAcrossFrames: ONE free pose per virtual board for all frames. The corners are
+//   grouped into tracks across frames and each track is one residual on its mean weighted by
+//   its length (corner_tracks.h) - exactly the least-squares problem over all observations at
+//   the cost of a single frame (the robust loss then acts on track means; transient outliers
+//   go by the track median test). The device model uses the same tracks.
+// - kPerFrame: a pose per board and frame (Zhang's maximum-likelihood formulation), one
+//   residual per corner observation. With the same boards in every frame it carries the same
+//   information on the cameras as kSharedAcrossFrames (the Schur complements coincide) at ten
+//   times the cost for ten frames.
+// - kAuto (default): kDeviceModel when a device is given, otherwise kSharedAcrossFrames.
+// The device model is the more accurate, hence the default. bench_calibrator --rig
+// config/sim_rig.yaml --trials 20 (0.2 px corner noise, nominal device 1 mm / 0.5 deg off),
+// mean |error| (mean reported sd), device model vs free shared poses (per-frame = shared):
+//   p1 p2 zero in the truth, k1 k2 estimated:
+//     1 frame:   fx 0.19 % (0.26 %) vs 0.71 % (0.96 %); cx,cy 1.0 (1.3) vs 4.1 (4.9) px;
+//                k1 0.0031 (0.0034) vs 0.0055 (0.0081); baseline 0.61 % (0.61 %) vs 1.1 % (1.1 %);
+//                rotation 0.10 (0.092) vs 0.13 (0.13) deg
+//     10 frames: fx 0.051 % (0.083 %) vs 0.28 % (0.30 %); cx,cy 0.33 (0.40) vs 1.6 (1.6) px;
+//                k1 0.0009 (0.0011) vs 0.0026 (0.0026); baseline 0.13 % (0.19 %) vs 0.34 %
+//                (0.35 %); rotation 0.027 (0.029) vs 0.043 (0.040) deg
+//   sim truth, p1 p2 estimated, 10 frames: fx 0.054 % (0.085 %) vs 0.33 % (0.39 %); baseline
+//     0.41 % (0.40 %) vs 0.38 % (0.48 %); 30 frames fx 0.031 % (0.049 %) vs 0.19 % (0.23 %).
+//   3-sd coverage of the 14 main parameters over the 20 trials: device model >= 99.6 %, free
+//   poses >= 97.9 %.
+// Six free virtual boards leave focal length and board distance nearly interchangeable; the
+// rigid three-board copies do not. The extrinsics gain less (baseline sd 0.19 % vs 0.35 %):
+// all the boards are 1.13-1.26 m away, so the right camera's translation trades against its
+// rotation whatever the board model.
+// Cost: the device model runs a free shared-pose solve first (its start), ~60-90 ms wall for
+// 1-30 frames on one thread vs ~40-60 ms for shared poses alone.
+//
+// Threading: a BundleAdjuster is immutable after construction and Solve() keeps its state on
+// the stack, so one instance may be used from several threads; it is meant to run on the
+// calibrator's worker thread, never on an image callback.
+#include <Eigen/Geometry>
+#include <array>
+#include <map>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "embedded_calibration_stereo/core/geometry/calibration_device.h"
+#include "embedded_calibration_stereo/core/geometry/observation.h"
+#include "embedded_calibration_stereo/core/geometry/stereo_rig.h"
+
+namespace ecs {
+
+enum class BoardPoseMode { kAuto, kDeviceModel, kSharedAcrossFrames, kPerFrame };
+enum class RobustLoss { kNone, kHuber, kCauchy };
+enum class InitializationMode {
+  kAuto,         // the calibration in force when given, otherwise Zhang
+  kFromInForce,  // requires the calibration in force
+  kZhang,        // closed form from the observations alone
+};
+
+struct BundleAdjustmentOptions {
+  BoardPoseMode board_pose_mode = BoardPoseMode::kAuto;
+  InitializationMode initialization = InitializationMode::kAuto;
+  RobustLoss loss = RobustLoss::kCauchy;
+  double loss_scale_px = 1.0;  // residual norm (px) where the loss leaves the quadratic
+  int max_iterations = 100;
+  double function_tolerance = 1e-10;
+  double gradient_tolerance = 1e-12;
+  double parameter_tolerance = 1e-10;
+  int num_threads = 1;
+  bool compute_covariance = true;
+  // Observation checks (see observation_validator.h).
+  int min_corners_per_board = 6;
+  double max_outside_image_px = 2.0;
+  // Residual norm (px) above which a corner counts as an outlier in the summary.
+  double outlier_threshold_px = 3.0;
+  // Shared poses: observations further than this from the median of the same corner over the
+  // frames are dropped before averaging (see corner_tracks.h).
+  double max_track_deviation_px = 2.0;
+  // Device model: refine the mirror planes (otherwise held at the device's values; only the
+  // device pose is then estimated, which is right only when the planes are known exactly).
+  bool refine_mirror_planes = true;
+  // Device model: weak prior of the device pose and planes around the given device, only to
+  // fix the gauge freedoms (see device_model_adjustment.h). Its default is a hundred times
+  // looser than the manufacturing tolerances (~1 mm, ~0.5 deg) so that it does not inform the
+  // cameras: sim_rig.yaml, 10 frames, 0.2 px, 20 trials, mean reported fx sd 0.0834 % with
+  // 50 deg / 0.1 m, 0.0836 % with 500 deg / 1 m (data alone), 0.0735 % with 5 deg / 10 mm and
+  // 0.0588 % with 1 deg / 2 mm. A prior at the real tolerances is thus worth ~30 % on fx, but
+  // only while the device is within them (a knock may move it further): set it knowingly.
+  double device_prior_angle_deg = 50.0;
+  double device_prior_position_m = 0.1;
+
+  // Empty when usable, otherwise what is wrong.
+  std::string Check() const;
+};
+
+// Which terms are estimated. Terms not estimated are held at their initial value (zero after
+// Zhang, the value in force otherwise).
+struct BundleAdjustmentConfig {
+  bool estimate_k1 = true;
+  bool estimate_k2 = true;
+  bool estimate_tangential = false;  // p1, p2
+  bool estimate_k3 = false;
+  bool constant_left_intrinsics = false;
+  bool constant_right_intrinsics = false;
+  bool constant_extrinsics = false;
+  // Start the board poses from VirtualBoard::rig_from_board instead of a PnP estimate (device
+  // model: the device pose and planes from the given device instead of aligning them to a
+  // free-pose solve), and optionally hold them there (only sensible when the device geometry
+  // is known exactly).
+  bool board_poses_from_layout = false;
+  bool constant_board_poses = false;
+
+  std::string Check() const;
+};
+
+struct CalibrationInput {
+  const std::vector<StereoObservation>* frames = nullptr;
+  // Layout of the virtual boards (CalibrationDevice::virtualBoards()): ids, cols, rows, square,
+  // mirrored flags; their rig_from_board is only a guess unless the config says otherwise.
+  // May be null when `device` is given (its virtualBoards() are used).
+  const std::vector<VirtualBoard>* boards = nullptr;
+  // The nominal device (layout held, pose and planes as starting values and prior): required
+  // by kDeviceModel, selects it under kAuto.
+  const CalibrationDevice* device = nullptr;
+  int image_width = 0, image_height = 0;  // must match the cameras of the calibration in force
+  std::optional<StereoRig> in_force;
+};
+
+// One standard deviation per reported parameter; zero for parameters held constant.
+struct CameraStddev {
+  double fx = 0, fy = 0, cx = 0, cy = 0;
+  std::array<double, 5> dist{{0, 0, 0, 0, 0}};  // k1, k2, p1, p2, k3
+};
+
+struct BundleAdjustmentSummary {
+  bool success = false;        // a solution was computed (false: see message)
+  bool converged = false;      // Ceres reported convergence
+  std::string message;         // why it failed, or the Ceres termination message
+  std::string initialization;  // "zhang" or "in force"
+  std::string board_poses;     // "device model", "shared free poses" or "per-frame free poses"
+  int iterations = 0;
+  double initial_cost = 0, final_cost = 0;
+  double rms_left_px = 0, rms_right_px = 0;
+  double epipolar_rms_px = 0;    // right corners to the epipolar lines of the left ones
+  double residual_sigma_px = 0;  // sqrt(2 cost / (residuals - parameters))
+  int frames_used = 0;
+  int corners_used = 0;  // left + right
+  int corners_left = 0, corners_right = 0;
+  int boards_left = 0, boards_right = 0;  // distinct virtual boards used per camera
+  int outliers = 0;
+  double solve_ms = 0;                     // validation, initialisation, solve and covariance
+  double ceres_ms = 0, covariance_ms = 0;  // parts of solve_ms
+  StereoRig rig;
+  bool covariance_ok = false;
+  CameraStddev left_stddev, right_stddev;
+  double baseline_stddev_m = 0;
+  double rotation_stddev_deg = 0;  // sqrt of the largest eigenvalue, rotation vector
+  // Estimated rig_from_board by virtual board id (shared or device mode) - the device as seen
+  // now.
+  std::map<int, Eigen::Isometry3d> rig_from_board;
+  // Device model: the estimated device (given layout, estimated pose and planes).
+  std::optional<CalibrationDevice> device;
+  std::vector<std::string> dropped;  // observations dropped by validation, with the reason
+};
+
+class BundleAdjuster {
+ public:
+  BundleAdjuster(BundleAdjustmentOptions options, BundleAdjustmentConfig config);
+  BundleAdjustmentSummary Solve(const CalibrationInput& input) const;
+
+  const BundleAdjustmentOptions& options() const { return options_; }
+  const BundleAdjustmentConfig& config() const { return config_; }
+
+ private:
+  BundleAdjustmentOptions options_;
+  BundleAdjustmentConfig config_;
+};
+
+// How well a fixed calibration explains the observations: only the board poses (or the device
+// pose and planes, when a device is given and the mode allows) are adjusted, same loss and
+// validation, so the RMS is comparable with a full solve's in the same mode. Used by the
+// quality gate to judge the calibration in force on fresh observations.
+BundleAdjustmentSummary evaluateFixedCalibration(const StereoRig& rig,
+                                                 const std::vector<StereoObservation>& frames,
+                                                 const std::vector<VirtualBoard>& boards,
+                                                 BundleAdjustmentOptions options = {},
+                                                 const CalibrationDevice* device = nullptr);
+
+}  // namespace ecs

@@ -1,0 +1,99 @@
+#pragma once
+// Disparity of a rectified mono8 stereo pair, by one of three matchers:
+//   "sad"  - the original head's block matcher: sum of absolute differences of x-Sobel
+//            prefiltered images over a square window (our own vectorised implementation,
+//            sad_matcher.h), winner-take-all, parabola sub-pixel, uniqueness and left-right check;
+//   "bm"   - OpenCV StereoBM;
+//   "sgbm" - OpenCV StereoSGBM in any of its modes (sgbm, hh, sgbm_3way, hh4).
+// Parameter names are stereo_image_proc's (Disparity.cfg) so that configurations carry over.
+// The default is "sad" with left-right check, speckle filter and hole filling (see
+// DisparityOptions for the measurements behind that choice).
+//
+// Output: CV_32FC1, disparity in pixels of the left image (u_left - u_right), and
+// kInvalidDisparity (NaN) where no disparity was found. With fill_holes on (the default), holes
+// are filled from the background side, so every pixel of a row with any match is valid.
+#include <limits>
+#include <opencv2/calib3d.hpp>
+#include <opencv2/core.hpp>
+#include <string>
+#include <vector>
+
+#include "embedded_calibration_stereo/core/depth/sad_matcher.h"
+#include "embedded_calibration_stereo/core/depth/speckle_filter.h"
+
+namespace ecs {
+
+constexpr float kInvalidDisparity = std::numeric_limits<float>::quiet_NaN();
+inline bool isValidDisparity(float d) { return d == d; }  // false only for NaN
+
+enum class DisparityAlgorithm { kSad, kBm, kSgbm };
+DisparityAlgorithm parseDisparityAlgorithm(const std::string& name);  // throws invalid_argument
+std::string toString(DisparityAlgorithm algorithm);
+
+// OpenCV StereoSGBM mode by name: "sgbm", "hh", "sgbm_3way", "hh4"; throws invalid_argument.
+int parseSgbmMode(const std::string& name);
+
+struct DisparityOptions {
+  // The defaults are the tuned configuration (test_middlebury.cpp, bench_disparity): the "sad"
+  // matcher with an 11x11 window, 5% uniqueness, left-right check, speckle filter and background
+  // hole filling met both accuracy targets (Tsukuba <= 6%, Teddy <= 15% bad > 2 px) at well
+  // over 40 fps. SGBM 3-way with a 3x3 window (P1 72, P2 288) is more accurate on Tsukuba
+  // (3.5%) but runs at about 35 fps on 2 cores, so it is not the default.
+  std::string algorithm = "sad";
+  int prefilter_size = 9;             // bm only: normalisation window (odd, 5..255)
+  int prefilter_cap = 31;             // all: clip of the prefiltered values (1..63)
+  int correlation_window_size = 11;   // all: matching window (odd; bm >= 5, sad <= 15)
+  int min_disparity = 0;
+  int disparity_range = 64;           // number of disparities; multiple of 16
+  double uniqueness_ratio = 5.0;      // percent margin of the best over other costs (0..100)
+  int texture_threshold = 10;         // bm only
+  int speckle_size = 100;             // max size of a speckle region to remove, pixels (0 = off)
+  int speckle_range = 2;              // max disparity step inside one region, pixels
+  int P1 = 200;                       // sgbm smoothness penalties (P2 > P1)
+  int P2 = 800;
+  int disp12MaxDiff = 1;              // tolerance of the left-right check, pixels
+  std::string sgbm_mode = "sgbm_3way";  // sgbm, hh, sgbm_3way, hh4
+  bool left_right_check = true;       // bm/sgbm: enables disp12MaxDiff; sad: own check
+  bool subpixel = true;               // false rounds the output to whole pixels
+  bool fill_holes = true;             // fill invalid pixels from the background neighbour
+
+  // Empty when the options are usable; otherwise one message per problem, joined by "; ".
+  std::string Check() const;
+  // Moves every invalid value to the nearest valid one; returns what changed (empty if none).
+  std::vector<std::string> clamp();
+
+  // The configuration stock stereo_image_proc runs by default (its Disparity.cfg: 15x15
+  // window, range 64, uniqueness 15, speckle 100/4, SGBM P1 200 / P2 400, no hole filling),
+  // for `algorithm` "bm" or "sgbm": the reference our defaults are measured against.
+  static DisparityOptions stereoImageProcDefaults(const std::string& algorithm);
+
+  // The "sad" matcher's parameters these options stand for (the matcher alone: the speckle
+  // filter and hole filling are DisparityComputer's steps after it).
+  SadMatcherParams sadMatcherParams() const;
+};
+
+// Computes disparity maps with one configuration.
+// Threading: one thread at a time per instance (it keeps the OpenCV matcher and its scratch
+// buffers); the matchers themselves run on cv::parallel_for_ (cv::setNumThreads bounds them).
+class DisparityComputer {
+ public:
+  // Throws std::invalid_argument with Check()'s message when the options are invalid.
+  explicit DisparityComputer(const DisparityOptions& options);
+  const DisparityOptions& options() const { return options_; }
+
+  // left, right: rectified CV_8UC1 images of one size (at least disparity_range + window wide).
+  // Throws std::invalid_argument for other types or mismatched sizes.
+  cv::Mat compute(const cv::Mat& left, const cv::Mat& right);
+  // The same into *disparity, which is written in place when it already is CV_32FC1 of the
+  // images' size (e.g. a header over an outgoing message's buffer: no copy to publish it).
+  void compute(const cv::Mat& left, const cv::Mat& right, cv::Mat* disparity);
+
+ private:
+  DisparityOptions options_;
+  DisparityAlgorithm algorithm_;
+  cv::Ptr<cv::StereoMatcher> matcher_;  // bm/sgbm
+  SpeckleFilter speckle_filter_;        // sad (bm/sgbm filter inside OpenCV)
+  cv::Mat disparity16_;                 // the matcher's fixed-point output, reused between frames
+};
+
+}  // namespace ecs

@@ -1,0 +1,61 @@
+#include "embedded_calibration_stereo/core/calibration/light_schedule.h"
+
+#include <algorithm>
+#include <cmath>
+
+namespace ecs {
+
+std::string LightScheduleConfig::validate() const {
+  if (!std::isfinite(period_s) || period_s < 0.0) return "calibration_period_s must be >= 0";
+  if (calibration_frames < 1) return "calibration_frames must be >= 1";
+  if (settle_frames < 0) return "settle_frames must be >= 0";
+  return "";
+}
+
+LightSchedule::LightSchedule(const LightScheduleConfig& config) : config_(config) {}
+
+void LightSchedule::request(bool on) {
+  hold_on_ = on;
+  if (!on) burst_frames_left_ = 0;
+}
+
+LightState LightSchedule::step(double time_s) {
+  if (config_.period_s > 0.0) {
+    if (!started_) {
+      started_ = true;
+      next_burst_s_ = time_s;
+    }
+    if (time_s >= next_burst_s_) {
+      if (burst_frames_left_ == 0) burst_frames_left_ = config_.settle_frames + config_.calibration_frames;
+      // Skip bursts missed while the driver was stalled instead of firing them back to back.
+      while (next_burst_s_ <= time_s) next_burst_s_ += config_.period_s;
+    }
+  }
+  const bool commanded_on = hold_on_ || burst_frames_left_ > 0;
+  if (burst_frames_left_ > 0) --burst_frames_left_;
+  return advance(commanded_on);
+}
+
+LightState LightSchedule::follow(bool light_on) { return advance(light_on); }
+
+LightState LightSchedule::advance(bool commanded_on) {
+  LightState state;
+  state.light_on = commanded_on;
+  state.switched = commanded_on != previous_on_;
+  if (state.switched) frames_since_switch_ = 0;
+  previous_on_ = commanded_on;
+
+  const int settle = config_.settle_frames;
+  state.settled = frames_since_switch_ >= settle;
+  if (state.settled) {
+    state.light_level = commanded_on ? 1.0 : 0.0;
+  } else {
+    // Linear ramp over the settling frames, never reaching the end value before settling.
+    const double progress = static_cast<double>(frames_since_switch_ + 1) / (settle + 1);
+    state.light_level = commanded_on ? progress : 1.0 - progress;
+  }
+  frames_since_switch_ = std::min<int64_t>(frames_since_switch_ + 1, int64_t(1) << 30);
+  return state;
+}
+
+}  // namespace ecs

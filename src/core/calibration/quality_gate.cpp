@@ -1,0 +1,117 @@
+#include "embedded_calibration_stereo/core/calibration/quality_gate.h"
+
+#include <cmath>
+#include <iomanip>
+#include <sstream>
+
+namespace ecs {
+
+namespace {
+
+std::string fmt(double value, int precision = 3) {
+  std::ostringstream s;
+  s << std::setprecision(precision) << value;
+  return s.str();
+}
+
+// First stddev over its limit, as "left fx stddev 1.2 px > 0.9 px"; empty when all pass.
+std::string cameraStddevProblem(const char* side, const PinholeCamera& c, const CameraStddev& sd,
+                                const GateOptions& o) {
+  const std::string name = side;
+  if (!(sd.fx <= o.max_focal_stddev_rel * c.fx))
+    return name + " fx stddev " + fmt(sd.fx) + " px > " + fmt(o.max_focal_stddev_rel * c.fx) +
+           " px";
+  if (!(sd.fy <= o.max_focal_stddev_rel * c.fy))
+    return name + " fy stddev " + fmt(sd.fy) + " px > " + fmt(o.max_focal_stddev_rel * c.fy) +
+           " px";
+  if (!(sd.cx <= o.max_principal_point_stddev_px) || !(sd.cy <= o.max_principal_point_stddev_px))
+    return name + " principal point stddev (" + fmt(sd.cx) + ", " + fmt(sd.cy) + ") px > " +
+           fmt(o.max_principal_point_stddev_px) + " px";
+  static const char* const kNames[5] = {"k1", "k2", "p1", "p2", "k3"};
+  for (int i = 0; i < 5; ++i)
+    if (!(sd.dist[i] <= o.max_distortion_stddev))
+      return name + " " + kNames[i] + " stddev " + fmt(sd.dist[i]) + " > " +
+             fmt(o.max_distortion_stddev);
+  return "";
+}
+
+}  // namespace
+
+std::string GateOptions::Check() const {
+  if (!(max_rms_px > 0) || !(max_epipolar_rms_px > 0)) return "RMS limits must be > 0";
+  if (!(max_outlier_fraction >= 0 && max_outlier_fraction <= 1))
+    return "max_outlier_fraction must be in [0, 1]";
+  if (min_boards_per_camera < 1) return "min_boards_per_camera must be >= 1";
+  if (!(max_focal_stddev_rel > 0) || !(max_principal_point_stddev_px > 0) ||
+      !(max_distortion_stddev > 0) || !(max_baseline_stddev_rel > 0) ||
+      !(max_rotation_stddev_deg > 0))
+    return "standard deviation limits must be > 0";
+  if (!(min_rms_improvement_rel >= 0)) return "min_rms_improvement_rel must be >= 0";
+  if (!(in_force_max_rms_px > 0)) return "in_force_max_rms_px must be > 0";
+  return "";
+}
+
+double combinedRms(const BundleAdjustmentSummary& s) {
+  const int n = s.corners_left + s.corners_right;
+  if (n == 0) return 0.0;
+  return std::sqrt((s.rms_left_px * s.rms_left_px * s.corners_left +
+                    s.rms_right_px * s.rms_right_px * s.corners_right) /
+                   n);
+}
+
+GateDecision QualityGate::evaluate(const BundleAdjustmentSummary& c,
+                                   const BundleAdjustmentSummary* in_force_fit) const {
+  const GateOptions& o = options_;
+  const auto reject = [](const std::string& why) {
+    return GateDecision{false, "rejected: " + why};
+  };
+  const std::string options_problem = o.Check();
+  if (!options_problem.empty()) return reject("invalid gate options: " + options_problem);
+  if (!c.success) return reject("no solution (" + c.message + ")");
+  if (c.boards_left < o.min_boards_per_camera || c.boards_right < o.min_boards_per_camera)
+    return reject("boards seen: " + std::to_string(c.boards_left) + " left, " +
+                  std::to_string(c.boards_right) + " right; at least " +
+                  std::to_string(o.min_boards_per_camera) + " needed in each camera");
+  if (!c.converged) return reject("solver did not converge (" + c.message + ")");
+  if (!(c.rms_left_px <= o.max_rms_px) || !(c.rms_right_px <= o.max_rms_px))
+    return reject("RMS " + fmt(c.rms_left_px) + " / " + fmt(c.rms_right_px) + " px > " +
+                  fmt(o.max_rms_px) + " px");
+  if (!(c.epipolar_rms_px <= o.max_epipolar_rms_px))
+    return reject("epipolar RMS " + fmt(c.epipolar_rms_px) + " px > " + fmt(o.max_epipolar_rms_px) +
+                  " px");
+  if (c.corners_used == 0 ||
+      c.outliers > o.max_outlier_fraction * static_cast<double>(c.corners_used))
+    return reject(std::to_string(c.outliers) + " outlier corners of " +
+                  std::to_string(c.corners_used) + " (max fraction " + fmt(o.max_outlier_fraction) +
+                  ")");
+  if (!c.covariance_ok) return reject("covariance unavailable (parameters not determined)");
+  std::string stddev = cameraStddevProblem("left", c.rig.left, c.left_stddev, o);
+  if (stddev.empty()) stddev = cameraStddevProblem("right", c.rig.right, c.right_stddev, o);
+  if (!stddev.empty()) return reject(stddev);
+  if (!(c.baseline_stddev_m <= o.max_baseline_stddev_rel * c.rig.baseline()))
+    return reject("baseline stddev " + fmt(c.baseline_stddev_m * 1000) + " mm > " +
+                  fmt(o.max_baseline_stddev_rel * c.rig.baseline() * 1000) + " mm");
+  if (!(c.rotation_stddev_deg <= o.max_rotation_stddev_deg))
+    return reject("rotation stddev " + fmt(c.rotation_stddev_deg) + " deg > " +
+                  fmt(o.max_rotation_stddev_deg) + " deg");
+
+  const double candidate_rms = combinedRms(c);
+  if (!in_force_fit)
+    return {true, "accepted: first calibration, RMS " + fmt(candidate_rms) + " px"};
+  if (!in_force_fit->success)
+    return {true, "accepted: calibration in force cannot explain the observations (" +
+                      in_force_fit->message + ")"};
+  const double in_force_rms = combinedRms(*in_force_fit);
+  if (in_force_rms > o.in_force_max_rms_px)
+    return {true, "accepted: calibration in force no longer fits (RMS " + fmt(in_force_rms) +
+                      " px > " + fmt(o.in_force_max_rms_px) + " px), new RMS " +
+                      fmt(candidate_rms) + " px"};
+  if (candidate_rms * (1.0 + o.min_rms_improvement_rel) <= in_force_rms)
+    return {true, "accepted: RMS " + fmt(candidate_rms) + " px vs " + fmt(in_force_rms) +
+                      " px for the calibration in force"};
+  return reject("no significant improvement: RMS " + fmt(candidate_rms) + " px vs " +
+                fmt(in_force_rms) + " px for the calibration in force (needs " +
+                fmt(100 * o.min_rms_improvement_rel) + "% lower)");
+}
+
+}  // namespace ecs
