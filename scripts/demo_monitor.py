@@ -3,8 +3,9 @@
 script (a 5 % zoom step, a slow thermal rotation of the right camera, a knock), prints a progress
 line every two seconds and writes the results folder at the end: calibration YAMLs, status,
 calibration-error timeline (CSV and PNG plot with the drift events), image and disparity
-snapshots, and a final report saying whether the calibration after the drift is within the
-calibrator's bounds (issue 4) of ground truth.
+snapshots, an overview picture (a light-on frame, its separated scene and its disparity side by
+side), and a final report saying whether the calibration after the drift is within the
+calibrator's bounds of ground truth.
 
 Usage: demo_monitor.py --duration S --out DIR [--ns stereo] [--zoom-at S]
 Times count from the first camera frame.
@@ -25,7 +26,7 @@ from stereo_msgs.msg import DisparityImage
 from embedded_calibration_stereo.msg import CalibrationMode, CalibrationStatus
 from embedded_calibration_stereo.srv import SetRigDrift, SetRigDriftRequest
 
-# The calibrator's accuracy bounds (issue 4), per error key of calibration_errors().
+# The calibrator's accuracy bounds, per error key of calibration_errors().
 BOUNDS = {
     "fx_pct": (0.05, "%"), "fy_pct": (0.05, "%"), "cx_px": (0.3, "px"), "cy_px": (0.3, "px"),
     "k1": (0.005, ""), "baseline_pct": (0.1, "%"), "rotation_deg": (0.01, "deg"),
@@ -62,6 +63,52 @@ def colourise_disparity(msg):
                     np.clip(1.5 - np.abs(4 * t - 1), 0, 1)], axis=-1)
     rgb[~valid] = 0
     return (rgb * 255).astype(np.uint8).tobytes(), float(valid.mean())
+
+
+def image_rgb_or_grey(image):
+    """sensor_msgs/Image (mono8, bgr8, rgb8) -> (H, W) grey or (H, W, 3) RGB uint8 array, or None."""
+    if image is None or image.encoding not in ("mono8", "bgr8", "rgb8"):
+        return None
+    channels = 1 if image.encoding == "mono8" else 3
+    pixels = np.frombuffer(bytes(image.data), np.uint8).reshape(image.height, image.step)
+    pixels = pixels[:, :image.width * channels].reshape(image.height, image.width, channels)
+    if image.encoding == "bgr8":
+        pixels = pixels[:, :, ::-1]
+    return np.ascontiguousarray(pixels[:, :, 0] if channels == 1 else pixels)
+
+
+def plot_overview(path, raw, scene, disparity, same_stamp, width_px=1200):
+    """Side by side and labelled: a light-on frame, its separated scene and a colourised
+    disparity, about width_px wide. False when matplotlib is missing."""
+    try:
+        import matplotlib
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError:
+        return False
+    rgb, _ = colourise_disparity(disparity)
+    panels = [
+        (image_rgb_or_grey(raw), "light on: the six boards over the scene (left/image_raw)"),
+        (image_rgb_or_grey(scene), "separated scene (left/image_scene)"),
+        (np.frombuffer(rgb, np.uint8).reshape(disparity.image.height, disparity.image.width, 3),
+         "disparity %s (red near, blue far, black invalid)" % ("of this frame" if same_stamp else "(latest)")),
+    ]
+    dpi = 100.0
+    width_in = width_px / dpi
+    panel_h = (width_in / 3.0) * raw.height / float(raw.width)
+    fig, axes = plt.subplots(1, 3, figsize=(width_in, panel_h + 0.35), dpi=dpi)
+    for ax, (pixels, title) in zip(axes, panels):
+        if pixels.ndim == 2:
+            ax.imshow(pixels, cmap="gray", vmin=0, vmax=255, interpolation="antialiased")
+        else:
+            ax.imshow(pixels, interpolation="antialiased")
+        ax.set_title(title, fontsize=8.5)
+        ax.axis("off")
+    fig.subplots_adjust(left=0.003, right=0.997, bottom=0.005, top=panel_h / (panel_h + 0.35) - 0.01,
+                        wspace=0.015)
+    fig.savefig(path, dpi=dpi)
+    plt.close(fig)
+    return True
 
 
 def _rotation(values):
@@ -205,6 +252,13 @@ class Monitor:
         self.unpaired_modes = {}
         self.disparities = 0
         self.last_disparity = None
+        # For the overview picture: the settled light-on raw frames, the Separator's scenes and
+        # the disparities of the last few stamps, and the newest light-on frame whose scene was
+        # separated (not passed through), with the disparity of its stamp once it has arrived.
+        self.recent_light_on = {}
+        self.recent_scenes = {}
+        self.recent_disparities = {}
+        self.separated = None  # (raw, scene, disparity or None), one stamp
         sub = lambda topic, cls, key: rospy.Subscriber(
             ns + "/" + topic, cls, lambda m: self.store(key, m), queue_size=2)
         self.subs = [
@@ -216,6 +270,8 @@ class Monitor:
             rospy.Subscriber(ns + "/left/image_raw", Image, self.on_image, queue_size=2,
                              buff_size=2 ** 24),
             rospy.Subscriber(ns + "/disparity", DisparityImage, self.on_disparity, queue_size=2,
+                             buff_size=2 ** 24),
+            rospy.Subscriber(ns + "/left/image_scene", Image, self.on_scene, queue_size=4,
                              buff_size=2 ** 24),
             sub("calibration/status", CalibrationStatus, "status"),
         ]
@@ -230,6 +286,28 @@ class Monitor:
             self.last_light_off_image = image
         elif mode.settled:
             self.last_light_on_image = image
+            self.recent_light_on[image.header.stamp] = image
+            self.keep_last(self.recent_light_on)
+            self.match_separated(image.header.stamp)
+
+    def match_separated(self, stamp):
+        """Called with self.lock held when a piece of the frame of `stamp` arrived: keeps the
+        newest settled light-on frame whose scene differs from it (the Separator separated it
+        rather than passing it through), preferring one whose disparity arrived too."""
+        raw, scene = self.recent_light_on.get(stamp), self.recent_scenes.get(stamp)
+        if raw is None or scene is None or scene.data == raw.data:
+            return
+        disparity = self.recent_disparities.get(stamp)
+        current = self.separated
+        if current is None or (stamp >= current[0].header.stamp and
+                               (disparity is not None or current[2] is None)):
+            self.separated = (raw, scene, disparity)
+
+    def on_scene(self, msg):
+        with self.lock:
+            self.recent_scenes[msg.header.stamp] = msg
+            self.keep_last(self.recent_scenes)
+            self.match_separated(msg.header.stamp)
 
     @staticmethod
     def keep_last(unpaired, limit=10):
@@ -266,6 +344,9 @@ class Monitor:
         with self.lock:
             self.disparities += 1
             self.last_disparity = msg
+            self.recent_disparities[msg.header.stamp] = msg
+            self.keep_last(self.recent_disparities, limit=4)
+            self.match_separated(msg.header.stamp)
 
     def errors(self):
         """Called with self.lock held."""
@@ -295,7 +376,7 @@ def plot_errors(path, timeline, events, epochs):
             per_camera = key not in ("baseline_pct", "rotation_deg")
             ax.semilogy(t, np.maximum(values, 1e-6), color=colour, linewidth=1.5,
                         label=key.rsplit("_", 1)[0] + (" (worse camera)" if per_camera else ""))
-        ax.axhline(BOUNDS[keys[0]][0], color="red", linestyle="--", linewidth=1, label="bound (issue 4)")
+        ax.axhline(BOUNDS[keys[0]][0], color="red", linestyle="--", linewidth=1, label="bound")
         for i, (te, name) in enumerate(events):
             ax.axvline(te, color="black", linestyle="-.", linewidth=1.2, label="drift event" if i == 0 else None)
             if ax is axes[0]:
@@ -332,7 +413,7 @@ def verdict(timeline, script, epochs):
     lines.append("calibration committed after the last drift event (%s at %.1f s): %s" % (
         script.fired[-1][1], last_event,
         ", ".join("%.1f s" % t for t in commits_after) if commits_after else "NONE"))
-    lines.append("final calibration error vs ground truth (worst of both cameras) and issue 4's bounds:")
+    lines.append("final calibration error vs ground truth (worst of both cameras) and the calibrator's bounds:")
     for key in ERROR_KEYS:
         bound, unit = BOUNDS[key]
         ok = final[key] <= bound
@@ -348,8 +429,11 @@ def write_results(out, mon, timeline, script, epochs, duration, report_lines, bo
         disparity = mon.last_disparity
         disparities = mon.disparities
         latest = dict(mon.latest)
+        separated = mon.separated
         images = {"left_snapshot.png": mon.last_light_off_image or mon.last_image,
-                  "left_snapshot_light_on.png": mon.last_light_on_image}
+                  # the frame of the separated scene when there is one, so the two match
+                  "left_snapshot_light_on.png": separated[0] if separated else mon.last_light_on_image,
+                  "left_scene_light_on.png": separated[1] if separated else None}
         frames, light_frames = mon.frames, mon.light_on_frames
         mode = mon.mode
         span = (mon.last_image_time or 0) - (mon.first_image_time or 0)
@@ -359,17 +443,24 @@ def write_results(out, mon, timeline, script, epochs, duration, report_lines, bo
             with open(os.path.join(out, name + ".yaml"), "w") as f:
                 f.write(camera_yaml(latest[key], name))
     for file_name, image in images.items():
-        if image is None or image.encoding not in ("mono8", "bgr8", "rgb8"):
+        pixels = image_rgb_or_grey(image)
+        if pixels is None:
             continue
-        channels = 1 if image.encoding == "mono8" else 3
-        data = bytes(image.data)
-        if channels == 3 and image.encoding == "bgr8":
-            data = np.frombuffer(data, np.uint8).reshape(-1, 3)[:, ::-1].tobytes()
-        write_png(os.path.join(out, file_name), image.width, image.height, channels, data)
+        channels = 1 if pixels.ndim == 2 else 3
+        write_png(os.path.join(out, file_name), image.width, image.height, channels, pixels.tobytes())
     if disparity is not None:
         rgb, _ = colourise_disparity(disparity)
         write_png(os.path.join(out, "disparity.png"), disparity.image.width,
                   disparity.image.height, 3, rgb)
+    overview = None  # why there is no overview.png, or None when there is one
+    if separated is None:
+        overview = "no light-on frame with a separated scene was received"
+    elif separated[2] is None and disparity is None:
+        overview = "no disparity image was received"
+    elif not plot_overview(os.path.join(out, "overview.png"), separated[0], separated[1],
+                           separated[2] if separated[2] is not None else disparity,
+                           separated[2] is not None):
+        overview = "python3-matplotlib is not installed"
     with open(os.path.join(out, "calibration_error.csv"), "w") as f:
         f.write("time_s,epoch,%s\n" % ",".join(ERROR_KEYS))
         for t, errors, epoch in timeline:
@@ -408,6 +499,8 @@ def write_results(out, mon, timeline, script, epochs, duration, report_lines, bo
     if not plotted:
         summary.append("no calibration_error.png: %s" % ("python3-matplotlib is not installed"
                                                           if timeline else "no error measured"))
+    if overview:
+        summary.append("no overview.png: %s" % overview)
     with open(os.path.join(out, "report.txt"), "w") as f:
         f.write("\n".join(summary + report_lines) + "\n")
     return summary, frames
