@@ -174,15 +174,13 @@ void expectOnlyExactPairsJoined(const std::string& ns, Stage stage) {
   Feeder feed(nh, stage);
   ASSERT_TRUE(waitUntil([&] { return feed.connected(); }, 15.0)) << ns << ": the inputs were not subscribed";
   std::set<ros::Time> mismatched, control;
-  for (int i = 0; i < 10; ++i)
-    feedUntil(
-        [&] {
-          const ros::Time t = ros::Time::now();
-          mismatched.insert(t);
-          mismatched.insert(t + kSkew);
-          feed.publish(t, t + kSkew);
-        },
-        [] { return true; }, 1.0);
+  ros::WallRate rate(10.0);  // a camera's pace: each pair could be joined before the next one
+  for (int i = 0; i < 10; ++i, rate.sleep()) {
+    const ros::Time t = ros::Time::now();
+    mismatched.insert(t);
+    mismatched.insert(t + kSkew);
+    feed.publish(t, t + kSkew);
+  }
   const bool control_out = feedUntil(
       [&] {
         const ros::Time t = ros::Time::now();
