@@ -95,9 +95,9 @@ ecs::DeviceTemplate templateFrom(const cv::Mat& sum, int frames, uint32_t epoch)
 // teach service and the publishers' connect callbacks; state_mutex_ still guards separator_ and
 // teach_ so that the class stays correct if it is moved to the multi-threaded handle. The inputs
 // (un)subscribe under their own mutex; need() is called outside state_mutex_ (unsubscribing
-// waits for a callback of that subscription running on another thread). separator_ points to an immutable StereoSeparator:
-// frameCb takes its own reference and separates outside the lock (both cameras in parallel,
-// ecs::separateStereo). Published messages are never modified after publishing. diagnostics_
+// waits for a callback of that subscription running on another thread). separator_ points to
+// an immutable StereoSeparator: frameCb takes its own reference and separates outside the lock
+// (both cameras in parallel, ecs::separateStereo). Published messages are never modified after publishing. diagnostics_
 // reports on a wall timer of the same queue and guards its own counters.
 class SeparatorNodelet : public nodelet::Nodelet {
  private:
@@ -134,7 +134,8 @@ class SeparatorNodelet : public nodelet::Nodelet {
         [this](const auto& left, const auto& right, const auto& mode) { frameCb(left, right, mode); });
     if (teach_from_truth_) {
       // The driver converts ground truth only for listeners: a small cost, only in the sim. The
-      // simulator stamps the truth exactly as the frames: always ExactTime.
+      // simulator stamps the truth exactly as the frames: always ExactTime. roscpp shares one
+      // subscription per topic between both inputs (no second transport of image_raw).
       truth_ = std::make_unique<TruthInput>(
           nh, pnh,
           TruthInput::Topics{"left/image_raw", "right/image_raw", "calibration_mode", "ground_truth/left/image_scene",
