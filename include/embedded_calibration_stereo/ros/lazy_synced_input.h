@@ -9,10 +9,12 @@
 // Use: construct, pass connectCallback()/imageConnectCallback() to the outputs' advertise(),
 // watch() each output, then start().
 //
-// Threads: every (un)subscription happens under the object's own mutex. The connect callbacks run
-// on the outputs' callback queue; need() may be called from any thread, the frame callback
-// included (roscpp allows a subscriber to be shut down from its own callback). The frame callback
-// runs on the callback queue of the node handle given to the constructor.
+// Threads: every (un)subscription happens under the object's own mutex. The frame callback runs
+// on the queue of the node handle given to the constructor, the connect callbacks on the outputs'
+// queue. need() may be called from the frame callback (roscpp lets a subscriber be shut down from
+// its own callback) when both kinds of callback share one single-threaded queue, as in the
+// nodelets: unsubscribing waits for a callback of that subscription running on another thread,
+// which must then not be waiting for this mutex.
 #include <image_transport/image_transport.h>
 #include <image_transport/subscriber_filter.h>
 #include <message_filters/subscriber.h>
