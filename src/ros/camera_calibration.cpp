@@ -175,6 +175,7 @@ StereoCalibration::SetResult StereoCalibration::set(bool left, const sensor_msgs
   SetResult result;
   const std::string name = std::string(sideName(left)) + "/set_camera_info";
   const std::string other_name = std::string(sideName(!left)) + "/set_camera_info";
+  const std::string other_in_force_name = std::string("the ") + sideName(!left) + " calibration in force";
   const std::string problem = checkOne(info, name);
   if (!problem.empty()) {
     result.message = "rejected: " + problem;
@@ -183,8 +184,8 @@ StereoCalibration::SetResult StereoCalibration::set(bool left, const sensor_msgs
   }
   std::optional<Staged>& own = left ? staged_left_ : staged_right_;
   std::optional<Staged>& other = left ? staged_right_ : staged_left_;
-  const auto pairWith = [&](const sensor_msgs::CameraInfo& o) {
-    return left ? checkRectifiedPair(info, name, o, other_name) : checkRectifiedPair(o, other_name, info, name);
+  const auto pairWith = [&](const sensor_msgs::CameraInfo& o, const std::string& o_name) {
+    return left ? checkRectifiedPair(info, name, o, o_name) : checkRectifiedPair(o, o_name, info, name);
   };
   sensor_msgs::CameraInfo other_in_force;
   {
@@ -196,11 +197,11 @@ StereoCalibration::SetResult StereoCalibration::set(bool left, const sensor_msgs
   std::optional<sensor_msgs::CameraInfo> partner;
   uint32_t calls = 1;
   std::string mismatch;
-  if (other && pairWith(other->info).empty()) {
+  if (other && pairWith(other->info, "the staged " + other_name).empty()) {
     partner = other->info;
     calls = 2;
   } else {
-    mismatch = pairWith(other_in_force);
+    mismatch = pairWith(other_in_force, other_in_force_name);
     if (mismatch.empty()) partner = other_in_force;
   }
   if (!partner) {

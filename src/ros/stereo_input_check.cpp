@@ -146,8 +146,8 @@ std::string checkRectifiedPair(const sensor_msgs::CameraInfo& left, const std::s
   } kShared[] = {{0, "fx' (P[0])"}, {5, "fy' (P[5])"}, {6, "cy' (P[6])"}};
   for (const auto& s : kShared) {
     if (std::abs(left.P[s.index] - right.P[s.index]) > kRectifiedPairTolerancePx)
-      return right_topic + ": P: " + s.name + " " + num(right.P[s.index]) + " differs from " + left_topic + "'s " +
-             num(left.P[s.index]) +
+      return right_topic + ": P: " + s.name + " " + num(right.P[s.index]) + " differs from " +
+             num(left.P[s.index]) + " in " + left_topic +
              " (the two cameras of a rectified pair share fx', fy' and cy'; was only one camera calibrated?)";
   }
   if (left.P[3] != 0)

@@ -51,6 +51,7 @@ class CalibrationCorruptFile : public testing::Test {
     Collector<CameraInfo> left(nh, "left/camera_info"), right(nh, "right/camera_info");
     Collector<diagnostic_msgs::DiagnosticArray> diagnostics(nh, "/diagnostics", 100);
     Collector<rosgraph_msgs::Log> log(nh, "/rosout", 1000);
+    ASSERT_TRUE(ecs_test::waitForRosoutPipe(log, 10.0));
     ASSERT_TRUE(manager_.load(kName, params())) << "the driver refused to start";
     // A published pair of one stamp: consistent, and the expected calibration.
     CameraInfo::ConstPtr l, r;

@@ -91,10 +91,10 @@ struct BadPair {
 std::vector<BadPair> badPairs(const std::string& ns) {
   const double nan = std::numeric_limits<double>::quiet_NaN();
   return {
-      {"right fx' differs", [](CameraInfo&, CameraInfo& r) { r.P[0] = 104.0; }, {ns + "/right/camera_info", "fx'"}},
+      {"right fx' differs", [](CameraInfo&, CameraInfo& r) { r.P[0] = 104.0; }, {ns + "/right/camera_info", "fx' (P[0])"}},
       {"right binning 1000", [](CameraInfo&, CameraInfo& r) { r.binning_x = r.binning_y = 1000; },
        {ns + "/right/camera_info", "binning"}},
-      {"left cy' differs", [](CameraInfo& l, CameraInfo&) { l.P[6] = 61.0; }, {ns + "/right/camera_info", "cy'"}},
+      {"left cy' differs", [](CameraInfo& l, CameraInfo&) { l.P[6] = 61.0; }, {ns + "/right/camera_info", "cy' (P[6])"}},
       {"NaN in the left R", [nan](CameraInfo& l, CameraInfo&) { l.R[4] = nan; }, {ns + "/left/camera_info", "R[4]"}},
       {"NaN in the right P", [nan](CameraInfo&, CameraInfo& r) { r.P[5] = nan; }, {ns + "/right/camera_info", "P[5]"}},
   };
@@ -112,6 +112,7 @@ void expectDroppedAndResumed(const std::string& ns, const std::string& image_nam
   for (const BadPair& bad : badPairs(ns)) {
     SCOPED_TRACE(ns + ": " + bad.name);
     Collector<Output> out(nh, ns + "/" + output);  // subscribing makes the lazy stage subscribe
+    log.clear();
     std::string found;
     EXPECT_TRUE(feedUntil(frames, bad.corrupt, [&] { return ecs_test::waitForLog(log, bad.needles, 0.0, &found); },
                           15.0))

@@ -36,7 +36,7 @@ TEST(CalibrationRefusals, BadFieldsAreRefusedAndNothingIsPersisted) {
     srv.request.camera_info = *(i == 0 ? left : right).snapshot().back();
     srv.request.camera_info.D[0] -= 0.01;
     k1[i] = srv.request.camera_info.D[0];
-    ASSERT_TRUE(ros::service::call(std::string(i == 0 ? "left" : "right") + "/set_camera_info", srv));
+    ASSERT_TRUE(ros::service::call(std::string("/stereo/") + (i == 0 ? "left" : "right") + "/set_camera_info", srv));
     ASSERT_TRUE(srv.response.success) << i << ": " << srv.response.status_message;
   }
   ASSERT_TRUE(modes.waitFor([](const auto& m) { return m.back()->calibration_epoch == 2u; }, 5.0));
@@ -67,7 +67,7 @@ TEST(CalibrationRefusals, BadFieldsAreRefusedAndNothingIsPersisted) {
       sensor_msgs::SetCameraInfo srv;
       srv.request.camera_info = side == "left" ? left_in_force : right_in_force;
       c.mutate(srv.request.camera_info);
-      ASSERT_TRUE(ros::service::call(side + "/set_camera_info", srv)) << "the driver is gone";
+      ASSERT_TRUE(ros::service::call("/stereo/" + side + "/set_camera_info", srv)) << "the driver is gone";
       EXPECT_FALSE(srv.response.success) << side << " " << c.name << " accepted: " << srv.response.status_message;
       EXPECT_NE(srv.response.status_message.find(c.field), std::string::npos)
           << side << " " << c.name << ": " << srv.response.status_message;

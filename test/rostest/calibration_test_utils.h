@@ -84,6 +84,17 @@ inline std::string pairProblem(const sensor_msgs::CameraInfo& left, const sensor
   return "";
 }
 
+// Waits until this node's own log messages come back on /rosout through `log`: a message
+// logged after this returns is not missed for a subscription still connecting.
+inline bool waitForRosoutPipe(Collector<rosgraph_msgs::Log>& log, double timeout_s) {
+  const ros::WallTime end = ros::WallTime::now() + ros::WallDuration(timeout_s);
+  for (int n = 0; ros::WallTime::now() < end; ++n) {
+    ROS_INFO("rosout pipe check %d", n);
+    if (waitForLog(log, {"rosout pipe check"}, 0.2)) return true;
+  }
+  return false;
+}
+
 // Waits for a driver status (name containing "camera_driver") of `level` whose message
 // contains `needle`; *message gets it.
 inline bool waitForDriverStatus(Collector<diagnostic_msgs::DiagnosticArray>& diagnostics, uint8_t level,
