@@ -124,7 +124,9 @@ void killAtEveryStep(bool from_regular_files) {
                 old_both ? "old pair" : new_both ? "new pair" : "MIXED");
     EXPECT_TRUE(old_both || new_both) << "the files show fx' " << shown.first << " and " << shown.second;
     // The new pair is on disk exactly from the rename of `current` (hook step 8) on.
-    if (kill_at > 0) EXPECT_EQ(new_both, kill_at >= 8);
+    if (kill_at > 0) {
+      EXPECT_EQ(new_both, kill_at >= 8);
+    }
     if (old_both || new_both) expectRelaunchPublishes(temp.path, old_both ? old_fx : new_fx);
   }
 }

@@ -136,6 +136,37 @@ TEST(CalibrationPairMismatch, RectifierDropsBadPairsAndResumes) {
   expectDroppedAndResumed<Image>("/fed_rectifier", "image_scene", "left/image_rect");
 }
 
+// The OnlineCalibrator reads the calibration in force from left|right/camera_info: a pair of one
+// stamp whose P disagree (published here beside the driver's) is dropped with an error naming
+// the topic and the field; the head goes on.
+TEST(CalibrationPairMismatch, OnlineCalibratorDropsABadPair) {
+  ros::NodeHandle nh("/stereo");
+  Collector<DisparityImage> head(nh, "disparity", 10);
+  Collector<CameraInfo> left(nh, "left/camera_info", 10), right(nh, "right/camera_info", 10);
+  Collector<rosgraph_msgs::Log> log(nh, "/rosout", 2000);
+  ASSERT_TRUE(head.waitForCount(1, 30.0)) << "control: no disparity from the head";
+  ASSERT_TRUE(left.waitForCount(1, 5.0));
+  ASSERT_TRUE(right.waitForCount(1, 5.0));
+  ros::Publisher left_pub = nh.advertise<CameraInfo>("left/camera_info", 5);
+  ros::Publisher right_pub = nh.advertise<CameraInfo>("right/camera_info", 5);
+  const std::vector<std::string> needles = {"OnlineCalibrator", "/stereo/right/camera_info", "fx' (P[0])"};
+  std::string found;
+  const ros::WallTime end = ros::WallTime::now() + ros::WallDuration(15.0);
+  ros::WallRate rate(10.0);
+  while (ros::WallTime::now() < end && !ecs_test::waitForLog(log, needles, 0.0, &found)) {
+    auto l = boost::make_shared<CameraInfo>(*left.snapshot().back());
+    auto r = boost::make_shared<CameraInfo>(*right.snapshot().back());
+    l->header.stamp = r->header.stamp = ros::Time::now();  // a stamp of no driver frame
+    r->P[0] *= 1.03;
+    left_pub.publish(l);
+    right_pub.publish(r);
+    rate.sleep();
+  }
+  EXPECT_TRUE(ecs_test::waitForLog(log, needles, 0.0, &found)) << "no error from the OnlineCalibrator";
+  std::printf("  %s\n", found.c_str());
+  EXPECT_TRUE(headDisparityFlows(head, 3, 10.0)) << "the manager died";
+}
+
 // set_camera_info of one camera alone (camera_calibration run on the left camera): staged, the
 // depth chain never sees it, and after the pair timeout it is discarded with an ERROR; binning
 // is refused; then a stereo calibration (left, then right) goes through and depth resumes
