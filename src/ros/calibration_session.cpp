@@ -2,6 +2,9 @@
 
 #include <sensor_msgs/SetCameraInfo.h>
 
+#include <algorithm>
+#include <cmath>
+#include <tuple>
 #include <utility>
 
 #include "embedded_calibration_stereo/core/geometry/config_error.h"
@@ -96,6 +99,16 @@ CalibrationStatus makeStatus(const ecs::BundleAdjustmentSummary& summary, const 
   return status;
 }
 
+bool carriesCalibration(const sensor_msgs::CameraInfo& published, const sensor_msgs::CameraInfo& committed) {
+  const auto near = [](double a, double b) { return std::abs(a - b) <= 1e-6 * std::max(1.0, std::abs(b)); };
+  const auto same = [&](const auto& a, const auto& b) {
+    return a.size() == b.size() && std::equal(a.begin(), a.end(), b.begin(), near);
+  };
+  return published.width == committed.width && published.height == committed.height &&
+         published.distortion_model == committed.distortion_model && same(published.D, committed.D) &&
+         same(published.K, committed.K) && same(published.R, committed.R) && same(published.P, committed.P);
+}
+
 CalibrationSession::CalibrationSession(ros::NodeHandle nh, CalibratorParams params, ecs::CalibrationDevice device)
     : nh_(std::move(nh)),
       params_(std::move(params)),
@@ -107,7 +120,8 @@ CalibrationSession::CalibrationSession(ros::NodeHandle nh, CalibratorParams para
 CalibrationStatus CalibrationSession::solve(const std::vector<ecs::StereoObservation>& frames,
                                             const sensor_msgs::CameraInfo* left_info,
                                             const sensor_msgs::CameraInfo* right_info, uint32_t epoch,
-                                            bool dry_run) {
+                                            bool dry_run, std::optional<CommittedCalibration>* committed) {
+  committed->reset();
   if (!left_info || !right_info) {
     CalibrationStatus status;
     status.header.stamp = ros::Time::now();
@@ -148,22 +162,25 @@ CalibrationStatus CalibrationSession::solve(const std::vector<ecs::StereoObserva
     status.reason = kAcceptedNotCommittedReason;
     return status;
   }
-  const std::string commit_error = commit(candidate.rig, *left_info);
+  CommittedCalibration infos;
+  std::tie(infos.left, infos.right) = toStereoCameraInfo(candidate.rig);
+  const std::string commit_error = commit(infos, candidate.rig, *left_info);
   if (!commit_error.empty()) {
     status.accepted = false;
     status.reason = "not committed: " + commit_error;
     return status;
   }
-  // The driver increments its epoch once per accepted set_camera_info.
-  status.epoch = epoch + 2;
+  // status.epoch stays `epoch`: how far the driver moves its epoch per set_camera_info is the
+  // driver's business, so the caller reads the new epoch from the driver's frames.
+  *committed = std::move(infos);
   return status;
 }
 
-std::string CalibrationSession::commit(const ecs::StereoRig& rig, const sensor_msgs::CameraInfo& left_in_force) {
-  const auto infos = toStereoCameraInfo(rig);
+std::string CalibrationSession::commit(const CommittedCalibration& infos, const ecs::StereoRig& rig,
+                                       const sensor_msgs::CameraInfo& left_in_force) {
   std::string error;
-  if (!callSetCameraInfo("left", infos.first, &error)) return error;
-  if (!callSetCameraInfo("right", infos.second, &error)) {
+  if (!callSetCameraInfo("left", infos.left, &error)) return error;
+  if (!callSetCameraInfo("right", infos.right, &error)) {
     // Never leave a half-updated pair: put the left calibration in force back.
     std::string restore_error;
     if (!callSetCameraInfo("left", left_in_force, &restore_error))
