@@ -3,6 +3,7 @@
 #include <sensor_msgs/SetCameraInfo.h>
 
 #include <cmath>
+#include <stdexcept>
 #include <utility>
 
 #include "embedded_calibration_stereo/core/geometry/config_error.h"
@@ -66,6 +67,10 @@ CalibratorParams loadCalibratorParams(const ros::NodeHandle& pnh, const std::str
   std::string commit = "driver";
   r.read("commit", &commit);
   p.commit = parseCommitTarget(commit);
+  if (pnh.hasParam("rectification_alpha") &&
+      (!pnh.getParam("rectification_alpha", p.rectification_alpha) ||
+       !(p.rectification_alpha == -1.0 || (p.rectification_alpha >= 0.0 && p.rectification_alpha <= 1.0))))
+    throw ecs::ConfigError("rectification_alpha", "must be in [0, 1], or -1 for OpenCV's default scaling");
   r.read("estimate_tangential", &p.terms.estimate_tangential);
   r.read("estimate_k3", &p.terms.estimate_k3);
   r.read("loss_scale_px", &p.adjustment.loss_scale_px);
@@ -183,7 +188,12 @@ CalibrationStatus CalibrationSession::solve(const std::vector<ecs::StereoObserva
 }
 
 std::string CalibrationSession::commit(const ecs::StereoRig& rig, const sensor_msgs::CameraInfo& left_in_force) {
-  const auto infos = toStereoCameraInfo(rig);
+  std::pair<sensor_msgs::CameraInfo, sensor_msgs::CameraInfo> infos;
+  try {
+    infos = toStereoCameraInfo(rig, params_.rectification_alpha);
+  } catch (const std::invalid_argument& e) {  // a rig that cannot be rectified is not committed
+    return e.what();
+  }
   std::string error;
   if (!callSetCameraInfo("left", infos.first, &error)) return error;
   if (!callSetCameraInfo("right", infos.second, &error)) {
