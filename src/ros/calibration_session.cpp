@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <stdexcept>
 #include <tuple>
 #include <utility>
 
@@ -46,6 +47,9 @@ CalibratorParams loadCalibratorParams(const ros::NodeHandle& pnh, const std::str
   p.max_frames = read.atLeast("max_frames", p.max_frames, p.min_frames);
   non_negative("service_timeout_s", &p.service_timeout_s);
   p.commit = parseCommitTarget(read.get("commit", "driver"));
+  p.rectification_alpha = read.get("rectification_alpha", p.rectification_alpha);
+  if (!(p.rectification_alpha == -1.0 || (p.rectification_alpha >= 0.0 && p.rectification_alpha <= 1.0)))
+    throw ecs::ConfigError("rectification_alpha", "must be in [0, 1], or -1 for OpenCV's default scaling");
   p.terms.estimate_tangential = read.get("estimate_tangential", p.terms.estimate_tangential);
   p.terms.estimate_k3 = read.get("estimate_k3", p.terms.estimate_k3);
   non_negative("loss_scale_px", &p.adjustment.loss_scale_px);
@@ -163,7 +167,13 @@ CalibrationStatus CalibrationSession::solve(const std::vector<ecs::StereoObserva
     return status;
   }
   CommittedCalibration infos;
-  std::tie(infos.left, infos.right) = toStereoCameraInfo(candidate.rig);
+  try {
+    std::tie(infos.left, infos.right) = toStereoCameraInfo(candidate.rig, params_.rectification_alpha);
+  } catch (const std::invalid_argument& e) {  // a rig that cannot be rectified is not committed
+    status.accepted = false;
+    status.reason = std::string("not committed: ") + e.what();
+    return status;
+  }
   const std::string commit_error = commit(infos, candidate.rig, *left_info);
   if (!commit_error.empty()) {
     status.accepted = false;

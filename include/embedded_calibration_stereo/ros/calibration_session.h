@@ -43,6 +43,9 @@ struct CalibratorParams {
   int max_frames = 30;         // frames kept per window (the first ones)
   double service_timeout_s = 2.0;  // for each set_light / set_camera_info call (wall time)
   CommitTarget commit = CommitTarget::kDriver;
+  // cv::stereoRectify's alpha for the committed CameraInfo R and P: 0 every rectified pixel
+  // valid, 1 every raw pixel kept, -1 OpenCV's default scaling.
+  double rectification_alpha = 0.0;
   ecs::BundleAdjustmentOptions adjustment;
   ecs::BundleAdjustmentConfig terms;  // which distortion terms are estimated (k1 k2 by default)
   ecs::GateOptions gate;
