@@ -18,6 +18,7 @@
 #include <cmath>
 #include <cstdio>
 #include <iostream>
+#include <opencv2/calib3d.hpp>
 #include <random>
 
 #include "embedded_calibration_stereo/test_support/cramer_rao.h"
@@ -83,9 +84,15 @@ TEST(SyntheticObservations, AllCornersOfTheLayoutAreSeenAndNoiseIsSeeded) {
   EXPECT_GE(a[0].right.size(), 5u);
   EXPECT_EQ(a[0].left[0].u, b[0].left[0].u);        // same seed, same noise
   EXPECT_NE(a[0].left[0].u[0], a[1].left[0].u[0]);  // frames differ by noise only
-  Eigen::Vector2d p;
-  ASSERT_TRUE(s.truth.left.project(s.boards[0].cornerInRig(c[0].left[0].corner_ids[0]), &p));
-  EXPECT_NEAR(c[0].left[0].u[0], p.x(), 1e-4);
+  // Noise-free corners where OpenCV projects them (not the PinholeCamera they are made with).
+  const PinholeCamera& cam = s.truth.left;
+  const Eigen::Vector3d corner = s.boards[0].cornerInRig(c[0].left[0].corner_ids[0]);
+  std::vector<cv::Point2d> p;
+  cv::projectPoints(std::vector<cv::Point3d>{cv::Point3d(corner.x(), corner.y(), corner.z())}, cv::Vec3d(0, 0, 0),
+                    cv::Vec3d(0, 0, 0), cv::Matx33d(cam.fx, cam.skew, cam.cx, 0, cam.fy, cam.cy, 0, 0, 1),
+                    cv::Mat(cv::Matx<double, 1, 5>(cam.dist.data()), true), p);
+  EXPECT_NEAR(c[0].left[0].u[0], p[0].x, 1e-4);
+  EXPECT_NEAR(c[0].left[0].v[0], p[0].y, 1e-4);
 }
 
 TEST(BundleAdjuster, NoiseFreeObservationsRecoverTheTruthFromZhang) {
