@@ -18,9 +18,9 @@
 //    after high-passing both (a 5x5 box mean removed): the scene is uncorrelated with the
 //    checkerboard's fine structure, so the scene only adds noise to the fit, never bias (without
 //    the high-pass, smooth scene structure correlates with board outlines and biases alpha).
-//    Fits are pooled over the neighbouring tiles (a 3x3 block of 32 px
-//    tiles by default), then shrunk towards the image-wide alpha by how much of their spread
-//    exceeds their own estimated noise (empirical Bayes), so a uniform light costs little extra
+//    Fits are pooled over the neighbouring tiles (a 3x3 block of 32 px tiles by default), then
+//    shrunk towards the image-wide alpha by how much of their spread exceeds their own
+//    estimated noise (empirical Bayes), so a uniform light costs little extra
 //    noise while a real light gradient is followed; blocks without enough device contrast
 //    (outside the boards, where I_C is the flat housing) take the image-wide estimate. The tile
 //    grid is interpolated bilinearly to a per-pixel alpha. It needs no alpha curve, follows lamp
