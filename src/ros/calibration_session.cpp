@@ -2,6 +2,10 @@
 
 #include <sensor_msgs/SetCameraInfo.h>
 
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+#include <tuple>
 #include <utility>
 
 #include "embedded_calibration_stereo/core/geometry/config_error.h"
@@ -43,6 +47,9 @@ CalibratorParams loadCalibratorParams(const ros::NodeHandle& pnh, const std::str
   p.max_frames = read.atLeast("max_frames", p.max_frames, p.min_frames);
   non_negative("service_timeout_s", &p.service_timeout_s);
   p.commit = parseCommitTarget(read.get("commit", "driver"));
+  p.rectification_alpha = read.get("rectification_alpha", p.rectification_alpha);
+  if (!(p.rectification_alpha == -1.0 || (p.rectification_alpha >= 0.0 && p.rectification_alpha <= 1.0)))
+    throw ecs::ConfigError("rectification_alpha", "must be in [0, 1], or -1 for OpenCV's default scaling");
   p.terms.estimate_tangential = read.get("estimate_tangential", p.terms.estimate_tangential);
   p.terms.estimate_k3 = read.get("estimate_k3", p.terms.estimate_k3);
   non_negative("loss_scale_px", &p.adjustment.loss_scale_px);
@@ -96,6 +103,16 @@ CalibrationStatus makeStatus(const ecs::BundleAdjustmentSummary& summary, const 
   return status;
 }
 
+bool carriesCalibration(const sensor_msgs::CameraInfo& published, const sensor_msgs::CameraInfo& committed) {
+  const auto near = [](double a, double b) { return std::abs(a - b) <= 1e-6 * std::max(1.0, std::abs(b)); };
+  const auto same = [&](const auto& a, const auto& b) {
+    return a.size() == b.size() && std::equal(a.begin(), a.end(), b.begin(), near);
+  };
+  return published.width == committed.width && published.height == committed.height &&
+         published.distortion_model == committed.distortion_model && same(published.D, committed.D) &&
+         same(published.K, committed.K) && same(published.R, committed.R) && same(published.P, committed.P);
+}
+
 CalibrationSession::CalibrationSession(ros::NodeHandle nh, CalibratorParams params, ecs::CalibrationDevice device)
     : nh_(std::move(nh)),
       params_(std::move(params)),
@@ -107,7 +124,8 @@ CalibrationSession::CalibrationSession(ros::NodeHandle nh, CalibratorParams para
 CalibrationStatus CalibrationSession::solve(const std::vector<ecs::StereoObservation>& frames,
                                             const sensor_msgs::CameraInfo* left_info,
                                             const sensor_msgs::CameraInfo* right_info, uint32_t epoch,
-                                            bool dry_run) {
+                                            bool dry_run, std::optional<CommittedCalibration>* committed) {
+  committed->reset();
   if (!left_info || !right_info) {
     CalibrationStatus status;
     status.header.stamp = ros::Time::now();
@@ -148,22 +166,31 @@ CalibrationStatus CalibrationSession::solve(const std::vector<ecs::StereoObserva
     status.reason = kAcceptedNotCommittedReason;
     return status;
   }
-  const std::string commit_error = commit(candidate.rig, *left_info);
+  CommittedCalibration infos;
+  try {
+    std::tie(infos.left, infos.right) = toStereoCameraInfo(candidate.rig, params_.rectification_alpha);
+  } catch (const std::invalid_argument& e) {  // a rig that cannot be rectified is not committed
+    status.accepted = false;
+    status.reason = std::string("not committed: ") + e.what();
+    return status;
+  }
+  const std::string commit_error = commit(infos, candidate.rig, *left_info);
   if (!commit_error.empty()) {
     status.accepted = false;
     status.reason = "not committed: " + commit_error;
     return status;
   }
-  // The driver increments its epoch once per accepted set_camera_info.
-  status.epoch = epoch + 2;
+  // status.epoch stays `epoch`: how far the driver moves its epoch per set_camera_info is the
+  // driver's business, so the caller reads the new epoch from the driver's frames.
+  *committed = std::move(infos);
   return status;
 }
 
-std::string CalibrationSession::commit(const ecs::StereoRig& rig, const sensor_msgs::CameraInfo& left_in_force) {
-  const auto infos = toStereoCameraInfo(rig);
+std::string CalibrationSession::commit(const CommittedCalibration& infos, const ecs::StereoRig& rig,
+                                       const sensor_msgs::CameraInfo& left_in_force) {
   std::string error, left_answer;
-  if (!callSetCameraInfo("left", infos.first, &error, &left_answer)) return error;
-  if (!callSetCameraInfo("right", infos.second, &error)) {
+  if (!callSetCameraInfo("left", infos.left, &error, &left_answer)) return error;
+  if (!callSetCameraInfo("right", infos.right, &error)) {
     // Our driver only stages a left calibration that does not match the right one in force, and
     // drops it when the right one is refused: nothing changed, nothing to put back.
     if (left_answer.rfind("staged:", 0) == 0) return error + "; the driver kept the calibration in force";
