@@ -129,7 +129,10 @@ std::string StereoCalibration::discardStagedLocked(const std::string& why) {
 }
 
 std::string StereoCalibration::expireStaged() {
-  std::lock_guard<std::mutex> write_lock(write_mutex_);
+  // Called by the capture thread every frame: never wait for a commit writing to disk (a
+  // staged calibration expires a frame later instead).
+  std::unique_lock<std::mutex> write_lock(write_mutex_, std::try_to_lock);
+  if (!write_lock.owns_lock()) return "";
   std::string text;
   const auto now = Clock::now();
   std::lock_guard<std::mutex> lock(state_mutex_);

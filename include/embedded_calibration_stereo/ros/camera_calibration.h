@@ -19,9 +19,10 @@
 //   valid generation of the store is used (the previous calibration), else the nominal
 //   calibration; problem() then says what was rejected and what runs instead.
 //
-// Threading: set() and expireStaged() may run on any thread (serialised by write_mutex_, which
-// is held across disk writes); inForce(), problem() and stagedText() take only state_mutex_, so
-// the capture thread never waits for a disk write.
+// Threading: set() and load() may run on any thread (serialised by write_mutex_, which is held
+// across disk writes); expireStaged() only tries that mutex (it skips while a commit runs);
+// inForce(), problem(), source() and stagedText() take only state_mutex_. So the capture thread
+// never waits for a disk write.
 #include <sensor_msgs/CameraInfo.h>
 
 #include <chrono>
@@ -61,6 +62,7 @@ class StereoCalibration {
   SetResult set(bool left, const sensor_msgs::CameraInfo& info);
 
   // Discards a staged calibration older than the pair timeout; returns the error text, or "".
+  // Does nothing while a set() is writing (the next call catches up).
   std::string expireStaged();
 
   struct InForce {
@@ -104,7 +106,7 @@ class StereoCalibration {
   const std::chrono::duration<double> pair_timeout_;
   CalibrationPairStore store_;
 
-  std::mutex write_mutex_;                   // serialises set() and expireStaged()
+  std::mutex write_mutex_;  // serialises load(), set() and expireStaged()
   std::optional<Staged> staged_left_, staged_right_;  // under write_mutex_ (and state_mutex_ to change)
 
   mutable std::mutex state_mutex_;  // guards the members below
