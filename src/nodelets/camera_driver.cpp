@@ -289,7 +289,8 @@ class CameraDriverNodelet : public nodelet::Nodelet {
     res.status_message = result.message;
     if (!result.discarded.empty()) NODELET_ERROR("CameraDriver: %s", result.discarded.c_str());
     if (!result.success)
-      NODELET_ERROR("CameraDriver: %s set_camera_info refused, calibration unchanged: %s", side, result.message.c_str());
+      NODELET_ERROR("CameraDriver: %s set_camera_info refused, calibration unchanged: %s", side,
+                    result.message.c_str());
     else
       NODELET_INFO("CameraDriver: %s calibration %s, epoch %u", side, result.message.c_str(),
                    calibration_->inForce().epoch);

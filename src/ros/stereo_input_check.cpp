@@ -40,7 +40,8 @@ std::string nonFiniteText(const char* field, int index, double value) {
 // The problem of one CameraInfo's fields (without the topic), or "".
 std::string cameraInfoProblem(const sensor_msgs::CameraInfo& info) {
   namespace models = sensor_msgs::distortion_models;
-  if (info.width == 0 || info.height == 0) return "width, height: the size " + sizeText(info.width, info.height) + " is empty";
+  if (info.width == 0 || info.height == 0)
+    return "width, height: the size " + sizeText(info.width, info.height) + " is empty";
 
   const std::string& model = info.distortion_model;
   const size_t nd = info.D.size();

@@ -74,7 +74,9 @@ std::pair<double, double> shownFocals(const std::string& left_path, const std::s
     CameraInfo info;
     std::string error;
     const CalibrationFileState state = readCalibrationFileIfPresent(paths[i], &info, &error);
-    focal[i] = state == CalibrationFileState::kMissing ? -1.0 : state == CalibrationFileState::kBroken ? -2.0 : info.P[0];
+    focal[i] = state == CalibrationFileState::kMissing  ? -1.0
+               : state == CalibrationFileState::kBroken ? -2.0
+                                                        : info.P[0];
   }
   return {focal[0], focal[1]};
 }
@@ -156,7 +158,8 @@ TEST(CalibrationPairStore, KeepsTheCurrentAndThePreviousGeneration) {
   CalibrationPairStore store(left, right, "stereo_left", "stereo_right");
   EXPECT_EQ(store.directory(), dir.path + "/.stereo_left+stereo_right.generations");
   const auto all_valid = [](const CalibrationPairStore::Generation&) { return true; };
-  for (const double fx : {600.0, 610.0, 620.0, 630.0}) store.commit(pairWithFocal(fx).first, pairWithFocal(fx).second, all_valid);
+  for (const double fx : {600.0, 610.0, 620.0, 630.0})
+    store.commit(pairWithFocal(fx).first, pairWithFocal(fx).second, all_valid);
   const auto generations = store.generations();
   ASSERT_EQ(generations.size(), 2u);
   EXPECT_EQ(store.currentGeneration(), generations[0].number);
@@ -315,7 +318,8 @@ TEST(StereoCalibrationSet, RefusalsPersistNothing) {
       {"all-zero P", [](CameraInfo& i) { i.P.fill(0); }, "P is all zero"},
       {"wrong size", [](CameraInfo& i) { i.width = 640; }, "differs from the image's 752x480"},
       {"binning 1000", [](CameraInfo& i) { i.binning_x = i.binning_y = 1000; }, "binning"},
-      {"not plumb_bob", [](CameraInfo& i) {
+      {"not plumb_bob",
+       [](CameraInfo& i) {
          i.distortion_model = "rational_polynomial";
          i.D.resize(8, 0.0);
        },
@@ -359,8 +363,7 @@ TEST(StereoCalibrationSet, MismatchedPIsStagedUntilTheOtherCameraMatches) {
   EXPECT_EQ(c.inForce().epoch, 2u);
   EXPECT_EQ(inForceFocal(c, true), 640.0);
   EXPECT_EQ(inForceFocal(c, false), 640.0);
-  EXPECT_EQ(shownFocals(dir.path + "/stereo_left.yaml", dir.path + "/stereo_right.yaml"),
-            std::make_pair(640.0, 640.0));
+  EXPECT_EQ(shownFocals(dir.path + "/stereo_left.yaml", dir.path + "/stereo_right.yaml"), std::make_pair(640.0, 640.0));
   EXPECT_EQ(c.stagedText(), "");
   // A change that keeps P (k1 only) is committed at once.
   CameraInfo k1 = next.first;

@@ -4,9 +4,9 @@
 // geometry. Each candidate pair is handed to image_geometry in a forked child process, so an
 // abort is observed, not suffered. Controls show that the child does abort on the pairs the
 // checks refuse, i.e. that the harness can see what it guards against.
+#include <fcntl.h>
 #include <gtest/gtest.h>
 #include <image_geometry/stereo_camera_model.h>
-#include <fcntl.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -41,7 +41,8 @@ std::pair<CameraInfo, CameraInfo> validPair() {
   rig.right.fx = 655.0;
   rig.right.fy = 654.5;
   rig.right.cx = 380.0;
-  rig.right_from_left.linear() = Eigen::AngleAxisd(0.01, Eigen::Vector3d(0.2, 1.0, 0.1).normalized()).toRotationMatrix();
+  rig.right_from_left.linear() =
+      Eigen::AngleAxisd(0.01, Eigen::Vector3d(0.2, 1.0, 0.1).normalized()).toRotationMatrix();
   rig.right_from_left.translation() = Eigen::Vector3d(-0.12, 0.002, 0.001);
   auto pair = toStereoCameraInfo(rig);
   pair.first.header.frame_id = pair.second.header.frame_id = "stereo_left_optical_frame";
@@ -111,39 +112,58 @@ std::vector<Case> refusedCases() {
   return {
       {"right fx' differs (one camera recalibrated)", [](CameraInfo&, CameraInfo& r) { r.P[0] += 0.5; },
        "right/camera_info: P: fx'", Outcome::kAborted},
-      {"right fy' differs", [](CameraInfo&, CameraInfo& r) { r.P[5] -= 2.0; }, "right/camera_info: P: fy'", Outcome::kAborted},
-      {"right cy' differs", [](CameraInfo&, CameraInfo& r) { r.P[6] += 1.0; }, "right/camera_info: P: cy'", Outcome::kAborted},
+      {"right fy' differs", [](CameraInfo&, CameraInfo& r) { r.P[5] -= 2.0; }, "right/camera_info: P: fy'",
+       Outcome::kAborted},
+      {"right cy' differs", [](CameraInfo&, CameraInfo& r) { r.P[6] += 1.0; }, "right/camera_info: P: cy'",
+       Outcome::kAborted},
       {"right binning 1000", [](CameraInfo&, CameraInfo& r) { r.binning_x = r.binning_y = 1000; },
        "right/camera_info: binning", Outcome::kAborted},
-      {"left binning 2 only", [](CameraInfo& l, CameraInfo&) { l.binning_x = 2; }, "left/camera_info: binning", Outcome::kAborted},
+      {"left binning 2 only", [](CameraInfo& l, CameraInfo&) { l.binning_x = 2; }, "left/camera_info: binning",
+       Outcome::kAborted},
       {"NaN skew", [](CameraInfo& l, CameraInfo&) { l.K[1] = kNaN; }, "left/camera_info: K: K[1]", Outcome::kFinite},
       {"NaN in R", [](CameraInfo&, CameraInfo& r) { r.R[4] = kNaN; }, "right/camera_info: R: R[4]", Outcome::kFinite},
       {"NaN in P", [](CameraInfo& l, CameraInfo&) { l.P[2] = kNaN; }, "left/camera_info: P: P[2]", Outcome::kNonFinite},
-      {"infinite Tx", [](CameraInfo&, CameraInfo& r) { r.P[3] = INFINITY; }, "right/camera_info: P: P[3]", Outcome::kNonFinite},
+      {"infinite Tx", [](CameraInfo&, CameraInfo& r) { r.P[3] = INFINITY; }, "right/camera_info: P: P[3]",
+       Outcome::kNonFinite},
       {"NaN in D", [](CameraInfo& l, CameraInfo&) { l.D[1] = kNaN; }, "left/camera_info: D: D[1]", Outcome::kFinite},
-      {"all-zero P", [](CameraInfo& l, CameraInfo&) { l.P.fill(0.0); }, "left/camera_info: P: uncalibrated", Outcome::kAborted},
-      {"all-zero K", [](CameraInfo&, CameraInfo& r) { r.K.fill(0.0); }, "right/camera_info: K: uncalibrated", Outcome::kFinite},
-      {"all-zero R", [](CameraInfo& l, CameraInfo&) { l.R.fill(0.0); }, "left/camera_info: R: uncalibrated", Outcome::kFinite},
-      {"R not a rotation", [](CameraInfo& l, CameraInfo&) { l.R[0] *= 1.01; }, "left/camera_info: R: not a rotation", Outcome::kFinite},
-      {"R a reflection", [](CameraInfo&, CameraInfo& r) { for (int i : {6, 7, 8}) r.R[i] = -r.R[i]; },
+      {"all-zero P", [](CameraInfo& l, CameraInfo&) { l.P.fill(0.0); }, "left/camera_info: P: uncalibrated",
+       Outcome::kAborted},
+      {"all-zero K", [](CameraInfo&, CameraInfo& r) { r.K.fill(0.0); }, "right/camera_info: K: uncalibrated",
+       Outcome::kFinite},
+      {"all-zero R", [](CameraInfo& l, CameraInfo&) { l.R.fill(0.0); }, "left/camera_info: R: uncalibrated",
+       Outcome::kFinite},
+      {"R not a rotation", [](CameraInfo& l, CameraInfo&) { l.R[0] *= 1.01; }, "left/camera_info: R: not a rotation",
+       Outcome::kFinite},
+      {"R a reflection",
+       [](CameraInfo&, CameraInfo& r) {
+         for (int i : {6, 7, 8}) r.R[i] = -r.R[i];
+       },
        "right/camera_info: R: not a rotation", Outcome::kFinite},
       {"negative focal in P", [](CameraInfo& l, CameraInfo& r) { l.P[0] = r.P[0] = -l.P[0]; },
        "left/camera_info: P: focal", Outcome::kFinite},
-      {"negative focal in K", [](CameraInfo& l, CameraInfo&) { l.K[4] = -1.0; }, "left/camera_info: K: focal", Outcome::kFinite},
-      {"wrong size", [](CameraInfo& l, CameraInfo& r) { l.width = r.width = 640; }, "left/camera_info: size 640x480", Outcome::kFinite},
-      {"empty size", [](CameraInfo&, CameraInfo& r) { r.height = 0; }, "right/camera_info: width, height", Outcome::kFinite},
-      {"ROI outside the image", [](CameraInfo& l, CameraInfo&) {
+      {"negative focal in K", [](CameraInfo& l, CameraInfo&) { l.K[4] = -1.0; }, "left/camera_info: K: focal",
+       Outcome::kFinite},
+      {"wrong size", [](CameraInfo& l, CameraInfo& r) { l.width = r.width = 640; }, "left/camera_info: size 640x480",
+       Outcome::kFinite},
+      {"empty size", [](CameraInfo&, CameraInfo& r) { r.height = 0; }, "right/camera_info: width, height",
+       Outcome::kFinite},
+      {"ROI outside the image",
+       [](CameraInfo& l, CameraInfo&) {
          l.roi.x_offset = 700;
          l.roi.width = 200;
          l.roi.height = 100;
        },
        "left/camera_info: roi", Outcome::kFinite},
-      {"left Tx non-zero", [](CameraInfo& l, CameraInfo&) { l.P[3] = 10.0; }, "left/camera_info: P: Tx", Outcome::kFinite},
-      {"right Tx zero (no baseline)", [](CameraInfo&, CameraInfo& r) { r.P[3] = 0.0; }, "right/camera_info: P: Tx", Outcome::kFinite},
+      {"left Tx non-zero", [](CameraInfo& l, CameraInfo&) { l.P[3] = 10.0; }, "left/camera_info: P: Tx",
+       Outcome::kFinite},
+      {"right Tx zero (no baseline)", [](CameraInfo&, CameraInfo& r) { r.P[3] = 0.0; }, "right/camera_info: P: Tx",
+       Outcome::kFinite},
       {"unsupported distortion model", [](CameraInfo& l, CameraInfo&) { l.distortion_model = "equidistant"; },
        "left/camera_info: distortion_model", Outcome::kFinite},
-      {"3 plumb_bob coefficients", [](CameraInfo&, CameraInfo& r) { r.D.resize(3); }, "right/camera_info: D:", Outcome::kFinite},
-      {"P last row", [](CameraInfo& l, CameraInfo&) { l.P[10] = 2.0; }, "left/camera_info: P: not a projection", Outcome::kFinite},
+      {"3 plumb_bob coefficients", [](CameraInfo&, CameraInfo& r) { r.D.resize(3); },
+       "right/camera_info: D:", Outcome::kFinite},
+      {"P last row", [](CameraInfo& l, CameraInfo&) { l.P[10] = 2.0; }, "left/camera_info: P: not a projection",
+       Outcome::kFinite},
       {"frame ids differ", [](CameraInfo&, CameraInfo& r) { r.header.frame_id = "other"; },
        "right/camera_info: frame id", Outcome::kAborted},
   };
@@ -189,7 +209,9 @@ TEST(CameraInfoCheck, RefusedPairsAbortOrBreakImageGeometry) {
     aborted += outcome == Outcome::kAborted;
     EXPECT_EQ(outcome, c.in_image_geometry) << c.name;
     std::printf("  %-44s image_geometry: %s\n", c.name.c_str(),
-                outcome == Outcome::kAborted ? "ABORT" : outcome == Outcome::kNonFinite ? "non-finite" : "finite");
+                outcome == Outcome::kAborted     ? "ABORT"
+                : outcome == Outcome::kNonFinite ? "non-finite"
+                                                 : "finite");
   }
   EXPECT_EQ(aborted, 7);
 }
@@ -221,18 +243,35 @@ TEST(CameraInfoCheck, RandomCorruptionsNeverReachAnAssertion) {
     const int which = static_cast<int>(rng() % 6);
     double* field = nullptr;
     switch (which) {
-      case 0: field = &target.K[rng() % 9]; break;
-      case 1: field = &target.R[rng() % 9]; break;
-      case 2: field = &target.P[rng() % 12]; break;
-      case 3: field = &target.D[rng() % target.D.size()]; break;
-      case 4: target.binning_x = rng() % 4; target.binning_y = rng() % 4; break;
-      default: target.roi.x_offset = rng() % 3; target.roi.width = rng() % 2 ? kWidth : 0; break;
+      case 0:
+        field = &target.K[rng() % 9];
+        break;
+      case 1:
+        field = &target.R[rng() % 9];
+        break;
+      case 2:
+        field = &target.P[rng() % 12];
+        break;
+      case 3:
+        field = &target.D[rng() % target.D.size()];
+        break;
+      case 4:
+        target.binning_x = rng() % 4;
+        target.binning_y = rng() % 4;
+        break;
+      default:
+        target.roi.x_offset = rng() % 3;
+        target.roi.width = rng() % 2 ? kWidth : 0;
+        break;
     }
     if (field) {
       const int kind = static_cast<int>(rng() % 3);
-      if (kind == 0) *field = specials[rng() % 7];
-      else if (kind == 1) *field += std::uniform_real_distribution<double>(-1e-4, 1e-4)(rng);  // round-off
-      else *field *= std::uniform_real_distribution<double>(0.5, 1.5)(rng);
+      if (kind == 0)
+        *field = specials[rng() % 7];
+      else if (kind == 1)
+        *field += std::uniform_real_distribution<double>(-1e-4, 1e-4)(rng);  // round-off
+      else
+        *field *= std::uniform_real_distribution<double>(0.5, 1.5)(rng);
     }
     ++tried;
     expectSafeIfAccepted(left, right, "trial " + std::to_string(trial), &accepted);

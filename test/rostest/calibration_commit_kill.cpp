@@ -6,8 +6,8 @@
 #include "calibration_test_utils.h"
 #include "embedded_calibration_stereo/CalibrationMode.h"
 
-using embedded_calibration_stereo::CalibrationMode;
 using ecs_test::Collector;
+using embedded_calibration_stereo::CalibrationMode;
 using sensor_msgs::CameraInfo;
 
 namespace {
@@ -77,7 +77,8 @@ std::pair<double, double> commitAndKill(const std::string& base, int kill_at, do
   if (kill_at <= kHookSteps) {
     const int status = driver.waitForExit(20.0);
     EXPECT_TRUE(WIFSIGNALED(status) && WTERMSIG(status) == SIGKILL)
-        << "the driver was not killed at step " << kill_at << " (status " << status << ")\n" << driver.logTail();
+        << "the driver was not killed at step " << kill_at << " (status " << status << ")\n"
+        << driver.logTail();
   }
   return ecs_test::shownFocals(dir + "/left.yaml", dir + "/right.yaml");
 }
@@ -112,18 +113,21 @@ void killAtEveryStep(bool from_regular_files) {
       std::string error;
       const auto pair = ecs_test::pairWithFocal(old_fx);
       ASSERT_TRUE(embedded_calibration_stereo::writeCalibrationFileAtomic(dir + "/left.yaml", "l", pair.first, &error));
-      ASSERT_TRUE(embedded_calibration_stereo::writeCalibrationFileAtomic(dir + "/right.yaml", "r", pair.second, &error));
+      ASSERT_TRUE(
+          embedded_calibration_stereo::writeCalibrationFileAtomic(dir + "/right.yaml", "r", pair.second, &error));
     } else {
       // A pair stored by the driver itself.
       ASSERT_NO_FATAL_FAILURE(commitAndKill(temp.path, kHookSteps + 1, 0.0, old_fx));
     }
     const auto shown = commitAndKill(temp.path, kill_at, old_fx, new_fx);
-    const bool old_both = std::abs(shown.first - rectifiedFocal(old_fx)) < 1e-3 &&
-                          std::abs(shown.second - rectifiedFocal(old_fx)) < 1e-3;
-    const bool new_both = std::abs(shown.first - rectifiedFocal(new_fx)) < 1e-3 &&
-                          std::abs(shown.second - rectifiedFocal(new_fx)) < 1e-3;
+    const bool old_both =
+        std::abs(shown.first - rectifiedFocal(old_fx)) < 1e-3 && std::abs(shown.second - rectifiedFocal(old_fx)) < 1e-3;
+    const bool new_both =
+        std::abs(shown.first - rectifiedFocal(new_fx)) < 1e-3 && std::abs(shown.second - rectifiedFocal(new_fx)) < 1e-3;
     std::printf("  kill at step %d: the files show fx' %.3f / %.3f (%s)\n", kill_at, shown.first, shown.second,
-                old_both ? "old pair" : new_both ? "new pair" : "MIXED");
+                old_both   ? "old pair"
+                : new_both ? "new pair"
+                           : "MIXED");
     EXPECT_TRUE(old_both || new_both) << "the files show fx' " << shown.first << " and " << shown.second;
     // The new pair is on disk exactly from the rename of `current` (hook step 8) on.
     if (kill_at > 0) {

@@ -20,7 +20,9 @@ class CalibrationCorruptFile : public testing::Test {
   void SetUp() override { ASSERT_FALSE(temp_.path.empty()); }
 
   ecs_test::InProcessManager::Params params() const {
-    return {{"backend", "sim"}, {"fps", 10.0}, {"left_camera_info_url", "file://" + left_path_},
+    return {{"backend", "sim"},
+            {"fps", 10.0},
+            {"left_camera_info_url", "file://" + left_path_},
             {"right_camera_info_url", "file://" + right_path_}};
   }
 
@@ -75,8 +77,8 @@ class CalibrationCorruptFile : public testing::Test {
       for (const double fx : {560.0, 572.0, 600.0}) EXPECT_GT(std::abs(l->P[0] - rectified(fx)), 1.0);
     }
     std::string status;
-    EXPECT_TRUE(ecs_test::waitForDriverStatus(diagnostics, diagnostic_msgs::DiagnosticStatus::ERROR, needle, 10.0,
-                                              &status))
+    EXPECT_TRUE(
+        ecs_test::waitForDriverStatus(diagnostics, diagnostic_msgs::DiagnosticStatus::ERROR, needle, 10.0, &status))
         << "no ERROR diagnostics naming " << needle;
     std::printf("  diagnostics: %s\n", status.c_str());
     EXPECT_TRUE(log.waitFor(
@@ -131,7 +133,8 @@ TEST_F(CalibrationCorruptFile, ZeroFocalLengthStartsOnTheNominalCalibration) {
   pair.first.K[0] = 0.0;
   std::string error;
   ASSERT_TRUE(embedded_calibration_stereo::writeCalibrationFileAtomic(left_path_, "stereo_left", pair.first, &error));
-  ASSERT_TRUE(embedded_calibration_stereo::writeCalibrationFileAtomic(right_path_, "stereo_right", pair.second, &error));
+  ASSERT_TRUE(
+      embedded_calibration_stereo::writeCalibrationFileAtomic(right_path_, "stereo_right", pair.second, &error));
   expectStartsOn(0.0, "focal");
 }
 

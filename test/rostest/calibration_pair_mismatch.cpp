@@ -91,10 +91,15 @@ struct BadPair {
 std::vector<BadPair> badPairs(const std::string& ns) {
   const double nan = std::numeric_limits<double>::quiet_NaN();
   return {
-      {"right fx' differs", [](CameraInfo&, CameraInfo& r) { r.P[0] = 104.0; }, {ns + "/right/camera_info", "fx' (P[0])"}},
-      {"right binning 1000", [](CameraInfo&, CameraInfo& r) { r.binning_x = r.binning_y = 1000; },
+      {"right fx' differs",
+       [](CameraInfo&, CameraInfo& r) { r.P[0] = 104.0; },
+       {ns + "/right/camera_info", "fx' (P[0])"}},
+      {"right binning 1000",
+       [](CameraInfo&, CameraInfo& r) { r.binning_x = r.binning_y = 1000; },
        {ns + "/right/camera_info", "binning"}},
-      {"left cy' differs", [](CameraInfo& l, CameraInfo&) { l.P[6] = 61.0; }, {ns + "/right/camera_info", "cy' (P[6])"}},
+      {"left cy' differs",
+       [](CameraInfo& l, CameraInfo&) { l.P[6] = 61.0; },
+       {ns + "/right/camera_info", "cy' (P[6])"}},
       {"NaN in the left R", [nan](CameraInfo& l, CameraInfo&) { l.R[4] = nan; }, {ns + "/left/camera_info", "R[4]"}},
       {"NaN in the right P", [nan](CameraInfo&, CameraInfo& r) { r.P[5] = nan; }, {ns + "/right/camera_info", "P[5]"}},
   };
@@ -114,14 +119,16 @@ void expectDroppedAndResumed(const std::string& ns, const std::string& image_nam
     Collector<Output> out(nh, ns + "/" + output);  // subscribing makes the lazy stage subscribe
     log.clear();
     std::string found;
-    EXPECT_TRUE(feedUntil(frames, bad.corrupt, [&] { return ecs_test::waitForLog(log, bad.needles, 0.0, &found); },
-                          15.0))
+    EXPECT_TRUE(feedUntil(
+        frames, bad.corrupt, [&] { return ecs_test::waitForLog(log, bad.needles, 0.0, &found); }, 15.0))
         << "no error naming " << ::testing::PrintToString(bad.needles);
-    feedUntil(frames, bad.corrupt, [] { return false; }, 1.0);
+    feedUntil(
+        frames, bad.corrupt, [] { return false; }, 1.0);
     EXPECT_EQ(out.snapshot().size(), 0u) << output << " published from a bad pair";
     EXPECT_TRUE(headDisparityFlows(head, 3, 10.0)) << "the manager died";
     std::printf("  %-20s -> %s\n", bad.name.c_str(), found.c_str());
-    EXPECT_TRUE(feedUntil(frames, nullptr, [&] { return !out.snapshot().empty(); }, 15.0))
+    EXPECT_TRUE(feedUntil(
+        frames, nullptr, [&] { return !out.snapshot().empty(); }, 15.0))
         << "no " << output << " from the next good pair";
   }
 }

@@ -9,8 +9,8 @@
 #include "calibration_test_utils.h"
 #include "embedded_calibration_stereo/CalibrationMode.h"
 
-using embedded_calibration_stereo::CalibrationMode;
 using ecs_test::Collector;
+using embedded_calibration_stereo::CalibrationMode;
 using sensor_msgs::CameraInfo;
 
 TEST(CalibrationRefusals, BadFieldsAreRefusedAndNothingIsPersisted) {

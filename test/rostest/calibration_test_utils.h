@@ -72,9 +72,12 @@ inline std::pair<double, double> shownFocals(const std::string& left_path, const
 inline std::string pairProblem(const sensor_msgs::CameraInfo& left, const sensor_msgs::CameraInfo& right) {
   if (left.header.frame_id != right.header.frame_id) return "frame ids differ";
   for (const auto* info : {&left, &right}) {
-    for (double v : info->K) if (!std::isfinite(v)) return "K not finite";
-    for (double v : info->R) if (!std::isfinite(v)) return "R not finite";
-    for (double v : info->P) if (!std::isfinite(v)) return "P not finite";
+    for (double v : info->K)
+      if (!std::isfinite(v)) return "K not finite";
+    for (double v : info->R)
+      if (!std::isfinite(v)) return "R not finite";
+    for (double v : info->P)
+      if (!std::isfinite(v)) return "P not finite";
     if (!(info->P[0] > 0 && info->P[5] > 0 && info->K[0] > 0 && info->K[4] > 0)) return "focal length <= 0";
     if (info->binning_x > 1 || info->binning_y > 1) return "binning";
   }
