@@ -3,6 +3,7 @@
 #include <sensor_msgs/SetCameraInfo.h>
 
 #include <cmath>
+#include <cstdio>
 #include <utility>
 
 #include "embedded_calibration_stereo/core/geometry/config_error.h"
@@ -160,6 +161,12 @@ CalibrationStatus CalibrationSession::solve(const std::vector<ecs::StereoObserva
   }
   CalibrationStatus status = makeStatus(candidate, decision);
   status.epoch = epoch;
+  if (decision.in_force_confirmed) {
+    char rms[96];
+    std::snprintf(rms, sizeof(rms), " (RMS %.3f px; the new solve %.3f px, no better)", ecs::combinedRms(in_force_fit),
+                  ecs::combinedRms(candidate));
+    status.reason = kInForceConfirmedReason + std::string(rms);
+  }
   if (!decision.accepted || dry_run) {
     if (decision.accepted) status.reason = "dry run: acceptable, not committed";
     return status;
