@@ -8,9 +8,11 @@
 //
 // The driver's latency between a light command and the exposure is unknown, so each frame's
 // light state and settled flag come from the images themselves (core LightLevelTracker: the
-// brightness step of the device's taught board regions, or of the whole image before the tracker
-// has taught them); the commanded state is only checked against them (the light watch). Deciding
-// a frame needs the next one: frames leave one frame late.
+// brightness step of the device's taught board regions, or of the whole image); the commanded
+// state is only checked against them (the light watch). The whole image is confirmed from the
+// start; regions taught later (the tracker's prior file) take over once their own confirmation
+// has seen a switch, so a change of regions never guesses the state. Deciding a frame needs the
+// next one: frames leave one frame late.
 //
 // calibration_epoch counts the changes of the driver's camera_info (one per camera), as our
 // CameraDriver counts its accepted set_camera_info calls. Calibrations are stored by the driver
@@ -228,7 +230,7 @@ class LightControllerNodelet : public nodelet::Nodelet {
       light_ = makeNoLight();
     }
     schedule_ = std::make_unique<ecs::LightSchedule>(params_.schedule);
-    confirmer_ = std::make_unique<ecs::StereoLightConfirmer>(params_.confirmation);
+    whole_ = std::make_unique<ecs::StereoLightConfirmer>(params_.confirmation);
     watch_ = std::make_unique<ecs::LightCommandWatch>(params_.max_delay_frames);
     if (params_.calibration_store == "file") {
       left_calibration_ = std::make_unique<CameraCalibration>(ros::NodeHandle(pnh, "camera_info_manager/left"),
@@ -285,12 +287,16 @@ class LightControllerNodelet : public nodelet::Nodelet {
                  params_.calibration_store == "file" ? "this nodelet (files, driver reloads)" : "the driver");
   }
 
+  bool regionsInUse() const { return regions_ && regions_->known(); }
+
   std::string regionsText() const {
-    return regions_taught_ ? "the taught board regions of " + params_.prior_file : "the whole image";
+    if (regionsInUse()) return "the taught board regions of " + params_.prior_file;
+    if (regions_) return "the whole image (the taught regions take over at the next switch)";
+    return "the whole image";
   }
 
-  // (Re)reads the tracker's prior when the file appeared or changed; new regions change what the
-  // levels mean, so the confirmation starts its levels again (keeping the light state).
+  // (Re)reads the tracker's prior when the file appeared or changed; the new regions get a
+  // confirmation of their own, which knows the light's state from its first switch on.
   void loadRegions(bool at_start) {
     struct stat info {};
     const bool exists = ::stat(params_.prior_file.c_str(), &info) == 0;
@@ -311,25 +317,19 @@ class LightControllerNodelet : public nodelet::Nodelet {
         masks[0] = masks[1] = cv::Mat();
       }
     }
-    const bool taught = !masks[0].empty();
-    if (!at_start && !taught && !regions_taught_) return;
     masks_[0] = masks[0];
     masks_[1] = masks[1];
-    regions_taught_ = taught;
+    regions_.reset();
+    if (!masks[0].empty()) {
+      regions_ = std::make_unique<ecs::StereoLightConfirmer>(params_.confirmation);
+      regions_->forgetLevels();  // the state is unknown to it until it sees a switch
+      NODELET_INFO("LightController: taught board regions read from %s; they confirm the light from the next switch on",
+                   params_.prior_file.c_str());
+    }
     if (!problem.empty())
       NODELET_WARN("LightController: prior file '%s' unusable (%s); confirming the light over the whole image",
                    params_.prior_file.c_str(), problem.c_str());
-    if (!at_start) {
-      NODELET_INFO("LightController: now confirming the light in %s", regionsText().c_str());
-      restartLevels();
-    }
-  }
-
-  // The pending frame cannot be decided with levels of another kind: it leaves unsettled.
-  void restartLevels() {
-    if (pending_) publish(*pending_, ecs::ConfirmedLight{confirmer_->left().lightOn() && confirmer_->right().lightOn(), false});
-    pending_.reset();
-    confirmer_->forgetLevels();
+    (void)at_start;
   }
 
   // A mask of another size than the image (prior of another camera mode) is not used.
@@ -393,8 +393,13 @@ class LightControllerNodelet : public nodelet::Nodelet {
       sim_level_pub_.publish(level_msg);
     }
 
-    const auto decided = confirmer_->push(level(left_cv->image, masks_[0], left_sub_.getTopic()),
-                                          level(right_cv->image, masks_[1], right_sub_.getTopic()));
+    std::optional<ecs::ConfirmedLight> decided =
+        whole_->push(ecs::regionLevel(left_cv->image, cv::Mat()), ecs::regionLevel(right_cv->image, cv::Mat()));
+    if (regions_) {
+      const auto by_regions = regions_->push(level(left_cv->image, masks_[0], left_sub_.getTopic()),
+                                             level(right_cv->image, masks_[1], right_sub_.getTopic()));
+      if (regions_->known() && by_regions) decided = by_regions;
+    }
     if (params_.light_backend != "none") {
       watch_->update(commanded.light_on, decided);
       if (!watch_->fault().empty())
@@ -546,8 +551,9 @@ class LightControllerNodelet : public nodelet::Nodelet {
     status.add("light commanded on", commanded_on_);
     status.add("light confirmed on", last_light_.light_on);
     status.add("settled", last_light_.settled);
-    status.add("light step left (grey levels)", confirmer_->left().step());
-    status.add("light step right (grey levels)", confirmer_->right().step());
+    const ecs::StereoLightConfirmer& used = regionsInUse() ? *regions_ : *whole_;
+    status.add("light step left (grey levels)", used.left().step());
+    status.add("light step right (grey levels)", used.right().step());
     status.add("confirmed in", regionsText());
     status.add("calibration epoch", epoch_);
     status.add("frames in", frames_in_);
@@ -565,11 +571,11 @@ class LightControllerNodelet : public nodelet::Nodelet {
   SharedLightLevel sim_level_;
   double published_level_ = -1.0;
   std::unique_ptr<ecs::LightSchedule> schedule_;
-  std::unique_ptr<ecs::StereoLightConfirmer> confirmer_;
+  std::unique_ptr<ecs::StereoLightConfirmer> whole_;    // over the whole image, from the start
+  std::unique_ptr<ecs::StereoLightConfirmer> regions_;  // over the taught regions, once taught
   std::unique_ptr<ecs::LightCommandWatch> watch_;
   std::unique_ptr<CameraCalibration> left_calibration_, right_calibration_;
   cv::Mat masks_[2];
-  bool regions_taught_ = false;
   int64_t prior_mtime_ = -2;
 
   std::unique_ptr<image_transport::ImageTransport> it_;

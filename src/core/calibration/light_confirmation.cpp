@@ -58,6 +58,7 @@ void LightLevelTracker::forgetLevels() {
   pending_ = 0;
   plateau_.reset();
   step_ = 0.0;
+  known_ = false;
 }
 
 ConfirmedLight LightLevelTracker::decide(double before, bool have_before, double level, double after) {
@@ -68,9 +69,21 @@ ConfirmedLight LightLevelTracker::decide(double before, bool have_before, double
   const bool stable = have_before && std::abs(level - before) <= tolerance && std::abs(after - level) <= tolerance;
   if (!plateau_) {
     if (stable) plateau_ = level;  // the first plateau keeps the state held (off at the start)
-    return {on_, stable};
+    return {on_, stable && known_};
   }
   const double change = level - *plateau_;
+  if (!known_) {
+    // The state shows again at the next switch: its direction says which.
+    if (stable && std::abs(change) >= threshold) {
+      on_ = change > 0;
+      known_ = true;
+      step_ = std::abs(change);
+      plateau_ = level;
+      return {on_, true};
+    }
+    if (stable) plateau_ = level;
+    return {on_, false};
+  }
   if (!stable) return {on_ ? change > -threshold : change >= threshold, false};
   if (!on_ && change >= threshold) {
     on_ = true;

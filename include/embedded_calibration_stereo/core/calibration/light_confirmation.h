@@ -64,10 +64,13 @@ class LightLevelTracker {
   // Adds the next frame's level; returns the decision for the frame before it (nothing for the
   // very first frame).
   std::optional<ConfirmedLight> push(double level);
-  // The level changed its meaning (other regions): keeps the state, forgets levels and step.
+  // The level changes its meaning from the next push (other regions): forgets levels, step and
+  // state; frames are unsettled until the next switch shows the state again (a rise: on).
   void forgetLevels();
 
   bool lightOn() const { return on_; }
+  // False after forgetLevels() until the next switch.
+  bool known() const { return known_; }
   // The light's step measured at the switches (grey levels); 0 before the first switch.
   double step() const { return step_; }
 
@@ -78,7 +81,8 @@ class LightLevelTracker {
   int pending_ = 0;                    // levels held: 0, 1 (level_) or 2 (before_, level_)
   double before_ = 0.0, level_ = 0.0;  // the frames before and of the undecided frame
   std::optional<double> plateau_;      // level of the last settled frame
-  bool on_ = false;
+  bool on_ = false;  // off at the start: the first plateau is taken as "off"
+  bool known_ = true;
   double step_ = 0.0;
 };
 
@@ -89,6 +93,7 @@ class StereoLightConfirmer {
 
   std::optional<ConfirmedLight> push(double left_level, double right_level);
   void forgetLevels();
+  bool known() const { return left_.known() && right_.known(); }
   const LightLevelTracker& left() const { return left_; }
   const LightLevelTracker& right() const { return right_; }
 
