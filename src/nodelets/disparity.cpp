@@ -8,7 +8,6 @@
 #include <cv_bridge/cv_bridge.h>
 #include <dynamic_reconfigure/server.h>
 #include <image_geometry/stereo_camera_model.h>
-#include <image_transport/image_transport.h>
 #include <nodelet/nodelet.h>
 #include <pluginlib/class_list_macros.hpp>
 #include <ros/ros.h>
@@ -23,6 +22,7 @@
 
 #include "embedded_calibration_stereo/DisparityConfig.h"
 #include "embedded_calibration_stereo/core/depth/disparity.h"
+#include "embedded_calibration_stereo/ros/parameter_reader.h"
 #include "embedded_calibration_stereo/ros/stage_diagnostics.h"
 #include "embedded_calibration_stereo/ros/stereo_camera_input.h"
 #include "embedded_calibration_stereo/ros/stereo_input_check.h"
@@ -100,41 +100,45 @@ float packedRgb(const cv::Mat& image, const std::string& encoding, int u, int v)
 }  // namespace
 
 // Threads:
-//  - the nodelet's (single-threaded) callback queue runs onInit, connectCb, the
+//  - the nodelet's (single-threaded) callback queue runs onInit, the connect callbacks, the
 //    dynamic_reconfigure callback and frameCb;
 //  - computer_mutex_ guards computer_ (replaced by configCb, used by frameCb) so the class stays
 //    correct should the callbacks ever run on a multi-threaded queue;
-//  - connect_mutex_ guards the (un)subscription done by connectCb against onInit;
+//  - input_ (un)subscribes the inputs from the publishers' connect callbacks under its own mutex
+//    (lazy_synced_input.h);
 //  - diagnostics_ reports on a wall timer of the callback queue and guards its own counters.
 class DisparityNodelet : public nodelet::Nodelet {
  private:
 
   void onInit() override {
+    try {
+      initialise();
+    } catch (const std::exception& e) {  // before anything is advertised: nothing to release
+      NODELET_FATAL("Disparity cannot start: %s", e.what());
+      throw;
+    }
+  }
+
+  void initialise() {
     ros::NodeHandle& nh = getNodeHandle();
     ros::NodeHandle& pnh = getPrivateNodeHandle();
-    queue_size_ = pnh.param("queue_size", 5);
-    const bool approximate = pnh.param("approximate_sync", false);
-    it_ = std::make_unique<image_transport::ImageTransport>(nh);
+    const ParameterReader read(pnh);
+    const int queue_size = read.atLeast("queue_size", 5, 1);
+    const bool approximate = read.get("approximate_sync", false);
+    checkReconfigureTypes<DisparityConfig>(read);  // the server would ignore a wrongly typed value
     input_ = std::make_unique<StereoCameraInput>(
-        approximate, queue_size_,
+        nh, pnh, "image_rect", approximate, queue_size,
         [this](const auto& l, const auto& li, const auto& r, const auto& ri) { frameCb(l, li, r, ri); });
     diagnostics_ = std::make_unique<StageDiagnostics>(nh, pnh, "disparity");
     reconfigure_ = std::make_unique<dynamic_reconfigure::Server<DisparityConfig>>(reconfigure_mutex_, pnh);
     reconfigure_->setCallback([this](DisparityConfig& config, uint32_t) { configCb(config); });
 
-    std::lock_guard<std::mutex> lock(connect_mutex_);
-    const auto cb = [this](const ros::SingleSubscriberPublisher&) { connectCb(); };
+    const auto cb = input_->connectCallback();
     disparity_pub_ = nh.advertise<stereo_msgs::DisparityImage>("disparity", 1, cb, cb);
     points_pub_ = nh.advertise<sensor_msgs::PointCloud2>("points2", 1, cb, cb);
-  }
-
-  void connectCb() {
-    std::lock_guard<std::mutex> lock(connect_mutex_);
-    if (disparity_pub_.getNumSubscribers() + points_pub_.getNumSubscribers() == 0) {
-      input_->unsubscribe();
-    } else {
-      input_->subscribe(*it_, getNodeHandle(), getPrivateNodeHandle(), "image_rect");
-    }
+    input_->watch(disparity_pub_);
+    input_->watch(points_pub_);
+    input_->start();  // subscribes the inputs while someone listens to an output
   }
 
   // Invalid values are clamped (with a warning) and the clamped values shown in the config.
@@ -270,10 +274,7 @@ class DisparityNodelet : public nodelet::Nodelet {
     return cloud;
   }
 
-  int queue_size_ = 5;
-  std::unique_ptr<image_transport::ImageTransport> it_;
-  std::unique_ptr<StereoCameraInput> input_;  // (un)subscribed under connect_mutex_
-  std::mutex connect_mutex_;
+  std::unique_ptr<StereoCameraInput> input_;  // created in onInit, before any callback
   ros::Publisher disparity_pub_, points_pub_;
   boost::recursive_mutex reconfigure_mutex_;
   std::unique_ptr<dynamic_reconfigure::Server<DisparityConfig>> reconfigure_;

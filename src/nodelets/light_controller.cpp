@@ -49,6 +49,7 @@
 #include "embedded_calibration_stereo/core/geometry/config_error.h"
 #include "embedded_calibration_stereo/ros/camera_calibration.h"
 #include "embedded_calibration_stereo/ros/light_backend.h"
+#include "embedded_calibration_stereo/ros/parameter_reader.h"
 #include "embedded_calibration_stereo/ros/tracker_teaching.h"
 
 namespace embedded_calibration_stereo {
@@ -78,96 +79,57 @@ struct LightControllerParams {
   std::string left_reload_service, right_reload_service;  // the driver's .../set_parameters
 };
 
-// Typed getters: a present value of the wrong type is refused, naming the parameter.
-class ParamReader {
- public:
-  explicit ParamReader(const ros::NodeHandle& nh) : nh_(nh) {}
-  std::string string(const std::string& name, const std::string& fallback) const {
-    std::string value = fallback;
-    if (nh_.hasParam(name) && !nh_.getParam(name, value)) throw ecs::ConfigError(name, "must be a string");
-    return value;
-  }
-  double number(const std::string& name, double fallback) const {
-    double value = fallback;
-    if (nh_.hasParam(name) && (!nh_.getParam(name, value) || !std::isfinite(value)))
-      throw ecs::ConfigError(name, "must be a number");
-    return value;
-  }
-  int integer(const std::string& name, int fallback) const {
-    int value = fallback;
-    if (nh_.hasParam(name) && !nh_.getParam(name, value)) throw ecs::ConfigError(name, "must be an integer");
-    return value;
-  }
-  bool boolean(const std::string& name, bool fallback) const {
-    bool value = fallback;
-    if (nh_.hasParam(name) && !nh_.getParam(name, value)) throw ecs::ConfigError(name, "must be true or false");
-    return value;
-  }
-  std::string bytes(const std::string& name, const std::string& fallback) const {
-    std::string decoded, error;
-    if (!unescapeBytes(string(name, fallback), &decoded, &error)) throw ecs::ConfigError(name, error);
-    return decoded;
-  }
-
- private:
-  const ros::NodeHandle& nh_;
-};
+std::string readBytes(const ParameterReader& read, const std::string& name, const std::string& fallback) {
+  std::string decoded, error;
+  if (!unescapeBytes(read.get(name, fallback), &decoded, &error)) throw ecs::ConfigError(name, error);
+  return decoded;
+}
 
 // Every parameter is read and checked here, once, at start.
 LightControllerParams loadParams(const ros::NodeHandle& pnh) {
-  const ParamReader read(pnh);
+  const ParameterReader read(pnh);
   LightControllerParams p;
-  p.light_backend = read.string("light_backend", p.light_backend);
-  if (p.light_backend != "none" && p.light_backend != "serial" && p.light_backend != "gpio" &&
-      p.light_backend != "sim")
-    throw ecs::ConfigError("light_backend", "unknown light backend '" + p.light_backend +
-                                                "' (use serial, gpio, sim or none)");
+  p.light_backend = read.choice("light_backend", p.light_backend, {"serial", "gpio", "sim", "none"});
   if (p.light_backend == "serial") {
-    p.serial.port = read.string("serial_port", "");
+    p.serial.port = read.required<std::string>("serial_port");
     if (p.serial.port.empty()) throw ecs::ConfigError("serial_port", "missing");
-    p.serial.baud = read.integer("serial_baud", p.serial.baud);
-    p.serial.on_bytes = read.bytes("serial_on", "ON\\n");
-    p.serial.off_bytes = read.bytes("serial_off", "OFF\\n");
+    p.serial.baud = read.get("serial_baud", p.serial.baud);
+    p.serial.on_bytes = readBytes(read, "serial_on", "ON\\n");
+    p.serial.off_bytes = readBytes(read, "serial_off", "OFF\\n");
   } else if (p.light_backend == "gpio") {
-    p.gpio.chip = read.string("gpio_chip", p.gpio.chip);
-    p.gpio.line = read.integer("gpio_line", p.gpio.line);
-    p.gpio.active_low = read.boolean("gpio_active_low", p.gpio.active_low);
+    p.gpio.chip = read.get("gpio_chip", p.gpio.chip);
+    p.gpio.line = read.get("gpio_line", p.gpio.line);
+    p.gpio.active_low = read.get("gpio_active_low", p.gpio.active_low);
     if (p.gpio.line < 0) throw ecs::ConfigError("gpio_line", "missing or negative line offset");
   }
-  p.schedule.period_s = read.number("calibration_period_s", 0.0);
-  p.schedule.calibration_frames = read.integer("calibration_frames", p.schedule.calibration_frames);
+  p.schedule.period_s = read.get("calibration_period_s", 0.0);
+  p.schedule.calibration_frames = read.get("calibration_frames", p.schedule.calibration_frames);
   // Frames the light is held on beyond calibration_frames: the driver's delay and the unsettled
   // frames on both sides of each switch.
-  p.schedule.settle_frames = read.integer("settle_frames", 5);
+  p.schedule.settle_frames = read.get("settle_frames", 5);
   if (const std::string problem = p.schedule.validate(); !problem.empty())
     throw ecs::ConfigError(problem.substr(0, problem.find(' ')), problem);
 
-  p.approximate_sync = read.boolean("approximate_sync", p.approximate_sync);
-  p.max_interval_s = read.number("max_interval_s", p.max_interval_s);
-  if (p.max_interval_s < 0) throw ecs::ConfigError("max_interval_s", "must be >= 0 s (0: no limit)");
-  p.queue_size = read.integer("queue_size", p.queue_size);
-  if (p.queue_size < 1) throw ecs::ConfigError("queue_size", "must be >= 1");
-  p.prior_file = read.string("prior_file", defaultPatternPriorFile());
-  p.region_margin_squares = read.number("region_margin_squares", p.region_margin_squares);
-  if (p.region_margin_squares < 0) throw ecs::ConfigError("region_margin_squares", "must be >= 0 squares");
-  p.confirmation.min_step = read.number("min_step", p.confirmation.min_step);
-  p.confirmation.switch_fraction = read.number("switch_fraction", p.confirmation.switch_fraction);
-  p.confirmation.plateau_fraction = read.number("plateau_fraction", p.confirmation.plateau_fraction);
+  p.approximate_sync = read.get("approximate_sync", p.approximate_sync);
+  p.max_interval_s = read.atLeast("max_interval_s", p.max_interval_s, 0.0);
+  p.queue_size = read.atLeast("queue_size", p.queue_size, 1);
+  p.prior_file = read.get("prior_file", defaultPatternPriorFile());
+  p.region_margin_squares = read.atLeast("region_margin_squares", p.region_margin_squares, 0.0);
+  p.confirmation.min_step = read.get("min_step", p.confirmation.min_step);
+  p.confirmation.switch_fraction = read.get("switch_fraction", p.confirmation.switch_fraction);
+  p.confirmation.plateau_fraction = read.get("plateau_fraction", p.confirmation.plateau_fraction);
   if (const std::string problem = p.confirmation.validate(); !problem.empty())
     throw ecs::ConfigError(problem.substr(0, problem.find(' ')), problem);
-  p.max_delay_frames = read.integer("max_delay_frames", p.max_delay_frames);
-  if (p.max_delay_frames < 0) throw ecs::ConfigError("max_delay_frames", "must be >= 0 frames");
+  p.max_delay_frames = read.atLeast("max_delay_frames", p.max_delay_frames, 0);
 
-  p.calibration_store = read.string("calibration_store", p.calibration_store);
-  if (p.calibration_store != "driver" && p.calibration_store != "file")
-    throw ecs::ConfigError("calibration_store", "must be 'driver' or 'file', got '" + p.calibration_store + "'");
+  p.calibration_store = read.choice("calibration_store", p.calibration_store, {"driver", "file"});
   if (p.calibration_store == "file") {
-    p.left_camera_name = read.string("left_camera_name", p.left_camera_name);
-    p.right_camera_name = read.string("right_camera_name", p.right_camera_name);
-    p.left_camera_info_url = read.string("left_camera_info_url", "");
-    p.right_camera_info_url = read.string("right_camera_info_url", "");
-    p.left_reload_service = read.string("left_reload_service", "");
-    p.right_reload_service = read.string("right_reload_service", "");
+    p.left_camera_name = read.get("left_camera_name", p.left_camera_name);
+    p.right_camera_name = read.get("right_camera_name", p.right_camera_name);
+    p.left_camera_info_url = read.get("left_camera_info_url", "");
+    p.right_camera_info_url = read.get("right_camera_info_url", "");
+    p.left_reload_service = read.get("left_reload_service", "");
+    p.right_reload_service = read.get("right_reload_service", "");
     if (p.left_camera_info_url.empty()) throw ecs::ConfigError("left_camera_info_url", "missing (calibration_store file)");
     if (p.right_camera_info_url.empty()) throw ecs::ConfigError("right_camera_info_url", "missing (calibration_store file)");
   }

@@ -2,7 +2,9 @@
 // whose calibration_mode is light_on && settled, matched by stamp), solves on a worker thread,
 // and on acceptance commits through the driver's set_camera_info services and /tf_static
 // (CalibrationSession). calibration/recalibrate switches the light on, collects, solves,
-// commits unless dry_run or rejected, switches the light off and answers with the status.
+// commits unless dry_run or rejected, switches the light off and answers with the status; one
+// request at a time (a second one is answered "busy" at once), and nothing is solved or
+// committed when set_light fails either way.
 // For a bag replay (launch/replay.launch: no driver, use_sim_time) the parameter commit:=none
 // solves and gates every window as usual but commits nowhere except /tf_static; only header
 // stamps (sim time) order the frames, and solve durations are wall time.
@@ -35,11 +37,13 @@ namespace embedded_calibration_stereo {
 // Threads:
 //  - the manager's single-threaded queue of this nodelet runs the subscribers (observations,
 //    calibration_mode, camera_info) and the diagnostics timer;
-//  - calibration/recalibrate runs on this nodelet's own service queue and spinner thread: it
-//    blocks while the window fills and the worker solves (up to timeout_s), and on the manager's
-//    shared pool it would hold one of its worker threads that long (with 4 threads, the
-//    tracker and the depth nodelets then fell behind and dropped frames during the call);
-//  - the worker thread (started in onInit, joined in the destructor) alone runs session_.
+//  - calibration/recalibrate runs on this nodelet's own service queue and its two spinner
+//    threads: a call blocks while the window fills and the worker solves (up to timeout_s), and
+//    on the manager's shared pool it would hold one of its worker threads that long (with 4
+//    threads, the tracker and the depth nodelets then fell behind and dropped frames during the
+//    call); the second thread answers a call arriving meanwhile ("busy") instead of queueing it;
+//  - the worker thread (started in onInit, joined in the destructor) alone runs session_, and
+//    after a commit waits for the driver's first frame carrying it (its epoch).
 // Everything they share is guarded by mutex_; session_->boards() is immutable after onInit.
 class OnlineCalibratorNodelet : public nodelet::Nodelet {
  public:
@@ -103,7 +107,7 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
     ros::NodeHandle service_nh(nh);
     service_nh.setCallbackQueue(&service_queue_);
     recalibrate_srv_ = service_nh.advertiseService("calibration/recalibrate", &OnlineCalibratorNodelet::recalibrate, this);
-    service_spinner_ = std::make_unique<ros::AsyncSpinner>(1, &service_queue_);
+    service_spinner_ = std::make_unique<ros::AsyncSpinner>(2, &service_queue_);  // see the class comment
     service_spinner_->start();
     NODELET_INFO("OnlineCalibrator: device from %s (%zu virtual boards), observations on %s, %s, commit to %s",
                  params_.device_config.c_str(), session_->boards().size(), observations_sub_.getTopic().c_str(),
@@ -132,6 +136,10 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
     {
       std::lock_guard<std::mutex> lock(mutex_);
       (left ? left_info_ : right_info_) = info;
+      auto& recent = left ? recent_left_infos_ : recent_right_infos_;
+      recent.push_back(info);
+      if (recent.size() > kKeptInfos) recent.pop_front();
+      if (awaiting_commit_) cv_.notify_all();
       if (in_force_tf_sent_ || !left_info_ || !right_info_) return;
       in_force_tf_sent_ = true;
       left_info = left_info_;
@@ -157,11 +165,24 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
       ++dropped_messages_;
       return;
     }
-    if (observation.left.empty() && observation.right.empty()) return;  // no board in this frame
     std::lock_guard<std::mutex> lock(mutex_);
-    for (const auto& mode : modes_) {
-      if (mode.first == msg->header.stamp) {
-        addToWindow(std::move(observation), msg->header.stamp, mode.second);
+    // A stamp not after the previous one (a replayed or restarted source) would put a frame in
+    // the window twice, or a frame of another timeline: dropped. A time jump of the driver's
+    // calibration_mode (forgetFramesAfterTimeJump) starts a new timeline for both.
+    if (!last_observation_stamp_.isZero() && msg->header.stamp <= last_observation_stamp_) {
+      ++backwards_messages_;
+      NODELET_WARN_THROTTLE(5.0,
+                            "OnlineCalibrator: observation dropped on %s: its stamp %.3f s is not after the "
+                            "previous one (%.3f s); a replayed or restarted source?",
+                            observations_sub_.getTopic().c_str(), msg->header.stamp.toSec(),
+                            last_observation_stamp_.toSec());
+      return;
+    }
+    last_observation_stamp_ = msg->header.stamp;
+    if (observation.left.empty() && observation.right.empty()) return;  // no board in this frame
+    for (const ModeSeen& mode : modes_) {
+      if (mode.stamp == msg->header.stamp) {
+        addToWindow(std::move(observation), msg->header.stamp, mode.calibrating);
         return;
       }
     }
@@ -174,10 +195,11 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
     std::optional<Job> job;
     {
       std::lock_guard<std::mutex> lock(mutex_);
-      if (!modes_.empty() && mode->header.stamp < modes_.back().first) forgetFramesAfterTimeJump(mode->header.stamp);
+      if (!modes_.empty() && mode->header.stamp < modes_.back().stamp) forgetFramesAfterTimeJump(mode->header.stamp);
       epoch_ = mode->calibration_epoch;
-      modes_.emplace_back(mode->header.stamp, calibrating);
+      modes_.push_back({mode->header.stamp, calibrating, mode->calibration_epoch});
       if (modes_.size() > kKeptFrames) modes_.pop_front();
+      if (awaiting_commit_) cv_.notify_all();
       for (auto it = pending_.begin(); it != pending_.end(); ++it) {
         if (it->first == mode->header.stamp) {
           addToWindow(std::move(it->second), it->first, calibrating);
@@ -201,11 +223,30 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
   // every new frame.
   void forgetFramesAfterTimeJump(const ros::Time& stamp) {
     NODELET_WARN("OnlineCalibrator: calibration_mode stamp went back from %.3f to %.3f s; window restarted",
-                 modes_.back().first.toSec(), stamp.toSec());
+                 modes_.back().stamp.toSec(), stamp.toSec());
     modes_.clear();
     pending_.clear();
     window_.clear();
     window_closed_at_ = ros::Time();
+    last_observation_stamp_ = ros::Time();
+  }
+
+  // Caller holds mutex_. The epoch of the driver's first frame whose left and right camera_info
+  // carry `committed`, among frames of another epoch than `before` (the one in force at the
+  // solve). Read, not predicted: how the driver counts set_camera_info calls is its business.
+  std::optional<uint32_t> epochCarrying(const CommittedCalibration& committed, uint32_t before) const {
+    const auto at = [](const std::deque<sensor_msgs::CameraInfoConstPtr>& infos, const ros::Time& stamp) {
+      for (const auto& info : infos)
+        if (info->header.stamp == stamp) return info;
+      return sensor_msgs::CameraInfoConstPtr();
+    };
+    for (const ModeSeen& mode : modes_) {
+      if (mode.epoch == before) continue;
+      const auto left = at(recent_left_infos_, mode.stamp), right = at(recent_right_infos_, mode.stamp);
+      if (left && right && carriesCalibration(*left, committed.left) && carriesCalibration(*right, committed.right))
+        return mode.epoch;
+    }
+    return std::nullopt;
   }
 
   // Caller holds mutex_.
@@ -245,7 +286,9 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
         right = right_info_;
         epoch = epoch_;
       }
-      CalibrationStatus status = session_->solve(job.frames, left.get(), right.get(), epoch, job.dry_run);
+      std::optional<CommittedCalibration> committed;
+      CalibrationStatus status = session_->solve(job.frames, left.get(), right.get(), epoch, job.dry_run, &committed);
+      if (committed) readCommittedEpoch(*committed, epoch, &status);
       NODELET_INFO("OnlineCalibrator: %zu frames, %s%s%s%s (rms %.3f / %.3f px, %.0f ms)", job.frames.size(),
                    job.dry_run ? "dry run, " : "", status.accepted ? "accepted" : "not accepted",
                    status.reason.empty() ? "" : ": ", status.reason.c_str(), status.rms_left_px,
@@ -263,22 +306,66 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
     }
   }
 
+  // Worker thread. Waits (bounded by service_timeout_s: the driver publishes the new
+  // calibration with its next frame) for the driver's first frame carrying `committed` and
+  // puts its epoch in `status`; without such a frame in time, the newest epoch seen, said so
+  // in the reason (the calibration was committed all the same).
+  void readCommittedEpoch(const CommittedCalibration& committed, uint32_t before, CalibrationStatus* status) {
+    std::optional<uint32_t> seen;
+    uint32_t newest;
+    {
+      std::unique_lock<std::mutex> lock(mutex_);
+      awaiting_commit_ = true;
+      cv_.wait_for(lock, std::chrono::duration<double>(params_.service_timeout_s),
+                   [&] { return stopping_ || (seen = epochCarrying(committed, before)).has_value(); });
+      awaiting_commit_ = false;
+      newest = epoch_;
+    }
+    if (seen) {
+      status->epoch = *seen;
+      return;
+    }
+    char text[200];
+    snprintf(text, sizeof(text),
+             "committed, but no frame with it on %s within %.1f s: epoch %u is the newest one seen",
+             mode_sub_.getTopic().c_str(), params_.service_timeout_s, newest);
+    status->epoch = newest;
+    status->reason = text;
+    NODELET_WARN("OnlineCalibrator: %s", text);
+  }
+
   bool recalibrate(Recalibrate::Request& req, Recalibrate::Response& res) {
     const size_t frames = req.frames > 0 ? req.frames : static_cast<size_t>(params_.min_frames);
     const double timeout_s = req.timeout_s > 0.0 ? req.timeout_s : 10.0;
     {
       std::lock_guard<std::mutex> lock(mutex_);
-      if (request_active_) return answer(&res, false, "busy: another recalibration is collecting");
+      // Answered at once (the second service thread): a queued request would switch the light
+      // and clear the window of the one running.
+      if (request_in_flight_) return answer(&res, false, "busy: a recalibration is already running");
+      request_in_flight_ = true;
       request_active_ = true;
       request_frames_ = frames;
       window_.clear();
-      if (!modes_.empty()) window_closed_at_ = modes_.back().first;  // only frames from now on
+      if (!modes_.empty()) window_closed_at_ = modes_.back().stamp;  // only frames from now on
     }
+    struct InFlight {  // cleared on every return
+      OnlineCalibratorNodelet* self;
+      ~InFlight() {
+        std::lock_guard<std::mutex> lock(self->mutex_);
+        self->request_in_flight_ = false;
+        self->request_active_ = false;
+      }
+    } in_flight{this};
     std::string error;
     if (!setLight(true, &error)) {
-      std::lock_guard<std::mutex> lock(mutex_);
-      request_active_ = false;
-      return answer(&res, false, "cannot switch the light on: " + error);
+      // The driver may have switched the light on all the same (an answer lost in a timeout, or
+      // success=false after acting): switch it off, unless the service is not there at all.
+      std::string message = "cannot switch the light on: " + error;
+      std::string off_error;
+      if (set_light_client_.exists() && !setLight(false, &off_error))
+        message += "; switching it off failed too: " + off_error;
+      NODELET_ERROR("OnlineCalibrator: recalibrate: %s", message.c_str());
+      return answer(&res, false, message + "; nothing solved or committed");
     }
     Job job;
     job.dry_run = req.dry_run;
@@ -288,11 +375,16 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
                    [&] { return stopping_ || window_.size() >= frames; });
       job.frames = std::move(window_);
       window_.clear();
-      if (!modes_.empty()) window_closed_at_ = modes_.back().first;
+      if (!modes_.empty()) window_closed_at_ = modes_.back().stamp;
       request_active_ = false;
     }
-    const bool light_off = setLight(false, &error);
-    if (!light_off) NODELET_ERROR("OnlineCalibrator: cannot switch the light off: %s", error.c_str());
+    if (!setLight(false, &error)) {
+      // The head is not back in its normal state (the boards may still be over the scene):
+      // nothing is committed on its behalf.
+      const std::string message = "cannot switch the light off: " + error + "; nothing solved or committed";
+      NODELET_ERROR("OnlineCalibrator: recalibrate: %s", message.c_str());
+      return answer(&res, false, message);
+    }
     if (job.frames.size() < frames) {
       char text[160];
       if (job.frames.empty())
@@ -311,7 +403,6 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
     res.success = res.status.accepted || confirmed;
     // An accepted status has an empty reason only when committed to the driver.
     res.message = res.status.accepted && res.status.reason.empty() ? "committed" : res.status.reason;
-    if (!light_off) res.message += " (light not switched off: " + error + ")";
     return true;
   }
 
@@ -338,8 +429,12 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
       *error = set_light_client_.getService() + " is not available";
       return false;
     }
-    if (!set_light_client_.call(srv) || !srv.response.success) {
-      *error = set_light_client_.getService() + " failed: " + srv.response.message;
+    if (!set_light_client_.call(srv)) {
+      *error = set_light_client_.getService() + " call failed";
+      return false;
+    }
+    if (!srv.response.success) {
+      *error = set_light_client_.getService() + " refused: " + srv.response.message;
       return false;
     }
     return true;
@@ -364,9 +459,17 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
     status.add("calibration epoch", epoch_.load());
     status.add("frames in window", window_.size());
     status.add("dropped observation messages", dropped_messages_);
+    status.add("observations dropped for a stamp going back", backwards_messages_);
   }
 
   static constexpr size_t kKeptFrames = 64;  // modes / unmatched observations remembered
+  static constexpr size_t kKeptInfos = 16;   // camera_info per side (the commit's epoch)
+
+  struct ModeSeen {
+    ros::Time stamp;
+    bool calibrating;  // light_on && settled
+    uint32_t epoch;
+  };
 
   CalibratorParams params_;
   std::unique_ptr<CalibrationSession> session_;  // worker thread only (boards(): any thread)
@@ -380,12 +483,16 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
   ros::WallTimer diagnostics_timer_;
 
   std::mutex mutex_;  // guards everything below
-  std::condition_variable cv_;  // jobs_, window_ (request) and stopping_
-  std::deque<std::pair<ros::Time, bool>> modes_;  // recent stamps: light_on && settled
+  std::condition_variable cv_;  // jobs_, window_ (request), stopping_, frames after a commit
+  std::deque<ModeSeen> modes_;  // recent frames
+  std::deque<sensor_msgs::CameraInfoConstPtr> recent_left_infos_, recent_right_infos_;
+  bool awaiting_commit_ = false;  // the worker waits for the driver's frame of a commit
+  ros::Time last_observation_stamp_;  // newest observation accepted (zero: none yet)
   std::deque<std::pair<ros::Time, ecs::StereoObservation>> pending_;
   std::vector<ecs::StereoObservation> window_;
   ros::Time window_closed_at_;  // frames up to this stamp belong to a finished window
-  bool request_active_ = false;
+  bool request_active_ = false;      // a recalibrate call is collecting its window
+  bool request_in_flight_ = false;   // a recalibrate call is running (from its start to its answer)
   size_t request_frames_ = 0;
   sensor_msgs::CameraInfoConstPtr left_info_, right_info_;
   bool in_force_tf_sent_ = false;  // the calibration in force went on /tf_static (storeInfo)
@@ -396,6 +503,7 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
   ros::WallTime last_solve_time_, last_commit_time_;
   std::string last_rejection_;
   uint64_t dropped_messages_ = 0;
+  uint64_t backwards_messages_ = 0;
   std::thread worker_;
 };
 

@@ -11,11 +11,6 @@
 // idle with an error naming the file until teaching runs.
 #include <cv_bridge/cv_bridge.h>
 #include <diagnostic_updater/diagnostic_updater.h>
-#include <image_transport/image_transport.h>
-#include <image_transport/subscriber_filter.h>
-#include <message_filters/subscriber.h>
-#include <message_filters/sync_policies/exact_time.h>
-#include <message_filters/synchronizer.h>
 #include <nodelet/nodelet.h>
 #include <pluginlib/class_list_macros.hpp>
 #include <ros/package.h>
@@ -30,8 +25,11 @@
 
 #include "embedded_calibration_stereo/CalibrationMode.h"
 #include "embedded_calibration_stereo/StereoPatternObservation.h"
+#include "embedded_calibration_stereo/core/geometry/config_error.h"
 #include "embedded_calibration_stereo/core/tracker/pattern_tracker.h"
 #include "embedded_calibration_stereo/ros/conversions.h"
+#include "embedded_calibration_stereo/ros/lazy_synced_input.h"
+#include "embedded_calibration_stereo/ros/parameter_reader.h"
 #include "embedded_calibration_stereo/ros/tracker_teaching.h"
 
 namespace embedded_calibration_stereo {
@@ -57,15 +55,15 @@ const char* toString(PriorState s) {
 }  // namespace
 
 // Threads:
-//  - the nodelet's single-threaded callback queue runs frameCb, the ~teach service, connectCb
-//    and the diagnostics timer: all state below except connect_mutex_'s is touched there only.
+//  - the nodelet's single-threaded callback queue runs frameCb, the ~teach service, the connect
+//    callbacks and the diagnostics timer: all state below is touched there only.
 //    Tracking runs in frameCb (core: ~1.3 ms per stereo pair, both cameras in parallel through
 //    cv::parallel_for_; 3-4.6 ms per frame with background and message in tracker_sim on two
 //    busy cores), which is fast enough for the camera rate;
 //  - teaching (~0.9 s in tracker_sim: cv::findChessboardCornersSB) runs on a std::async worker that receives
 //    copies of the frames and the device model and returns a TeachOutcome through teach_result_;
 //    frameCb collects it when ready. The destructor waits for it;
-//  - connect_mutex_ guards the (un)subscription in connectCb against onInit.
+//  - input_ (un)subscribes the inputs under its own mutex (lazy_synced_input.h).
 class PatternTrackerNodelet : public nodelet::Nodelet {
  public:
   ~PatternTrackerNodelet() override {
@@ -73,28 +71,36 @@ class PatternTrackerNodelet : public nodelet::Nodelet {
   }
 
  private:
-  using SyncPolicy = message_filters::sync_policies::ExactTime<Image, Image, CalibrationMode>;
+  using FrameInput = LazySyncedInput<Image, Image, CalibrationMode>;
 
   void onInit() override {
+    try {
+      initialise();
+    } catch (const std::exception& e) {  // before anything is advertised: nothing to release
+      NODELET_FATAL("PatternTracker cannot start: %s", e.what());
+      throw;
+    }
+  }
+
+  void initialise() {
     ros::NodeHandle& nh = getNodeHandle();
     ros::NodeHandle& pnh = getPrivateNodeHandle();
     const std::string package_path = ros::package::getPath("embedded_calibration_stereo");
-    prior_file_ = pnh.param<std::string>("prior_file", defaultPatternPriorFile());
-    device_config_ = pnh.param<std::string>("device_config", package_path + "/config/sim_rig.yaml");
-    const bool teach_on_start = pnh.param("teach_on_start", true);
-    queue_size_ = pnh.param("queue_size", 10);
+    const ParameterReader read(pnh);
+    prior_file_ = read.get("prior_file", defaultPatternPriorFile());
+    device_config_ = read.get("device_config", package_path + "/config/sim_rig.yaml");
+    const bool teach_on_start = read.get("teach_on_start", true);
+    const int queue_size = read.atLeast("queue_size", 10, 1);
     try {
       device_ = ecs::loadSimRigConfig(device_config_);
     } catch (const std::exception& e) {
-      NODELET_FATAL("PatternTracker cannot start: device_config '%s': %s", device_config_.c_str(), e.what());
-      throw;
+      throw ecs::ConfigError("device_config", "'" + device_config_ + "': " + e.what());
     }
     loadPrior(teach_on_start);
 
-    it_ = std::make_unique<image_transport::ImageTransport>(nh);
-    sync_ = std::make_unique<message_filters::Synchronizer<SyncPolicy>>(SyncPolicy(queue_size_), left_sub_,
-                                                                        right_sub_, mode_sub_);
-    sync_->registerCallback(&PatternTrackerNodelet::frameCb, this);
+    input_ = std::make_unique<FrameInput>(
+        nh, pnh, FrameInput::Topics{"left/image_raw", "right/image_raw", "calibration_mode"}, false, queue_size,
+        [this](const auto& left, const auto& right, const auto& mode) { frameCb(left, right, mode); });
     diagnostics_ = std::make_unique<diagnostic_updater::Updater>(nh, pnh, getName());
     diagnostics_->setHardwareID("pattern_tracker");
     diagnostics_->add("pattern_tracker", this, &PatternTrackerNodelet::diagnose);
@@ -102,10 +108,11 @@ class PatternTrackerNodelet : public nodelet::Nodelet {
       diagnostics_->update();
     });
     teach_srv_ = pnh.advertiseService("teach", &PatternTrackerNodelet::teachCb, this);
-    std::lock_guard<std::mutex> lock(connect_mutex_);
-    const auto cb = [this](const ros::SingleSubscriberPublisher&) { connectCb(); };
+    const auto cb = input_->connectCallback();
     observations_pub_ = nh.advertise<StereoPatternObservation>("calibration/observations", 10, cb, cb);
-    subscribeIfWanted();
+    input_->watch(observations_pub_);
+    updateNeed();
+    input_->start();  // subscribes the inputs while someone listens or teaching waits
     NODELET_INFO("PatternTracker: prior %s (%s), device %s", prior_file_.c_str(), toString(state_),
                  device_config_.c_str());
   }
@@ -146,29 +153,8 @@ class PatternTrackerNodelet : public nodelet::Nodelet {
            teachServiceName() + ")";
   }
 
-  void connectCb() {
-    std::lock_guard<std::mutex> lock(connect_mutex_);
-    subscribeIfWanted();
-  }
-
-  // Caller holds connect_mutex_. Inputs are needed while someone listens or teaching waits.
-  void subscribeIfWanted() {
-    const bool wanted = observations_pub_.getNumSubscribers() > 0 || teach_requested_ ||
-                        state_ == PriorState::kTeaching;
-    if (wanted == subscribed_) return;
-    subscribed_ = wanted;
-    if (!wanted) {
-      left_sub_.unsubscribe();
-      right_sub_.unsubscribe();
-      mode_sub_.unsubscribe();
-      return;
-    }
-    ros::NodeHandle& nh = getNodeHandle();
-    const image_transport::TransportHints hints("raw", ros::TransportHints(), getPrivateNodeHandle());
-    left_sub_.subscribe(*it_, "left/image_raw", queue_size_, hints);
-    right_sub_.subscribe(*it_, "right/image_raw", queue_size_, hints);
-    mode_sub_.subscribe(nh, "calibration_mode", queue_size_);
-  }
+  // Inputs are needed, whoever listens, while teaching waits for a frame or runs.
+  void updateNeed() { input_->need(teach_requested_ || state_ == PriorState::kTeaching); }
 
   bool teachCb(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& res) {
     if (state_ == PriorState::kTeaching) {
@@ -177,10 +163,7 @@ class PatternTrackerNodelet : public nodelet::Nodelet {
       return true;
     }
     teach_requested_ = true;
-    {
-      std::lock_guard<std::mutex> lock(connect_mutex_);
-      subscribeIfWanted();
-    }
+    updateNeed();
     res.success = true;
     res.message = "teaching at the next settled light-on frame; prior file " + prior_file_;
     return true;
@@ -204,7 +187,7 @@ class PatternTrackerNodelet : public nodelet::Nodelet {
         return;
       }
       NODELET_WARN_THROTTLE(5.0, "PatternTracker: teaching waits for a settled light-off frame on %s",
-                            left_sub_.getTopic().c_str());
+                            input_->topic(0).c_str());
     }
     if (!tracker_) {
       if (state_ != PriorState::kTeaching && !teach_requested_)
@@ -218,20 +201,20 @@ class PatternTrackerNodelet : public nodelet::Nodelet {
                 cv_bridge::CvImageConstPtr* right_cv, ecs::ColorOrder* order) {
     if (left->encoding != right->encoding || left->width != right->width || left->height != right->height) {
       NODELET_ERROR_THROTTLE(5.0, "PatternTracker: %s and %s differ (%s %ux%u vs %s %ux%u); frame dropped",
-                             left_sub_.getTopic().c_str(), right_sub_.getTopic().c_str(), left->encoding.c_str(),
+                             input_->topic(0).c_str(), input_->topic(1).c_str(), left->encoding.c_str(),
                              left->width, left->height, right->encoding.c_str(), right->width, right->height);
       return false;
     }
     if (left->encoding != "mono8" && left->encoding != "bgr8" && left->encoding != "rgb8") {
       NODELET_ERROR_THROTTLE(5.0, "PatternTracker: %s has encoding '%s' (expected mono8, bgr8 or rgb8); frame dropped",
-                             left_sub_.getTopic().c_str(), left->encoding.c_str());
+                             input_->topic(0).c_str(), left->encoding.c_str());
       return false;
     }
     try {
       *left_cv = cv_bridge::toCvShare(left);
       *right_cv = cv_bridge::toCvShare(right);
     } catch (const cv_bridge::Exception& e) {
-      NODELET_ERROR_THROTTLE(5.0, "PatternTracker: cannot read %s: %s", left_sub_.getTopic().c_str(), e.what());
+      NODELET_ERROR_THROTTLE(5.0, "PatternTracker: cannot read %s: %s", input_->topic(0).c_str(), e.what());
       return false;
     }
     *order = left->encoding == "rgb8" ? ecs::ColorOrder::kRgb : ecs::ColorOrder::kBgr;
@@ -270,6 +253,7 @@ class PatternTrackerNodelet : public nodelet::Nodelet {
         NODELET_INFO("PatternTracker: taught %zu + %zu boards in %.0f ms, prior written to %s (%s)",
                      outcome.prior.cameras[0].boards.size(), outcome.prior.cameras[1].boards.size(), outcome.ms,
                      prior_file_.c_str(), outcome.notes.c_str());
+        updateNeed();
         return;
       } catch (const std::exception& e) {
         prior_error_ = e.what();
@@ -279,6 +263,7 @@ class PatternTrackerNodelet : public nodelet::Nodelet {
     }
     state_ = PriorState::kTeachFailed;
     NODELET_ERROR("%s", idleMessage().c_str());
+    updateNeed();
   }
 
   void track(const ImageConstPtr& left_msg, const cv::Mat& left, const cv::Mat& right, ecs::ColorOrder order) {
@@ -293,7 +278,7 @@ class PatternTrackerNodelet : public nodelet::Nodelet {
       }
       msg = toMsg(tracker_->trackStereo(left, right, left_msg->header.stamp.toSec(), order));
     } catch (const std::exception& e) {
-      NODELET_ERROR_THROTTLE(5.0, "PatternTracker: tracking failed on %s: %s", left_sub_.getTopic().c_str(),
+      NODELET_ERROR_THROTTLE(5.0, "PatternTracker: tracking failed on %s: %s", input_->topic(0).c_str(),
                              e.what());
       return;
     }
@@ -339,18 +324,12 @@ class PatternTrackerNodelet : public nodelet::Nodelet {
   }
 
   std::string prior_file_, device_config_;
-  int queue_size_ = 10;
   ecs::SimRigConfig device_;
-  std::unique_ptr<image_transport::ImageTransport> it_;
-  image_transport::SubscriberFilter left_sub_, right_sub_;
-  message_filters::Subscriber<CalibrationMode> mode_sub_;
-  std::unique_ptr<message_filters::Synchronizer<SyncPolicy>> sync_;
+  std::unique_ptr<FrameInput> input_;  // created in onInit, before any callback
   ros::Publisher observations_pub_;
   ros::ServiceServer teach_srv_;
   std::unique_ptr<diagnostic_updater::Updater> diagnostics_;
   ros::WallTimer diagnostics_timer_;
-  std::mutex connect_mutex_;
-  bool subscribed_ = false;
 
   PriorState state_ = PriorState::kMissing;
   std::string prior_error_;

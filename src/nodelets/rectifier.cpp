@@ -25,8 +25,10 @@
 
 #include "embedded_calibration_stereo/CalibrationMode.h"
 #include "embedded_calibration_stereo/core/depth/rectification.h"
+#include "embedded_calibration_stereo/core/geometry/config_error.h"
 #include "embedded_calibration_stereo/ros/conversions.h"
 #include "embedded_calibration_stereo/ros/output_image.h"
+#include "embedded_calibration_stereo/ros/parameter_reader.h"
 #include "embedded_calibration_stereo/ros/stage_diagnostics.h"
 #include "embedded_calibration_stereo/ros/stereo_camera_input.h"
 #include "embedded_calibration_stereo/ros/stereo_input_check.h"
@@ -108,12 +110,13 @@ std::shared_ptr<const StereoMaps> buildMaps(const CalibrationKey& key, ecs::Rect
 }  // namespace
 
 // Threads:
-//  - the nodelet's (single-threaded) callback queue runs onInit, connectCb and frameCb; frameCb
-//    reads the publishers and the immutable options, and takes maps_mutex_ for maps_, build_,
-//    building_key_ and failure_;
+//  - the nodelet's (single-threaded) callback queue runs onInit, the connect callbacks and
+//    frameCb; frameCb reads the publishers and the immutable options, and takes maps_mutex_ for
+//    maps_, build_, building_key_ and failure_;
 //  - a std::async worker runs buildMaps and stores its result under maps_mutex_ (maps_ is a
 //    shared_ptr to immutable maps: a frame keeps its own reference while it is remapped);
-//  - connect_mutex_ guards the (un)subscription done by connectCb against onInit;
+//  - input_ (un)subscribes the inputs from the publishers' connect callbacks under its own mutex
+//    (lazy_synced_input.h);
 //  - modeCb (callback queue) and frameCb share epochs_ under epochs_mutex_; diagnostics_ reports
 //    on a wall timer of the callback queue and guards its own counters.
 class RectifierNodelet : public nodelet::Nodelet {
@@ -130,48 +133,49 @@ class RectifierNodelet : public nodelet::Nodelet {
  private:
 
   void onInit() override {
+    try {
+      initialise();
+    } catch (const std::exception& e) {  // before anything is advertised: nothing to release
+      NODELET_FATAL("Rectifier cannot start: %s", e.what());
+      throw;
+    }
+  }
+
+  void initialise() {
     ros::NodeHandle& nh = getNodeHandle();
     ros::NodeHandle& pnh = getPrivateNodeHandle();
-    const std::string method_name = pnh.param<std::string>("rectification_method", "bouguet");
+    const ParameterReader read(pnh);
+    const std::string method_name = read.get("rectification_method", "bouguet");
     try {
       method_ = ecs::parseRectificationMethod(method_name);
     } catch (const std::exception& e) {
-      NODELET_FATAL("Rectifier cannot start: rectification_method: %s", e.what());
-      throw;
+      throw ecs::ConfigError("rectification_method", e.what());
     }
-    queue_size_ = pnh.param("queue_size", 5);
-    const bool approximate = pnh.param("approximate_sync", false);
-    it_ = std::make_unique<image_transport::ImageTransport>(nh);
+    const int queue_size = read.atLeast("queue_size", 5, 1);
+    const bool approximate = read.get("approximate_sync", false);
     input_ = std::make_unique<StereoCameraInput>(
-        approximate, queue_size_,
+        nh, pnh, "image_scene", approximate, queue_size,
         [this](const auto& l, const auto& li, const auto& r, const auto& ri) { frameCb(l, li, r, ri); });
-    std::lock_guard<std::mutex> lock(connect_mutex_);  // connectCb must see the publishers
-    const auto image_cb = [this](const image_transport::SingleSubscriberPublisher&) { connectCb(); };
-    const auto info_cb = [this](const ros::SingleSubscriberPublisher&) { connectCb(); };
-    left_pub_ = it_->advertise("left/image_rect", 1, image_cb, image_cb);
-    right_pub_ = it_->advertise("right/image_rect", 1, image_cb, image_cb);
+    image_transport::ImageTransport it(nh);
+    const auto image_cb = input_->imageConnectCallback();
+    const auto info_cb = input_->connectCallback();
+    left_pub_ = it.advertise("left/image_rect", 1, image_cb, image_cb);
+    right_pub_ = it.advertise("right/image_rect", 1, image_cb, image_cb);
     left_info_pub_ = nh.advertise<CameraInfo>("left/camera_info_rect", 1, info_cb, info_cb);
     right_info_pub_ = nh.advertise<CameraInfo>("right/camera_info_rect", 1, info_cb, info_cb);
+    input_->watch(left_pub_);
+    input_->watch(right_pub_);
+    input_->watch(left_info_pub_);
+    input_->watch(right_info_pub_);
     diagnostics_ = std::make_unique<StageDiagnostics>(nh, pnh, "rectifier");
     diagnostics_->set("method", method_name);
     diagnostics_->set("maps", "none yet");
     // Only to name the epoch of the maps in the diagnostics (frames are matched to maps by their
     // CameraInfo, never by this).
     mode_sub_ = nh.subscribe("calibration_mode", 10, &RectifierNodelet::modeCb, this);
+    input_->start();  // subscribes the inputs while someone listens to an output
     NODELET_INFO("Rectifier: %s rectification, %s sync, queue %d", method_name.c_str(),
-                 approximate ? "approximate" : "exact", queue_size_);
-  }
-
-  // Subscribes the inputs only while someone listens to an output (image_pipeline's pattern).
-  void connectCb() {
-    std::lock_guard<std::mutex> lock(connect_mutex_);
-    const uint32_t listeners = left_pub_.getNumSubscribers() + right_pub_.getNumSubscribers() +
-                               left_info_pub_.getNumSubscribers() + right_info_pub_.getNumSubscribers();
-    if (listeners == 0) {
-      input_->unsubscribe();
-    } else {
-      input_->subscribe(*it_, getNodeHandle(), getPrivateNodeHandle(), "image_scene");
-    }
+                 approximate ? "approximate" : "exact", queue_size);
   }
 
   void reportError(const std::string& message) {
@@ -269,10 +273,7 @@ class RectifierNodelet : public nodelet::Nodelet {
   }
 
   ecs::RectificationMethod method_ = ecs::RectificationMethod::kBouguet;
-  int queue_size_ = 5;
-  std::unique_ptr<image_transport::ImageTransport> it_;
-  std::unique_ptr<StereoCameraInput> input_;  // (un)subscribed under connect_mutex_
-  std::mutex connect_mutex_;
+  std::unique_ptr<StereoCameraInput> input_;  // created in onInit, before any callback
   image_transport::Publisher left_pub_, right_pub_;
   ros::Publisher left_info_pub_, right_info_pub_;
   ErrorThrottle errors_{5.0};

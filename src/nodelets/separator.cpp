@@ -1,7 +1,10 @@
 // Separator nodelet: removes the lit calibration device from calibration-mode frames so that
 // depth keeps running while the light is on (core/separator.h does the work).
 //
-// Per stereo frame (left|right/image_raw and calibration_mode, ExactTime):
+// Lazy: the inputs are subscribed only while someone subscribes to left|right/image_scene or a
+// teach is running (lazy_synced_input.h).
+// Per stereo frame (left|right/image_raw and calibration_mode, ExactTime, or ApproximateTime with
+// approximate_sync):
 //  - light off, or light on but not settled (mixed frames), or no template taught for the
 //    frame's calibration epoch: the incoming message pointers are republished unchanged on
 //    left|right/image_scene (zero-copy; depth never stops; a missing template is warned about);
@@ -19,9 +22,6 @@
 // method, template epoch and input copies (must stay 0).
 #include <cv_bridge/cv_bridge.h>
 #include <image_transport/image_transport.h>
-#include <message_filters/subscriber.h>
-#include <message_filters/sync_policies/exact_time.h>
-#include <message_filters/synchronizer.h>
 #include <nodelet/nodelet.h>
 #include <pluginlib/class_list_macros.hpp>
 #include <ros/ros.h>
@@ -30,10 +30,14 @@
 #include <chrono>
 #include <memory>
 #include <mutex>
+#include <vector>
 
 #include "embedded_calibration_stereo/CalibrationMode.h"
 #include "embedded_calibration_stereo/core/depth/separator.h"
+#include "embedded_calibration_stereo/core/geometry/config_error.h"
+#include "embedded_calibration_stereo/ros/lazy_synced_input.h"
 #include "embedded_calibration_stereo/ros/output_image.h"
+#include "embedded_calibration_stereo/ros/parameter_reader.h"
 #include "embedded_calibration_stereo/ros/stage_diagnostics.h"
 #include "embedded_calibration_stereo/ros/stereo_input_check.h"
 
@@ -87,57 +91,92 @@ ecs::DeviceTemplate templateFrom(const cv::Mat& sum, int frames, uint32_t epoch)
 
 }  // namespace
 
-// Threads: the nodelet's (single-threaded) callback queue runs onInit, frameCb, truthCb and the
-// teach service; state_mutex_ still guards separator_ and teach_ so that the class stays correct
-// if it is moved to the multi-threaded handle. separator_ points to an immutable StereoSeparator:
-// frameCb takes its own reference and separates outside the lock (both cameras in parallel,
-// ecs::separateStereo). Published messages are never modified after publishing. diagnostics_
+// Threads: the nodelet's (single-threaded) callback queue runs onInit, frameCb, truthCb, the
+// teach service and the publishers' connect callbacks; state_mutex_ still guards separator_ and
+// teach_ so that the class stays correct if it is moved to the multi-threaded handle. The inputs
+// (un)subscribe under their own mutex; need() is called outside state_mutex_ (unsubscribing
+// waits for a callback of that subscription running on another thread). separator_ points to
+// an immutable StereoSeparator: frameCb takes its own reference and separates outside the lock
+// (both cameras in parallel, ecs::separateStereo). Published messages are never modified after publishing. diagnostics_
 // reports on a wall timer of the same queue and guards its own counters.
 class SeparatorNodelet : public nodelet::Nodelet {
  private:
-  using FramePolicy = message_filters::sync_policies::ExactTime<Image, Image, CalibrationMode>;
-  using TruthPolicy = message_filters::sync_policies::ExactTime<Image, Image, CalibrationMode, Image, Image>;
+  using FrameInput = LazySyncedInput<Image, Image, CalibrationMode>;
+  using TruthInput = LazySyncedInput<Image, Image, CalibrationMode, Image, Image>;
 
   void onInit() override {
-    ros::NodeHandle& nh = getNodeHandle();
-    ros::NodeHandle& pnh = getPrivateNodeHandle();
-    const std::string method = pnh.param<std::string>("method", "regional_alpha");
-    teach_frames_ = pnh.param("teach_frames", 8);
-    teach_from_truth_ = pnh.param("teach_from_ground_truth", false);
-    reteach_on_epoch_change_ = pnh.param("reteach_on_epoch_change", true);
-    const int queue_size = pnh.param("queue_size", 5);
     try {
-      options_.method = ecs::parseSeparationMethod(method);
-      if (teach_frames_ < 1) throw std::invalid_argument("teach_frames must be >= 1, got " + std::to_string(teach_frames_));
-      if (queue_size < 1) throw std::invalid_argument("queue_size must be >= 1");
-    } catch (const std::exception& e) {
+      initialise();
+    } catch (const std::exception& e) {  // before anything is advertised: nothing to release
       NODELET_FATAL("Separator cannot start: %s", e.what());
       throw;
     }
+  }
+
+  void initialise() {
+    ros::NodeHandle& nh = getNodeHandle();
+    ros::NodeHandle& pnh = getPrivateNodeHandle();
+    const ParameterReader read(pnh);
+    const std::string method = read.get("method", "regional_alpha");
+    try {
+      options_.method = ecs::parseSeparationMethod(method);
+    } catch (const std::exception& e) {
+      throw ecs::ConfigError("method", e.what());
+    }
+    teach_frames_ = read.atLeast("teach_frames", 8, 1);
+    teach_from_truth_ = read.get("teach_from_ground_truth", false);
+    reteach_on_epoch_change_ = read.get("reteach_on_epoch_change", true);
+    const int queue_size = read.atLeast("queue_size", 5, 1);
+    const bool approximate = read.get("approximate_sync", false);
+
+    frames_ = std::make_unique<FrameInput>(
+        nh, pnh, FrameInput::Topics{"left/image_raw", "right/image_raw", "calibration_mode"}, approximate, queue_size,
+        [this](const auto& left, const auto& right, const auto& mode) { frameCb(left, right, mode); });
+    if (teach_from_truth_) {
+      // The driver converts ground truth only for listeners: a small cost, only in the sim. The
+      // simulator stamps the truth exactly as the frames: always ExactTime. roscpp shares one
+      // subscription per topic between both inputs (no second transport of image_raw).
+      truth_ = std::make_unique<TruthInput>(
+          nh, pnh,
+          TruthInput::Topics{"left/image_raw", "right/image_raw", "calibration_mode", "ground_truth/left/image_scene",
+                             "ground_truth/right/image_scene"},
+          false, queue_size, [this](const auto& l, const auto& r, const auto& m, const auto& lt, const auto& rt) {
+            truthCb(l, r, m, lt, rt);
+          });
+    }
     image_transport::ImageTransport it(nh);
-    left_pub_ = it.advertise("left/image_scene", 2);
-    right_pub_ = it.advertise("right/image_scene", 2);
+    const auto cb = frames_->imageConnectCallback();
+    const auto truth_cb = truth_ ? truth_->imageConnectCallback() : image_transport::SubscriberStatusCallback();
+    const auto both_cb = [cb, truth_cb](const image_transport::SingleSubscriberPublisher& p) {
+      cb(p);
+      if (truth_cb) truth_cb(p);
+    };
+    left_pub_ = it.advertise("left/image_scene", 2, both_cb, both_cb);
+    right_pub_ = it.advertise("right/image_scene", 2, both_cb, both_cb);
+    for (LazySubscription* input : inputs()) {
+      input->watch(left_pub_);
+      input->watch(right_pub_);
+    }
     teach_srv_ = nh.advertiseService("teach", &SeparatorNodelet::teachService, this);
     diagnostics_ = std::make_unique<StageDiagnostics>(nh, pnh, "separator");
     diagnostics_->set("method", method);
     diagnostics_->set("template epoch", "none (not taught)");
+    for (LazySubscription* input : inputs()) input->start();  // subscribed while someone listens
+    NODELET_INFO("Separator: %s, teach %d frames from %s, %s sync, queue %d", method.c_str(), teach_frames_,
+                 teach_from_truth_ ? "ground truth (simulator)" : "the teach service (scene covered)",
+                 approximate ? "approximate" : "exact", queue_size);
+  }
 
-    left_sub_.subscribe(nh, "left/image_raw", queue_size);
-    right_sub_.subscribe(nh, "right/image_raw", queue_size);
-    mode_sub_.subscribe(nh, "calibration_mode", queue_size);
-    frame_sync_ = std::make_unique<message_filters::Synchronizer<FramePolicy>>(FramePolicy(queue_size), left_sub_,
-                                                                               right_sub_, mode_sub_);
-    frame_sync_->registerCallback(&SeparatorNodelet::frameCb, this);
-    if (teach_from_truth_) {
-      // The driver converts ground truth only for listeners: a small cost, only in the sim.
-      truth_left_sub_.subscribe(nh, "ground_truth/left/image_scene", queue_size);
-      truth_right_sub_.subscribe(nh, "ground_truth/right/image_scene", queue_size);
-      truth_sync_ = std::make_unique<message_filters::Synchronizer<TruthPolicy>>(
-          TruthPolicy(queue_size), left_sub_, right_sub_, mode_sub_, truth_left_sub_, truth_right_sub_);
-      truth_sync_->registerCallback(&SeparatorNodelet::truthCb, this);
-    }
-    NODELET_INFO("Separator: %s, teach %d frames from %s", method.c_str(), teach_frames_,
-                 teach_from_truth_ ? "ground truth (simulator)" : "the teach service (scene covered)");
+  // The inputs that exist (the truth only with teach_from_ground_truth).
+  std::vector<LazySubscription*> inputs() {
+    std::vector<LazySubscription*> out{frames_.get()};
+    if (truth_) out.push_back(truth_.get());
+    return out;
+  }
+
+  // A teach needs frames even when nobody listens to image_scene. Called without state_mutex_.
+  void needInputsForTeach(bool teaching) {
+    for (LazySubscription* input : inputs()) input->need(teaching);
   }
 
   void reportError(const std::string& message) {
@@ -158,7 +197,7 @@ class SeparatorNodelet : public nodelet::Nodelet {
 
   void frameCb(const ImageConstPtr& left, const ImageConstPtr& right, const CalibrationMode::ConstPtr& mode) {
     const std::string problem =
-        checkImagePair(*left, left_sub_.getTopic(), *right, right_sub_.getTopic(), {"mono8", "bgr8"});
+        checkImagePair(*left, frames_->topic(0), *right, frames_->topic(1), {"mono8", "bgr8"});
     diagnostics_->frameIn();
     diagnostics_->set("light on", mode->light_on ? "true" : "false");
     if (!problem.empty()) return reportError("frame dropped: " + problem);
@@ -166,13 +205,16 @@ class SeparatorNodelet : public nodelet::Nodelet {
     if (!mode->settled) return publishRaw(left, right, "light changing");
 
     std::shared_ptr<const StereoSeparator> separator;
+    bool teaching;
     {
       std::lock_guard<std::mutex> lock(state_mutex_);
       if (!teach_from_truth_ && teach_.active) addTeachFrame(*left, *right, nullptr, nullptr, mode->calibration_epoch);
       separator = separator_;
       if (teach_from_truth_ && (!separator || (reteach_on_epoch_change_ && separator->epoch() != mode->calibration_epoch)))
         startTeach(mode->calibration_epoch);
+      teaching = teach_.active;
     }
+    needInputsForTeach(teaching);
     if (!separator) {
       reportWarning("separation not taught yet: republishing the raw light-on frames");
       return publishRaw(left, right, "not taught");
@@ -199,7 +241,7 @@ class SeparatorNodelet : public nodelet::Nodelet {
       diagnostics_->framePublished(left->header.stamp,
                                    std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count());
     } catch (const std::exception& e) {  // e.g. the image size changed since teaching
-      reportError(left_sub_.getTopic() + ", " + right_sub_.getTopic() + ": cannot separate (" + e.what() +
+      reportError(frames_->topic(0) + ", " + frames_->topic(1) + ": cannot separate (" + e.what() +
                   "); republishing raw frames");
       publishRaw(left, right, "separation failed");
     }
@@ -209,12 +251,17 @@ class SeparatorNodelet : public nodelet::Nodelet {
   void truthCb(const ImageConstPtr& left, const ImageConstPtr& right, const CalibrationMode::ConstPtr& mode,
                const ImageConstPtr& left_truth, const ImageConstPtr& right_truth) {
     if (!mode->light_on || !mode->settled) return;
-    if (checkImagePair(*left, left_sub_.getTopic(), *right, right_sub_.getTopic(), {"mono8", "bgr8"}).size() ||
-        checkImagePair(*left, left_sub_.getTopic(), *left_truth, truth_left_sub_.getTopic(), {left->encoding}).size() ||
-        checkImagePair(*right, right_sub_.getTopic(), *right_truth, truth_right_sub_.getTopic(), {right->encoding}).size())
+    if (checkImagePair(*left, frames_->topic(0), *right, frames_->topic(1), {"mono8", "bgr8"}).size() ||
+        checkImagePair(*left, frames_->topic(0), *left_truth, truth_->topic(3), {left->encoding}).size() ||
+        checkImagePair(*right, frames_->topic(1), *right_truth, truth_->topic(4), {right->encoding}).size())
       return reportError("ground truth does not match the raw images: cannot teach from it");
-    std::lock_guard<std::mutex> lock(state_mutex_);
-    if (teach_.active) addTeachFrame(*left, *right, left_truth.get(), right_truth.get(), mode->calibration_epoch);
+    bool teaching;
+    {
+      std::lock_guard<std::mutex> lock(state_mutex_);
+      if (teach_.active) addTeachFrame(*left, *right, left_truth.get(), right_truth.get(), mode->calibration_epoch);
+      teaching = teach_.active;
+    }
+    needInputsForTeach(teaching);
   }
 
   // Called with state_mutex_ held.
@@ -249,9 +296,12 @@ class SeparatorNodelet : public nodelet::Nodelet {
   }
 
   bool teachService(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& res) {
-    std::lock_guard<std::mutex> lock(state_mutex_);
-    teach_ = TeachAccumulator();
-    teach_.active = true;
+    {
+      std::lock_guard<std::mutex> lock(state_mutex_);
+      teach_ = TeachAccumulator();
+      teach_.active = true;
+    }
+    needInputsForTeach(true);
     res.success = true;
     res.message = "averaging the next " + std::to_string(teach_frames_) + " light-on settled frames" +
                   (teach_from_truth_ ? " minus the ground-truth scene" : ": keep the scene covered");
@@ -261,10 +311,8 @@ class SeparatorNodelet : public nodelet::Nodelet {
   ecs::SeparatorOptions options_;
   int teach_frames_ = 8;
   bool teach_from_truth_ = false, reteach_on_epoch_change_ = true;
-  message_filters::Subscriber<Image> left_sub_, right_sub_, truth_left_sub_, truth_right_sub_;
-  message_filters::Subscriber<CalibrationMode> mode_sub_;
-  std::unique_ptr<message_filters::Synchronizer<FramePolicy>> frame_sync_;
-  std::unique_ptr<message_filters::Synchronizer<TruthPolicy>> truth_sync_;
+  std::unique_ptr<FrameInput> frames_;  // created in onInit, before any callback
+  std::unique_ptr<TruthInput> truth_;   // only with teach_from_ground_truth
   image_transport::Publisher left_pub_, right_pub_;
   ros::ServiceServer teach_srv_;
   ErrorThrottle errors_{5.0};

@@ -2,40 +2,20 @@
 
 #include <sensor_msgs/SetCameraInfo.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <stdexcept>
+#include <tuple>
 #include <utility>
 
 #include "embedded_calibration_stereo/core/geometry/config_error.h"
 #include "embedded_calibration_stereo/core/calibration/observation_validator.h"
 #include "embedded_calibration_stereo/ros/conversions.h"
+#include "embedded_calibration_stereo/ros/parameter_reader.h"
 
 namespace embedded_calibration_stereo {
 namespace {
-
-// Typed private parameters with defaults; a present value of the wrong type or range is an error.
-class ParamReader {
- public:
-  explicit ParamReader(const ros::NodeHandle& nh) : nh_(nh) {}
-  void read(const std::string& name, std::string* value) const {
-    if (nh_.hasParam(name) && !nh_.getParam(name, *value)) throw ecs::ConfigError(name, "must be a string");
-  }
-  void read(const std::string& name, bool* value) const {
-    if (nh_.hasParam(name) && !nh_.getParam(name, *value)) throw ecs::ConfigError(name, "must be true or false");
-  }
-  void read(const std::string& name, int* value, int min) const {
-    if (nh_.hasParam(name) && !nh_.getParam(name, *value)) throw ecs::ConfigError(name, "must be an integer");
-    if (*value < min) throw ecs::ConfigError(name, "must be >= " + std::to_string(min));
-  }
-  void read(const std::string& name, double* value) const {
-    if (nh_.hasParam(name) && (!nh_.getParam(name, *value) || !std::isfinite(*value)))
-      throw ecs::ConfigError(name, "must be a number");
-    if (*value < 0.0) throw ecs::ConfigError(name, "must be >= 0");
-  }
-
- private:
-  const ros::NodeHandle& nh_;
-};
 
 void appendIntrinsics(const ecs::PinholeCamera& camera, const ecs::CameraStddev& sd, std::vector<double>* values,
                       std::vector<double>* stddevs) {
@@ -55,32 +35,36 @@ CommitTarget parseCommitTarget(const std::string& name) {
 
 CalibratorParams loadCalibratorParams(const ros::NodeHandle& pnh, const std::string& default_device_config) {
   CalibratorParams p;
-  const ParamReader r(pnh);
-  p.device_config = default_device_config;
-  r.read("device_config", &p.device_config);
-  r.read("left_frame_id", &p.left_frame_id);
-  r.read("right_frame_id", &p.right_frame_id);
-  r.read("auto_calibrate", &p.auto_calibrate);
-  r.read("min_frames", &p.min_frames, 1);
-  r.read("max_frames", &p.max_frames, p.min_frames);
-  r.read("service_timeout_s", &p.service_timeout_s);
-  std::string commit = "driver";
-  r.read("commit", &commit);
-  p.commit = parseCommitTarget(commit);
-  r.read("estimate_tangential", &p.terms.estimate_tangential);
-  r.read("estimate_k3", &p.terms.estimate_k3);
-  r.read("loss_scale_px", &p.adjustment.loss_scale_px);
-  r.read("max_rms_px", &p.gate.max_rms_px);
-  r.read("max_epipolar_rms_px", &p.gate.max_epipolar_rms_px);
-  r.read("max_outlier_fraction", &p.gate.max_outlier_fraction);
-  r.read("min_boards_per_camera", &p.gate.min_boards_per_camera, 1);
-  r.read("max_focal_stddev_rel", &p.gate.max_focal_stddev_rel);
-  r.read("max_principal_point_stddev_px", &p.gate.max_principal_point_stddev_px);
-  r.read("max_distortion_stddev", &p.gate.max_distortion_stddev);
-  r.read("max_baseline_stddev_rel", &p.gate.max_baseline_stddev_rel);
-  r.read("max_rotation_stddev_deg", &p.gate.max_rotation_stddev_deg);
-  r.read("min_rms_improvement_rel", &p.gate.min_rms_improvement_rel);
-  r.read("in_force_max_rms_px", &p.gate.in_force_max_rms_px);
+  const ParameterReader read(pnh);
+  // Thresholds, scales and times: none may be negative.
+  const auto non_negative = [&read](const std::string& name, double* value) {
+    *value = read.atLeast(name, *value, 0.0);
+  };
+  p.device_config = read.get("device_config", default_device_config);
+  p.left_frame_id = read.get("left_frame_id", p.left_frame_id);
+  p.right_frame_id = read.get("right_frame_id", p.right_frame_id);
+  p.auto_calibrate = read.get("auto_calibrate", p.auto_calibrate);
+  p.min_frames = read.atLeast("min_frames", p.min_frames, 1);
+  p.max_frames = read.atLeast("max_frames", p.max_frames, p.min_frames);
+  non_negative("service_timeout_s", &p.service_timeout_s);
+  p.commit = parseCommitTarget(read.get("commit", "driver"));
+  p.rectification_alpha = read.get("rectification_alpha", p.rectification_alpha);
+  if (!(p.rectification_alpha == -1.0 || (p.rectification_alpha >= 0.0 && p.rectification_alpha <= 1.0)))
+    throw ecs::ConfigError("rectification_alpha", "must be in [0, 1], or -1 for OpenCV's default scaling");
+  p.terms.estimate_tangential = read.get("estimate_tangential", p.terms.estimate_tangential);
+  p.terms.estimate_k3 = read.get("estimate_k3", p.terms.estimate_k3);
+  non_negative("loss_scale_px", &p.adjustment.loss_scale_px);
+  non_negative("max_rms_px", &p.gate.max_rms_px);
+  non_negative("max_epipolar_rms_px", &p.gate.max_epipolar_rms_px);
+  non_negative("max_outlier_fraction", &p.gate.max_outlier_fraction);
+  p.gate.min_boards_per_camera = read.atLeast("min_boards_per_camera", p.gate.min_boards_per_camera, 1);
+  non_negative("max_focal_stddev_rel", &p.gate.max_focal_stddev_rel);
+  non_negative("max_principal_point_stddev_px", &p.gate.max_principal_point_stddev_px);
+  non_negative("max_distortion_stddev", &p.gate.max_distortion_stddev);
+  non_negative("max_baseline_stddev_rel", &p.gate.max_baseline_stddev_rel);
+  non_negative("max_rotation_stddev_deg", &p.gate.max_rotation_stddev_deg);
+  non_negative("min_rms_improvement_rel", &p.gate.min_rms_improvement_rel);
+  non_negative("in_force_max_rms_px", &p.gate.in_force_max_rms_px);
   if (const std::string e = p.adjustment.Check(); !e.empty()) throw ecs::ConfigError("loss_scale_px", e);
   if (const std::string e = p.gate.Check(); !e.empty()) throw ecs::ConfigError("quality gate", e);
   return p;
@@ -120,6 +104,16 @@ CalibrationStatus makeStatus(const ecs::BundleAdjustmentSummary& summary, const 
   return status;
 }
 
+bool carriesCalibration(const sensor_msgs::CameraInfo& published, const sensor_msgs::CameraInfo& committed) {
+  const auto near = [](double a, double b) { return std::abs(a - b) <= 1e-6 * std::max(1.0, std::abs(b)); };
+  const auto same = [&](const auto& a, const auto& b) {
+    return a.size() == b.size() && std::equal(a.begin(), a.end(), b.begin(), near);
+  };
+  return published.width == committed.width && published.height == committed.height &&
+         published.distortion_model == committed.distortion_model && same(published.D, committed.D) &&
+         same(published.K, committed.K) && same(published.R, committed.R) && same(published.P, committed.P);
+}
+
 CalibrationSession::CalibrationSession(ros::NodeHandle nh, CalibratorParams params, ecs::CalibrationDevice device)
     : nh_(std::move(nh)),
       params_(std::move(params)),
@@ -131,7 +125,8 @@ CalibrationSession::CalibrationSession(ros::NodeHandle nh, CalibratorParams para
 CalibrationStatus CalibrationSession::solve(const std::vector<ecs::StereoObservation>& frames,
                                             const sensor_msgs::CameraInfo* left_info,
                                             const sensor_msgs::CameraInfo* right_info, uint32_t epoch,
-                                            bool dry_run) {
+                                            bool dry_run, std::optional<CommittedCalibration>* committed) {
+  committed->reset();
   if (!left_info || !right_info) {
     CalibrationStatus status;
     status.header.stamp = ros::Time::now();
@@ -178,22 +173,31 @@ CalibrationStatus CalibrationSession::solve(const std::vector<ecs::StereoObserva
     status.reason = kAcceptedNotCommittedReason;
     return status;
   }
-  const std::string commit_error = commit(candidate.rig, *left_info);
+  CommittedCalibration infos;
+  try {
+    std::tie(infos.left, infos.right) = toStereoCameraInfo(candidate.rig, params_.rectification_alpha);
+  } catch (const std::invalid_argument& e) {  // a rig that cannot be rectified is not committed
+    status.accepted = false;
+    status.reason = std::string("not committed: ") + e.what();
+    return status;
+  }
+  const std::string commit_error = commit(infos, candidate.rig, *left_info);
   if (!commit_error.empty()) {
     status.accepted = false;
     status.reason = "not committed: " + commit_error;
     return status;
   }
-  // The driver increments its epoch once per accepted set_camera_info.
-  status.epoch = epoch + 2;
+  // status.epoch stays `epoch`: how far the driver moves its epoch per set_camera_info is the
+  // driver's business, so the caller reads the new epoch from the driver's frames.
+  *committed = std::move(infos);
   return status;
 }
 
-std::string CalibrationSession::commit(const ecs::StereoRig& rig, const sensor_msgs::CameraInfo& left_in_force) {
-  const auto infos = toStereoCameraInfo(rig);
+std::string CalibrationSession::commit(const CommittedCalibration& infos, const ecs::StereoRig& rig,
+                                       const sensor_msgs::CameraInfo& left_in_force) {
   std::string error;
-  if (!callSetCameraInfo("left", infos.first, &error)) return error;
-  if (!callSetCameraInfo("right", infos.second, &error)) {
+  if (!callSetCameraInfo("left", infos.left, &error)) return error;
+  if (!callSetCameraInfo("right", infos.right, &error)) {
     // Never leave a half-updated pair: put the left calibration in force back.
     std::string restore_error;
     if (!callSetCameraInfo("left", left_in_force, &restore_error))

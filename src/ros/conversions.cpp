@@ -1,20 +1,12 @@
 #include "embedded_calibration_stereo/ros/conversions.h"
 
 #include <cmath>
-#include <opencv2/calib3d.hpp>
-#include <opencv2/core/eigen.hpp>
 #include <sensor_msgs/distortion_models.h>
+
+#include "embedded_calibration_stereo/core/depth/rectification.h"
 
 namespace embedded_calibration_stereo {
 namespace {
-
-cv::Matx33d cameraMatrix(const ecs::PinholeCamera& c) {
-  return cv::Matx33d(c.fx, c.skew, c.cx, 0, c.fy, c.cy, 0, 0, 1);
-}
-
-cv::Mat distortionVector(const ecs::PinholeCamera& c) {
-  return (cv::Mat_<double>(1, 5) << c.dist[0], c.dist[1], c.dist[2], c.dist[3], c.dist[4]);
-}
 
 // Fields shared by the mono and stereo messages: size, model, K, D.
 sensor_msgs::CameraInfo intrinsicsMsg(const ecs::PinholeCamera& camera) {
@@ -23,16 +15,16 @@ sensor_msgs::CameraInfo intrinsicsMsg(const ecs::PinholeCamera& camera) {
   info.height = static_cast<uint32_t>(camera.height);
   info.distortion_model = sensor_msgs::distortion_models::PLUMB_BOB;
   info.D.assign(camera.dist.begin(), camera.dist.end());
-  const cv::Matx33d k = cameraMatrix(camera);
+  const cv::Matx33d k = ecs::cameraMatrix(camera);
   for (int i = 0; i < 9; ++i) info.K[i] = k.val[i];
   return info;
 }
 
-void setRectification(const cv::Mat& r, const cv::Mat& p, sensor_msgs::CameraInfo* info) {
+void setRectification(const cv::Matx33d& r, const cv::Matx34d& p, sensor_msgs::CameraInfo* info) {
   for (int i = 0; i < 3; ++i)
-    for (int j = 0; j < 3; ++j) info->R[3 * i + j] = r.at<double>(i, j);
+    for (int j = 0; j < 3; ++j) info->R[3 * i + j] = r(i, j);
   for (int i = 0; i < 3; ++i)
-    for (int j = 0; j < 4; ++j) info->P[4 * i + j] = p.at<double>(i, j);
+    for (int j = 0; j < 4; ++j) info->P[4 * i + j] = p(i, j);
 }
 
 Eigen::Matrix3d rotationOf(const boost::array<double, 9>& r) {
@@ -47,7 +39,7 @@ Eigen::Matrix3d rotationOf(const boost::array<double, 9>& r) {
 sensor_msgs::CameraInfo toCameraInfo(const ecs::PinholeCamera& camera) {
   sensor_msgs::CameraInfo info = intrinsicsMsg(camera);
   info.R = {1, 0, 0, 0, 1, 0, 0, 0, 1};
-  const cv::Matx33d k = cameraMatrix(camera);
+  const cv::Matx33d k = ecs::cameraMatrix(camera);
   for (int i = 0; i < 3; ++i) {
     for (int j = 0; j < 3; ++j) info.P[4 * i + j] = k(i, j);
     info.P[4 * i + 3] = 0.0;
@@ -56,21 +48,17 @@ sensor_msgs::CameraInfo toCameraInfo(const ecs::PinholeCamera& camera) {
 }
 
 std::pair<sensor_msgs::CameraInfo, sensor_msgs::CameraInfo> toStereoCameraInfo(
-    const ecs::StereoRig& rig) {
+    const ecs::StereoRig& rig, double alpha) {
   sensor_msgs::CameraInfo left = intrinsicsMsg(rig.left);
   sensor_msgs::CameraInfo right = intrinsicsMsg(rig.right);
-  cv::Mat rotation, translation;
-  cv::eigen2cv(Eigen::Matrix3d(rig.right_from_left.rotation()), rotation);
-  cv::eigen2cv(Eigen::Vector3d(rig.right_from_left.translation()), translation);
-  cv::Mat r1, r2, p1, p2, q;
-  // p_right = R p_left + T is exactly stereoRectify's convention. Alpha 0 keeps only valid
-  // pixels; zero disparity at infinity makes cx' equal in both cameras.
-  cv::stereoRectify(cv::Mat(cameraMatrix(rig.left)), distortionVector(rig.left),
-                    cv::Mat(cameraMatrix(rig.right)), distortionVector(rig.right),
-                    cv::Size(rig.left.width, rig.left.height), rotation, translation, r1, r2, p1,
-                    p2, q, cv::CALIB_ZERO_DISPARITY, 0.0);
-  setRectification(r1, p1, &left);
-  setRectification(r2, p2, &right);
+  // Bouguet is the rectification CameraInfo's R and P mean to stereo_image_proc (and the
+  // rectifier's bouguet method applies them as they are).
+  ecs::RectificationOptions options;
+  options.method = ecs::RectificationMethod::kBouguet;
+  options.alpha = alpha;
+  const ecs::RectificationGeometry g = ecs::computeRectificationGeometry(rig, options);
+  setRectification(g.R1, g.P1, &left);
+  setRectification(g.R2, g.P2, &right);
   return {left, right};
 }
 

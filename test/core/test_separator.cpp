@@ -253,6 +253,7 @@ TEST(Separator, RejectsWrongInputs) {
   EXPECT_THROW(separator.separate(same, &same), std::invalid_argument);
   try {
     separator.separate(cv::Mat(48, 32, CV_8UC1), &out);
+    ADD_FAILURE() << "an image of another size than the template must throw";
   } catch (const std::invalid_argument& e) {
     EXPECT_NE(std::string(e.what()).find("64x48"), std::string::npos) << e.what();
   }

@@ -1,13 +1,18 @@
 // The calibrator's ROS-side helpers that need no master: which observation messages are
-// dropped and why, and the CalibrationStatus filled from a solve.
+// dropped and why, the CalibrationStatus filled from a solve, and whether a published
+// camera_info carries a committed calibration.
 #include <gtest/gtest.h>
 #include <ros/time.h>
 
 #include <cmath>
+#include <cstdlib>
+#include <filesystem>
 #include <limits>
 
 #include "embedded_calibration_stereo/core/geometry/config_io.h"
+#include "embedded_calibration_stereo/ros/calibration_file.h"
 #include "embedded_calibration_stereo/ros/calibration_session.h"
+#include "embedded_calibration_stereo/ros/conversions.h"
 
 namespace ecsr = embedded_calibration_stereo;
 
@@ -121,4 +126,50 @@ TEST(MakeStatus, FillsEveryFieldInCameraInfoOrder) {
   EXPECT_EQ(status.rotation_stddev_deg, 0.02);
   EXPECT_EQ(status.solve_ms, 80);
   EXPECT_TRUE(ecsr::makeStatus(s, ecs::GateDecision{true, "ignored"}).reason.empty());
+}
+
+TEST(CarriesCalibration, TellsTheCommittedCalibrationFromAnother) {
+  ecs::StereoRig rig;
+  rig.left.width = rig.right.width = 752;
+  rig.left.height = rig.right.height = 480;
+  rig.left.fx = 652.4;
+  rig.left.fy = 651.3;
+  rig.left.cx = 372.9;
+  rig.left.cy = 243.4;
+  rig.left.dist = {-0.281, 0.0712, 0.00031, -0.00052, 0.0};
+  rig.right = rig.left;
+  rig.right.fx = 648.7;
+  rig.right_from_left.translation() << -0.1203, 0.0004, 0.0011;
+  const auto [left, right] = ecsr::toStereoCameraInfo(rig);
+  EXPECT_TRUE(ecsr::carriesCalibration(left, left));
+  EXPECT_TRUE(ecsr::carriesCalibration(right, right));
+  EXPECT_FALSE(ecsr::carriesCalibration(right, left));
+
+  // A driver storing the calibration as a camera_calibration_parsers file and reading it back
+  // still publishes the committed calibration.
+  char dir[] = "/tmp/ecs_carries_calibration_XXXXXX";
+  ASSERT_NE(mkdtemp(dir), nullptr);
+  std::string error;
+  sensor_msgs::CameraInfo reread;
+  ASSERT_TRUE(ecsr::writeCalibrationFileAtomic(std::string(dir) + "/left.yaml", "left", left, &error)) << error;
+  ASSERT_TRUE(ecsr::readCalibrationFile(std::string(dir) + "/left.yaml", nullptr, &reread, &error)) << error;
+  std::filesystem::remove_all(dir);
+  EXPECT_TRUE(ecsr::carriesCalibration(reread, left));
+
+  // Another calibration: each field that a commit changes, changed a little.
+  const auto changed = [&](auto edit) {
+    sensor_msgs::CameraInfo other = left;
+    edit(&other);
+    return ecsr::carriesCalibration(other, left);
+  };
+  EXPECT_FALSE(changed([](auto* i) { i->K[0] *= 1.0 + 1e-5; }));
+  EXPECT_FALSE(changed([](auto* i) { i->K[5] += 1e-3; }));
+  EXPECT_FALSE(changed([](auto* i) { i->D[2] += 1e-5; }));
+  EXPECT_FALSE(changed([](auto* i) { i->D.push_back(0.0); }));
+  EXPECT_FALSE(changed([](auto* i) { i->R[1] += 1e-5; }));
+  EXPECT_FALSE(changed([](auto* i) { i->P[3] -= 1e-3; }));
+  EXPECT_FALSE(changed([](auto* i) { i->width = 640; }));
+  EXPECT_FALSE(changed([](auto* i) { i->distortion_model = "equidistant"; }));
+  // The header is not part of the calibration.
+  EXPECT_TRUE(changed([](auto* i) { i->header.frame_id = "elsewhere"; }));
 }

@@ -4,6 +4,9 @@
 #include <image_geometry/stereo_camera_model.h>
 #include <tf2_eigen/tf2_eigen.h>
 
+#include <opencv2/calib3d.hpp>
+#include <stdexcept>
+
 #include "embedded_calibration_stereo/ros/conversions.h"
 
 using namespace embedded_calibration_stereo;
@@ -101,6 +104,48 @@ TEST(Conversions, StereoCameraInfoRoundTripRecoversTheRig) {
   EXPECT_LT((back.right_from_left.translation() - r.right_from_left.translation()).norm(), 1e-9);
   EXPECT_EQ(back.right.fx, r.right.fx);
   EXPECT_EQ(back.left.cy, r.left.cy);
+}
+
+// R and P against cv::stereoRectify called here on the rig's K, D, R, T (Bouguet, zero
+// disparity at infinity) with the same alpha; alpha 0 is the default.
+TEST(Conversions, StereoRectificationIsOpenCvsForTheGivenAlpha) {
+  const ecs::StereoRig r = rig();
+  const cv::Matx33d k1(r.left.fx, 0, r.left.cx, 0, r.left.fy, r.left.cy, 0, 0, 1);
+  const cv::Matx33d k2(r.right.fx, 0, r.right.cx, 0, r.right.fy, r.right.cy, 0, 0, 1);
+  const cv::Matx<double, 1, 5> d1(r.left.dist.data()), d2(r.right.dist.data());
+  cv::Matx33d rotation;
+  for (int i = 0; i < 9; ++i) rotation(i / 3, i % 3) = r.right_from_left.linear()(i / 3, i % 3);
+  const Eigen::Vector3d t = r.right_from_left.translation();
+  std::vector<double> focal;
+  for (const double alpha : {0.0, 1.0}) {
+    cv::Mat r1, r2, p1, p2, q;
+    cv::stereoRectify(k1, d1, k2, d2, cv::Size(r.left.width, r.left.height), rotation,
+                      cv::Vec3d(t.x(), t.y(), t.z()), r1, r2, p1, p2, q, cv::CALIB_ZERO_DISPARITY,
+                      alpha);
+    const auto infos = alpha == 0.0 ? toStereoCameraInfo(r) : toStereoCameraInfo(r, alpha);
+    for (int i = 0; i < 9; ++i) {
+      EXPECT_NEAR(infos.first.R[i], r1.at<double>(i / 3, i % 3), 1e-12) << "alpha " << alpha << " R1 " << i;
+      EXPECT_NEAR(infos.second.R[i], r2.at<double>(i / 3, i % 3), 1e-12) << "alpha " << alpha << " R2 " << i;
+    }
+    for (int i = 0; i < 12; ++i) {
+      EXPECT_NEAR(infos.first.P[i], p1.at<double>(i / 4, i % 4), 1e-9) << "alpha " << alpha << " P1 " << i;
+      EXPECT_NEAR(infos.second.P[i], p2.at<double>(i / 4, i % 4), 1e-9) << "alpha " << alpha << " P2 " << i;
+    }
+    focal.push_back(infos.first.P[0]);
+  }
+  // Alpha 1 keeps every raw pixel, so it zooms out: the two cases differ (the test can tell).
+  EXPECT_LT(focal[1], focal[0] * 0.98);
+}
+
+TEST(Conversions, StereoCameraInfoOfAnUnusableRigThrowsWithAReason) {
+  ecs::StereoRig r = rig();
+  r.right_from_left.translation().setZero();
+  try {
+    toStereoCameraInfo(r);
+    FAIL() << "a rig without baseline was converted";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("right_from_left"), std::string::npos) << e.what();
+  }
 }
 
 TEST(Conversions, UnusableCameraInfoIsRefusedWithAReason) {

@@ -101,7 +101,14 @@ TEST(TrackerSim, TeachesOnStartThenTracksEverySettledLightOnFrame) {
   ecs::PatternPrior prior;
   ASSERT_NO_THROW(prior = ecs::readPatternPrior(prior_file)) << prior_file;
   ASSERT_EQ(prior.cameras.size(), 2u);
-  EXPECT_FALSE(std::filesystem::exists(prior_file + ".tmp.yaml"));
+  // Written through a temporary file next to it (writeFileAtomically: "<file>.tmp.XXXXXX"),
+  // renamed over the target: none may be left in the folder once the prior is there.
+  std::vector<std::string> leftovers;
+  for (const auto& entry : std::filesystem::directory_iterator(cleanup.path))
+    if (entry.path().filename().string().find(".tmp.") != std::string::npos)
+      leftovers.push_back(entry.path().filename().string());
+  EXPECT_TRUE(leftovers.empty()) << "temporary files left next to the prior: "
+                                 << ::testing::PrintToString(leftovers);
 
   // Two more complete windows after the first observation.
   ASSERT_TRUE(waitForWindow(first, 6.0));

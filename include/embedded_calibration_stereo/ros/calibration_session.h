@@ -46,6 +46,9 @@ struct CalibratorParams {
   int max_frames = 30;         // frames kept per window (the first ones)
   double service_timeout_s = 2.0;  // for each set_light / set_camera_info call (wall time)
   CommitTarget commit = CommitTarget::kDriver;
+  // cv::stereoRectify's alpha for the committed CameraInfo R and P: 0 every rectified pixel
+  // valid, 1 every raw pixel kept, -1 OpenCV's default scaling.
+  double rectification_alpha = 0.0;
   ecs::BundleAdjustmentOptions adjustment;
   ecs::BundleAdjustmentConfig terms;  // which distortion terms are estimated (k1 k2 by default)
   ecs::GateOptions gate;
@@ -63,6 +66,16 @@ std::vector<std::string> observationDefects(const ecs::StereoObservation& observ
 // CalibrationStatus of a solve (every field filled; intrinsics fx, fy, cx, cy, k1, k2, p1, p2, k3).
 CalibrationStatus makeStatus(const ecs::BundleAdjustmentSummary& summary, const ecs::GateDecision& decision);
 
+// The pair a successful commit sent to the driver's set_camera_info services.
+struct CommittedCalibration {
+  sensor_msgs::CameraInfo left, right;
+};
+
+// True when `published` (a camera_info of the driver) carries the calibration `committed`: same
+// image size and distortion model, and D, K, R, P equal to 1e-6 (relative above 1; a driver may
+// store the calibration as text and read it back). Header, binning and ROI are not compared.
+bool carriesCalibration(const sensor_msgs::CameraInfo& published, const sensor_msgs::CameraInfo& committed);
+
 // Solve, gate and commit. Threading: solve() runs on the calibrator's worker thread only (it
 // blocks on service calls and on the solver); broadcastTransform() may also be called from a
 // subscriber callback (the calibration in force at start-up), so the broadcaster is guarded.
@@ -78,9 +91,12 @@ class CalibrationSession {
   // solves again against the unchanged calibration in force: the retry). With commit "none" an
   // acceptable calibration is published on /tf_static only: status.accepted is true, its reason
   // kAcceptedNotCommittedReason and its epoch `epoch` (still in force: nothing was committed).
+  // status.epoch is always `epoch`: after a commit, `*committed` holds the pair sent to the
+  // driver, and the caller reads the epoch the driver put in force from the driver's frames
+  // (see carriesCalibration); `*committed` is reset otherwise.
   CalibrationStatus solve(const std::vector<ecs::StereoObservation>& frames,
                           const sensor_msgs::CameraInfo* left_info, const sensor_msgs::CameraInfo* right_info,
-                          uint32_t epoch, bool dry_run);
+                          uint32_t epoch, bool dry_run, std::optional<CommittedCalibration>* committed);
 
   // The left->right optical transform of `rig` on /tf_static (also sent at every commit).
   void broadcastTransform(const ecs::StereoRig& rig);
@@ -91,7 +107,8 @@ class CalibrationSession {
  private:
   // Empty on success, otherwise why the commit failed (the left calibration is then restored
   // to `left_in_force` when only the right one was refused).
-  std::string commit(const ecs::StereoRig& rig, const sensor_msgs::CameraInfo& left_in_force);
+  std::string commit(const CommittedCalibration& infos, const ecs::StereoRig& rig,
+                     const sensor_msgs::CameraInfo& left_in_force);
   bool callSetCameraInfo(const std::string& side, const sensor_msgs::CameraInfo& info, std::string* error);
 
   ros::NodeHandle nh_;

@@ -6,8 +6,9 @@
 //  - distortion_model "plumb_bob", D = [k1, k2, p1, p2, k3];
 //  - K the raw camera matrix; R the rectifying rotation; P the projection of the rectified
 //    camera: P = [fx' 0 cx' Tx; 0 fy' cy' Ty; 0 0 1 0];
-//  - for a stereo pair, R and P come from cv::stereoRectify (Bouguet, alpha 0, zero disparity at
-//    infinity) so that the right P has Tx = -fx' * baseline and
+//  - for a stereo pair, R and P are the core's Bouguet rectification (ecs::
+//    computeRectificationGeometry: cv::stereoRectify, zero disparity at infinity, alpha 0 unless
+//    asked) so that the right P has Tx = -fx' * baseline and
 //    image_geometry::StereoCameraModel::baseline() equals the rig's baseline.
 // All functions are pure and thread-safe.
 #include <Eigen/Geometry>
@@ -28,11 +29,14 @@ namespace embedded_calibration_stereo {
 // The header is left empty; the caller stamps it.
 sensor_msgs::CameraInfo toCameraInfo(const ecs::PinholeCamera& camera);
 
-// Left and right CameraInfo of a stereo rig with the rectification of cv::stereoRectify
-// (alpha 0): R1/R2 rotate each raw optical frame into the common rectified frame, P1/P2 share
-// fx', fy', cx', cy' and P2(0,3) = -fx' * baseline.
+// Left and right CameraInfo of a stereo rig with its Bouguet rectification
+// (ecs::computeRectificationGeometry): R1/R2 rotate each raw optical frame into the common
+// rectified frame, P1/P2 share fx', fy', cx', cy' and P2(0,3) = -fx' * baseline. `alpha` is
+// cv::stereoRectify's: 0 zooms so that every rectified pixel is valid, 1 keeps every raw pixel,
+// -1 is OpenCV's default scaling. Throws std::invalid_argument when the rig is not usable
+// (invalid camera, zero baseline, left and right sizes differ).
 std::pair<sensor_msgs::CameraInfo, sensor_msgs::CameraInfo> toStereoCameraInfo(
-    const ecs::StereoRig& rig);
+    const ecs::StereoRig& rig, double alpha = 0.0);
 
 // K and D of a CameraInfo as a core camera (R and P are ignored). Accepts plumb_bob (or an
 // empty model) with 0, 4 or 5 coefficients. Returns false and explains why in *error when the

@@ -35,8 +35,8 @@ struct DriverParams {
 };
 
 // Reads and validates the parameters. `default_sim_config` is used when sim_config is not set.
-// Checks types, ranges and names (backend, light_backend, encodings, escapes); the existence of
-// files and devices is checked when the backends open them.
+// Checks types (ParameterReader), ranges and names (backend, light_backend, encodings, escapes);
+// the existence of files and devices is checked when the backends open them.
 DriverParams loadDriverParams(const ros::NodeHandle& private_nh, const std::string& default_sim_config);
 
 }  // namespace embedded_calibration_stereo

@@ -125,357 +125,453 @@ struct CornerResidual {
   const CornerTrack* track = nullptr;  // the observations this residual stands for
 };
 
+// One Solve() call, in the stages of COLMAP's bundle adjuster: check the inputs, start the
+// cameras, set up the parameter blocks, add the residuals, hold blocks and set manifolds, run
+// Ceres, then the residual statistics (robust loss, outliers), the covariance and the summary.
+// Each stage reads what the earlier ones left in the members. Lives on Solve()'s stack; Ceres
+// keeps pointers into the blocks, so it is neither copied nor moved.
+class AdjustmentRun {
+ public:
+  AdjustmentRun(const BundleAdjustmentOptions& options, const BundleAdjustmentConfig& config,
+                const CalibrationInput& input)
+      : options_(options), config_(config), input_(input), problem_(problemOptions()) {}
+  AdjustmentRun(const AdjustmentRun&) = delete;
+  AdjustmentRun& operator=(const AdjustmentRun&) = delete;
+
+  BundleAdjustmentSummary run() {
+    if (!validateInputs() || !initializeCameras() || !buildParameterBlocks()) return out_;
+    addResiduals();
+    holdBlocksAndSetManifolds();
+    if (!runSolver()) return out_;
+    residualStatistics();
+    computeCovariance();
+    out_.success = true;
+    out_.solve_ms = msSince(start_);
+    return out_;
+  }
+
+ private:
+  static ceres::Problem::Options problemOptions() {
+    ceres::Problem::Options o;
+    o.loss_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
+    o.manifold_ownership = ceres::TAKE_OWNERSHIP;
+    return o;
+  }
+  static double msSince(Clock::time_point t) {
+    return std::chrono::duration<double, std::milli>(Clock::now() - t).count();
+  }
+  // Records why the solve failed; returns false for `return fail(...)` in the stages.
+  bool fail(const std::string& why) {
+    out_.success = false;
+    out_.message = why;
+    out_.solve_ms = msSince(start_);
+    return false;
+  }
+
+  // Options, config, board pose mode and layout, image size, then the observations (1).
+  bool validateInputs() {
+    std::string problem_text = options_.Check();
+    if (!problem_text.empty()) return fail("invalid options: " + problem_text);
+    problem_text = config_.Check();
+    if (!problem_text.empty()) return fail("invalid config: " + problem_text);
+    if (!input_.frames || (!input_.boards && !input_.device))
+      return fail("no observations or no board layout given");
+    mode_ = options_.board_pose_mode;
+    if (mode_ == BoardPoseMode::kAuto)
+      mode_ = input_.device ? BoardPoseMode::kDeviceModel : BoardPoseMode::kSharedAcrossFrames;
+    device_mode_ = mode_ == BoardPoseMode::kDeviceModel;
+    shared_ = mode_ != BoardPoseMode::kPerFrame;
+    if (device_mode_ && !input_.device) return fail("the device model needs the device");
+    if (input_.device) {
+      const std::string device_problem = input_.device->validate();
+      if (!device_problem.empty()) return fail("invalid device: " + device_problem);
+      device_layout_ = input_.device->virtualBoards();
+    }
+    // The device model takes its layout from the device, the free modes the given one.
+    layout_ = (device_mode_ || !input_.boards) ? &device_layout_ : input_.boards;
+    out_.board_poses = device_mode_                        ? "device model"
+                       : mode_ == BoardPoseMode::kPerFrame ? "per-frame free poses"
+                                                           : "shared free poses";
+
+    // Image size: given, or that of the calibration in force; both must agree.
+    width_ = input_.image_width, height_ = input_.image_height;
+    if (input_.in_force) {
+      const StereoRig& f = *input_.in_force;
+      const std::string rig_problem = f.validate();
+      if (!rig_problem.empty()) return fail("calibration in force is invalid: " + rig_problem);
+      if (f.left.width != f.right.width || f.left.height != f.right.height)
+        return fail("left and right image sizes of the calibration in force differ");
+      if (width_ <= 0 && height_ <= 0) width_ = f.left.width, height_ = f.left.height;
+      if (width_ != f.left.width || height_ != f.left.height)
+        return fail("image size " + std::to_string(width_) + "x" + std::to_string(height_) +
+                    " differs from the calibration in force (" + std::to_string(f.left.width) +
+                    "x" + std::to_string(f.left.height) + ")");
+    }
+    if (width_ <= 0 || height_ <= 0) return fail("image size unknown or invalid");
+
+    ObservationValidationOptions vo;
+    vo.image_width = width_;
+    vo.image_height = height_;
+    vo.min_corners_per_board = options_.min_corners_per_board;
+    vo.max_outside_image_px = options_.max_outside_image_px;
+    valid_ = validateObservations(*input_.frames, *layout_, vo);
+    out_.dropped = std::move(valid_.dropped);
+    if (valid_.views.empty()) return fail("no usable board observation");
+    return true;
+  }
+
+  // The initial cameras (2): the calibration in force, Zhang's closed form, or - for the device
+  // model - a free shared-pose solve, whose virtual boards the nominal device is aligned to next.
+  bool initializeCameras() {
+    if (device_mode_) {
+      BundleAdjustmentOptions free_options = options_;
+      free_options.board_pose_mode = BoardPoseMode::kSharedAcrossFrames;
+      free_options.compute_covariance = false;
+      CalibrationInput free_input = input_;
+      free_input.boards = layout_;
+      free_input.device = nullptr;
+      free_input.image_width = width_;
+      free_input.image_height = height_;
+      free_solve_ = BundleAdjuster(free_options, config_).Solve(free_input);
+      if (!free_solve_->success)
+        return fail("device model: the free-pose solve that starts it failed: " +
+                    free_solve_->message);
+    }
+    const bool use_in_force =
+        options_.initialization == InitializationMode::kFromInForce ||
+        (options_.initialization == InitializationMode::kAuto && input_.in_force.has_value());
+    if (device_mode_) {
+      initial_ = free_solve_->rig;
+      out_.initialization = free_solve_->initialization;
+    } else if (use_in_force) {
+      if (!input_.in_force)
+        return fail("initialisation from the calibration in force, but none given");
+      initial_ = *input_.in_force;
+      out_.initialization = "in force";
+    } else {
+      ZhangInitialization zhang = initializeWithZhang(valid_.views, *layout_, width_, height_);
+      if (!zhang.ok) return fail(zhang.message);
+      initial_ = zhang.rig;
+      out_.initialization = "zhang";
+    }
+    return true;
+  }
+
+  // The parameter blocks (3): cameras, extrinsics, and the board poses (PnP, or the layout's)
+  // or the device pose and planes (aligned to the free solve, or the given device's). Views
+  // whose board gets no initial pose are dropped here.
+  bool buildParameterBlocks() {
+    intrinsics_ = {{toBlock(initial_.left), toBlock(initial_.right)}};
+    extrinsics_ = toBlock(initial_.right_from_left);
+    priors_.angle_tolerance_rad = options_.device_prior_angle_deg * M_PI / 180.0;
+    priors_.position_tolerance_m = options_.device_prior_position_m;
+    priors_.refine_planes = options_.refine_mirror_planes;
+    const std::vector<VirtualBoard>& layout = *layout_;
+    std::vector<BoardView>& views = valid_.views;
+    if (device_mode_) {
+      device_blocks_ = std::make_unique<DeviceModelBlocks>(*input_.device);
+      if (!config_.board_poses_from_layout &&
+          device_blocks_->alignTo(layout, free_solve_->rig_from_board, priors_) < 0)
+        return fail("device model: no virtual board to align the device to");
+      return true;
+    }
+    std::set<PoseKey> failed;
+    const std::map<PoseKey, Eigen::Isometry3d> initial_poses = initialBoardPoses(
+        initial_, views, layout, shared_, config_.board_poses_from_layout, &failed);
+    pose_blocks_.reserve(initial_poses.size());  // never reallocated: Ceres keeps pointers
+    for (const auto& [key, pose] : initial_poses) {
+      pose_keys_.push_back(key);
+      pose_index_[key] = pose_blocks_.size();
+      pose_blocks_.push_back(poseToBlock(pose));
+    }
+    if (failed.empty()) return true;
+    std::vector<BoardView> kept;
+    for (BoardView& v : views) {
+      if (failed.count({shared_ ? -1 : v.frame, v.board})) {
+        out_.dropped.push_back("frame " + std::to_string(v.frame) + " board " +
+                               std::to_string(layout[v.board].virtual_id) +
+                               ": no initial pose (degenerate corners), dropped");
+      } else {
+        kept.push_back(std::move(v));
+      }
+    }
+    views = std::move(kept);
+    if (views.empty()) return fail("no board observation with a usable initial pose");
+    return true;
+  }
+
+  // The robust loss of a track of n observations: n * rho(|p - mean|^2) stands for the n
+  // observations (one ScaledLoss per n, shared by the tracks of that length).
+  ceres::LossFunction* lossFor(size_t n) {
+    if (n == 1) return loss_.get();
+    auto& l = track_losses_[n];
+    if (!l)
+      l = std::make_unique<ceres::ScaledLoss>(loss_.get(), static_cast<double>(n),
+                                              ceres::DO_NOT_TAKE_OWNERSHIP);
+    return l.get();
+  }
+
+  // The residuals (4): one block per corner track (per corner observation in kPerFrame mode;
+  // per corner over all frames, on the track mean weighted by its length, when shared).
+  void addResiduals() {
+    const std::vector<VirtualBoard>& layout = *layout_;
+    tracks_ = buildCornerTracks(valid_.views, shared_, options_.max_track_deviation_px);
+    if (tracks_.rejected > 0)
+      out_.dropped.push_back(std::to_string(tracks_.rejected) +
+                             " corner observation(s) further than " +
+                             std::to_string(options_.max_track_deviation_px) +
+                             " px from the median of their track across frames, dropped");
+    loss_ = makeLoss(options_);
+    std::set<int> boards_seen[2];
+    for (const CornerTrack& t : tracks_.tracks) {
+      const VirtualBoard& board = layout[t.board];
+      boards_seen[static_cast<int>(t.camera)].insert(board.virtual_id);
+      CornerResidual r;
+      r.camera = t.camera;
+      r.track = &t;
+      const bool right = t.camera == CameraSide::kRight;
+      double* camera = intrinsics_[right ? 1 : 0].data();
+      if (device_mode_) {
+        r.blocks = device_blocks_->residualBlocks(board.copy_index, camera,
+                                                  right ? extrinsics_.data() : nullptr);
+        r.cost = DeviceCornerReprojectionCost::Create(
+            device_blocks_->cornerInDevice(board.board_index, t.corner_id), t.mean, right,
+            device_blocks_->planeCount(board.copy_index));
+      } else {
+        double* pose = pose_blocks_[pose_index_.at({t.frame, t.board})].data();
+        const Eigen::Vector3d corner = board.cornerInBoard(t.corner_id);
+        r.blocks = {camera, pose};
+        if (right) r.blocks.push_back(extrinsics_.data());
+        r.cost = right ? RightCornerReprojectionCost::Create(corner, t.mean)
+                       : LeftCornerReprojectionCost::Create(corner, t.mean);
+      }
+      problem_.AddResidualBlock(r.cost, lossFor(t.observations.size()), r.blocks);
+      scatter_sq_ += t.scatter_sq;
+      residuals_.push_back(r);
+    }
+    out_.frames_used = valid_.frames_used;
+    out_.boards_left = static_cast<int>(boards_seen[0].size());
+    out_.boards_right = static_cast<int>(boards_seen[1].size());
+  }
+
+  // What the config holds (constant blocks, held distortion terms as a subset manifold), the
+  // device model's manifolds and priors, and the unit-quaternion manifold of the board poses.
+  void holdBlocksAndSetManifolds() {
+    const std::vector<int> held = heldIntrinsics(config_);
+    const bool constant_intrinsics[2] = {config_.constant_left_intrinsics,
+                                         config_.constant_right_intrinsics};
+    for (int c = 0; c < 2; ++c) {
+      double* block = intrinsics_[c].data();
+      if (!problem_.HasParameterBlock(block)) continue;
+      camera_blocks_.push_back(block);
+      if (constant_intrinsics[c])
+        problem_.SetParameterBlockConstant(block);
+      else if (!held.empty())
+        problem_.SetManifold(block, new ceres::SubsetManifold(kIntrinsicsSize, held));
+    }
+    if (problem_.HasParameterBlock(extrinsics_.data())) {
+      camera_blocks_.push_back(extrinsics_.data());
+      if (config_.constant_extrinsics) problem_.SetParameterBlockConstant(extrinsics_.data());
+    }
+    if (device_mode_)
+      prior_ids_ = device_blocks_->configure(&problem_, priors_, config_.constant_board_poses);
+    for (BoardPose& pose : pose_blocks_) {
+      if (!problem_.HasParameterBlock(pose.data())) continue;
+      problem_.SetManifold(
+          pose.data(),
+          new ceres::ProductManifold<ceres::EigenQuaternionManifold, ceres::EuclideanManifold<3>>());
+      if (config_.constant_board_poses) problem_.SetParameterBlockConstant(pose.data());
+    }
+    for (double* b : camera_blocks_) any_free_camera_block_ |= !problem_.IsParameterBlockConstant(b);
+  }
+
+  // The solve (5) and the solution into the summary. With free poses each residual touches one
+  // board pose, so the poses are eliminated (Schur) and the reduced system has only the camera
+  // blocks (at most 24 unknowns). The device model has a few dozen unknowns in all, each
+  // touched by many residuals: dense QR.
+  bool runSolver() {
+    ceres::Solver::Options solver_options;
+    solver_options.max_num_iterations = options_.max_iterations;
+    solver_options.function_tolerance = options_.function_tolerance;
+    solver_options.gradient_tolerance = options_.gradient_tolerance;
+    solver_options.parameter_tolerance = options_.parameter_tolerance;
+    solver_options.num_threads = options_.num_threads;
+    solver_options.logging_type = ceres::SILENT;
+    if (device_mode_) {
+      solver_options.linear_solver_type = ceres::DENSE_QR;
+    } else if (any_free_camera_block_ && !config_.constant_board_poses) {
+      auto ordering = std::make_shared<ceres::ParameterBlockOrdering>();
+      for (BoardPose& pose : pose_blocks_)
+        if (problem_.HasParameterBlock(pose.data())) ordering->AddElementToGroup(pose.data(), 0);
+      for (double* b : camera_blocks_) ordering->AddElementToGroup(b, 1);
+      solver_options.linear_solver_ordering = ordering;
+      solver_options.linear_solver_type = ceres::DENSE_SCHUR;
+    } else {
+      solver_options.linear_solver_type = ceres::SPARSE_NORMAL_CHOLESKY;
+    }
+    const auto ceres_start = Clock::now();
+    ceres::Solve(solver_options, &problem_, &ceres_summary_);
+    out_.ceres_ms = msSince(ceres_start);
+    out_.iterations = static_cast<int>(ceres_summary_.iterations.size()) - 1;
+    out_.initial_cost = ceres_summary_.initial_cost;
+    out_.final_cost = ceres_summary_.final_cost;
+    out_.converged = ceres_summary_.termination_type == ceres::CONVERGENCE;
+    out_.message = ceres_summary_.message;
+    if (!ceres_summary_.IsSolutionUsable()) return fail("Ceres: " + ceres_summary_.message);
+
+    out_.rig.left = fromBlock(intrinsics_[0], width_, height_);
+    out_.rig.right = fromBlock(intrinsics_[1], width_, height_);
+    out_.rig.right_from_left = extrinsicsFromBlock(extrinsics_);
+    if (device_mode_) {
+      out_.device = device_blocks_->device();
+      for (const VirtualBoard& b : out_.device->virtualBoards())
+        out_.rig_from_board[b.virtual_id] = b.rig_from_board;
+    } else if (shared_) {
+      for (size_t i = 0; i < pose_blocks_.size(); ++i)
+        out_.rig_from_board[(*layout_)[pose_keys_[i].second].virtual_id] =
+            poseFromBlock(pose_blocks_[i]);
+    }
+    return true;
+  }
+
+  // Residual statistics at the solution (6), per observation (plain squared pixel errors, not
+  // the robust cost): RMS per camera, outliers (the median test's rejections plus residuals
+  // over the threshold), epipolar RMS; then the residual variance: the robust cost of the track
+  // means plus the within-track scatter, over the degrees of freedom of the per-observation
+  // problem.
+  void residualStatistics() {
+    double sum_sq[2] = {0, 0};
+    int count[2] = {0, 0};
+    out_.outliers = tracks_.rejected;
+    const double outlier_sq = options_.outlier_threshold_px * options_.outlier_threshold_px;
+    for (const CornerResidual& r : residuals_) {
+      const int side = static_cast<int>(r.camera);
+      Eigen::Vector2d e;
+      if (!r.cost->Evaluate(r.blocks.data(), e.data(), nullptr)) continue;
+      const Eigen::Vector2d predicted = r.track->mean + e;
+      for (const Eigen::Vector2d& o : r.track->observations) {
+        const double sq = (predicted - o).squaredNorm();
+        sum_sq[side] += sq;
+        ++count[side];
+        if (sq > outlier_sq) ++out_.outliers;
+      }
+    }
+    out_.corners_left = count[0];
+    out_.corners_right = count[1];
+    out_.corners_used = count[0] + count[1];
+    out_.rms_left_px = count[0] ? std::sqrt(sum_sq[0] / count[0]) : 0.0;
+    out_.rms_right_px = count[1] ? std::sqrt(sum_sq[1] / count[1]) : 0.0;
+    out_.epipolar_rms_px = epipolarRms(out_.rig, valid_.views);
+
+    std::vector<double*> blocks;
+    problem_.GetParameterBlocks(&blocks);
+    for (double* b : blocks)
+      if (!problem_.IsParameterBlockConstant(b))
+        free_parameters_ += problem_.ParameterBlockTangentSize(b);
+    dof_ = 2 * out_.corners_used - free_parameters_;
+    double prior_cost = 0.0;  // the device prior is no observation: not in the residual variance
+    for (ceres::ResidualBlockId id : prior_ids_) {
+      double cost = 0.0;
+      problem_.EvaluateResidualBlock(id, false, &cost, nullptr, nullptr);
+      prior_cost += cost;
+    }
+    const double data_cost = std::max(0.0, ceres_summary_.final_cost - prior_cost);
+    sigma2_ = dof_ > 0 ? (2.0 * data_cost + scatter_sq_) / dof_ : 0.0;
+    out_.residual_sigma_px = std::sqrt(sigma2_);
+  }
+
+  // Covariance of the camera blocks (7), scaled by the residual variance estimate.
+  void computeCovariance() {
+    const auto covariance_start = Clock::now();
+    if (options_.compute_covariance && dof_ > 0 && any_free_camera_block_) {
+      ceres::Covariance::Options co;
+      co.num_threads = options_.num_threads;
+      // Dense SVD is exact and cheap for small problems; sparse QR scales with per-frame poses.
+      co.algorithm_type = free_parameters_ <= 300 ? ceres::DENSE_SVD : ceres::SPARSE_QR;
+      ceres::Covariance covariance(co);
+      std::vector<std::pair<const double*, const double*>> pairs;
+      for (double* b : camera_blocks_) pairs.emplace_back(b, b);
+      if (covariance.Compute(pairs, &problem_)) {
+        out_.covariance_ok = true;
+        CameraStddev* stddev[2] = {&out_.left_stddev, &out_.right_stddev};
+        for (int c = 0; c < 2; ++c) {
+          if (!problem_.HasParameterBlock(intrinsics_[c].data())) continue;
+          Eigen::Matrix<double, kIntrinsicsSize, kIntrinsicsSize, Eigen::RowMajor> cov;
+          covariance.GetCovarianceBlock(intrinsics_[c].data(), intrinsics_[c].data(), cov.data());
+          const Eigen::VectorXd sd = (cov.diagonal() * sigma2_).cwiseMax(0.0).cwiseSqrt();
+          *stddev[c] = CameraStddev{
+              sd[kFx], sd[kFy], sd[kCx], sd[kCy], {{sd[kK1], sd[kK2], sd[kP1], sd[kP2], sd[kK3]}}};
+        }
+        if (problem_.HasParameterBlock(extrinsics_.data())) {
+          Eigen::Matrix<double, kExtrinsicsSize, kExtrinsicsSize, Eigen::RowMajor> cov;
+          covariance.GetCovarianceBlock(extrinsics_.data(), extrinsics_.data(), cov.data());
+          const Eigen::Matrix<double, 6, 6> scaled = cov * sigma2_;
+          const Eigen::Vector3d t(extrinsics_[3], extrinsics_[4], extrinsics_[5]);
+          const Eigen::Vector3d dir = t.normalized();
+          out_.baseline_stddev_m =
+              std::sqrt(std::max(0.0, dir.dot(scaled.block<3, 3>(3, 3) * dir)));
+          const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(scaled.block<3, 3>(0, 0));
+          out_.rotation_stddev_deg =
+              std::sqrt(std::max(0.0, eig.eigenvalues().maxCoeff())) * 180.0 / M_PI;
+        }
+      }
+    }
+    out_.covariance_ms = msSince(covariance_start);
+  }
+
+  const BundleAdjustmentOptions& options_;
+  const BundleAdjustmentConfig& config_;
+  const CalibrationInput& input_;
+  const Clock::time_point start_ = Clock::now();
+  BundleAdjustmentSummary out_;
+
+  // validateInputs
+  BoardPoseMode mode_ = BoardPoseMode::kAuto;
+  bool device_mode_ = false;
+  bool shared_ = true;  // one pose per virtual board for all frames (not kPerFrame)
+  std::vector<VirtualBoard> device_layout_;
+  const std::vector<VirtualBoard>* layout_ = nullptr;  // device_layout_ or *input_.boards
+  int width_ = 0, height_ = 0;
+  ValidatedObservations valid_;  // its views are the ones solved
+  // initializeCameras
+  std::optional<BundleAdjustmentSummary> free_solve_;
+  StereoRig initial_;
+  // buildParameterBlocks. Ceres keeps pointers into the blocks and, for the Schur solver and
+  // the covariance, orders blocks by address: the board poses sit in one vector in PoseKey
+  // order (std::map nodes would land wherever the heap's history put them, and the rounding
+  // of the results with them), and the camera blocks in these members' order.
+  std::array<Intrinsics, 2> intrinsics_{};
+  std::array<double, kExtrinsicsSize> extrinsics_{};
+  std::vector<BoardPose> pose_blocks_;
+  std::vector<PoseKey> pose_keys_;       // of pose_blocks_[i]
+  std::map<PoseKey, size_t> pose_index_;  // PoseKey -> index in pose_blocks_
+  DeviceModelPriors priors_;
+  std::unique_ptr<DeviceModelBlocks> device_blocks_;
+  // addResiduals, holdBlocksAndSetManifolds (the problem references the losses, not owns them)
+  CornerTracks tracks_;
+  std::unique_ptr<ceres::LossFunction> loss_;
+  std::map<size_t, std::unique_ptr<ceres::LossFunction>> track_losses_;
+  ceres::Problem problem_;
+  std::vector<CornerResidual> residuals_;
+  double scatter_sq_ = 0.0;  // within-track part of the squared error, constant in the solve
+  std::vector<double*> camera_blocks_;
+  std::vector<ceres::ResidualBlockId> prior_ids_;
+  bool any_free_camera_block_ = false;
+  // runSolver, residualStatistics
+  ceres::Solver::Summary ceres_summary_;
+  int free_parameters_ = 0;
+  int dof_ = 0;
+  double sigma2_ = 0.0;  // residual variance (px^2)
+};
+
 }  // namespace
 
 BundleAdjuster::BundleAdjuster(BundleAdjustmentOptions options, BundleAdjustmentConfig config)
     : options_(std::move(options)), config_(std::move(config)) {}
 
 BundleAdjustmentSummary BundleAdjuster::Solve(const CalibrationInput& input) const {
-  const auto start = Clock::now();
-  BundleAdjustmentSummary out;
-  const auto fail = [&](const std::string& why) {
-    out.success = false;
-    out.message = why;
-    out.solve_ms = std::chrono::duration<double, std::milli>(Clock::now() - start).count();
-    return out;
-  };
-  std::string problem_text = options_.Check();
-  if (!problem_text.empty()) return fail("invalid options: " + problem_text);
-  problem_text = config_.Check();
-  if (!problem_text.empty()) return fail("invalid config: " + problem_text);
-  if (!input.frames || (!input.boards && !input.device))
-    return fail("no observations or no board layout given");
-  BoardPoseMode mode = options_.board_pose_mode;
-  if (mode == BoardPoseMode::kAuto)
-    mode = input.device ? BoardPoseMode::kDeviceModel : BoardPoseMode::kSharedAcrossFrames;
-  const bool device_mode = mode == BoardPoseMode::kDeviceModel;
-  if (device_mode && !input.device) return fail("the device model needs the device");
-  std::vector<VirtualBoard> device_layout;
-  if (input.device) {
-    const std::string device_problem = input.device->validate();
-    if (!device_problem.empty()) return fail("invalid device: " + device_problem);
-    device_layout = input.device->virtualBoards();
-  }
-  // The device model takes its layout from the device, the free modes the given one.
-  const std::vector<VirtualBoard>& layout =
-      (device_mode || !input.boards) ? device_layout : *input.boards;
-  out.board_poses = device_mode                        ? "device model"
-                    : mode == BoardPoseMode::kPerFrame ? "per-frame free poses"
-                                                       : "shared free poses";
-
-  // Image size: given, or that of the calibration in force; both must agree.
-  int width = input.image_width, height = input.image_height;
-  if (input.in_force) {
-    const StereoRig& f = *input.in_force;
-    const std::string rig_problem = f.validate();
-    if (!rig_problem.empty()) return fail("calibration in force is invalid: " + rig_problem);
-    if (f.left.width != f.right.width || f.left.height != f.right.height)
-      return fail("left and right image sizes of the calibration in force differ");
-    if (width <= 0 && height <= 0) width = f.left.width, height = f.left.height;
-    if (width != f.left.width || height != f.left.height)
-      return fail("image size " + std::to_string(width) + "x" + std::to_string(height) +
-                  " differs from the calibration in force (" + std::to_string(f.left.width) + "x" +
-                  std::to_string(f.left.height) + ")");
-  }
-  if (width <= 0 || height <= 0) return fail("image size unknown or invalid");
-
-  // 1. Validation.
-  ObservationValidationOptions vo;
-  vo.image_width = width;
-  vo.image_height = height;
-  vo.min_corners_per_board = options_.min_corners_per_board;
-  vo.max_outside_image_px = options_.max_outside_image_px;
-  ValidatedObservations valid = validateObservations(*input.frames, layout, vo);
-  out.dropped = std::move(valid.dropped);
-  std::vector<BoardView>& views = valid.views;
-  if (views.empty()) return fail("no usable board observation");
-
-  // The device model starts from a free shared-pose solve: its cameras, and its virtual boards
-  // to which the nominal device is aligned.
-  std::optional<BundleAdjustmentSummary> free_solve;
-  if (device_mode) {
-    BundleAdjustmentOptions free_options = options_;
-    free_options.board_pose_mode = BoardPoseMode::kSharedAcrossFrames;
-    free_options.compute_covariance = false;
-    CalibrationInput free_input = input;
-    free_input.boards = &layout;
-    free_input.device = nullptr;
-    free_input.image_width = width;
-    free_input.image_height = height;
-    free_solve = BundleAdjuster(free_options, config_).Solve(free_input);
-    if (!free_solve->success)
-      return fail("device model: the free-pose solve that starts it failed: " +
-                  free_solve->message);
-  }
-
-  // 2. Initial cameras.
-  const bool use_in_force =
-      options_.initialization == InitializationMode::kFromInForce ||
-      (options_.initialization == InitializationMode::kAuto && input.in_force.has_value());
-  StereoRig initial;
-  if (device_mode) {
-    initial = free_solve->rig;
-    out.initialization = free_solve->initialization;
-  } else if (use_in_force) {
-    if (!input.in_force)
-      return fail("initialisation from the calibration in force, but none given");
-    initial = *input.in_force;
-    out.initialization = "in force";
-  } else {
-    ZhangInitialization zhang = initializeWithZhang(views, layout, width, height);
-    if (!zhang.ok) return fail(zhang.message);
-    initial = zhang.rig;
-    out.initialization = "zhang";
-  }
-
-  // 3. Parameter blocks. std::map nodes never move, so Ceres may keep pointers into them.
-  const bool shared = mode != BoardPoseMode::kPerFrame;
-  std::array<Intrinsics, 2> intrinsics{{toBlock(initial.left), toBlock(initial.right)}};
-  std::array<double, kExtrinsicsSize> extrinsics = toBlock(initial.right_from_left);
-  std::map<PoseKey, BoardPose> poses;
-  DeviceModelPriors priors;
-  priors.angle_tolerance_rad = options_.device_prior_angle_deg * M_PI / 180.0;
-  priors.position_tolerance_m = options_.device_prior_position_m;
-  priors.refine_planes = options_.refine_mirror_planes;
-  std::unique_ptr<DeviceModelBlocks> device_blocks;
-  if (device_mode) {
-    device_blocks = std::make_unique<DeviceModelBlocks>(*input.device);
-    if (!config_.board_poses_from_layout &&
-        device_blocks->alignTo(layout, free_solve->rig_from_board, priors) < 0)
-      return fail("device model: no virtual board to align the device to");
-  } else {
-    std::set<PoseKey> failed;
-    for (const auto& [key, pose] : initialBoardPoses(initial, views, layout, shared,
-                                                     config_.board_poses_from_layout, &failed))
-      poses[key] = poseToBlock(pose);
-    if (!failed.empty()) {
-      std::vector<BoardView> kept;
-      for (BoardView& v : views) {
-        if (failed.count({shared ? -1 : v.frame, v.board})) {
-          out.dropped.push_back("frame " + std::to_string(v.frame) + " board " +
-                                std::to_string(layout[v.board].virtual_id) +
-                                ": no initial pose (degenerate corners), dropped");
-        } else {
-          kept.push_back(std::move(v));
-        }
-      }
-      views = std::move(kept);
-      if (views.empty()) return fail("no board observation with a usable initial pose");
-    }
-  }
-
-  // 4. Problem: one residual block per corner track (per corner observation in kPerFrame
-  // mode; per corner over all frames, on the track mean weighted by its length, when shared).
-  const CornerTracks tracks = buildCornerTracks(views, shared, options_.max_track_deviation_px);
-  if (tracks.rejected > 0)
-    out.dropped.push_back(std::to_string(tracks.rejected) + " corner observation(s) further than " +
-                          std::to_string(options_.max_track_deviation_px) +
-                          " px from the median of their track across frames, dropped");
-  ceres::Problem::Options problem_options;
-  problem_options.loss_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
-  problem_options.manifold_ownership = ceres::TAKE_OWNERSHIP;
-  ceres::Problem problem(problem_options);
-  const std::unique_ptr<ceres::LossFunction> loss = makeLoss(options_);
-  // n * rho(|p - mean|^2) stands for the n observations of a track (one ScaledLoss per n).
-  std::map<size_t, std::unique_ptr<ceres::LossFunction>> track_losses;
-  const auto lossFor = [&](size_t n) -> ceres::LossFunction* {
-    if (n == 1) return loss.get();
-    auto& l = track_losses[n];
-    if (!l)
-      l = std::make_unique<ceres::ScaledLoss>(loss.get(), static_cast<double>(n),
-                                              ceres::DO_NOT_TAKE_OWNERSHIP);
-    return l.get();
-  };
-  std::vector<CornerResidual> residuals;
-  std::set<int> boards_seen[2];
-  double scatter_sq = 0.0;  // within-track part of the squared error, constant in the solve
-  for (const CornerTrack& t : tracks.tracks) {
-    const VirtualBoard& board = layout[t.board];
-    boards_seen[static_cast<int>(t.camera)].insert(board.virtual_id);
-    CornerResidual r;
-    r.camera = t.camera;
-    r.track = &t;
-    const bool right = t.camera == CameraSide::kRight;
-    double* camera = intrinsics[right ? 1 : 0].data();
-    if (device_mode) {
-      r.blocks = device_blocks->residualBlocks(board.copy_index, camera,
-                                               right ? extrinsics.data() : nullptr);
-      r.cost = DeviceCornerReprojectionCost::Create(
-          device_blocks->cornerInDevice(board.board_index, t.corner_id), t.mean, right,
-          device_blocks->planeCount(board.copy_index));
-    } else {
-      double* pose = poses.at({t.frame, t.board}).data();
-      const Eigen::Vector3d corner = board.cornerInBoard(t.corner_id);
-      r.blocks = {camera, pose};
-      if (right) r.blocks.push_back(extrinsics.data());
-      r.cost = right ? RightCornerReprojectionCost::Create(corner, t.mean)
-                     : LeftCornerReprojectionCost::Create(corner, t.mean);
-    }
-    problem.AddResidualBlock(r.cost, lossFor(t.observations.size()), r.blocks);
-    scatter_sq += t.scatter_sq;
-    residuals.push_back(r);
-  }
-  out.frames_used = valid.frames_used;
-  out.boards_left = static_cast<int>(boards_seen[0].size());
-  out.boards_right = static_cast<int>(boards_seen[1].size());
-
-  const std::vector<int> held = heldIntrinsics(config_);
-  const bool constant_intrinsics[2] = {config_.constant_left_intrinsics,
-                                       config_.constant_right_intrinsics};
-  std::vector<double*> camera_blocks;
-  for (int c = 0; c < 2; ++c) {
-    double* block = intrinsics[c].data();
-    if (!problem.HasParameterBlock(block)) continue;
-    camera_blocks.push_back(block);
-    if (constant_intrinsics[c])
-      problem.SetParameterBlockConstant(block);
-    else if (!held.empty())
-      problem.SetManifold(block, new ceres::SubsetManifold(kIntrinsicsSize, held));
-  }
-  if (problem.HasParameterBlock(extrinsics.data())) {
-    camera_blocks.push_back(extrinsics.data());
-    if (config_.constant_extrinsics) problem.SetParameterBlockConstant(extrinsics.data());
-  }
-  std::vector<ceres::ResidualBlockId> prior_ids;
-  if (device_mode)
-    prior_ids = device_blocks->configure(&problem, priors, config_.constant_board_poses);
-  for (auto& [key, pose] : poses) {
-    if (!problem.HasParameterBlock(pose.data())) continue;
-    problem.SetManifold(
-        pose.data(),
-        new ceres::ProductManifold<ceres::EigenQuaternionManifold, ceres::EuclideanManifold<3>>());
-    if (config_.constant_board_poses) problem.SetParameterBlockConstant(pose.data());
-  }
-
-  // 5. Solve. With free poses each residual touches one board pose, so the poses are eliminated
-  // (Schur) and the reduced system has only the camera blocks (at most 24 unknowns). The device
-  // model has a few dozen unknowns in all, each touched by many residuals: dense QR.
-  ceres::Solver::Options solver_options;
-  solver_options.max_num_iterations = options_.max_iterations;
-  solver_options.function_tolerance = options_.function_tolerance;
-  solver_options.gradient_tolerance = options_.gradient_tolerance;
-  solver_options.parameter_tolerance = options_.parameter_tolerance;
-  solver_options.num_threads = options_.num_threads;
-  solver_options.logging_type = ceres::SILENT;
-  bool any_free_camera_block = false;
-  for (double* b : camera_blocks) any_free_camera_block |= !problem.IsParameterBlockConstant(b);
-  if (device_mode) {
-    solver_options.linear_solver_type = ceres::DENSE_QR;
-  } else if (any_free_camera_block && !config_.constant_board_poses) {
-    auto ordering = std::make_shared<ceres::ParameterBlockOrdering>();
-    for (auto& [key, pose] : poses)
-      if (problem.HasParameterBlock(pose.data())) ordering->AddElementToGroup(pose.data(), 0);
-    for (double* b : camera_blocks) ordering->AddElementToGroup(b, 1);
-    solver_options.linear_solver_ordering = ordering;
-    solver_options.linear_solver_type = ceres::DENSE_SCHUR;
-  } else {
-    solver_options.linear_solver_type = ceres::SPARSE_NORMAL_CHOLESKY;
-  }
-  ceres::Solver::Summary ceres_summary;
-  const auto ceres_start = Clock::now();
-  ceres::Solve(solver_options, &problem, &ceres_summary);
-  out.ceres_ms = std::chrono::duration<double, std::milli>(Clock::now() - ceres_start).count();
-  out.iterations = static_cast<int>(ceres_summary.iterations.size()) - 1;
-  out.initial_cost = ceres_summary.initial_cost;
-  out.final_cost = ceres_summary.final_cost;
-  out.converged = ceres_summary.termination_type == ceres::CONVERGENCE;
-  out.message = ceres_summary.message;
-  if (!ceres_summary.IsSolutionUsable()) return fail("Ceres: " + ceres_summary.message);
-
-  out.rig.left = fromBlock(intrinsics[0], width, height);
-  out.rig.right = fromBlock(intrinsics[1], width, height);
-  out.rig.right_from_left = extrinsicsFromBlock(extrinsics);
-  if (device_mode) {
-    out.device = device_blocks->device();
-    for (const VirtualBoard& b : out.device->virtualBoards())
-      out.rig_from_board[b.virtual_id] = b.rig_from_board;
-  } else if (shared) {
-    for (const auto& [key, pose] : poses)
-      out.rig_from_board[layout[key.second].virtual_id] = poseFromBlock(pose);
-  }
-
-  // 6. Residual statistics at the solution, per observation (plain squared pixel errors).
-  double sum_sq[2] = {0, 0};
-  int count[2] = {0, 0};
-  out.outliers = tracks.rejected;
-  const double outlier_sq = options_.outlier_threshold_px * options_.outlier_threshold_px;
-  for (const CornerResidual& r : residuals) {
-    const int side = static_cast<int>(r.camera);
-    Eigen::Vector2d e;
-    if (!r.cost->Evaluate(r.blocks.data(), e.data(), nullptr)) continue;
-    const Eigen::Vector2d predicted = r.track->mean + e;
-    for (const Eigen::Vector2d& o : r.track->observations) {
-      const double sq = (predicted - o).squaredNorm();
-      sum_sq[side] += sq;
-      ++count[side];
-      if (sq > outlier_sq) ++out.outliers;
-    }
-  }
-  out.corners_left = count[0];
-  out.corners_right = count[1];
-  out.corners_used = count[0] + count[1];
-  out.rms_left_px = count[0] ? std::sqrt(sum_sq[0] / count[0]) : 0.0;
-  out.rms_right_px = count[1] ? std::sqrt(sum_sq[1] / count[1]) : 0.0;
-  out.epipolar_rms_px = epipolarRms(out.rig, views);
-
-  // Residual variance: robust cost of the track means plus the within-track scatter, over the
-  // degrees of freedom of the per-observation problem.
-  int free_parameters = 0;
-  std::vector<double*> blocks;
-  problem.GetParameterBlocks(&blocks);
-  for (double* b : blocks)
-    if (!problem.IsParameterBlockConstant(b))
-      free_parameters += problem.ParameterBlockTangentSize(b);
-  const int dof = 2 * out.corners_used - free_parameters;
-  double prior_cost = 0.0;  // the device prior is no observation: not in the residual variance
-  for (ceres::ResidualBlockId id : prior_ids) {
-    double cost = 0.0;
-    problem.EvaluateResidualBlock(id, false, &cost, nullptr, nullptr);
-    prior_cost += cost;
-  }
-  const double data_cost = std::max(0.0, ceres_summary.final_cost - prior_cost);
-  const double sigma2 = dof > 0 ? (2.0 * data_cost + scatter_sq) / dof : 0.0;
-  out.residual_sigma_px = std::sqrt(sigma2);
-
-  // 7. Covariance of the camera blocks, scaled by the residual variance estimate.
-  const auto covariance_start = Clock::now();
-  if (options_.compute_covariance && dof > 0 && any_free_camera_block) {
-    ceres::Covariance::Options co;
-    co.num_threads = options_.num_threads;
-    // Dense SVD is exact and cheap for small problems; sparse QR scales with per-frame poses.
-    co.algorithm_type = free_parameters <= 300 ? ceres::DENSE_SVD : ceres::SPARSE_QR;
-    ceres::Covariance covariance(co);
-    std::vector<std::pair<const double*, const double*>> pairs;
-    for (double* b : camera_blocks) pairs.emplace_back(b, b);
-    if (covariance.Compute(pairs, &problem)) {
-      out.covariance_ok = true;
-      CameraStddev* stddev[2] = {&out.left_stddev, &out.right_stddev};
-      for (int c = 0; c < 2; ++c) {
-        if (!problem.HasParameterBlock(intrinsics[c].data())) continue;
-        Eigen::Matrix<double, kIntrinsicsSize, kIntrinsicsSize, Eigen::RowMajor> cov;
-        covariance.GetCovarianceBlock(intrinsics[c].data(), intrinsics[c].data(), cov.data());
-        const Eigen::VectorXd sd = (cov.diagonal() * sigma2).cwiseMax(0.0).cwiseSqrt();
-        *stddev[c] = CameraStddev{
-            sd[kFx], sd[kFy], sd[kCx], sd[kCy], {{sd[kK1], sd[kK2], sd[kP1], sd[kP2], sd[kK3]}}};
-      }
-      if (problem.HasParameterBlock(extrinsics.data())) {
-        Eigen::Matrix<double, kExtrinsicsSize, kExtrinsicsSize, Eigen::RowMajor> cov;
-        covariance.GetCovarianceBlock(extrinsics.data(), extrinsics.data(), cov.data());
-        const Eigen::Matrix<double, 6, 6> scaled = cov * sigma2;
-        const Eigen::Vector3d t(extrinsics[3], extrinsics[4], extrinsics[5]);
-        const Eigen::Vector3d dir = t.normalized();
-        out.baseline_stddev_m = std::sqrt(std::max(0.0, dir.dot(scaled.block<3, 3>(3, 3) * dir)));
-        const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(scaled.block<3, 3>(0, 0));
-        out.rotation_stddev_deg =
-            std::sqrt(std::max(0.0, eig.eigenvalues().maxCoeff())) * 180.0 / M_PI;
-      }
-    }
-  }
-  out.covariance_ms =
-      std::chrono::duration<double, std::milli>(Clock::now() - covariance_start).count();
-  out.success = true;
-  out.solve_ms = std::chrono::duration<double, std::milli>(Clock::now() - start).count();
-  return out;
+  AdjustmentRun run(options_, config_, input);
+  return run.run();
 }
 
 BundleAdjustmentSummary evaluateFixedCalibration(const StereoRig& rig,

@@ -3,6 +3,8 @@
 #include <Eigen/LU>
 #include <cmath>
 
+#include "embedded_calibration_stereo/core/geometry/plumb_bob_distortion.h"
+
 namespace ecs {
 
 std::string PinholeCamera::validate() const {
@@ -16,39 +18,22 @@ std::string PinholeCamera::validate() const {
   return "";
 }
 
-namespace {
-// Radial factor and its derivative with respect to r^2.
-inline void radial(const std::array<double, 5>& d, double r2, double* f, double* df_dr2) {
-  *f = 1.0 + r2 * (d[0] + r2 * (d[1] + r2 * d[4]));
-  *df_dr2 = d[0] + r2 * (2.0 * d[1] + 3.0 * r2 * d[4]);
-}
-}  // namespace
-
 Eigen::Vector2d PinholeCamera::distort(const Eigen::Vector2d& xn) const {
-  const double x = xn.x(), y = xn.y(), r2 = x * x + y * y;
-  double f, df;
-  radial(dist, r2, &f, &df);
-  const double p1 = dist[2], p2 = dist[3];
-  return {x * f + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x),
-          y * f + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y};
+  Eigen::Vector2d xd;
+  plumb_bob::distort(dist.data(), xn.x(), xn.y(), &xd.x(), &xd.y());
+  return xd;
 }
 
 Eigen::Vector2d PinholeCamera::undistortNormalized(const Eigen::Vector2d& xd) const {
   // Newton on distort(x) - xd = 0 with the analytic Jacobian; plumb_bob is well conditioned
   // inside the image, so a handful of steps reach machine precision.
   Eigen::Vector2d x = xd;
-  const double p1 = dist[2], p2 = dist[3];
   for (int it = 0; it < 50; ++it) {
-    const double r2 = x.squaredNorm();
-    double f, df;
-    radial(dist, r2, &f, &df);
-    const Eigen::Vector2d residual = distort(x) - xd;
-    if (residual.squaredNorm() < 1e-30) break;
+    Eigen::Vector2d distorted;
     Eigen::Matrix2d J;
-    J(0, 0) = f + 2.0 * x.x() * x.x() * df + 2.0 * p1 * x.y() + 6.0 * p2 * x.x();
-    J(0, 1) = 2.0 * x.x() * x.y() * df + 2.0 * p1 * x.x() + 2.0 * p2 * x.y();
-    J(1, 0) = 2.0 * x.x() * x.y() * df + 2.0 * p1 * x.x() + 2.0 * p2 * x.y();
-    J(1, 1) = f + 2.0 * x.y() * x.y() * df + 6.0 * p1 * x.y() + 2.0 * p2 * x.x();
+    plumb_bob::distortWithJacobian(dist.data(), x.x(), x.y(), &distorted.x(), &distorted.y(), &J);
+    const Eigen::Vector2d residual = distorted - xd;
+    if (residual.squaredNorm() < 1e-30) break;
     const Eigen::Vector2d step = J.partialPivLu().solve(residual);
     x -= step;
     if (step.squaredNorm() < 1e-30) break;

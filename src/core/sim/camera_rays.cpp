@@ -5,34 +5,16 @@
 #include <cmath>
 #include <vector>
 
+#include "embedded_calibration_stereo/core/geometry/plumb_bob_distortion.h"
+
 namespace ecs {
 namespace sim {
-
-namespace {
-
-// Plumb_bob distortion of normalised (x, y) and its 2x2 Jacobian; same model as
-// PinholeCamera::distort (k1, k2, p1, p2, k3).
-void distortWithJacobian(const std::array<double, 5>& d, double x, double y, double* xd, double* yd,
-                         Eigen::Matrix2d* J) {
-  const double r2 = x * x + y * y;
-  const double f = 1.0 + r2 * (d[0] + r2 * (d[1] + r2 * d[4]));
-  const double df = d[0] + r2 * (2.0 * d[1] + 3.0 * r2 * d[4]);
-  const double p1 = d[2], p2 = d[3];
-  *xd = x * f + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x);
-  *yd = y * f + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y;
-  (*J)(0, 0) = f + 2.0 * x * x * df + 2.0 * p1 * y + 6.0 * p2 * x;
-  (*J)(0, 1) = 2.0 * x * y * df + 2.0 * p1 * x + 2.0 * p2 * y;
-  (*J)(1, 0) = 2.0 * x * y * df + 2.0 * p1 * x + 2.0 * p2 * y;
-  (*J)(1, 1) = f + 2.0 * y * y * df + 6.0 * p1 * y + 2.0 * p2 * x;
-}
-
-}  // namespace
 
 void CameraRays::jacobian(double x, double y, double J[4]) const {
   // (u, v) = A * distort(x, y) + c with A = [fx skew; 0 fy], so d(x,y)/d(u,v) = (A * Jd)^-1.
   double xd, yd;
   Eigen::Matrix2d Jd;
-  distortWithJacobian(camera.dist, x, y, &xd, &yd, &Jd);
+  plumb_bob::distortWithJacobian(camera.dist.data(), x, y, &xd, &yd, &Jd);
   Eigen::Matrix2d A;
   A << camera.fx, camera.skew, 0.0, camera.fy;
   const Eigen::Matrix2d inv = (A * Jd).inverse();
@@ -75,7 +57,7 @@ CameraRays computeCameraRays(const PinholeCamera& camera) {
         Eigen::Matrix2d J;
         for (int it = 0; it < 30; ++it) {
           double xd, yd;
-          distortWithJacobian(camera.dist, x, y, &xd, &yd, &J);
+          plumb_bob::distortWithJacobian(camera.dist.data(), x, y, &xd, &yd, &J);
           const Eigen::Vector2d step = J.inverse() * Eigen::Vector2d(xd - target.x(), yd - target.y());
           x -= step.x();
           y -= step.y();

@@ -49,6 +49,11 @@
 // Cost: the device model runs a free shared-pose solve first (its start), ~60-90 ms wall for
 // 1-30 frames on one thread vs ~40-60 ms for shared poses alone.
 //
+// Solve() runs in named stages (bundle_adjuster.cpp): validate the inputs, initial cameras,
+// parameter blocks, residuals, held blocks and manifolds, Ceres, residual statistics and
+// outliers, covariance. Its result depends on the input alone, to the last bit: the block order
+// that Ceres takes from the blocks' addresses is fixed (test_bundle_adjuster_repeatability).
+//
 // Threading: a BundleAdjuster is immutable after construction and Solve() keeps its state on
 // the stack, so one instance may be used from several threads; it is meant to run on the
 // calibrator's worker thread, never on an image callback.

@@ -1,6 +1,6 @@
 #pragma once
-// Ceres reprojection functors of the stereo bundle adjuster (plumb_bob distortion, templated so
-// that Ceres differentiates them automatically).
+// Ceres reprojection functors of the stereo bundle adjuster (plumb_bob distortion from
+// plumb_bob_distortion.h, templated so that Ceres differentiates them automatically).
 //
 // Parameter blocks (all doubles):
 //   intrinsics[9]  = fx, fy, cx, cy, k1, k2, p1, p2, k3   (skew is fixed at zero)
@@ -17,6 +17,8 @@
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 
+#include "embedded_calibration_stereo/core/geometry/plumb_bob_distortion.h"
+
 namespace ecs {
 
 constexpr int kIntrinsicsSize = 9;
@@ -26,20 +28,18 @@ constexpr int kExtrinsicsSize = 6;
 // Index of each intrinsic in the intrinsics block.
 enum IntrinsicIndex { kFx = 0, kFy, kCx, kCy, kK1, kK2, kP1, kP2, kK3 };
 
+// k1..k3 follow each other in CameraInfo.D order, so intrinsics + kK1 is plumb_bob's d[5].
+static_assert(kK2 == kK1 + 1 && kP1 == kK1 + 2 && kP2 == kK1 + 3 && kK3 == kK1 + 4 &&
+                  kIntrinsicsSize == kK1 + plumb_bob::kCoefficientCount,
+              "the intrinsics block must hold the distortion in CameraInfo.D order");
+
 // A point in a camera's optical frame -> raw pixel with the plumb_bob model of OpenCV/ROS.
 template <typename T>
 void projectPlumbBob(const T* intrinsics, const T* point, T* pixel) {
   const T x = point[0] / point[2];
   const T y = point[1] / point[2];
-  const T& k1 = intrinsics[kK1];
-  const T& k2 = intrinsics[kK2];
-  const T& p1 = intrinsics[kP1];
-  const T& p2 = intrinsics[kP2];
-  const T& k3 = intrinsics[kK3];
-  const T r2 = x * x + y * y;
-  const T radial = T(1.0) + r2 * (k1 + r2 * (k2 + r2 * k3));
-  const T xd = x * radial + T(2.0) * p1 * x * y + p2 * (r2 + T(2.0) * x * x);
-  const T yd = y * radial + p1 * (r2 + T(2.0) * y * y) + T(2.0) * p2 * x * y;
+  T xd, yd;
+  plumb_bob::distort(intrinsics + kK1, x, y, &xd, &yd);
   pixel[0] = intrinsics[kFx] * xd + intrinsics[kCx];
   pixel[1] = intrinsics[kFy] * yd + intrinsics[kCy];
 }

@@ -1,7 +1,7 @@
 #pragma once
 // Pinhole camera with the plumb_bob distortion model of ROS CameraInfo / OpenCV
-// (k1, k2, p1, p2, k3; unused terms zero). Pixel convention: the centre of the top-left
-// pixel is (0, 0), as in OpenCV and CameraInfo.
+// (k1, k2, p1, p2, k3; unused terms zero; the arithmetic is plumb_bob_distortion.h's). Pixel
+// convention: the centre of the top-left pixel is (0, 0), as in OpenCV and CameraInfo.
 #include <Eigen/Core>
 #include <array>
 #include <string>
