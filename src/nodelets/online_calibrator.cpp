@@ -422,7 +422,9 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
     std::future<CalibrationStatus> result = job.result->get_future();
     submit(std::move(job));
     res.status = result.get();
-    res.success = res.status.accepted;
+    // A solve that fits no better than the calibration in force confirms it: nothing to change.
+    const bool confirmed = res.status.reason.rfind(kInForceConfirmedReason, 0) == 0;
+    res.success = res.status.accepted || confirmed;
     // An accepted status has an empty reason only when committed to the driver.
     res.message = res.status.accepted && res.status.reason.empty() ? "committed" : res.status.reason;
     return true;

@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <stdexcept>
 #include <tuple>
 #include <utility>
@@ -155,6 +156,12 @@ CalibrationStatus CalibrationSession::solve(const std::vector<ecs::StereoObserva
   }
   CalibrationStatus status = makeStatus(candidate, decision);
   status.epoch = epoch;
+  if (decision.in_force_confirmed) {
+    char rms[96];
+    std::snprintf(rms, sizeof(rms), " (RMS %.3f px; the new solve %.3f px, no better)", ecs::combinedRms(in_force_fit),
+                  ecs::combinedRms(candidate));
+    status.reason = kInForceConfirmedReason + std::string(rms);
+  }
   if (!decision.accepted || dry_run) {
     if (decision.accepted) status.reason = "dry run: acceptable, not committed";
     return status;

@@ -33,6 +33,9 @@ CommitTarget parseCommitTarget(const std::string& name);
 
 // status.reason of a calibration accepted by the gate but, with commit "none", committed nowhere.
 constexpr const char* kAcceptedNotCommittedReason = "accepted (commit: none): gate passed, not committed to a driver";
+// Start of status.reason when a solve fits no better than the calibration in force (the gate keeps
+// it): nothing needs changing, which a recalibration request answers as a success.
+constexpr const char* kInForceConfirmedReason = "calibration in force confirmed";
 
 struct CalibratorParams {
   std::string device_config;  // sim_rig.yaml format: the `device` node

@@ -41,6 +41,9 @@ struct GateOptions {
 struct GateDecision {
   bool accepted = false;
   std::string reason;  // why, in words, for CalibrationStatus.reason
+  // Rejected only because the candidate fits no better (and not clearly worse) than the
+  // calibration in force: the calibration in force is confirmed by these observations.
+  bool in_force_confirmed = false;
 };
 
 class QualityGate {
