@@ -7,6 +7,7 @@
 #include <sensor_msgs/SetCameraInfo.h>
 #include <stereo_msgs/DisparityImage.h>
 
+#include <filesystem>
 #include <functional>
 #include <limits>
 #include <opencv2/core.hpp>
@@ -238,5 +239,8 @@ int main(int argc, char** argv) {
   ros::init(argc, argv, "calibration_pair_mismatch_test");
   ros::AsyncSpinner spinner(2);
   spinner.start();
-  return RUN_ALL_TESTS();
+  const int result = RUN_ALL_TESTS();
+  std::string dir;  // the launch file's temporary calibration folder
+  if (ros::param::get("/stereo/calibration_dir", dir) && dir.rfind("/tmp/", 0) == 0) std::filesystem::remove_all(dir);
+  return result;
 }
