@@ -200,14 +200,7 @@ class LightControllerNodelet : public nodelet::Nodelet {
     whole_ = std::make_unique<ecs::StereoLightConfirmer>(params_.confirmation);
     watch_ = std::make_unique<ecs::LightCommandWatch>(params_.max_delay_frames);
     if (params_.calibration_store == "file") {
-      left_calibration_ = std::make_unique<CameraCalibration>(ros::NodeHandle(pnh, "camera_info_manager/left"),
-                                                              params_.left_camera_name,
-                                                              params_.left_camera_info_url, "left_camera_info_url");
-      right_calibration_ = std::make_unique<CameraCalibration>(ros::NodeHandle(pnh, "camera_info_manager/right"),
-                                                               params_.right_camera_name,
-                                                               params_.right_camera_info_url, "right_camera_info_url");
-      left_calibration_->load(CameraInfo());
-      right_calibration_->load(CameraInfo());
+      // The pair store is made at the first set_camera_info, when the driver's image size is known.
       left_set_info_srv_ = nh.advertiseService<sensor_msgs::SetCameraInfo::Request, sensor_msgs::SetCameraInfo::Response>(
           "left/set_camera_info", [this](auto& req, auto& res) { return setCameraInfo(true, req, res); });
       right_set_info_srv_ = nh.advertiseService<sensor_msgs::SetCameraInfo::Request, sensor_msgs::SetCameraInfo::Response>(
@@ -442,17 +435,46 @@ class LightControllerNodelet : public nodelet::Nodelet {
       NODELET_WARN("LightController: %s set_camera_info %s", side, res.status_message.c_str());
       return true;
     }
-    CameraCalibration& calibration = left ? *left_calibration_ : *right_calibration_;
-    std::string reason;
-    if (!calibration.set(req.camera_info, &reason)) {
-      res.success = false;
-      res.status_message = reason;
-      NODELET_ERROR("LightController: %s set_camera_info failed, calibration unchanged: %s", side, reason.c_str());
+    if (!calibration_) {
+      if (!last_info_[0] || !last_info_[1]) {
+        res.success = false;
+        res.status_message = "rejected: no camera_info from the driver yet (the calibration's image size is unknown)";
+        NODELET_WARN("LightController: %s set_camera_info %s", side, res.status_message.c_str());
+        return true;
+      }
+      try {
+        calibration_ = std::make_unique<StereoCalibration>(
+            StereoCalibration::Camera{params_.left_camera_name, params_.left_camera_info_url, "left_camera_info_url"},
+            StereoCalibration::Camera{params_.right_camera_name, params_.right_camera_info_url,
+                                      "right_camera_info_url"},
+            last_info_[0]->width, last_info_[0]->height, kPairTimeoutS);
+        calibration_->load(*last_info_[0], *last_info_[1]);
+      } catch (const ecs::ConfigError& e) {
+        calibration_.reset();
+        res.success = false;
+        res.status_message = std::string("not stored: ") + e.what();
+        NODELET_ERROR("LightController: %s set_camera_info: %s", side, res.status_message.c_str());
+        return true;
+      }
+    }
+    const StereoCalibration::SetResult result = calibration_->set(left, req.camera_info);
+    if (!result.discarded.empty()) NODELET_ERROR("LightController: %s", result.discarded.c_str());
+    res.success = result.success;
+    res.status_message = result.message;
+    if (!result.success) {
+      NODELET_ERROR("LightController: %s set_camera_info failed, calibration unchanged: %s", side,
+                    result.message.c_str());
       return true;
     }
-    const std::string& service = left ? params_.left_reload_service : params_.right_reload_service;
-    const std::string& url = left ? params_.left_camera_info_url : params_.right_camera_info_url;
-    if (!service.empty()) {
+    if (result.message.rfind("staged:", 0) == 0) {  // waits for the other camera: nothing written yet
+      NODELET_INFO("LightController: %s calibration %s", side, result.message.c_str());
+      return true;
+    }
+    // Both files changed together: both drivers reload theirs.
+    for (const bool side_left : {true, false}) {
+      const std::string& service = side_left ? params_.left_reload_service : params_.right_reload_service;
+      const std::string& url = side_left ? params_.left_camera_info_url : params_.right_camera_info_url;
+      if (service.empty()) continue;
       dynamic_reconfigure::Reconfigure reload;
       dynamic_reconfigure::StrParameter parameter;
       parameter.name = "camera_info_url";
@@ -460,14 +482,11 @@ class LightControllerNodelet : public nodelet::Nodelet {
       reload.request.config.strs.push_back(parameter);
       if (!ros::service::call(service, reload)) {
         res.success = false;
-        res.status_message = "written to " + calibration.path() + ", but the driver did not reload it: " + service +
-                             " is not available";
+        res.status_message = result.message + ", but the driver did not reload it: " + service + " is not available";
         NODELET_ERROR("LightController: %s set_camera_info: %s", side, res.status_message.c_str());
         return true;
       }
     }
-    res.success = true;
-    res.status_message = "written to " + calibration.path() + (service.empty() ? "" : ", driver reloading it");
     NODELET_INFO("LightController: %s calibration %s", side, res.status_message.c_str());
     return true;
   }
@@ -541,7 +560,11 @@ class LightControllerNodelet : public nodelet::Nodelet {
   std::unique_ptr<ecs::StereoLightConfirmer> whole_;    // over the whole image, from the start
   std::unique_ptr<ecs::StereoLightConfirmer> regions_;  // over the taught regions, once taught
   std::unique_ptr<ecs::LightCommandWatch> watch_;
-  std::unique_ptr<CameraCalibration> left_calibration_, right_calibration_;
+  // calibration_store "file": both cameras' files, committed as one pair (made at the first
+  // set_camera_info; callback-queue thread only).
+  std::unique_ptr<StereoCalibration> calibration_;
+  // How long a calibration of one camera waits for the other camera's (as the CameraDriver's default).
+  static constexpr double kPairTimeoutS = 10.0;
   cv::Mat masks_[2];
   int64_t prior_mtime_ = -2;
 

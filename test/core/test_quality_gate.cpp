@@ -191,7 +191,7 @@ TEST(QualityGate, EachCriterionRejectsWithItsReason) {
 }
 
 TEST(QualityGate, OneFrameOfThisLayoutIsTooUncertainForTheDefaultLimits) {
-  // One frame: fx is known to ~1.4 % only (Cramer-Rao bound of this geometry at 0.2 px).
+  // One frame: the Cramer-Rao bound of this geometry at 0.2 px on fx is above the default limit.
   const Scenario s;
   const BundleAdjustmentSummary candidate = s.solve(s.observe(1, 6), s.drifted());
   ASSERT_TRUE(candidate.success);
