@@ -18,8 +18,9 @@
 // CameraDriver counts its accepted set_camera_info calls. Calibrations are stored by the driver
 // itself (calibration_store "driver": the calibrator calls the driver's set_camera_info) or, for
 // drivers that read a calibration file but cannot store one (image_publisher), by this nodelet
-// (calibration_store "file": it serves left|right/set_camera_info, writes the file atomically and
-// asks the driver to reload it through its dynamic_reconfigure parameter camera_info_url).
+// (calibration_store "file": it serves left|right/set_camera_info, writes both cameras' files as
+// one pair and asks both drivers to reload theirs through their dynamic_reconfigure parameter
+// camera_info_url).
 #include <cv_bridge/cv_bridge.h>
 #include <diagnostic_updater/diagnostic_updater.h>
 #include <dynamic_reconfigure/Reconfigure.h>

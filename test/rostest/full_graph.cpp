@@ -187,8 +187,9 @@ TEST(FullGraph, ZoomAndKnockAreRecalibratedAndDisparityNeverStops) {
   EXPECT_NEAR(zoomed.truth.left.fx / before_zoom.left.fx, 1.05, 0.01);
   expectWithinBounds(zoomed.rig, zoomed.truth, zoomed.tf_left_from_right, "after the zoom");
 
-  // A forced recalibration after a knock of the right camera (with nothing to correct the gate
-  // keeps the calibration in force, and the service answers success = false).
+  // A forced recalibration after a knock of the right camera: a real change to commit (with
+  // nothing to correct the service would answer success = true, "calibration in force confirmed",
+  // and commit nothing).
   embedded_calibration_stereo::SetRigDrift knock;
   knock.request.focal_scale = 1.05;
   knock.request.knock_rotation_deg = {0.2, -0.3, 0.1};
