@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <stdexcept>
 #include <tuple>
 #include <utility>
@@ -12,6 +13,8 @@
 #include "embedded_calibration_stereo/core/calibration/observation_validator.h"
 #include "embedded_calibration_stereo/ros/conversions.h"
 #include "embedded_calibration_stereo/ros/parameter_reader.h"
+#include "embedded_calibration_stereo/ros/service_call.h"
+#include "embedded_calibration_stereo/ros/stamp_guard.h"
 
 namespace embedded_calibration_stereo {
 namespace {
@@ -46,6 +49,9 @@ CalibratorParams loadCalibratorParams(const ros::NodeHandle& pnh, const std::str
   p.min_frames = read.atLeast("min_frames", p.min_frames, 1);
   p.max_frames = read.atLeast("max_frames", p.max_frames, p.min_frames);
   non_negative("service_timeout_s", &p.service_timeout_s);
+  p.max_request_timeout_s = read.atLeast("max_request_timeout_s", p.max_request_timeout_s, 0.1);
+  p.window_timeout_s = read.atLeast("window_timeout_s", p.window_timeout_s, 0.1);
+  p.stamp_tolerance_s = readStampTolerance(pnh);
   p.commit = parseCommitTarget(read.get("commit", "driver"));
   p.rectification_alpha = read.get("rectification_alpha", p.rectification_alpha);
   if (!(p.rectification_alpha == -1.0 || (p.rectification_alpha >= 0.0 && p.rectification_alpha <= 1.0)))
@@ -67,6 +73,32 @@ CalibratorParams loadCalibratorParams(const ros::NodeHandle& pnh, const std::str
   if (const std::string e = p.adjustment.Check(); !e.empty()) throw ecs::ConfigError("loss_scale_px", e);
   if (const std::string e = p.gate.Check(); !e.empty()) throw ecs::ConfigError("quality gate", e);
   return p;
+}
+
+BoundedRequest boundRecalibrateRequest(uint32_t frames, double timeout_s, const CalibratorParams& params) {
+  BoundedRequest r;
+  char text[200];
+  if (!std::isfinite(timeout_s)) {
+    std::snprintf(text, sizeof(text), "refused: timeout_s must be a finite number of seconds, got %g (at most %g s)",
+                  timeout_s, params.max_request_timeout_s);
+    r.refusal = text;
+    return r;
+  }
+  r.frames = frames > 0 ? frames : static_cast<size_t>(params.min_frames);
+  r.timeout_s = timeout_s > 0.0 ? timeout_s : std::min(kDefaultRequestTimeoutS, params.max_request_timeout_s);
+  const auto add_note = [&r](const std::string& note) { r.note += (r.note.empty() ? "" : ", ") + note; };
+  if (r.frames > static_cast<size_t>(params.max_frames)) {
+    std::snprintf(text, sizeof(text), "frames %u limited to %d (max_frames)", frames, params.max_frames);
+    add_note(text);
+    r.frames = static_cast<size_t>(params.max_frames);
+  }
+  if (r.timeout_s > params.max_request_timeout_s) {
+    std::snprintf(text, sizeof(text), "timeout_s %g limited to %g s (max_request_timeout_s)", timeout_s,
+                  params.max_request_timeout_s);
+    add_note(text);
+    r.timeout_s = params.max_request_timeout_s;
+  }
+  return r;
 }
 
 std::vector<std::string> observationDefects(const ecs::StereoObservation& observation,
@@ -210,19 +242,11 @@ void CalibrationSession::broadcastTransform(const ecs::StereoRig& rig) {
 bool CalibrationSession::callSetCameraInfo(const std::string& side, const sensor_msgs::CameraInfo& info,
                                            std::string* error) {
   const std::string name = side + "/set_camera_info";
-  ros::ServiceClient client = nh_.serviceClient<sensor_msgs::SetCameraInfo>(name);
   sensor_msgs::SetCameraInfo srv;
   srv.request.camera_info = info;
-  if (!client.waitForExistence(ros::Duration(params_.service_timeout_s))) {
-    *error = client.getService() + " is not available";
-    return false;
-  }
-  if (!client.call(srv)) {
-    *error = client.getService() + " call failed";
-    return false;
-  }
+  if (!callService(nh_, name, &srv, params_.service_timeout_s, error)) return false;  // bounded
   if (!srv.response.success) {
-    *error = client.getService() + " refused: " + srv.response.status_message;
+    *error = nh_.resolveName(name) + " refused: " + srv.response.status_message;
     return false;
   }
   return true;

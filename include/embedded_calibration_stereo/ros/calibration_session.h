@@ -41,7 +41,10 @@ struct CalibratorParams {
   bool auto_calibrate = true;  // solve at the end of every light-on window of the driver
   int min_frames = 5;          // a light-on window with fewer frames is not solved
   int max_frames = 30;         // frames kept per window (the first ones)
-  double service_timeout_s = 2.0;  // for each set_light / set_camera_info call (wall time)
+  double service_timeout_s = 2.0;  // for each set_light / set_camera_info call: to appear, then to answer (wall)
+  double max_request_timeout_s = 60.0;  // recalibrate's timeout_s is limited to it
+  double window_timeout_s = 5.0;   // an automatic window with no settled frame added for this long ends (wall)
+  double stamp_tolerance_s = 2.0;  // inputs stamped further from the others are dropped (stamp_guard.h)
   CommitTarget commit = CommitTarget::kDriver;
   // cv::stereoRectify's alpha for the committed CameraInfo R and P: 0 every rectified pixel
   // valid, 1 every raw pixel kept, -1 OpenCV's default scaling.
@@ -53,6 +56,19 @@ struct CalibratorParams {
 
 // Reads the private parameters; throws ecs::ConfigError naming a bad one.
 CalibratorParams loadCalibratorParams(const ros::NodeHandle& pnh, const std::string& default_device_config);
+
+// A recalibrate request within the calibrator's limits: `frames` (0: min_frames) at most
+// max_frames, `timeout_s` (<= 0: kDefaultRequestTimeoutS) at most max_request_timeout_s. A
+// non-finite timeout_s is refused (`refusal` says why: nothing may be done). `note` says what
+// was limited ("" when nothing was).
+struct BoundedRequest {
+  std::string refusal;
+  size_t frames = 0;
+  double timeout_s = 0.0;
+  std::string note;
+};
+constexpr double kDefaultRequestTimeoutS = 10.0;
+BoundedRequest boundRecalibrateRequest(uint32_t frames, double timeout_s, const CalibratorParams& params);
 
 // The defects of one observation message that make the calibrator drop it (non-finite
 // coordinates, duplicate ids, ids outside the board, unknown board, mismatched lengths), from
