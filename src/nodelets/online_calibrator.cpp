@@ -22,6 +22,7 @@
 #include <ros/ros.h>
 #include <std_srvs/SetBool.h>
 
+#include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <cmath>
@@ -220,9 +221,30 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
     std::optional<Job> job;
     {
       std::lock_guard<std::mutex> lock(mutex_);
-      if (!modes_.empty() && mode->header.stamp < modes_.back().stamp) forgetFramesAfterTimeJump(mode->header.stamp);
-      epoch_ = mode->calibration_epoch;
-      modes_.push_back({mode->header.stamp, calibrating, mode->calibration_epoch});
+      const ros::Time& stamp = mode->header.stamp;
+      // One frame per stamp: a second message of a stamp is ignored.
+      for (const ModeSeen& seen : modes_)
+        if (seen.stamp == stamp) return;
+      // Older than the newest frame: a time jump of the driver when by more than the stamp
+      // tolerance (the stamp guard lets such a jump through only once every input made it),
+      // otherwise a late or stray message: kept for matching its observation, but it says
+      // nothing about the light now.
+      bool late = false;
+      if (!modes_.empty() && stamp < modes_.back().stamp) {
+        if (modes_.back().stamp.toSec() - stamp.toSec() > params_.stamp_tolerance_s)
+          forgetFramesAfterTimeJump(stamp);
+        else
+          late = true;
+      }
+      const ModeSeen seen{stamp, calibrating, mode->calibration_epoch};
+      if (late) {
+        modes_.insert(std::upper_bound(modes_.begin(), modes_.end(), stamp,
+                                       [](const ros::Time& t, const ModeSeen& m) { return t < m.stamp; }),
+                      seen);
+      } else {
+        epoch_ = mode->calibration_epoch;
+        modes_.push_back(seen);
+      }
       if (modes_.size() > kKeptFrames) modes_.pop_front();
       if (awaiting_commit_) cv_.notify_all();
       for (auto it = pending_.begin(); it != pending_.end(); ++it) {
@@ -233,7 +255,7 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
         }
       }
       // The light went off: the window of the driver's schedule is complete.
-      if (!mode->light_on && !request_active_ && !window_.empty()) {
+      if (!late && !mode->light_on && !request_active_ && !window_.empty()) {
         window_closed_at_ = mode->header.stamp;
         if (params_.auto_calibrate && static_cast<int>(window_.size()) >= params_.min_frames)
           job = Job{std::move(window_), false, nullptr};

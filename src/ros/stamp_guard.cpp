@@ -37,8 +37,8 @@ bool StampGuard::admit(size_t index, const ros::Time& stamp) {
     const double now = clock_();
     const double t = stamp.toSec();
     bool any_other = false;
-    double nearest_offset = std::numeric_limits<double>::infinity();  // signed: t - latest of the nearest input
-    size_t nearest = index;
+    double nearest_offset = std::numeric_limits<double>::infinity();  // signed: t - latest of `nearest`
+    size_t nearest = index;  // the other input admitted most recently
     for (size_t j = 0; j < inputs_.size(); ++j) {
       const Input& other = inputs_[j];
       if (j == index || !other.has) continue;
@@ -49,7 +49,8 @@ bool StampGuard::admit(size_t index, const ros::Time& stamp) {
         admitted = true;
         break;
       }
-      if (std::abs(offset) < std::abs(nearest_offset)) {
+      // Messages name the input let through most recently (the freshest reference).
+      if (nearest == index || other.admitted_at > inputs_[nearest].admitted_at) {
         nearest_offset = offset;
         nearest = j;
       }
