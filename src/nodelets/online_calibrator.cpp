@@ -10,7 +10,9 @@
 // answer, and a caller that goes away (killed) ends it early; the light is switched off on
 // every way out. Inputs whose stamps lie far from the others' are dropped (stamp_guard.h), an
 // observation is counted once per stamp, and an automatic window to which no settled frame was
-// added for window_timeout_s ends (solved when it has min_frames).
+// added for window_timeout_s ends (solved when it has min_frames). An accepted calibration the
+// driver could not store is committed again every commit_retry_s while the calibration in force
+// is unchanged and no later solve replaced it.
 // For a bag replay (launch/replay.launch: no driver, use_sim_time) the parameter commit:=none
 // solves and gates every window as usual but commits nowhere except /tf_static; only header
 // stamps (sim time) order the frames, and solve durations are wall time.
@@ -48,7 +50,8 @@ namespace embedded_calibration_stereo {
 
 // Threads:
 //  - the manager's single-threaded queue of this nodelet runs the subscribers (observations,
-//    calibration_mode, camera_info), the diagnostics timer and the window age timer;
+//    calibration_mode, camera_info), the diagnostics timer, the window age timer and the commit
+//    retry timer (which only queues a job for the worker);
 //  - calibration/recalibrate runs on this nodelet's own service queue and its two spinner
 //    threads: a call blocks while the window fills and the worker solves (up to timeout_s), and
 //    on the manager's shared pool it would hold one of its worker threads that long (with 4
@@ -73,6 +76,7 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
     std::vector<ecs::StereoObservation> frames;
     bool dry_run = false;
     std::shared_ptr<std::promise<CalibrationStatus>> result;  // null for automatic windows
+    bool commit_again = false;  // no solve: commit uncommitted_ again
   };
 
   void onInit() override {
@@ -86,6 +90,7 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
       recalibrate_srv_.shutdown();
       diagnostics_timer_.stop();
       window_timer_.stop();
+      commit_retry_timer_.stop();
       for (ros::Subscriber* sub : {&observations_sub_, &mode_sub_, &left_info_sub_, &right_info_sub_}) sub->shutdown();
       throw;
     }
@@ -125,6 +130,9 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
       diagnostics_->update();
     });
     window_timer_ = nh.createWallTimer(ros::WallDuration(0.25), [this](const ros::WallTimerEvent&) { endIdleWindow(); });
+    if (params_.commit_retry_s > 0)
+      commit_retry_timer_ = nh.createWallTimer(ros::WallDuration(params_.commit_retry_s),
+                                               [this](const ros::WallTimerEvent&) { scheduleCommitAgain(); });
     worker_ = std::thread(&OnlineCalibratorNodelet::workerLoop, this);
     ros::NodeHandle service_nh(nh);
     service_nh.setCallbackQueue(&service_queue_);
@@ -362,9 +370,21 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
         right = right_info_;
         epoch = epoch_;
       }
+      if (job.commit_again) {
+        commitAgain();
+        continue;
+      }
       std::optional<CommittedCalibration> committed;
-      CalibrationStatus status = session_->solve(job.frames, left.get(), right.get(), epoch, job.dry_run, &committed);
+      std::optional<UncommittedCalibration> uncommitted;
+      CalibrationStatus status =
+          session_->solve(job.frames, left.get(), right.get(), epoch, job.dry_run, &committed, &uncommitted);
       if (committed) readCommittedEpoch(*committed, epoch, &status);
+      if (!job.dry_run) {
+        // The newest solve decides: a calibration not stored is tried again (scheduleCommitAgain);
+        // a later one, committed, rejected or not stored either, replaces it.
+        std::lock_guard<std::mutex> lock(mutex_);
+        uncommitted_ = std::move(uncommitted);
+      }
       NODELET_INFO("OnlineCalibrator: %zu frames, %s%s%s%s (rms %.3f / %.3f px, %.0f ms)", job.frames.size(),
                    job.dry_run ? "dry run, " : "", status.accepted ? "accepted" : "not accepted",
                    status.reason.empty() ? "" : ": ", status.reason.c_str(), status.rms_left_px,
@@ -380,6 +400,68 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
       if (!job.dry_run) status_pub_.publish(status);  // a dry run is answered, not announced
       if (job.result) job.result->set_value(status);
     }
+  }
+
+  // Caller holds mutex_. The driver still publishes the calibration `u` was gated against (its
+  // epoch may have moved: a failed commit puts the left calibration back).
+  bool stillInForce(const UncommittedCalibration& u) const {
+    return left_info_ && right_info_ && carriesCalibration(*left_info_, u.left_in_force) &&
+           carriesCalibration(*right_info_, u.right_in_force);
+  }
+
+  // Commit retry timer (subscriber queue): a calibration the driver could not store (a full
+  // disk, a driver restarting) is committed again every commit_retry_s, on the worker, while
+  // the calibration in force is still the one it was gated against.
+  void scheduleCommitAgain() {
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      if (!uncommitted_ || commit_again_queued_) return;
+      if (!stillInForce(*uncommitted_)) {
+        NODELET_WARN("OnlineCalibrator: the calibration in force changed: the calibration the driver could not "
+                     "store is not committed again");
+        uncommitted_.reset();
+        return;
+      }
+      commit_again_queued_ = true;
+    }
+    Job job;
+    job.commit_again = true;
+    submit(std::move(job));
+  }
+
+  // Worker thread.
+  void commitAgain() {
+    std::optional<UncommittedCalibration> calibration;
+    uint32_t before;
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      commit_again_queued_ = false;
+      if (uncommitted_ && stillInForce(*uncommitted_)) calibration = uncommitted_;
+      before = epoch_;
+    }
+    if (!calibration) return;
+    const std::string error = session_->commitAgain(*calibration);
+    if (!error.empty()) {
+      NODELET_WARN_THROTTLE(60.0, "OnlineCalibrator: the accepted calibration is still not committed: %s; trying "
+                            "again every %.0f s",
+                            error.c_str(), params_.commit_retry_s);
+      return;
+    }
+    CalibrationStatus status = calibration->status;
+    status.header.stamp = ros::Time::now();
+    status.accepted = true;
+    status.reason.clear();
+    readCommittedEpoch(calibration->infos, before, &status);
+    NODELET_INFO("OnlineCalibrator: the accepted calibration the driver could not store before is committed now "
+                 "(epoch %u)",
+                 status.epoch);
+    {
+      std::lock_guard<std::mutex> lock(mutex_);  // no solve ran meanwhile: the worker runs one job at a time
+      uncommitted_.reset();
+      last_solve_ = status;
+      last_solve_time_ = last_commit_time_ = ros::WallTime::now();
+    }
+    status_pub_.publish(status);
   }
 
   // Worker thread. Waits (bounded by service_timeout_s: the driver publishes the new
@@ -584,6 +666,7 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
     status.add("observations dropped for a stamp going back", backwards_messages_);
     status.add("messages dropped for a stamp far from the others", guard_->dropped());
     status.add("last window ended early", last_window_end_);
+    status.add("accepted calibration waiting to be committed again", uncommitted_.has_value());
   }
 
   static constexpr size_t kKeptFrames = 64;  // modes / unmatched observations remembered
@@ -607,7 +690,7 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
   std::unique_ptr<ros::AsyncSpinner> service_spinner_;
   ros::ServiceClient set_light_client_;
   std::unique_ptr<diagnostic_updater::Updater> diagnostics_;
-  ros::WallTimer diagnostics_timer_, window_timer_;
+  ros::WallTimer diagnostics_timer_, window_timer_, commit_retry_timer_;
   std::unique_ptr<StampGuard> guard_;
 
   std::mutex mutex_;  // guards everything below
@@ -624,6 +707,8 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
   std::string request_caller_;       // the node that made it
   ros::WallTime last_window_frame_wall_;  // when a frame was last added to window_
   std::string last_window_end_;      // why the last window ended without the light going off
+  std::optional<UncommittedCalibration> uncommitted_;  // accepted, not stored by the driver: tried again
+  bool commit_again_queued_ = false;
   size_t request_frames_ = 0;
   sensor_msgs::CameraInfoConstPtr left_info_, right_info_;
   bool in_force_tf_sent_ = false;  // the calibration in force went on /tf_static (storeInfo)

@@ -52,6 +52,7 @@ CalibratorParams loadCalibratorParams(const ros::NodeHandle& pnh, const std::str
   p.max_request_timeout_s = read.atLeast("max_request_timeout_s", p.max_request_timeout_s, 0.1);
   p.window_timeout_s = read.atLeast("window_timeout_s", p.window_timeout_s, 0.1);
   p.stamp_tolerance_s = readStampTolerance(pnh);
+  non_negative("commit_retry_s", &p.commit_retry_s);
   p.commit = parseCommitTarget(read.get("commit", "driver"));
   p.rectification_alpha = read.get("rectification_alpha", p.rectification_alpha);
   if (!(p.rectification_alpha == -1.0 || (p.rectification_alpha >= 0.0 && p.rectification_alpha <= 1.0)))
@@ -156,8 +157,10 @@ CalibrationSession::CalibrationSession(ros::NodeHandle nh, CalibratorParams para
 CalibrationStatus CalibrationSession::solve(const std::vector<ecs::StereoObservation>& frames,
                                             const sensor_msgs::CameraInfo* left_info,
                                             const sensor_msgs::CameraInfo* right_info, uint32_t epoch,
-                                            bool dry_run, std::optional<CommittedCalibration>* committed) {
+                                            bool dry_run, std::optional<CommittedCalibration>* committed,
+                                            std::optional<UncommittedCalibration>* uncommitted) {
   committed->reset();
+  if (uncommitted) uncommitted->reset();
   if (!left_info || !right_info) {
     CalibrationStatus status;
     status.header.stamp = ros::Time::now();
@@ -210,12 +213,17 @@ CalibrationStatus CalibrationSession::solve(const std::vector<ecs::StereoObserva
   if (!commit_error.empty()) {
     status.accepted = false;
     status.reason = "not committed: " + commit_error;
+    if (uncommitted) *uncommitted = UncommittedCalibration{infos, candidate.rig, *left_info, *right_info, status};
     return status;
   }
   // status.epoch stays `epoch`: how far the driver moves its epoch per set_camera_info is the
   // driver's business, so the caller reads the new epoch from the driver's frames.
   *committed = std::move(infos);
   return status;
+}
+
+std::string CalibrationSession::commitAgain(const UncommittedCalibration& calibration) {
+  return commit(calibration.infos, calibration.rig, calibration.left_in_force);
 }
 
 std::string CalibrationSession::commit(const CommittedCalibration& infos, const ecs::StereoRig& rig,
