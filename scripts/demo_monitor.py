@@ -4,8 +4,8 @@ script (a 5 % zoom step, a slow thermal rotation of the right camera, a knock), 
 line every two seconds and writes the results folder at the end: calibration YAMLs, status,
 calibration-error timeline (CSV and PNG plot with the drift events), image and disparity
 snapshots, an overview picture (a light-on frame, its separated scene and its disparity side by
-side), and a final report saying whether the calibration after the drift is within the
-calibrator's bounds of ground truth.
+side), and a final report saying whether the calibration after the drift meets the calibrator's accuracy
+targets against ground truth.
 
 Usage: demo_monitor.py --duration S --out DIR [--ns stereo] [--zoom-at S]
 Times count from the first camera frame.
@@ -26,7 +26,7 @@ from stereo_msgs.msg import DisparityImage
 from embedded_calibration_stereo.msg import CalibrationMode, CalibrationStatus
 from embedded_calibration_stereo.srv import SetRigDrift, SetRigDriftRequest
 
-# The calibrator's accuracy bounds, per error key of calibration_errors().
+# The calibrator's accuracy targets, per error key of calibration_errors().
 BOUNDS = {
     "fx_pct": (0.05, "%"), "fy_pct": (0.05, "%"), "cx_px": (0.3, "px"), "cy_px": (0.3, "px"),
     "k1": (0.005, ""), "baseline_pct": (0.1, "%"), "rotation_deg": (0.01, "deg"),
@@ -355,7 +355,7 @@ class Monitor:
 
 
 def plot_errors(path, timeline, events, epochs):
-    """PNG plot of each error against time (log scale), its bound dashed, drift events as
+    """PNG plot of each error against time (log scale), its accuracy target dashed, drift events as
     vertical lines and calibration commits (epoch changes) as dotted lines. False when
     matplotlib is missing."""
     try:
@@ -376,7 +376,7 @@ def plot_errors(path, timeline, events, epochs):
             per_camera = key not in ("baseline_pct", "rotation_deg")
             ax.semilogy(t, np.maximum(values, 1e-6), color=colour, linewidth=1.5,
                         label=key.rsplit("_", 1)[0] + (" (worse camera)" if per_camera else ""))
-        ax.axhline(BOUNDS[keys[0]][0], color="red", linestyle="--", linewidth=1, label="bound")
+        ax.axhline(BOUNDS[keys[0]][0], color="red", linestyle="--", linewidth=1, label="accuracy target")
         for i, (te, name) in enumerate(events):
             ax.axvline(te, color="black", linestyle="-.", linewidth=1.2, label="drift event" if i == 0 else None)
             if ax is axes[0]:
@@ -398,7 +398,7 @@ def plot_errors(path, timeline, events, epochs):
 
 
 def verdict(timeline, script, epochs):
-    """Final errors against the bounds; the calibration counts as 'after the drift' only if a
+    """Final errors against the accuracy targets; the calibration counts as 'after the drift' only if a
     commit came after the last drift event. Returns (lines, bounds_met)."""
     lines = []
     last_event = script.last_event_time()
@@ -413,14 +413,14 @@ def verdict(timeline, script, epochs):
     lines.append("calibration committed after the last drift event (%s at %.1f s): %s" % (
         script.fired[-1][1], last_event,
         ", ".join("%.1f s" % t for t in commits_after) if commits_after else "NONE"))
-    lines.append("final calibration error vs ground truth (worst of both cameras) and the calibrator's bounds:")
+    lines.append("final calibration error vs ground truth (worst of both cameras) and the calibrator's accuracy targets:")
     for key in ERROR_KEYS:
         bound, unit = BOUNDS[key]
         ok = final[key] <= bound
         met = met and ok
-        lines.append("  %-13s %10.5f %-3s  bound %-6g %s" % (key, final[key], unit, bound, "ok" if ok else "EXCEEDED"))
+        lines.append("  %-13s %10.5f %-3s  target %-6g %s" % (key, final[key], unit, bound, "ok" if ok else "EXCEEDED"))
     lines.append("RESULT: calibration after the drift is %s" % (
-        "WITHIN the calibrator's bounds" if met else "NOT within the calibrator's bounds"))
+        "WITHIN the calibrator's accuracy targets" if met else "NOT within the calibrator's accuracy targets"))
     return lines, met
 
 

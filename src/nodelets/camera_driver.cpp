@@ -1,6 +1,8 @@
 // CameraDriver nodelet: publishes stereo frames from a backend (sim, files, v4l2) with their
 // CameraInfo and one calibration_mode message per frame, all with the same stamp; switches the
-// calibration light on a schedule or on request; stores calibrations sent to set_camera_info.
+// calibration light on a schedule or on request; stores calibrations sent to set_camera_info
+// (both cameras' files change together, see StereoCalibration) and refuses those no consumer
+// could use.
 #include <cv_bridge/cv_bridge.h>
 #include <diagnostic_updater/diagnostic_updater.h>
 #include <image_transport/image_transport.h>
@@ -36,8 +38,9 @@ namespace embedded_calibration_stereo {
 //    light_, the publishers' use and the diagnostics, and takes mutex_ for the shared state
 //    once per frame;
 //  - the manager's callback threads run the services (set_light, set_camera_info, sim/set_drift)
-//    and touch only the shared state under mutex_ (schedule_, left_info_, right_info_, epoch_),
-//    the CameraCalibration objects (thread-safe) and sim_ (thread-safe drift).
+//    and touch only schedule_ under mutex_, calibration_ (thread-safe: the capture thread reads
+//    the pair in force and its epoch from one snapshot, never waiting for a disk write) and
+//    sim_ (thread-safe drift).
 class CameraDriverNodelet : public nodelet::Nodelet {
  public:
   ~CameraDriverNodelet() override { stopCapture(); }
@@ -58,8 +61,6 @@ class CameraDriverNodelet : public nodelet::Nodelet {
   // a service still advertised then would unregister from a freed queue. Drop them now.
   void releaseServices() {
     stopCapture();
-    left_calibration_.reset();  // each holds camera_info_manager's own service
-    right_calibration_.reset();
     for (ros::ServiceServer* server : {&left_set_info_srv_, &right_set_info_srv_, &set_light_srv_, &set_drift_srv_})
       server->shutdown();
   }
@@ -93,7 +94,7 @@ class CameraDriverNodelet : public nodelet::Nodelet {
       light_ = makeNoLight();
     }
     schedule_ = std::make_unique<ecs::LightSchedule>(params_.schedule);
-    loadCalibrations(pnh);
+    loadCalibrations();
 
     image_transport::ImageTransport it(nh);
     left_pub_ = it.advertiseCamera("left/image_raw", 2);
@@ -113,8 +114,8 @@ class CameraDriverNodelet : public nodelet::Nodelet {
       gt_depth_pub_ = it.advertise("ground_truth/left/depth", 2);
       set_drift_srv_ = nh.advertiseService("sim/set_drift", &CameraDriverNodelet::setDrift, this);
     }
-    NODELET_INFO("CameraDriver: backend %s, light %s, %.1f fps, calibration epoch %u",
-                 params_.backend.c_str(), params_.light_backend.c_str(), params_.fps, epoch_);
+    NODELET_INFO("CameraDriver: backend %s, light %s, %.1f fps", params_.backend.c_str(),
+                 params_.light_backend.c_str(), params_.fps);
     diagnostics_ = std::make_unique<diagnostic_updater::Updater>(nh, pnh, getName());
     diagnostics_->setHardwareID(params_.backend == "v4l2" ? params_.v4l2.left_device : params_.backend);
     diagnostics_->add("camera_driver", this, &CameraDriverNodelet::diagnose);
@@ -122,9 +123,11 @@ class CameraDriverNodelet : public nodelet::Nodelet {
     capture_thread_ = std::thread(&CameraDriverNodelet::captureLoop, this);
   }
 
-  // Loads both calibrations; without a file, the sim's nominal rig (or an uncalibrated message
-  // carrying only the image size) is used in memory until the first set_camera_info.
-  void loadCalibrations(const ros::NodeHandle& pnh) {
+  // Loads the calibration pair; without a file, the sim's nominal rig (or an uncalibrated message
+  // carrying only the image size) is used in memory until the first set_camera_info. A rejected
+  // file does not stop the driver: it runs on the previous generation or the nominal calibration
+  // with an ERROR (log and diagnostics).
+  void loadCalibrations() {
     sensor_msgs::CameraInfo left_fallback, right_fallback;
     if (const auto rig = source_->nominalRig()) {
       std::tie(left_fallback, right_fallback) = toStereoCameraInfo(*rig);
@@ -133,21 +136,17 @@ class CameraDriverNodelet : public nodelet::Nodelet {
       left_fallback.width = right_fallback.width = static_cast<uint32_t>(size.width);
       left_fallback.height = right_fallback.height = static_cast<uint32_t>(size.height);
     }
-    // camera_info_manager advertises its own set_camera_info in the handle's namespace: keep
-    // it out of the way under the private namespace; the driver serves the public ones.
-    left_calibration_ = std::make_unique<CameraCalibration>(ros::NodeHandle(pnh, "camera_info_manager/left"),
-                                                            params_.left_camera_name, params_.left_camera_info_url,
-                                                            "left_camera_info_url");
-    right_calibration_ = std::make_unique<CameraCalibration>(ros::NodeHandle(pnh, "camera_info_manager/right"),
-                                                             params_.right_camera_name, params_.right_camera_info_url,
-                                                             "right_camera_info_url");
-    const bool left_loaded = left_calibration_->load(left_fallback);
-    const bool right_loaded = right_calibration_->load(right_fallback);
-    left_info_ = left_calibration_->current();
-    right_info_ = right_calibration_->current();
-    NODELET_INFO("CameraDriver: left calibration %s %s, right calibration %s %s",
-                 left_loaded ? "loaded from" : "not found, will be stored in", left_calibration_->path().c_str(),
-                 right_loaded ? "loaded from" : "not found, will be stored in", right_calibration_->path().c_str());
+    const cv::Size size = source_->imageSize();
+    calibration_ = std::make_unique<StereoCalibration>(
+        StereoCalibration::Camera{params_.left_camera_name, params_.left_camera_info_url, "left_camera_info_url"},
+        StereoCalibration::Camera{params_.right_camera_name, params_.right_camera_info_url, "right_camera_info_url"},
+        static_cast<uint32_t>(size.width), static_cast<uint32_t>(size.height), params_.pair_timeout_s);
+    const std::string source = calibration_->load(left_fallback, right_fallback);
+    const std::string problem = calibration_->problem();
+    if (problem.empty())
+      NODELET_INFO("CameraDriver: calibration from %s", source.c_str());
+    else
+      NODELET_ERROR("CameraDriver: %s", problem.c_str());
   }
 
   void stopCapture() {
@@ -191,6 +190,8 @@ class CameraDriverNodelet : public nodelet::Nodelet {
       std::string error;
       if (!light_->apply(light, &error)) NODELET_ERROR_THROTTLE(5.0, "CameraDriver: light: %s", error.c_str());
     }
+    const std::string discarded = calibration_->expireStaged();
+    if (!discarded.empty()) NODELET_ERROR("CameraDriver: %s", discarded.c_str());
     StereoFrame frame;
     std::string error;
     if (!source_->grab(time_s, &frame, &error)) {
@@ -200,14 +201,15 @@ class CameraDriverNodelet : public nodelet::Nodelet {
       return;
     }
     CalibrationModePtr mode = boost::make_shared<CalibrationMode>();
-    sensor_msgs::CameraInfoPtr left_info, right_info;
-    {
+    if (recorded_light) {
       std::lock_guard<std::mutex> lock(mutex_);
-      if (recorded_light) light = schedule_->follow(frame.light_on.value_or(false));
-      left_info = boost::make_shared<sensor_msgs::CameraInfo>(left_info_);
-      right_info = boost::make_shared<sensor_msgs::CameraInfo>(right_info_);
-      mode->calibration_epoch = epoch_;
+      light = schedule_->follow(frame.light_on.value_or(false));
     }
+    // Both CameraInfos and the epoch from one snapshot: a published pair is never mixed.
+    StereoCalibration::InForce in_force = calibration_->inForce();
+    auto left_info = boost::make_shared<sensor_msgs::CameraInfo>(std::move(in_force.left));
+    auto right_info = boost::make_shared<sensor_msgs::CameraInfo>(std::move(in_force.right));
+    mode->calibration_epoch = in_force.epoch;
     std_msgs::Header left_header, right_header;
     left_header.stamp = right_header.stamp = stamp;
     left_header.frame_id = params_.left_frame_id;
@@ -235,13 +237,12 @@ class CameraDriverNodelet : public nodelet::Nodelet {
     const double rate = diagnosed_at_.time_since_epoch().count() == 0 ? 0.0 : frames_published_ / span;
     diagnosed_at_ = now;
     frames_published_ = 0;
-    uint32_t epoch;
-    {
-      std::lock_guard<std::mutex> lock(mutex_);
-      epoch = epoch_;
-    }
+    const uint32_t epoch = calibration_->inForce().epoch;
+    const std::string calibration_problem = calibration_->problem();
     if (!last_error_.empty()) {
       status.summary(diagnostic_msgs::DiagnosticStatus::ERROR, last_error_);
+    } else if (!calibration_problem.empty()) {
+      status.summary(diagnostic_msgs::DiagnosticStatus::ERROR, calibration_problem);
     } else if (rate < 0.9 * params_.fps) {
       status.summaryf(diagnostic_msgs::DiagnosticStatus::WARN, "%.1f fps, below %.1f", rate, params_.fps);
     } else {
@@ -251,6 +252,10 @@ class CameraDriverNodelet : public nodelet::Nodelet {
     status.add("configured fps", params_.fps);
     status.add("light on", last_light_on_);
     status.add("calibration epoch", epoch);
+    status.add("calibration", calibration_->source());
+    status.add("calibration problem", calibration_problem.empty() ? "none" : calibration_problem);
+    const std::string staged = calibration_->stagedText();
+    status.add("calibration staged", staged.empty() ? "none" : staged);
   }
 
   // Ground truth costs conversions and copies: only for topics somebody listens to.
@@ -278,28 +283,16 @@ class CameraDriverNodelet : public nodelet::Nodelet {
   }
 
   bool setCameraInfo(bool left, sensor_msgs::SetCameraInfo::Request& req, sensor_msgs::SetCameraInfo::Response& res) {
-    CameraCalibration& calibration = left ? *left_calibration_ : *right_calibration_;
-    const cv::Size size = source_->imageSize();
-    if (static_cast<int>(req.camera_info.width) != size.width || static_cast<int>(req.camera_info.height) != size.height) {
-      res.success = false;
-      res.status_message = "rejected: calibration is for " + std::to_string(req.camera_info.width) + "x" +
-                           std::to_string(req.camera_info.height) + " but the images are " +
-                           std::to_string(size.width) + "x" + std::to_string(size.height);
-      NODELET_WARN("CameraDriver: %s set_camera_info %s", left ? "left" : "right", res.status_message.c_str());
-      return true;
-    }
-    std::string reason;
-    res.success = calibration.set(req.camera_info, &reason);
-    res.status_message = reason;
-    if (res.success) {
-      std::lock_guard<std::mutex> lock(mutex_);
-      (left ? left_info_ : right_info_) = calibration.current();
-      ++epoch_;
-      NODELET_INFO("CameraDriver: %s calibration %s, epoch %u", left ? "left" : "right", reason.c_str(), epoch_);
-    } else {
-      NODELET_ERROR("CameraDriver: %s set_camera_info failed, calibration unchanged: %s", left ? "left" : "right",
-                    reason.c_str());
-    }
+    const char* side = left ? "left" : "right";
+    const StereoCalibration::SetResult result = calibration_->set(left, req.camera_info);
+    res.success = result.success;
+    res.status_message = result.message;
+    if (!result.discarded.empty()) NODELET_ERROR("CameraDriver: %s", result.discarded.c_str());
+    if (!result.success)
+      NODELET_ERROR("CameraDriver: %s set_camera_info refused, calibration unchanged: %s", side, result.message.c_str());
+    else
+      NODELET_INFO("CameraDriver: %s calibration %s, epoch %u", side, result.message.c_str(),
+                   calibration_->inForce().epoch);
     return true;
   }
 
@@ -336,12 +329,10 @@ class CameraDriverNodelet : public nodelet::Nodelet {
   std::shared_ptr<ecs::SimRig> sim_;
   std::unique_ptr<FrameSource> source_;
   std::unique_ptr<LightBackend> light_;
-  std::unique_ptr<CameraCalibration> left_calibration_, right_calibration_;
+  std::unique_ptr<StereoCalibration> calibration_;  // created in onInit, thread-safe
 
-  std::mutex mutex_;  // guards the four members below
+  std::mutex mutex_;  // guards schedule_
   std::unique_ptr<ecs::LightSchedule> schedule_;
-  sensor_msgs::CameraInfo left_info_, right_info_;
-  uint32_t epoch_ = 0;
 
   image_transport::CameraPublisher left_pub_, right_pub_;
   ros::Publisher mode_pub_;

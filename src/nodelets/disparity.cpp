@@ -173,8 +173,12 @@ class DisparityNodelet : public nodelet::Nodelet {
     if (problem.empty())
       problem = checkSameFrame(*left_info, input_->leftInfoTopic(), *right_info, input_->rightInfoTopic());
     if (!problem.empty()) return reportError(problem);
+    // The checks above are what image_geometry asserts (abort in this build); the pair may differ
+    // by round-off in fx', fy', cy', which image_geometry compares exactly.
+    sensor_msgs::CameraInfo aligned_right = *right_info;
+    alignRectifiedPair(*left_info, &aligned_right);
     image_geometry::StereoCameraModel model;
-    model.fromCameraInfo(left_info, right_info);
+    model.fromCameraInfo(*left_info, aligned_right);
 
     // The matcher writes straight into the outgoing message's buffer (NaN where invalid); the
     // cloud is made from it, then invalid pixels get stereo_image_proc's value, then both go out.

@@ -45,6 +45,7 @@
 #include "embedded_calibration_stereo/ros/conversions.h"
 #include "embedded_calibration_stereo/ros/service_call.h"
 #include "embedded_calibration_stereo/ros/stamp_guard.h"
+#include "embedded_calibration_stereo/ros/stereo_input_check.h"
 
 namespace embedded_calibration_stereo {
 
@@ -158,24 +159,47 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
     jobs_.clear();
   }
 
-  // Keeps the latest CameraInfo of each side. The first complete pair's geometry goes on
-  // /tf_static at once, so that tf (rviz, points2 users) has the right camera before the first
-  // commit; every commit replaces it.
+  // Keeps the latest valid CameraInfo pair: a side that fails the consumers' checks, or that
+  // does not form a rectified pair with the other side of its stamp, is dropped with an error
+  // (the pair in force stays); when the other side of its stamp has not arrived yet it waits.
+  // The first pair's geometry goes on /tf_static at once, so that tf (rviz, points2 users) has
+  // the right camera before the first commit; every commit replaces it.
   void storeInfo(bool left, const sensor_msgs::CameraInfoConstPtr& info) {
     if (!guard_->admit(left ? kLeftInfoInput : kRightInfoInput, info->header.stamp)) return;
+    const std::string topic = (left ? left_info_sub_ : right_info_sub_).getTopic();
+    const std::string other_topic = (left ? right_info_sub_ : left_info_sub_).getTopic();
+    std::string problem = checkCameraInfo(*info, topic, info->width, info->height);
     sensor_msgs::CameraInfoConstPtr left_info, right_info;
     {
       std::lock_guard<std::mutex> lock(mutex_);
-      (left ? left_info_ : right_info_) = info;
-      auto& recent = left ? recent_left_infos_ : recent_right_infos_;
+      auto& recent = left ? recent_left_infos_ : recent_right_infos_;  // every frame's, for the commit read-back
       recent.push_back(info);
       if (recent.size() > kKeptInfos) recent.pop_front();
       if (awaiting_commit_) cv_.notify_all();
-      if (in_force_tf_sent_ || !left_info_ || !right_info_) return;
-      in_force_tf_sent_ = true;
-      left_info = left_info_;
-      right_info = right_info_;
+      (left ? latest_left_info_ : latest_right_info_) = problem.empty() ? info : nullptr;
+      const sensor_msgs::CameraInfoConstPtr other = left ? latest_right_info_ : latest_left_info_;
+      if (problem.empty() && other) {
+        const std::string mismatch = left ? checkRectifiedPair(*info, topic, *other, other_topic)
+                                          : checkRectifiedPair(*other, other_topic, *info, topic);
+        if (mismatch.empty()) {
+          left_info_ = left ? info : other;
+          right_info_ = left ? other : info;
+          if (!in_force_tf_sent_) {
+            in_force_tf_sent_ = true;
+            left_info = left_info_;
+            right_info = right_info_;
+          }
+        } else if (other->header.stamp == info->header.stamp) {
+          problem = mismatch;  // the two sides of one frame disagree
+        }
+      }
     }
+    if (!problem.empty()) {
+      if (info_errors_.shouldReport(problem))
+        NODELET_ERROR("OnlineCalibrator: camera_info dropped, the calibration in force is kept: %s", problem.c_str());
+      return;
+    }
+    if (!left_info) return;
     ecs::StereoRig rig;
     std::string error;
     if (fromStereoCameraInfo(*left_info, *right_info, &rig, &error))
@@ -573,7 +597,9 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
     std::future<CalibrationStatus> result = job.result->get_future();
     submit(std::move(job));
     res.status = result.get();  // the solve and commit are bounded (service calls: callService)
-    res.success = res.status.accepted;
+    // A solve that fits no better than the calibration in force confirms it: nothing to change.
+    const bool confirmed = res.status.reason.rfind(kInForceConfirmedReason, 0) == 0;
+    res.success = res.status.accepted || confirmed;
     // An accepted status has an empty reason only when committed to the driver.
     res.message = noted(res.status.accepted && res.status.reason.empty() ? "committed" : res.status.reason);
     return true;
@@ -692,6 +718,7 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
   std::unique_ptr<diagnostic_updater::Updater> diagnostics_;
   ros::WallTimer diagnostics_timer_, window_timer_, commit_retry_timer_;
   std::unique_ptr<StampGuard> guard_;
+  ErrorThrottle info_errors_{5.0};  // thread-safe
 
   std::mutex mutex_;  // guards everything below
   std::condition_variable cv_;  // jobs_, window_ (request), stopping_, frames after a commit
@@ -710,7 +737,8 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
   std::optional<UncommittedCalibration> uncommitted_;  // accepted, not stored by the driver: tried again
   bool commit_again_queued_ = false;
   size_t request_frames_ = 0;
-  sensor_msgs::CameraInfoConstPtr left_info_, right_info_;
+  sensor_msgs::CameraInfoConstPtr left_info_, right_info_;  // the latest valid pair (storeInfo)
+  sensor_msgs::CameraInfoConstPtr latest_left_info_, latest_right_info_;  // the latest valid side
   bool in_force_tf_sent_ = false;  // the calibration in force went on /tf_static (storeInfo)
   std::atomic<uint32_t> epoch_{0};  // also read without mutex_ (statuses)
   std::deque<Job> jobs_;

@@ -60,10 +60,9 @@ const char* toString(PriorState s) {
 //  - the nodelet's single-threaded callback queue runs frameCb, the ~teach service, the connect
 //    callbacks, the diagnostics timer and the prior write retry timer: all state below is
 //    touched there only.
-//    Tracking runs in frameCb (core: ~1.3 ms per stereo pair, both cameras in parallel through
-//    cv::parallel_for_; 3-4.6 ms per frame with background and message in tracker_sim on two
-//    busy cores), which is fast enough for the camera rate;
-//  - teaching (~0.9 s in tracker_sim: cv::findChessboardCornersSB) runs on a std::async worker that receives
+//    Tracking runs in frameCb (both cameras in parallel through cv::parallel_for_): it takes a
+//    fraction of a frame period, so it needs no thread of its own;
+//  - teaching (cv::findChessboardCornersSB: many frame periods long) runs on a std::async worker that receives
 //    copies of the frames and the device model and returns a TeachOutcome through teach_result_;
 //    frameCb collects it when ready. The destructor waits for it;
 //  - input_ (un)subscribes the inputs under its own mutex (lazy_synced_input.h).

@@ -190,6 +190,12 @@ CalibrationStatus CalibrationSession::solve(const std::vector<ecs::StereoObserva
   }
   CalibrationStatus status = makeStatus(candidate, decision);
   status.epoch = epoch;
+  if (decision.in_force_confirmed) {
+    char rms[96];
+    std::snprintf(rms, sizeof(rms), " (RMS %.3f px; the new solve %.3f px, no better)", ecs::combinedRms(in_force_fit),
+                  ecs::combinedRms(candidate));
+    status.reason = kInForceConfirmedReason + std::string(rms);
+  }
   if (!decision.accepted || dry_run) {
     if (decision.accepted) status.reason = "dry run: acceptable, not committed";
     return status;
@@ -228,10 +234,14 @@ std::string CalibrationSession::commitAgain(const UncommittedCalibration& calibr
 
 std::string CalibrationSession::commit(const CommittedCalibration& infos, const ecs::StereoRig& rig,
                                        const sensor_msgs::CameraInfo& left_in_force) {
-  std::string error;
-  if (!callSetCameraInfo("left", infos.left, &error)) return error;
+  std::string error, left_answer;
+  if (!callSetCameraInfo("left", infos.left, &error, &left_answer)) return error;
   if (!callSetCameraInfo("right", infos.right, &error)) {
-    // Never leave a half-updated pair: put the left calibration in force back.
+    // Our driver only stages a left calibration that does not match the right one in force, and
+    // drops it when the right one is refused: nothing changed, nothing to put back.
+    if (left_answer.rfind("staged:", 0) == 0) return error + "; the driver kept the calibration in force";
+    // A driver that stored the left one at once: never leave a half-updated pair, put the left
+    // calibration in force back.
     std::string restore_error;
     if (!callSetCameraInfo("left", left_in_force, &restore_error))
       return error + "; restoring the left calibration failed too: " + restore_error;
@@ -248,7 +258,7 @@ void CalibrationSession::broadcastTransform(const ecs::StereoRig& rig) {
 }
 
 bool CalibrationSession::callSetCameraInfo(const std::string& side, const sensor_msgs::CameraInfo& info,
-                                           std::string* error) {
+                                           std::string* error, std::string* answer) {
   const std::string name = side + "/set_camera_info";
   sensor_msgs::SetCameraInfo srv;
   srv.request.camera_info = info;
@@ -257,6 +267,7 @@ bool CalibrationSession::callSetCameraInfo(const std::string& side, const sensor
     *error = nh_.resolveName(name) + " refused: " + srv.response.status_message;
     return false;
   }
+  if (answer) *answer = srv.response.status_message;
   return true;
 }
 

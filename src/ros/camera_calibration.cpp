@@ -1,58 +1,266 @@
 #include "embedded_calibration_stereo/ros/camera_calibration.h"
 
-#include <sys/stat.h>
+#include <cstdio>
 
 #include "embedded_calibration_stereo/core/geometry/config_error.h"
-#include "embedded_calibration_stereo/ros/calibration_file.h"
 #include "embedded_calibration_stereo/ros/conversions.h"
+#include "embedded_calibration_stereo/ros/stereo_input_check.h"
 
 namespace embedded_calibration_stereo {
 
-CameraCalibration::CameraCalibration(const ros::NodeHandle& manager_nh,
-                                     const std::string& camera_name, const std::string& url,
-                                     const std::string& parameter)
-    : camera_name_(camera_name), url_(url), parameter_(parameter) {
-  std::string error;
-  if (!resolveCalibrationUrl(url_, camera_name_, &path_, &error))
-    throw ecs::ConfigError(parameter_, error);
-  manager_ = std::make_unique<camera_info_manager::CameraInfoManager>(manager_nh, camera_name_, url_);
+namespace {
+
+std::string resolve(const StereoCalibration::Camera& camera) {
+  std::string path, error;
+  if (!resolveCalibrationUrl(camera.url, camera.name, &path, &error)) throw ecs::ConfigError(camera.parameter, error);
+  return path;
 }
 
-bool CameraCalibration::load(const sensor_msgs::CameraInfo& fallback) {
-  struct stat st;
-  if (stat(path_.c_str(), &st) != 0) {
-    manager_->setCameraInfo(fallback);
-    return false;
-  }
-  // Check the file ourselves first: camera_info_manager only logs a warning for a broken file.
-  sensor_msgs::CameraInfo info;
-  std::string error;
-  if (!readCalibrationFile(path_, nullptr, &info, &error)) throw ecs::ConfigError(parameter_, error);
+const char* sideName(bool left) { return left ? "left" : "right"; }
+
+}  // namespace
+
+StereoCalibration::StereoCalibration(const Camera& left, const Camera& right, uint32_t width, uint32_t height,
+                                     double pair_timeout_s)
+    : left_camera_(left),
+      right_camera_(right),
+      width_(width),
+      height_(height),
+      pair_timeout_(pair_timeout_s),
+      store_(resolve(left), resolve(right), left.name, right.name) {
+  if (store_.leftPath() == store_.rightPath())
+    throw ecs::ConfigError(right.parameter, "resolves to '" + store_.rightPath() + "', the same file as " +
+                                                left.parameter + ": each camera needs its own file");
+}
+
+std::string StereoCalibration::checkOne(const sensor_msgs::CameraInfo& info, const std::string& name) const {
+  std::string problem = checkCameraInfo(info, name, width_, height_);
+  if (!problem.empty()) return problem;
+  // The OnlineCalibrator models plumb_bob only: it would not read any other calibration back.
   ecs::PinholeCamera camera;
-  if (!fromCameraInfo(info, &camera, &error))
-    throw ecs::ConfigError(parameter_, "'" + path_ + "': " + error);
-  if (!manager_->loadCameraInfo(url_))
-    throw ecs::ConfigError(parameter_, "camera_info_manager could not load '" + path_ + "'");
-  return true;
-}
-
-bool CameraCalibration::set(const sensor_msgs::CameraInfo& info, std::string* reason) {
-  ecs::PinholeCamera camera;
   std::string error;
-  if (!fromCameraInfo(info, &camera, &error)) {
-    if (reason) *reason = "rejected: " + error;
-    return false;
-  }
-  std::lock_guard<std::mutex> lock(write_mutex_);
-  if (!writeCalibrationFileAtomic(path_, camera_name_, info, &error)) {
-    if (reason) *reason = "not stored: " + error;
-    return false;
-  }
-  manager_->setCameraInfo(info);
-  if (reason) *reason = "stored in " + path_;
-  return true;
+  if (!fromCameraInfo(info, &camera, &error)) return name + ": " + error;
+  return "";
 }
 
-sensor_msgs::CameraInfo CameraCalibration::current() const { return manager_->getCameraInfo(); }
+std::string StereoCalibration::checkPair(const sensor_msgs::CameraInfo& left, const std::string& left_name,
+                                         const sensor_msgs::CameraInfo& right, const std::string& right_name) const {
+  std::string problem = checkOne(left, left_name);
+  if (problem.empty()) problem = checkOne(right, right_name);
+  if (problem.empty()) problem = checkRectifiedPair(left, left_name, right, right_name);
+  return problem;
+}
+
+std::string StereoCalibration::readGeneration(const CalibrationPairStore::Generation& g, sensor_msgs::CameraInfo* left,
+                                              sensor_msgs::CameraInfo* right) const {
+  std::string error;
+  if (!readCalibrationFile(g.left_file, nullptr, left, &error)) return error;
+  if (!readCalibrationFile(g.right_file, nullptr, right, &error)) return error;
+  return checkPair(*left, "'" + g.left_file + "'", *right, "'" + g.right_file + "'");
+}
+
+void StereoCalibration::setProblem(const std::string& problem) {
+  std::lock_guard<std::mutex> lock(state_mutex_);
+  problem_ = problem;
+}
+
+std::string StereoCalibration::load(const sensor_msgs::CameraInfo& left_fallback,
+                                    const sensor_msgs::CameraInfo& right_fallback) {
+  std::lock_guard<std::mutex> write_lock(write_mutex_);
+  sensor_msgs::CameraInfo infos[2];
+  CalibrationFileState states[2];
+  std::string errors[2];
+  const Camera* cameras[2] = {&left_camera_, &right_camera_};
+  const std::string paths[2] = {store_.leftPath(), store_.rightPath()};
+  for (int i = 0; i < 2; ++i) states[i] = readCalibrationFileIfPresent(paths[i], &infos[i], &errors[i]);
+  const auto named = [&](int i) { return cameras[i]->parameter + " '" + paths[i] + "'"; };
+
+  std::string problem, source;
+  sensor_msgs::CameraInfo left = left_fallback, right = right_fallback;
+  if (states[0] == CalibrationFileState::kMissing && states[1] == CalibrationFileState::kMissing) {
+    source = "no calibration files yet (" + paths[0] + ", " + paths[1] + ")";
+  } else {
+    for (int i = 0; i < 2 && problem.empty(); ++i) {
+      if (states[i] == CalibrationFileState::kBroken) problem = named(i) + ": " + errors[i];
+      if (states[i] == CalibrationFileState::kMissing)
+        problem = named(i) + ": missing while " + named(1 - i) + " exists (half a stereo calibration)";
+    }
+    if (problem.empty()) problem = checkPair(infos[0], named(0), infos[1], named(1));
+    if (problem.empty()) {
+      left = infos[0];
+      right = infos[1];
+      source = "files '" + paths[0] + "' and '" + paths[1] + "'";
+    } else {
+      // The previous calibration: the newest generation that is a valid pair.
+      source = "";
+      for (const auto& g : store_.generations()) {
+        sensor_msgs::CameraInfo gl, gr;
+        if (readGeneration(g, &gl, &gr).empty()) {
+          left = gl;
+          right = gr;
+          source = "generation " + std::to_string(g.number) + " in '" + store_.directory() + "'";
+          break;
+        }
+      }
+      if (source.empty()) source = "the nominal calibration (no valid calibration found)";
+      problem = "calibration files rejected: " + problem + "; running on " + source;
+    }
+  }
+  alignRectifiedPair(left, &right);  // exact fx', fy', cy' for image_geometry (a no-op on fallbacks)
+  std::lock_guard<std::mutex> lock(state_mutex_);
+  in_force_.left = left;
+  in_force_.right = right;
+  problem_ = problem;
+  source_ = source;
+  return source;
+}
+
+std::string StereoCalibration::discardStagedLocked(const std::string& why) {
+  std::string text;
+  std::lock_guard<std::mutex> lock(state_mutex_);
+  for (auto* staged : {&staged_left_, &staged_right_}) {
+    if (!*staged) continue;
+    text += std::string(text.empty() ? "" : "; ") + "staged " + sideName(staged == &staged_left_) +
+            " calibration discarded: " + why;
+    staged->reset();
+  }
+  if (!text.empty()) problem_ = text;
+  return text;
+}
+
+std::string StereoCalibration::expireStaged() {
+  std::lock_guard<std::mutex> write_lock(write_mutex_);
+  std::string text;
+  const auto now = Clock::now();
+  std::lock_guard<std::mutex> lock(state_mutex_);
+  for (auto* staged : {&staged_left_, &staged_right_}) {
+    if (!*staged || now - (*staged)->since < pair_timeout_) continue;
+    const bool left = staged == &staged_left_;
+    char seconds[32];
+    std::snprintf(seconds, sizeof(seconds), "%.1f", pair_timeout_.count());
+    text += std::string(text.empty() ? "" : "; ") + "staged " + sideName(left) +
+            " calibration discarded: no " + sideName(!left) + "/set_camera_info with a matching P within " + seconds +
+            " s (pair_timeout_s); the calibration in force is unchanged";
+    staged->reset();
+  }
+  if (!text.empty()) problem_ = text;
+  return text;
+}
+
+std::string StereoCalibration::commitLocked(sensor_msgs::CameraInfo left, sensor_msgs::CameraInfo right,
+                                            uint32_t calls, std::string* where) {
+  alignRectifiedPair(left, &right);  // image_geometry compares fx', fy', cy' exactly
+  unsigned generation = 0;
+  try {
+    generation = store_.commit(left, right, [this](const CalibrationPairStore::Generation& g) {
+      sensor_msgs::CameraInfo l, r;
+      return readGeneration(g, &l, &r).empty();
+    });
+  } catch (const std::exception& e) {
+    return e.what();
+  }
+  *where = "'" + store_.leftPath() + "' and '" + store_.rightPath() + "' (generation " + std::to_string(generation) +
+           ")";
+  std::lock_guard<std::mutex> lock(state_mutex_);
+  in_force_.left = left;
+  in_force_.right = right;
+  in_force_.epoch += calls;
+  problem_.clear();
+  source_ = "set_camera_info, stored in " + *where;
+  return "";
+}
+
+StereoCalibration::SetResult StereoCalibration::set(bool left, const sensor_msgs::CameraInfo& info) {
+  std::lock_guard<std::mutex> write_lock(write_mutex_);
+  SetResult result;
+  const std::string name = std::string(sideName(left)) + "/set_camera_info";
+  const std::string other_name = std::string(sideName(!left)) + "/set_camera_info";
+  const std::string other_in_force_name = std::string("the ") + sideName(!left) + " calibration in force";
+  const std::string problem = checkOne(info, name);
+  if (!problem.empty()) {
+    result.message = "rejected: " + problem;
+    result.discarded = discardStagedLocked("the " + name + " that followed it was rejected");
+    return result;
+  }
+  std::optional<Staged>& own = left ? staged_left_ : staged_right_;
+  std::optional<Staged>& other = left ? staged_right_ : staged_left_;
+  const auto pairWith = [&](const sensor_msgs::CameraInfo& o, const std::string& o_name) {
+    return left ? checkRectifiedPair(info, name, o, o_name) : checkRectifiedPair(o, o_name, info, name);
+  };
+  sensor_msgs::CameraInfo other_in_force;
+  {
+    std::lock_guard<std::mutex> lock(state_mutex_);
+    other_in_force = left ? in_force_.right : in_force_.left;
+  }
+
+  // With the staged other camera (both calls are committed), else with the other camera in force.
+  std::optional<sensor_msgs::CameraInfo> partner;
+  uint32_t calls = 1;
+  std::string mismatch;
+  if (other && pairWith(other->info, "the staged " + other_name).empty()) {
+    partner = other->info;
+    calls = 2;
+  } else {
+    mismatch = pairWith(other_in_force, other_in_force_name);
+    if (mismatch.empty()) partner = other_in_force;
+  }
+  if (!partner) {
+    std::lock_guard<std::mutex> lock(state_mutex_);
+    own = Staged{info, Clock::now()};
+    char seconds[32];
+    std::snprintf(seconds, sizeof(seconds), "%.1f", pair_timeout_.count());
+    result.success = true;
+    result.message = "staged: " + mismatch + "; waiting up to " + seconds + " s for " + other_name +
+                     " with a matching P, the calibration in force is unchanged until then";
+    return result;
+  }
+  std::string where;
+  const std::string error =
+      left ? commitLocked(info, *partner, calls, &where) : commitLocked(*partner, info, calls, &where);
+  if (!error.empty()) {
+    result.message = "not stored: " + error;
+    result.discarded = discardStagedLocked("the pair could not be stored");
+    setProblem("calibration not stored: " + error);
+    return result;
+  }
+  {
+    std::lock_guard<std::mutex> lock(state_mutex_);
+    own.reset();
+    if (calls == 2) other.reset();
+  }
+  result.success = true;
+  result.message = std::string(calls == 2 ? "stored with the staged " + std::string(sideName(!left)) + " calibration"
+                                          : "stored") +
+                   " in " + where;
+  return result;
+}
+
+StereoCalibration::InForce StereoCalibration::inForce() const {
+  std::lock_guard<std::mutex> lock(state_mutex_);
+  return in_force_;
+}
+
+std::string StereoCalibration::problem() const {
+  std::lock_guard<std::mutex> lock(state_mutex_);
+  return problem_;
+}
+
+std::string StereoCalibration::source() const {
+  std::lock_guard<std::mutex> lock(state_mutex_);
+  return source_;
+}
+
+std::string StereoCalibration::stagedText() const {
+  std::lock_guard<std::mutex> lock(state_mutex_);
+  std::string text;
+  const auto now = Clock::now();
+  for (const auto* staged : {&staged_left_, &staged_right_}) {
+    if (!*staged) continue;
+    char age[48];
+    std::snprintf(age, sizeof(age), " (%.1f s)", std::chrono::duration<double>(now - (*staged)->since).count());
+    text += std::string(text.empty() ? "" : ", ") + sideName(staged == &staged_left_) + age;
+  }
+  return text;
+}
 
 }  // namespace embedded_calibration_stereo

@@ -35,6 +35,9 @@ DriverParams loadDriverParams(const ros::NodeHandle& private_nh, const std::stri
   p.right_camera_name = read.get("right_camera_name", p.right_camera_name);
   p.left_camera_info_url = read.get("left_camera_info_url", p.left_camera_info_url);
   p.right_camera_info_url = read.get("right_camera_info_url", p.right_camera_info_url);
+  p.pair_timeout_s = read.get("pair_timeout_s", p.pair_timeout_s);
+  if (!(p.pair_timeout_s > 0.0) || p.pair_timeout_s > 3600.0)
+    throw ecs::ConfigError("pair_timeout_s", "must be in (0, 3600] seconds");
 
   p.schedule.period_s = read.get("calibration_period_s", 0.0);
   p.schedule.calibration_frames = read.get("calibration_frames", p.schedule.calibration_frames);

@@ -20,6 +20,7 @@ std::string StereoCameraInput::checkFrame(const sensor_msgs::Image& left, const 
       checkImagePair(left, leftImageTopic(), right, rightImageTopic(), {"mono8", "bgr8", "rgb8"});
   if (problem.empty()) problem = checkCameraInfo(left_info, leftInfoTopic(), left);
   if (problem.empty()) problem = checkCameraInfo(right_info, rightInfoTopic(), right);
+  if (problem.empty()) problem = checkRectifiedPair(left_info, leftInfoTopic(), right_info, rightInfoTopic());
   return problem;
 }
 

@@ -1,8 +1,11 @@
 #include "embedded_calibration_stereo/ros/stereo_input_check.h"
 
 #include <ros/time.h>
+#include <sensor_msgs/distortion_models.h>
 
 #include <algorithm>
+#include <cmath>
+#include <cstdio>
 
 namespace embedded_calibration_stereo {
 
@@ -12,8 +15,87 @@ std::string sizeText(uint32_t width, uint32_t height) {
   return std::to_string(width) + "x" + std::to_string(height);
 }
 
+std::string num(double v) {
+  char text[32];
+  std::snprintf(text, sizeof(text), "%.9g", v);
+  return text;
+}
+
 bool allZero(const double* values, size_t n) {
   return std::all_of(values, values + n, [](double v) { return v == 0.0; });
+}
+
+// The index of the first non-finite value, or -1.
+int firstNonFinite(const double* values, size_t n) {
+  for (size_t i = 0; i < n; ++i)
+    if (!std::isfinite(values[i])) return static_cast<int>(i);
+  return -1;
+}
+
+std::string nonFiniteText(const char* field, int index, double value) {
+  return std::string(field) + ": " + field + "[" + std::to_string(index) + "] is " + num(value) +
+         " (every element must be finite)";
+}
+
+// The problem of one CameraInfo's fields (without the topic), or "".
+std::string cameraInfoProblem(const sensor_msgs::CameraInfo& info) {
+  namespace models = sensor_msgs::distortion_models;
+  if (info.width == 0 || info.height == 0) return "width, height: the size " + sizeText(info.width, info.height) + " is empty";
+
+  const std::string& model = info.distortion_model;
+  const size_t nd = info.D.size();
+  if (model.empty() || model == models::PLUMB_BOB) {
+    if (nd != 0 && nd != 4 && nd != 5)
+      return "D: plumb_bob takes 4 or 5 coefficients, not " + std::to_string(nd);
+  } else if (model == models::RATIONAL_POLYNOMIAL) {
+    if (nd != 8) return "D: rational_polynomial takes 8 coefficients, not " + std::to_string(nd);
+  } else {
+    return "distortion_model: '" + model + "' is not supported (plumb_bob or rational_polynomial)";
+  }
+  if (const int i = firstNonFinite(info.D.data(), nd); i >= 0) return nonFiniteText("D", i, info.D[i]);
+
+  const auto& K = info.K;
+  if (allZero(K.data(), K.size())) return "K: uncalibrated camera (K is all zero)";
+  if (const int i = firstNonFinite(K.data(), K.size()); i >= 0) return nonFiniteText("K", i, K[i]);
+  if (!(K[0] > 0 && K[4] > 0))
+    return "K: focal lengths must be > 0 (fx " + num(K[0]) + ", fy " + num(K[4]) + ")";
+  if (K[3] != 0 || K[6] != 0 || K[7] != 0 || K[8] != 1)
+    return "K: not a camera matrix (its rows 2 and 3 must be [0 fy cy] and [0 0 1])";
+
+  const auto& R = info.R;
+  if (allZero(R.data(), R.size())) return "R: uncalibrated camera (R is all zero)";
+  if (const int i = firstNonFinite(R.data(), R.size()); i >= 0) return nonFiniteText("R", i, R[i]);
+  double worst = 0;  // largest element of R R^T - I
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 3; ++c) {
+      double dot = 0;
+      for (int k = 0; k < 3; ++k) dot += R[3 * r + k] * R[3 * c + k];
+      worst = std::max(worst, std::abs(dot - (r == c ? 1.0 : 0.0)));
+    }
+  const double det = R[0] * (R[4] * R[8] - R[5] * R[7]) - R[1] * (R[3] * R[8] - R[5] * R[6]) +
+                     R[2] * (R[3] * R[7] - R[4] * R[6]);
+  if (worst > 1e-5 || det < 0) return "R: not a rotation (R R^T - I up to " + num(worst) + ", det " + num(det) + ")";
+
+  const auto& P = info.P;
+  if (allZero(P.data(), P.size())) return "P: uncalibrated camera (P is all zero)";
+  if (const int i = firstNonFinite(P.data(), P.size()); i >= 0) return nonFiniteText("P", i, P[i]);
+  if (!(P[0] > 0 && P[5] > 0))
+    return "P: focal lengths must be > 0 (fx' " + num(P[0]) + ", fy' " + num(P[5]) + ")";
+  if (P[4] != 0 || P[8] != 0 || P[9] != 0 || P[10] != 1 || P[11] != 0)
+    return "P: not a projection matrix of a rectified camera (its rows 2 and 3 must be [0 fy' cy' Ty] and "
+           "[0 0 1 0])";
+
+  if (info.binning_x > 1 || info.binning_y > 1)
+    return "binning_x, binning_y: " + std::to_string(info.binning_x) + ", " + std::to_string(info.binning_y) +
+           ": binned images are not supported (binning 0 or 1: this pipeline works at full resolution)";
+  const auto& roi = info.roi;
+  const bool no_roi = roi.x_offset == 0 && roi.y_offset == 0 && roi.width == 0 && roi.height == 0;
+  const bool full_roi = roi.x_offset == 0 && roi.y_offset == 0 && roi.width == info.width && roi.height == info.height;
+  if (!no_roi && !full_roi)
+    return "roi: " + sizeText(roi.width, roi.height) + " at (" + std::to_string(roi.x_offset) + ", " +
+           std::to_string(roi.y_offset) + ") is not the full " + sizeText(info.width, info.height) +
+           " image (regions of interest are not supported)";
+  return "";
 }
 
 }  // namespace
@@ -38,15 +120,41 @@ std::string checkImagePair(const sensor_msgs::Image& left, const std::string& le
   return "";
 }
 
+std::string checkCameraInfo(const sensor_msgs::CameraInfo& info, const std::string& info_topic, uint32_t width,
+                            uint32_t height) {
+  const std::string problem = cameraInfoProblem(info);
+  if (!problem.empty()) return info_topic + ": " + problem;
+  if (info.width != width || info.height != height)
+    return info_topic + ": size " + sizeText(info.width, info.height) + " differs from the image's " +
+           sizeText(width, height);
+  return "";
+}
+
 std::string checkCameraInfo(const sensor_msgs::CameraInfo& info, const std::string& info_topic,
                             const sensor_msgs::Image& image) {
-  if (allZero(info.K.data(), info.K.size())) return info_topic + ": uncalibrated camera (K is all zero)";
-  if (allZero(info.P.data(), info.P.size())) return info_topic + ": uncalibrated camera (P is all zero)";
-  if (!(info.K[0] > 0 && info.K[4] > 0 && info.P[0] > 0 && info.P[5] > 0))
-    return info_topic + ": non-positive focal length in K or P";
-  if (info.width != image.width || info.height != image.height)
-    return info_topic + ": size " + sizeText(info.width, info.height) + " differs from the image's " +
-           sizeText(image.width, image.height);
+  return checkCameraInfo(info, info_topic, image.width, image.height);
+}
+
+std::string checkRectifiedPair(const sensor_msgs::CameraInfo& left, const std::string& left_topic,
+                               const sensor_msgs::CameraInfo& right, const std::string& right_topic) {
+  if (left.width != right.width || left.height != right.height)
+    return right_topic + ": size " + sizeText(right.width, right.height) + " differs from " + left_topic + "'s " +
+           sizeText(left.width, left.height);
+  static const struct {
+    int index;
+    const char* name;
+  } kShared[] = {{0, "fx' (P[0])"}, {5, "fy' (P[5])"}, {6, "cy' (P[6])"}};
+  for (const auto& s : kShared) {
+    if (std::abs(left.P[s.index] - right.P[s.index]) > kRectifiedPairTolerancePx)
+      return right_topic + ": P: " + s.name + " " + num(right.P[s.index]) + " differs from " +
+             num(left.P[s.index]) + " in " + left_topic +
+             " (the two cameras of a rectified pair share fx', fy' and cy'; was only one camera calibrated?)";
+  }
+  if (left.P[3] != 0)
+    return left_topic + ": P: Tx (P[3]) is " + num(left.P[3]) +
+           ", must be 0 (the left camera is the reference of the rectified pair)";
+  if (right.P[3] == 0)
+    return right_topic + ": P: Tx (P[3]) is 0: no baseline (the right camera's P carries Tx = -fx' * baseline)";
   return "";
 }
 
@@ -55,6 +163,10 @@ std::string checkSameFrame(const sensor_msgs::CameraInfo& left, const std::strin
   if (left.header.frame_id == right.header.frame_id) return "";
   return right_topic + ": frame id '" + right.header.frame_id + "' differs from " + left_topic + "'s '" +
          left.header.frame_id + "' (stereo_image_proc convention: one frame id, see right_in_left_frame)";
+}
+
+void alignRectifiedPair(const sensor_msgs::CameraInfo& left, sensor_msgs::CameraInfo* right) {
+  for (const int i : {0, 5, 6}) right->P[i] = left.P[i];
 }
 
 bool ErrorThrottle::shouldReport(const std::string& message) {

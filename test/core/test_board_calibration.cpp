@@ -5,7 +5,7 @@
 // held at 30 poses 0.45-0.8 m away, centres spread over the image (3 x 3 grid), tilted 15-40 deg
 // about varying axes and rolled +-20 deg, whole board in both images; rendered with the
 // simulator's anti-aliased board renderer, 0.8 px Gaussian PSF and 1.5 grey levels of noise.
-// Bounds are issue 4's: fx, fy <= 0.05 %, cx, cy <= 0.3 px, k1 <= 0.005, baseline <= 0.1 %,
+// Bounds are the calibrator's: fx, fy <= 0.05 %, cx, cy <= 0.3 px, k1 <= 0.005, baseline <= 0.1 %,
 // rotation <= 0.01 deg.
 #include <gtest/gtest.h>
 #include <unistd.h>

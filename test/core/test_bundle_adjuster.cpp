@@ -3,16 +3,15 @@
 // the sim's (752x480, fx ~650, k1 ~-0.28, k2 ~0.07, p1 = p2 = k3 = 0, baseline 0.12 m, ~0.5 deg
 // rotation) and six virtual 8x6 boards of 25 mm squares, tilted +-25 deg, 1.2 m away. The
 // rigid device model - the default when the device is given, and the more accurate - is
-// tested against the bounds on the sim's device in test_device_model_adjustment.cpp.
+// tested against the calibrator's bounds on the sim's device in test_device_model_adjustment.cpp.
 //
 // Accuracy with 0.2 px corner noise is limited by the geometry: the boards appear ~95 px
 // wide, so focal length trades against board distance. The Cramer-Rao bound (the covariance
-// the adjuster reports, checked for calibration below) is about 1.4 % on fx for one frame and
-// 0.43 % for ten; the targets (0.05 % on fx, 0.01 deg) are out of reach with free
-// poses at this noise level. So the tests check (a) exact recovery without noise, (b) errors
-// within the reported standard deviations and those equal to the Cramer-Rao bound computed
-// independently with OpenCV's Jacobians, (c) the 20-trial coverage of the reported standard
-// deviations.
+// the adjuster reports, checked for calibration below) is far above the calibrator's bounds
+// (0.05 % on fx, 0.01 deg) with free poses at this noise level, for one frame and for ten. So
+// the tests check (a) exact recovery without noise, (b) errors within the reported standard
+// deviations and those equal to the Cramer-Rao bound computed independently with OpenCV's
+// Jacobians, (c) the 20-trial coverage of the reported standard deviations.
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -161,7 +160,7 @@ TEST(BundleAdjuster, PerturbedInForceCalibrationConvergesToTheTruth) {
 // against its 1 px scale (sd ~4 % higher with one frame; ten frames' track means are sqrt(10)
 // less noisy, so ~0.4 %). (2) At the truth with the true noise - the Cramer-Rao bound, the best any
 // unbiased estimator can do: within 10 % at 10 frames; one frame's estimate is too far from the
-// truth (fx ~1.4 %) for the bound at the truth to describe its covariance to better than ~20 %.
+// truth for the bound at the truth to describe its covariance that closely.
 // A missing noise scale, frames not counted or a parameter block left out are far outside.
 TEST(BundleAdjuster, NoisyFramesReportTheCramerRaoBound) {
   const Scenario s;

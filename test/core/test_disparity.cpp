@@ -152,7 +152,7 @@ TEST(DisparityTest, SadWithoutSubpixelUniquenessOrLeftRightCheck) {
   o.algorithm = "sad";
   o.subpixel = false;
   o.uniqueness_ratio = 0;
-  o.left_right_check = false;  // without these filters a 5x5 window mismatches ~20 % here
+  o.left_right_check = false;  // without these filters a smaller window mismatches too often here
   o.correlation_window_size = 9;
   const cv::Mat d = DisparityComputer(o).compute(left, right);
   int whole = 0, right_value = 0, neighbours = 0, total = 0;

@@ -77,6 +77,14 @@ TEST(QualityGate, NoImprovementOverACalibrationThatStillFitsIsRejected) {
   const GateDecision d = QualityGate(GateOptions{}).evaluate(candidate, &in_force);
   EXPECT_FALSE(d.accepted);
   EXPECT_NE(d.reason.find("no significant improvement"), std::string::npos) << d.reason;
+  // Nothing to change: the calibration in force is confirmed.
+  EXPECT_TRUE(d.in_force_confirmed);
+  // A fresh solve that fits clearly worse than the calibration in force confirms nothing.
+  BundleAdjustmentSummary worse = candidate;
+  worse.rms_left_px = worse.rms_right_px = 1.2 * combinedRms(in_force);
+  const GateDecision w = QualityGate(GateOptions{}).evaluate(worse, &in_force);
+  EXPECT_FALSE(w.accepted);
+  EXPECT_FALSE(w.in_force_confirmed) << w.reason;
 }
 
 TEST(QualityGate, SingleBoardSolveIsRejectedOrAccurate) {
@@ -183,7 +191,7 @@ TEST(QualityGate, EachCriterionRejectsWithItsReason) {
 }
 
 TEST(QualityGate, OneFrameOfThisLayoutIsTooUncertainForTheDefaultLimits) {
-  // One frame: fx is known to ~1.4 % only (Cramer-Rao bound of this geometry at 0.2 px).
+  // One frame: the Cramer-Rao bound of this geometry at 0.2 px on fx is above the default limit.
   const Scenario s;
   const BundleAdjustmentSummary candidate = s.solve(s.observe(1, 6), s.drifted());
   ASSERT_TRUE(candidate.success);

@@ -1,6 +1,6 @@
 // Depth from the simulated head against the simulator's depth map: a textured frontal panel at
 // exactly 2 m in front of the usual scene, light-off frames (noise on), rectified with the true
-// calibration, disparity with the default settings and with each algorithm. The bound:
+// calibration, disparity with the default settings and with each algorithm. The bound:
 // median absolute depth error <= 1 % at 2 m.
 #include <gtest/gtest.h>
 

@@ -220,11 +220,10 @@ TEST(CalibratorSim, RecoversADriftedRigAndCommitsIt) {
                                                                 *fixture->right.snapshot().back(), &published, &error))
       << error;
   // Bounds: the corners are the sim's noise-free ground truth and device_config is the sim's
-  // own device, so the solve should return the truth up to the solver's tolerances (measured:
-  // fx 1e-5 %, cx 1e-4 px, baseline 2e-5 %, rotation 1e-5 deg). The bounds leave a margin of
-  // ~100x on that and are still 5-10x tighter than the README's 10-frame figures at 0.2 px
-  // noise (fx 0.05 %, cx 0.33 px, baseline 0.13 %, rotation 0.027 deg): fx, fy 0.01 %,
-  // cx, cy 0.05 px, baseline 0.01 %, rotation 0.005 deg.
+  // own device, so the solve should return the truth up to the solver's tolerances (printed
+  // below). The bounds leave a wide margin on that and are still several times tighter than
+  // what 10 frames reach at 0.2 px noise (docs/figures.md): fx, fy 0.01 %, cx, cy 0.05 px,
+  // baseline 0.01 %, rotation 0.005 deg.
   const auto relative = [](double a, double b) { return std::abs(a - b) / std::abs(b); };
   for (const auto& [est, ref, name] : {std::make_tuple(published.left, truth.left, "left"),
                                        std::make_tuple(published.right, truth.right, "right")}) {

@@ -5,8 +5,6 @@
 #include <sstream>
 
 #include "driver_test_utils.h"
-#include "embedded_calibration_stereo/ros/calibration_file.h"
-#include "embedded_calibration_stereo/ros/conversions.h"
 
 using ecs_test::Collector;
 using Params = ecs_test::InProcessManager::Params;
@@ -72,17 +70,8 @@ TEST_F(DriverBadConfig, NonPositiveFocalLength) {
   text.replace(at, text.find('\n', at) - at, "fx: -652.4");
   expectFailure({{"backend", "sim"}, {"sim_config", writeFile("negative_fx.yaml", text)}}, "sim_config", "fx");
 
-  // A stored calibration with fx = 0 is refused too, naming its URL parameter.
-  sensor_msgs::CameraInfo info;
-  info.width = 752;
-  info.height = 480;
-  info.distortion_model = "plumb_bob";
-  info.D.assign(5, 0.0);
-  info.K = {0, 0, 376, 0, 650, 240, 0, 0, 1};
-  std::string error;
-  ASSERT_TRUE(embedded_calibration_stereo::writeCalibrationFileAtomic(dir_ + "/zero_fx.yaml", "c", info, &error));
-  expectFailure({{"backend", "sim"}, {"left_camera_info_url", "file://" + dir_ + "/zero_fx.yaml"}},
-                "left_camera_info_url", "focal");
+  // A stored calibration with fx = 0 does not stop the driver: it starts on the previous or
+  // the nominal calibration with an ERROR (calibration_corrupt_file.test).
 }
 
 TEST_F(DriverBadConfig, UnknownBackends) {

@@ -54,32 +54,46 @@ TEST(DriverCalibration, SetCameraInfoPersistsAtomicallyAndSurvivesAReload) {
   { std::ofstream(dir + "/plain_file") << "not a directory"; }
   const std::string left_path = dir + "/left.yaml";
   ecs_test::InProcessManager manager;
-  const ecs_test::InProcessManager::Params params = {
-      {"backend", "sim"}, {"fps", 10.0},
-      {"left_camera_info_url", "file://" + left_path},
-      // Unwritable: its parent is a regular file.
-      {"right_camera_info_url", "file://" + dir + "/plain_file/right.yaml"}};
-  ASSERT_TRUE(manager.load(kName, params));
-
   Collector<CalibrationMode> modes(nh, "calibration_mode");
   Collector<CameraInfo> left(nh, "left/camera_info"), right(nh, "right/camera_info");
+
+  // 1. Unwritable URL (its parent is a regular file): false with a reason; the calibration in
+  //    force and the epoch stay. Both files change together, so the left one is not stored
+  //    either.
+  ASSERT_TRUE(manager.load(kName, {{"backend", "sim"}, {"fps", 10.0}, {"left_camera_info_url", "file://" + left_path},
+                                   {"right_camera_info_url", "file://" + dir + "/plain_file/right.yaml"}}));
   ASSERT_TRUE(modes.waitForCount(2, 20.0));
   ASSERT_TRUE(left.waitForCount(2, 5.0));
   ASSERT_TRUE(right.waitForCount(2, 5.0));
   const CameraInfo nominal_left = *left.snapshot().back();
-  const CameraInfo nominal_right = *right.snapshot().back();
   EXPECT_EQ(modes.snapshot().back()->calibration_epoch, 0u);
   EXPECT_GT(nominal_left.K[0], 0.0) << "no nominal calibration published before any file exists";
-
-  // 1. Accepted: written to the URL, published with a new epoch from the next frames on.
   CameraInfo updated = nominal_left;
-  updated.K[0] += 7.5;
-  updated.P[0] += 7.5;
+  updated.K[0] += 7.5;  // K only: the rectified P, shared with the right camera, stays
   sensor_msgs::SetCameraInfo srv;
   ASSERT_TRUE(callSet("left", updated, &srv));
-  EXPECT_TRUE(srv.response.success) << srv.response.status_message;
+  EXPECT_FALSE(srv.response.success);
+  EXPECT_NE(srv.response.status_message.find("plain_file"), std::string::npos) << srv.response.status_message;
+  const size_t seen = modes.snapshot().size();
+  ASSERT_TRUE(modes.waitForCount(seen + 3, 5.0));
+  EXPECT_EQ(modes.snapshot().back()->calibration_epoch, 0u);
+  EXPECT_EQ(left.snapshot().back()->K[0], nominal_left.K[0]);
   CameraInfo stored;
   std::string error;
+  EXPECT_FALSE(embedded_calibration_stereo::readCalibrationFile(left_path, nullptr, &stored, &error))
+      << "the left file was stored without the right one";
+  ASSERT_TRUE(manager.unload(kName));
+
+  // 2. Accepted: written to the URL, published with a new epoch from the next frames on.
+  const ecs_test::InProcessManager::Params params = {{"backend", "sim"}, {"fps", 10.0},
+                                                      {"left_camera_info_url", "file://" + left_path},
+                                                      {"right_camera_info_url", "file://" + dir + "/right.yaml"}};
+  modes.clear();
+  left.clear();
+  ASSERT_TRUE(manager.load(kName, params));
+  ASSERT_TRUE(modes.waitForCount(2, 20.0));
+  ASSERT_TRUE(callSet("left", updated, &srv));
+  EXPECT_TRUE(srv.response.success) << srv.response.status_message;
   ASSERT_TRUE(embedded_calibration_stereo::readCalibrationFile(left_path, nullptr, &stored, &error)) << error;
   EXPECT_NEAR(stored.K[0], updated.K[0], 1e-9);
   ASSERT_TRUE(modes.waitFor([](const auto& m) { return m.back()->calibration_epoch == 1u; }, 5.0));
@@ -90,17 +104,6 @@ TEST(DriverCalibration, SetCameraInfoPersistsAtomicallyAndSurvivesAReload) {
     EXPECT_EQ(f.left->K[0], f.mode->calibration_epoch == 0 ? nominal_left.K[0] : updated.K[0])
         << "epoch " << f.mode->calibration_epoch;
   }
-
-  // 2. Unwritable URL: false with a reason; the calibration in force and the epoch stay.
-  CameraInfo right_update = nominal_right;
-  right_update.K[0] += 3.0;
-  ASSERT_TRUE(callSet("right", right_update, &srv));
-  EXPECT_FALSE(srv.response.success);
-  EXPECT_NE(srv.response.status_message.find("plain_file"), std::string::npos) << srv.response.status_message;
-  const size_t seen = modes.snapshot().size();
-  ASSERT_TRUE(modes.waitForCount(seen + 3, 5.0));
-  EXPECT_EQ(modes.snapshot().back()->calibration_epoch, 1u);
-  EXPECT_EQ(right.snapshot().back()->K[0], nominal_right.K[0]);
 
   // 3. Non-positive focal length: refused, the file keeps the accepted calibration.
   CameraInfo broken = updated;

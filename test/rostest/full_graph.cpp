@@ -31,7 +31,7 @@ using sensor_msgs::CameraInfo;
 
 namespace {
 
-// The calibrator issue's bounds.
+// The calibrator's bounds.
 constexpr double kFocalRel = 0.0005, kPrincipalPx = 0.3, kK1 = 0.005, kBaselineRel = 0.001,
                  kRotationDeg = 0.01;
 

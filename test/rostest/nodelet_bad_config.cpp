@@ -29,6 +29,7 @@ Params baseParams(const std::string& nodelet) {
   if (nodelet == "PatternTracker")
     return {{"prior_file", temp_dir.path + "/no_prior.yaml"}, {"teach_on_start", false}};
   if (nodelet == "OnlineCalibrator") return {{"commit", "none"}, {"auto_calibrate", false}};
+  if (nodelet == "LightController") return {{"light_backend", "none"}, {"prior_file", temp_dir.path + "/no_prior.yaml"}};
   return {};
 }
 
@@ -68,8 +69,8 @@ struct BadConfig {
 
 std::ostream& operator<<(std::ostream& out, const BadConfig& c) { return out << c.label; }
 
-const std::vector<std::string> kNodelets = {"CameraDriver", "PatternTracker", "OnlineCalibrator",
-                                            "Separator",    "Rectifier",      "Disparity"};
+const std::vector<std::string> kNodelets = {"CameraDriver", "PatternTracker", "OnlineCalibrator", "Separator",
+                                            "Rectifier",    "Disparity",      "LightController"};
 
 }  // namespace
 
@@ -84,6 +85,8 @@ TEST(NodeletGoodConfig, EveryNodeletStarts) {
                      {"teach_from_ground_truth", false}}},
       {"Rectifier", {{"queue_size", 1}, {"approximate_sync", true}, {"rectification_method", "fusiello"}}},
       {"Disparity", {{"queue_size", 1}, {"approximate_sync", false}, {"disparity_range", 32}, {"uniqueness_ratio", 10}}},
+      {"LightController", {{"min_step", 8}, {"max_delay_frames", 0}, {"approximate_sync", false},
+                           {"plateau_fraction", 0.1}, {"calibration_store", "driver"}}},
   };
   for (const std::string& nodelet : kNodelets) {
     Params params = baseParams(nodelet);
@@ -139,7 +142,13 @@ INSTANTIATE_TEST_SUITE_P(
         BadConfig{"Disparity", "DisparityQueueSizeRange", "queue_size", -1, "must be >= 1"},
         BadConfig{"Disparity", "DisparityApproximateSyncText", "approximate_sync", "true", "must be true or false"},
         BadConfig{"Disparity", "DisparityRangeText", "disparity_range", "sixty", "must be an integer"},
-        BadConfig{"Disparity", "DisparitySubpixelInt", "subpixel", 1, "must be true or false"}),
+        BadConfig{"Disparity", "DisparitySubpixelInt", "subpixel", 1, "must be true or false"},
+        BadConfig{"LightController", "LightControllerBackendChoice", "light_backend", "laser", "laser"},
+        BadConfig{"LightController", "LightControllerMinStepText", "min_step", "big", "must be a number"},
+        BadConfig{"LightController", "LightControllerMaxDelayRange", "max_delay_frames", -1, "must be >= 0"},
+        BadConfig{"LightController", "LightControllerPlateauFractionRange", "plateau_fraction", 0.9, "(0, switch_fraction)"},
+        BadConfig{"LightController", "LightControllerApproximateSyncInt", "approximate_sync", 1, "must be true or false"},
+        BadConfig{"LightController", "LightControllerStoreChoice", "calibration_store", "cloud", "cloud"}),
     [](const testing::TestParamInfo<BadConfig>& info) { return info.param.label; });
 
 int main(int argc, char** argv) {

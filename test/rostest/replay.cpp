@@ -11,14 +11,14 @@
 //     tracks every window of the bag as the live tracker did).
 // The replayed statuses are compared with the bag's, epoch by epoch: same count (no window lost
 // or added), same gate decision, and every parameter within 1 reported standard deviation of the
-// recorded one (the "within the reported standard deviations", taken literally). Why 1
-// sd is not too tight: both runs solve the same frames of the same images, so they agree closely
-// (measured: at most 0.07 sd; not bit-exact, the live tracker had tracked the window before the
-// bag); a frame lost by a starved subscriber queue in either run moves an estimate from n frames
-// by about sd/sqrt(n). Why it can fail: another calibrator configuration, another window or a
-// truncated bag changes the frames or the epochs (tried: the replay with max_frames:=6 fails on
-// frames_used and on a parameter 1.13 sd off). The bag's statuses are also checked against the
-// ones received live, and the replay's Disparity must keep up with the bag.
+// recorded one ("within the reported standard deviations", taken literally). Why 1 sd is not
+// too tight: both runs solve the same frames of the same images, so they agree far closer than
+// that (not bit-exact: the live tracker had tracked the window before the bag); a frame lost by
+// a starved subscriber queue in either run moves an estimate from n frames by about sd/sqrt(n).
+// Why it can fail: another calibrator configuration, another window or a truncated bag changes
+// the frames or the epochs (a replay with max_frames:=6 fails on frames_used and on a
+// parameter). The bag's statuses are also checked against the ones received live, and the
+// replay's Disparity must keep up with the bag.
 #include <gtest/gtest.h>
 #include <rosbag/bag.h>
 #include <rosbag/view.h>

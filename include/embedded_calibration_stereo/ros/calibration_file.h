@@ -11,8 +11,13 @@
 // target and fsyncs the directory, so a crash at any point leaves either the old or the new
 // complete file, never a truncated one.
 // All functions are thread-safe (no shared state).
+//
+// CalibrationPairStore (below) keeps the two files of a stereo pair consistent with each other.
 #include <sensor_msgs/CameraInfo.h>
+
+#include <functional>
 #include <string>
+#include <vector>
 
 namespace embedded_calibration_stereo {
 
@@ -31,5 +36,78 @@ bool writeCalibrationFileAtomic(const std::string& path, const std::string& came
 // cannot be parsed.
 bool readCalibrationFile(const std::string& path, std::string* camera_name,
                          sensor_msgs::CameraInfo* info, std::string* error);
+
+// What readCalibrationFileIfPresent found.
+enum class CalibrationFileState { kMissing, kLoaded, kBroken };
+// Like readCalibrationFile, telling a missing file (or a symbolic link to nothing) apart from
+// one that exists but cannot be read or parsed (kBroken, with the reason in *error).
+CalibrationFileState readCalibrationFileIfPresent(const std::string& path, sensor_msgs::CameraInfo* info,
+                                                  std::string* error);
+
+// The two calibration files of a stereo head, changed together: after a crash at any moment
+// both show the old calibration or both the new one.
+//
+// Layout (names for URL files stereo_left.yaml and stereo_right.yaml):
+//   <dir of the left file>/.stereo_left+stereo_right.generations/
+//       g000007/left.yaml, g000007/right.yaml    one calibration pair per generation
+//       g000008/left.yaml, g000008/right.yaml
+//       current -> g000008                       symbolic link
+//   <left URL file>  -> .stereo_left+stereo_right.generations/current/left.yaml
+//   <right URL file> -> (the same)/current/right.yaml    (absolute when in another folder)
+// A reader that opens a URL file (our driver, camera_info_manager, a user) reads the current
+// generation. commit() writes a complete new generation, then replaces `current` with one
+// rename(): that rename is the single atomic step that moves both cameras to the new pair.
+// The URL files themselves are turned into the links once (the first commit), with a
+// generation holding exact copies of what they showed, so that they show the same content at
+// every moment of that conversion too. Generation files take each URL file's extension
+// (.yaml, or .ini for the INI format).
+// commit() keeps the new generation, the one it replaces and the newest valid generation
+// before them (the previous calibration the driver falls back to), and deletes older ones.
+//
+// Test hook, inert unless set: with the environment variable ECS_TEST_CRASH_COMMIT_AT=k the
+// process kills itself (SIGKILL) right after the k-th durable step of a commit (steps 1-5
+// convert the URL files, whether or not there is anything to convert; 6 and 7 write the new
+// generation's files, 8 replaces `current`, 9 deletes old generations), so that tests can
+// check the files after a crash at each step.
+//
+// Threading: no internal state besides the paths; the caller serialises commits.
+class CalibrationPairStore {
+ public:
+  struct Generation {
+    unsigned number = 0;
+    std::string directory, left_file, right_file;
+  };
+
+  CalibrationPairStore(std::string left_path, std::string right_path, std::string left_camera_name,
+                       std::string right_camera_name);
+
+  const std::string& leftPath() const { return left_path_; }
+  const std::string& rightPath() const { return right_path_; }
+  const std::string& directory() const { return directory_; }
+
+  // Every generation on disk, newest first, whatever its content (may be incomplete).
+  std::vector<Generation> generations() const;
+  // The generation `current` points to; 0 when there is none.
+  unsigned currentGeneration() const;
+
+  // Makes (left, right) the calibration of both URL files in one atomic step and returns the
+  // new generation's number. `is_valid` tells which older generations can serve as a fallback.
+  // Throws std::runtime_error naming the path and the system's reason; the URL files then still
+  // show the calibration they showed before.
+  unsigned commit(const sensor_msgs::CameraInfo& left, const sensor_msgs::CameraInfo& right,
+                  const std::function<bool(const Generation&)>& is_valid);
+
+ private:
+  Generation generation(unsigned number) const;
+  std::string linkTarget(bool left) const;  // what a URL file that is ours points to
+  bool isOurLink(bool left) const;
+  void makeCurrent(unsigned number) const;
+  void linkUrlFile(bool left) const;
+
+  std::string left_path_, right_path_;
+  std::string left_camera_name_, right_camera_name_;
+  std::string directory_;
+  std::string left_extension_, right_extension_;
+};
 
 }  // namespace embedded_calibration_stereo

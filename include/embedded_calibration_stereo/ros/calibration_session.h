@@ -33,6 +33,9 @@ CommitTarget parseCommitTarget(const std::string& name);
 
 // status.reason of a calibration accepted by the gate but, with commit "none", committed nowhere.
 constexpr const char* kAcceptedNotCommittedReason = "accepted (commit: none): gate passed, not committed to a driver";
+// Start of status.reason when a solve fits no better than the calibration in force (the gate keeps
+// it): nothing needs changing, which a recalibration request answers as a success.
+constexpr const char* kInForceConfirmedReason = "calibration in force confirmed";
 
 struct CalibratorParams {
   std::string device_config;  // sim_rig.yaml format: the `device` node
@@ -135,11 +138,14 @@ class CalibrationSession {
   const std::vector<ecs::VirtualBoard>& boards() const { return boards_; }
 
  private:
-  // Empty on success, otherwise why the commit failed (the left calibration is then restored
-  // to `left_in_force` when only the right one was refused).
+  // Empty on success, otherwise why the commit failed. When only the right one was refused, a
+  // left calibration the driver stored (a driver without pairs) is restored to `left_in_force`;
+  // our driver only staged it ("staged: ..." answer) and has already dropped it.
   std::string commit(const CommittedCalibration& infos, const ecs::StereoRig& rig,
                      const sensor_msgs::CameraInfo& left_in_force);
-  bool callSetCameraInfo(const std::string& side, const sensor_msgs::CameraInfo& info, std::string* error);
+  // *answer (optional): the driver's status message of an accepted call.
+  bool callSetCameraInfo(const std::string& side, const sensor_msgs::CameraInfo& info, std::string* error,
+                         std::string* answer = nullptr);
 
   ros::NodeHandle nh_;
   CalibratorParams params_;

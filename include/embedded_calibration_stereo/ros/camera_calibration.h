@@ -1,56 +1,116 @@
 #pragma once
-// The calibration of one camera of the driver: a camera_info_manager::CameraInfoManager holds
-// the CameraInfo in force (loaded from its URL), and set() persists a new one atomically to
-// the URL's file before making it current.
+// The calibration pair of the driver: what is in force (published with every frame), how it is
+// loaded at start-up, and how set_camera_info changes it.
 //
-// Why not camera_info_manager's own set_camera_info service: it writes the file in place
-// (a crash mid-write leaves a broken file) and answers true even when the file cannot be
-// written. The driver serves left|right/set_camera_info itself with set(); the manager is
-// constructed on a private namespace (`~camera_info_manager/<side>`) so that its own service
-// does not collide with the driver's.
+// - Validation: a calibration is refused with the reason when a consumer would drop it
+//   (stereo_input_check.h: finite K, R, P, D; positive focal lengths; R a rotation; the
+//   images' size; no binning or ROI) or when the OnlineCalibrator cannot model it (plumb_bob).
+// - Pairs: a set_camera_info for one camera whose P does not form a rectified pair with the
+//   other camera's (a stereo calibration sets left, then right) is staged: answered success
+//   with a status message starting "staged:", and committed together with the other camera's
+//   set_camera_info when that one matches it. A staged calibration that finds no match within
+//   `pair_timeout_s` is discarded with an error (problem()); so is every staged one when a set
+//   is refused. So the pair in force is always a consistent rectified pair.
+// - Persistence: every commit writes both cameras' files through CalibrationPairStore (a new
+//   generation made current in one rename), then puts the pair in force with one epoch update:
+//   the capture thread reads pair and epoch from one snapshot (inForce()).
+// - Start-up: the URL files are used when both load and pass the checks as a pair; when either
+//   is corrupt, unreadable, missing beside an existing other one, or inconsistent, the newest
+//   valid generation of the store is used (the previous calibration), else the nominal
+//   calibration; problem() then says what was rejected and what runs instead.
 //
-// Threading: set() and current() may be called from any thread (the manager locks its state;
-// set() is serialised by an internal mutex so that two writers cannot interleave).
-#include <camera_info_manager/camera_info_manager.h>
-#include <ros/node_handle.h>
+// Threading: set() and expireStaged() may run on any thread (serialised by write_mutex_, which
+// is held across disk writes); inForce(), problem() and stagedText() take only state_mutex_, so
+// the capture thread never waits for a disk write.
 #include <sensor_msgs/CameraInfo.h>
 
-#include <memory>
+#include <chrono>
 #include <mutex>
+#include <optional>
 #include <string>
+
+#include "embedded_calibration_stereo/ros/calibration_file.h"
 
 namespace embedded_calibration_stereo {
 
-class CameraCalibration {
+class StereoCalibration {
  public:
-  // `manager_nh`: namespace for camera_info_manager's internal service; `parameter` names the
-  // URL parameter in error messages (e.g. "left_camera_info_url").
-  CameraCalibration(const ros::NodeHandle& manager_nh, const std::string& camera_name,
-                    const std::string& url, const std::string& parameter);
+  struct Camera {
+    std::string name;       // camera_info_manager camera name, written into the file
+    std::string url;        // camera_info_manager URL
+    std::string parameter;  // URL parameter, named in errors (e.g. "left_camera_info_url")
+  };
 
-  // Loads the calibration at start-up. A missing file is not an error: `fallback` (a nominal
-  // calibration, or an uncalibrated message with the image size) is used in memory until the
-  // first set(). Throws ecs::ConfigError naming the URL parameter when the URL cannot be
-  // resolved, or the file exists but is unreadable, unparsable or has a non-positive focal
-  // length. Returns true when a file was loaded.
-  bool load(const sensor_msgs::CameraInfo& fallback);
+  // Resolves both URLs. Throws ecs::ConfigError naming the URL parameter when a URL cannot be
+  // resolved, or when both resolve to the same file. `width` x `height`: the cameras' images.
+  StereoCalibration(const Camera& left, const Camera& right, uint32_t width, uint32_t height,
+                    double pair_timeout_s);
 
-  // Validates `info` (plumb_bob, positive focal length, image size), writes it atomically to
-  // the URL's file and only then makes it current. On failure returns false with the reason;
-  // the calibration in force and the file on disk are unchanged.
-  bool set(const sensor_msgs::CameraInfo& info, std::string* reason);
+  // Loads the pair at start-up (see above); the fallbacks (the nominal calibration, or
+  // uncalibrated messages carrying the image size) are used when there is no file at all or
+  // nothing valid. Never throws for a file's content. Returns what is in force, e.g.
+  // "files '/a/left.yaml' and '/a/right.yaml'"; problem() is set when something was rejected.
+  std::string load(const sensor_msgs::CameraInfo& left_fallback, const sensor_msgs::CameraInfo& right_fallback);
 
-  sensor_msgs::CameraInfo current() const;
-  const std::string& path() const { return path_; }
-  const std::string& cameraName() const { return camera_name_; }
+  struct SetResult {
+    bool success = false;
+    std::string message;    // for the service response: "stored in ...", "staged: ...", "rejected: ..."
+    std::string discarded;  // non-empty when staged calibrations were discarded (log it as an error)
+  };
+  // set_camera_info of one camera.
+  SetResult set(bool left, const sensor_msgs::CameraInfo& info);
+
+  // Discards a staged calibration older than the pair timeout; returns the error text, or "".
+  std::string expireStaged();
+
+  struct InForce {
+    sensor_msgs::CameraInfo left, right;
+    uint32_t epoch = 0;  // accepted set_camera_info calls committed in this process
+  };
+  InForce inForce() const;
+  // The last calibration problem (start-up fallback, discarded staged calibration); "" after
+  // a successful commit.
+  std::string problem() const;
+  // Which camera's calibration waits for the other one, e.g. "left (2.1 s)"; "" if none.
+  std::string stagedText() const;
+  // What is in force: the files, a generation, the nominal calibration, or the last commit.
+  std::string source() const;
+  const CalibrationPairStore& store() const { return store_; }
 
  private:
-  std::string camera_name_;
-  std::string url_;
-  std::string parameter_;
-  std::string path_;
-  std::unique_ptr<camera_info_manager::CameraInfoManager> manager_;
-  std::mutex write_mutex_;
+  using Clock = std::chrono::steady_clock;
+  struct Staged {
+    sensor_msgs::CameraInfo info;
+    Clock::time_point since;
+  };
+
+  // "" when `info` can be put in force for one camera; `name` names it in the reason.
+  std::string checkOne(const sensor_msgs::CameraInfo& info, const std::string& name) const;
+  // "" when the two form a valid pair, as loaded from the named files.
+  std::string checkPair(const sensor_msgs::CameraInfo& left, const std::string& left_name,
+                        const sensor_msgs::CameraInfo& right, const std::string& right_name) const;
+  // Reads a generation; "" when it is a valid pair (then *left and *right are set).
+  std::string readGeneration(const CalibrationPairStore::Generation& g, sensor_msgs::CameraInfo* left,
+                             sensor_msgs::CameraInfo* right) const;
+  // Caller holds write_mutex_. Writes the pair and puts it in force; "" or the reason.
+  std::string commitLocked(sensor_msgs::CameraInfo left, sensor_msgs::CameraInfo right, uint32_t calls,
+                           std::string* where);
+  // Caller holds write_mutex_. Drops staged calibrations; returns the text saying so, or "".
+  std::string discardStagedLocked(const std::string& why);
+  void setProblem(const std::string& problem);
+
+  const Camera left_camera_, right_camera_;
+  const uint32_t width_, height_;
+  const std::chrono::duration<double> pair_timeout_;
+  CalibrationPairStore store_;
+
+  std::mutex write_mutex_;                   // serialises set() and expireStaged()
+  std::optional<Staged> staged_left_, staged_right_;  // under write_mutex_ (and state_mutex_ to change)
+
+  mutable std::mutex state_mutex_;  // guards the members below
+  InForce in_force_;
+  std::string problem_;
+  std::string source_;
 };
 
 }  // namespace embedded_calibration_stereo

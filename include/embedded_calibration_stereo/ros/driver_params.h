@@ -26,6 +26,9 @@ struct DriverParams {
   std::string right_camera_name = "stereo_right";
   std::string left_camera_info_url;     // empty: file://${ROS_HOME}/camera_info/${NAME}.yaml
   std::string right_camera_info_url;
+  // Seconds a set_camera_info whose P does not match the other camera's waits for the other
+  // camera's set_camera_info (a stereo calibration sets left, then right) before it is discarded.
+  double pair_timeout_s = 10.0;
   std::string sim_config;               // path of sim_rig.yaml (sim backend)
   ecs::LightScheduleConfig schedule;    // calibration_period_s, calibration_frames, settle_frames
   FilesSourceParams files;

@@ -25,7 +25,8 @@ class StereoCameraInput
   const std::string& rightInfoTopic() const { return topic(3); }
 
   // The first problem of a synchronised frame, named by these topics (stereo_input_check.h):
-  // an image pair of mono8, bgr8 or rgb8, and each CameraInfo matching its image; "" if none.
+  // an image pair of mono8, bgr8 or rgb8, each CameraInfo valid for its image, and the two
+  // CameraInfos a rectified stereo pair (checkRectifiedPair); "" if none.
   std::string checkFrame(const sensor_msgs::Image& left, const sensor_msgs::CameraInfo& left_info,
                          const sensor_msgs::Image& right, const sensor_msgs::CameraInfo& right_info) const;
 };

@@ -1,7 +1,15 @@
 #pragma once
-// Checks of the stereo inputs shared by the Rectifier and Disparity nodelets: every function
-// returns an empty string when the input is usable, otherwise "<topic>: <problem>", so that the
-// nodelet can log it (see ErrorThrottle) and skip the frame instead of crashing.
+// Checks of the stereo inputs shared by every consumer of CameraInfo (Rectifier, Disparity,
+// OnlineCalibrator) and by the driver's set_camera_info and calibration loader, so that the
+// driver refuses exactly what the consumers would drop. Every function returns an empty string
+// when the input is usable, otherwise "<topic>: <field>: <problem>", so that the nodelet can log
+// it (see ErrorThrottle) and skip the frame instead of crashing.
+//
+// Why: image_geometry::StereoCameraModel::fromCameraInfo asserts that both cameras share the
+// frame id and the rectified fx', fy' and cy' (after binning), and Debian's build keeps
+// assertions: one inconsistent pair aborts the whole nodelet manager. NaN or zero fields do not
+// abort but silently stop depth. So a pair passes only when it is a rectified stereo pair that
+// this pipeline (full-resolution images, plumb_bob or rational_polynomial distortion) can use.
 // All functions are pure and thread-safe; ErrorThrottle is thread-safe.
 #include <sensor_msgs/CameraInfo.h>
 #include <sensor_msgs/Image.h>
@@ -13,19 +21,42 @@
 
 namespace embedded_calibration_stereo {
 
+// Largest difference of fx', fy' or cy' (pixels) between the two P of a rectified pair: far
+// below anything the matcher resolves, above the round-off of a calibration file.
+constexpr double kRectifiedPairTolerancePx = 1e-3;
+
 // Both images have an encoding of `accepted`, the same encoding and the same size.
 std::string checkImagePair(const sensor_msgs::Image& left, const std::string& left_topic,
                            const sensor_msgs::Image& right, const std::string& right_topic,
                            const std::vector<std::string>& accepted);
 
-// The CameraInfo is calibrated (K and P not all zero, positive focal lengths) and has the
-// image's size.
+// One CameraInfo of a camera whose images are `width` x `height`: a positive size equal to the
+// images'; a distortion model this pipeline rectifies (plumb_bob with 0, 4 or 5 coefficients,
+// rational_polynomial with 8; an empty model counts as plumb_bob) and finite coefficients;
+// K, R, P finite, K and P calibrated (not all zero) with positive focal lengths and last rows
+// [0 0 1] and [0 0 1 0]; R a rotation; binning 0 or 1 and the ROI empty or the full image
+// (this pipeline works on full-resolution images).
+std::string checkCameraInfo(const sensor_msgs::CameraInfo& info, const std::string& info_topic, uint32_t width,
+                            uint32_t height);
+// The same for the camera of `image`.
 std::string checkCameraInfo(const sensor_msgs::CameraInfo& info, const std::string& info_topic,
                             const sensor_msgs::Image& image);
+
+// Two CameraInfos, each passing checkCameraInfo, form a rectified stereo pair: same size, the
+// same fx', fy' and cy' in both P (within kRectifiedPairTolerancePx), the left P's Tx (P[3])
+// zero and the right one's (-fx' * baseline) non-zero. The frame ids are not compared (see
+// checkSameFrame): the driver stamps them itself.
+std::string checkRectifiedPair(const sensor_msgs::CameraInfo& left, const std::string& left_topic,
+                               const sensor_msgs::CameraInfo& right, const std::string& right_topic);
 
 // The two CameraInfos share one frame id (image_geometry::StereoCameraModel asserts it).
 std::string checkSameFrame(const sensor_msgs::CameraInfo& left, const std::string& left_topic,
                            const sensor_msgs::CameraInfo& right, const std::string& right_topic);
+
+// Gives the right P exactly the left P's fx', fy' and cy'. checkRectifiedPair allows round-off
+// between them; image_geometry compares them with ==. Call it on a pair that passed the checks,
+// before any image_geometry call or before publishing the pair.
+void alignRectifiedPair(const sensor_msgs::CameraInfo& left, sensor_msgs::CameraInfo* right);
 
 // Throttles error reports per message text: a new problem is reported at once even while
 // another one repeats (one NODELET_ERROR_THROTTLE call site would hide it).

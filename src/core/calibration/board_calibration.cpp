@@ -71,10 +71,9 @@ bool detectChessboard(const cv::Mat& image, int cols, int rows, CornerDetector d
   if (detector == CornerDetector::kSectorBased)
     return cv::findChessboardCornersSB(grey, pattern, *corners, cv::CALIB_CB_ACCURACY) &&
            static_cast<int>(corners->size()) == cols * rows;
-  // The classic detector on a global threshold is fast (~10 ms on 752x480) but misses some
-  // boards (3 of 24 simulated 11x8 views; its adaptive-threshold modes missed as many and took
-  // ~1 s per image on average), the sector-based one finds them (~120 ms). Either way
-  // cornerSubPix places the corners.
+  // The classic detector on a global threshold is fast but misses some boards (its
+  // adaptive-threshold modes miss as many and are far slower); the slower sector-based one
+  // finds them, so it is the fallback. Either way cornerSubPix places the corners.
   const bool found = cv::findChessboardCorners(grey, pattern, *corners, 0) ||
                      cv::findChessboardCornersSB(grey, pattern, *corners);
   if (!found || static_cast<int>(corners->size()) != cols * rows) return false;

@@ -54,7 +54,7 @@ bool calibrateOneCamera(const std::vector<const BoardView*>& views,
   }
   // Zhang's closed form on the boards' homographies (principal point at the image centre,
   // no distortion). OpenCV's full calibrateCamera refinement is left out on purpose: the
-  // bundle adjustment refines everything from here, and the refinement costs ~50 ms.
+  // bundle adjustment refines everything from here, so it would be paid for twice.
   cv::Mat k;
   std::vector<cv::Mat> rvecs(views.size()), tvecs(views.size());
   try {

@@ -109,9 +109,12 @@ GateDecision QualityGate::evaluate(const BundleAdjustmentSummary& c,
   if (candidate_rms * (1.0 + o.min_rms_improvement_rel) <= in_force_rms)
     return {true, "accepted: RMS " + fmt(candidate_rms) + " px vs " + fmt(in_force_rms) +
                       " px for the calibration in force"};
-  return reject("no significant improvement: RMS " + fmt(candidate_rms) + " px vs " +
-                fmt(in_force_rms) + " px for the calibration in force (needs " +
-                fmt(100 * o.min_rms_improvement_rel) + "% lower)");
+  GateDecision kept = reject("no significant improvement: RMS " + fmt(candidate_rms) + " px vs " +
+                             fmt(in_force_rms) + " px for the calibration in force (needs " +
+                             fmt(100 * o.min_rms_improvement_rel) + "% lower)");
+  // A fresh solve clearly worse than the calibration in force confirms nothing: something failed.
+  kept.in_force_confirmed = candidate_rms <= in_force_rms * (1.0 + o.min_rms_improvement_rel);
+  return kept;
 }
 
 }  // namespace ecs

@@ -10,8 +10,8 @@ namespace ecs {
 // `min_units` rows: four per thread. In a nodelet manager other stages (the Rectifier of the
 // next frame) run on the same cores at the same time, and a piece cannot be shared out once a
 // thread has started it: with one piece per thread, the threads that finish early wait for the
-// one that was preempted. (bench/pipeline, two frames in flight: 130 fps with two pieces per
-// thread in the sad matcher, 145-151 with four; alone, bench_disparity shows no difference.)
+// one that was preempted. (bench/pipeline, with two frames in flight, shows the gain;
+// bench_disparity, which runs alone, does not.)
 inline int parallelPieces(int units, int min_units) {
   return std::max(1, std::min(cv::getNumThreads() * 4, units / min_units));
 }

@@ -335,7 +335,7 @@ TeachResult teachCamera(const std::vector<TeachFrame>& frames, const BoardLayout
       detectInRegion(search, roi, sizes, difference, &all);
     const std::vector<Detection> detections = unique(all);
     std::vector<std::vector<cv::Point2f>> identified = identify(detections, layout, &result.notes);
-    // Polish on the detection image (SB's corners are good to about 0.1 px).
+    // Polish on the detection image (SB's own corners are less accurate than cornerSubPix's).
     std::vector<BoardCorners> frame_result;
     for (size_t i = 0; i < identified.size(); ++i) {
       if (identified[i].empty()) continue;

@@ -36,7 +36,7 @@ cv::Mat SceneBackground::difference(const cv::Mat& gray, double smoothing_sigma)
   cv::addWeighted(gray, 1.0, image_, -1.0, kDifferenceOffset, diff, CV_8U);
   if (smoothing_sigma > 0) {
     // Kernel truncated at 2 sigma (7 taps for 1.5): symmetric, so corners do not move, and
-    // 2.5x cheaper than OpenCV's default 3-sigma kernel.
+    // cheaper than OpenCV's default 3-sigma kernel.
     const int k = 2 * static_cast<int>(std::ceil(2.0 * smoothing_sigma)) + 1;
     cv::GaussianBlur(diff, diff, cv::Size(k, k), smoothing_sigma);
   }

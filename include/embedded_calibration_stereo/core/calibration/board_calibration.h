@@ -42,11 +42,11 @@ bool parseBoardSize(const std::string& text, int* cols, int* rows, std::string* 
 
 enum class CornerDetector {
   // cv::findChessboardCorners (falling back to cv::findChessboardCornersSB when it misses the
-  // board), corners placed by cv::cornerSubPix - the default, as ROS camera_calibration: on the
-  // simulated images of test_board_calibration 0.036 px RMS from the true corners, unbiased.
+  // board), corners placed by cv::cornerSubPix - the default, as ROS camera_calibration:
+  // unbiased on the simulated images of test_board_calibration.
   kCornerSubPix,
-  // cv::findChessboardCornersSB with its own sub-pixel refinement (CALIB_CB_ACCURACY): 0.117 px
-  // RMS with biases up to 0.13 px on the same images, a several times worse calibration.
+  // cv::findChessboardCornersSB with its own sub-pixel refinement (CALIB_CB_ACCURACY): several
+  // times less accurate and biased on the same images, so a several times worse calibration.
   kSectorBased,
 };
 

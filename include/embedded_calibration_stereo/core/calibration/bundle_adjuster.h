@@ -6,9 +6,8 @@
 // Estimated: per camera fx, fy, cx, cy (skew fixed at zero) and the configured plumb_bob terms
 // (k1, k2 by default; p1, p2 and k3 optional), right_from_left, and the board poses. Metric
 // scale comes from the known square size. Residuals are corner reprojection errors (px) under
-// a robust loss (Cauchy by default: with a tenth of the corners displaced by 5 px in every
-// frame, 10 frames, Huber at 1 px left cx 17 px off, Cauchy at 1 px 4 px; on clean data both
-// give the least-squares figures).
+// a robust loss (Cauchy by default: it resists corners that are consistently mis-localised in
+// every frame far better than Huber; on clean data both give the least-squares solution).
 //
 // Board poses (BoardPoseMode): the embedded device is fixed to the left camera, so every
 // frame sees the same virtual boards and only the noise differs.
@@ -28,26 +27,15 @@
 //   information on the cameras as kSharedAcrossFrames (the Schur complements coincide) at ten
 //   times the cost for ten frames.
 // - kAuto (default): kDeviceModel when a device is given, otherwise kSharedAcrossFrames.
-// The device model is the more accurate, hence the default. bench_calibrator --rig
-// config/sim_rig.yaml --trials 20 (0.2 px corner noise, nominal device 1 mm / 0.5 deg off),
-// mean |error| (mean reported sd), device model vs free shared poses (per-frame = shared):
-//   p1 p2 zero in the truth, k1 k2 estimated:
-//     1 frame:   fx 0.19 % (0.26 %) vs 0.71 % (0.96 %); cx,cy 1.0 (1.3) vs 4.1 (4.9) px;
-//                k1 0.0031 (0.0034) vs 0.0055 (0.0081); baseline 0.61 % (0.61 %) vs 1.1 % (1.1 %);
-//                rotation 0.10 (0.092) vs 0.13 (0.13) deg
-//     10 frames: fx 0.051 % (0.083 %) vs 0.28 % (0.30 %); cx,cy 0.33 (0.40) vs 1.6 (1.6) px;
-//                k1 0.0009 (0.0011) vs 0.0026 (0.0026); baseline 0.13 % (0.19 %) vs 0.34 %
-//                (0.35 %); rotation 0.027 (0.029) vs 0.043 (0.040) deg
-//   sim truth, p1 p2 estimated, 10 frames: fx 0.054 % (0.085 %) vs 0.33 % (0.39 %); baseline
-//     0.41 % (0.40 %) vs 0.38 % (0.48 %); 30 frames fx 0.031 % (0.049 %) vs 0.19 % (0.23 %).
-//   3-sd coverage of the 14 main parameters over the 20 trials: device model >= 99.6 %, free
-//   poses >= 97.9 %.
+// The device model is the more accurate, hence the default (bench_calibrator --rig
+// config/sim_rig.yaml prints both modes' errors and reported standard deviations;
+// docs/figures.md).
 // Six free virtual boards leave focal length and board distance nearly interchangeable; the
-// rigid three-board copies do not. The extrinsics gain less (baseline sd 0.19 % vs 0.35 %):
-// all the boards are 1.13-1.26 m away, so the right camera's translation trades against its
-// rotation whatever the board model.
-// Cost: the device model runs a free shared-pose solve first (its start), ~60-90 ms wall for
-// 1-30 frames on one thread vs ~40-60 ms for shared poses alone.
+// rigid three-board copies do not. The extrinsics gain less: all the boards are about the same
+// distance away, so the right camera's translation trades against its rotation whatever the
+// board model.
+// Cost: the device model runs a free shared-pose solve first (its start), so it costs more
+// than shared poses alone (bench_calibrator prints the solve times).
 //
 // Solve() runs in named stages (bundle_adjuster.cpp): validate the inputs, initial cameras,
 // parameter blocks, residuals, held blocks and manifolds, Ceres, residual statistics and
@@ -103,9 +91,8 @@ struct BundleAdjustmentOptions {
   // Device model: weak prior of the device pose and planes around the given device, only to
   // fix the gauge freedoms (see device_model_adjustment.h). Its default is a hundred times
   // looser than the manufacturing tolerances (~1 mm, ~0.5 deg) so that it does not inform the
-  // cameras: sim_rig.yaml, 10 frames, 0.2 px, 20 trials, mean reported fx sd 0.0834 % with
-  // 50 deg / 0.1 m, 0.0836 % with 500 deg / 1 m (data alone), 0.0735 % with 5 deg / 10 mm and
-  // 0.0588 % with 1 deg / 2 mm. A prior at the real tolerances is thus worth ~30 % on fx, but
+  // cameras (the reported standard deviations are then those of the data alone). A prior at
+  // the real tolerances narrows fx noticeably (bench_calibrator --prior-deg / --prior-m), but
   // only while the device is within them (a knock may move it further): set it knowingly.
   double device_prior_angle_deg = 50.0;
   double device_prior_position_m = 0.1;

@@ -36,9 +36,9 @@ int parseSgbmMode(const std::string& name);
 struct DisparityOptions {
   // The defaults are the tuned configuration (test_middlebury.cpp, bench_disparity): the "sad"
   // matcher with an 11x11 window, 5% uniqueness, left-right check, speckle filter and background
-  // hole filling met both accuracy targets (Tsukuba <= 6%, Teddy <= 15% bad > 2 px) at well
-  // over 40 fps. SGBM 3-way with a 3x3 window (P1 72, P2 288) is more accurate on Tsukuba
-  // (3.5%) but runs at about 35 fps on 2 cores, so it is not the default.
+  // hole filling meets both accuracy targets (Tsukuba <= 6%, Teddy <= 15% bad > 2 px) well
+  // inside the frame budget. SGBM 3-way with a 3x3 window (P1 72, P2 288) is more accurate on
+  // Tsukuba but several times slower, so it is not the default.
   std::string algorithm = "sad";
   int prefilter_size = 9;             // bm only: normalisation window (odd, 5..255)
   int prefilter_cap = 31;             // all: clip of the prefiltered values (1..63)

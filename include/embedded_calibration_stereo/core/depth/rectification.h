@@ -54,7 +54,7 @@ RectificationGeometry computeRectificationGeometry(const StereoRig& rig,
 // region started while another thread's runs executes serially), so one short region per frame,
 // rather than one per image, leaves the regions of the other stages of a nodelet manager
 // parallel more often; and one image per thread costs less CPU than remap's split of one image
-// (bench_rectify: 1.3 ms of CPU per pair against 1.5-2.1 ms).
+// (docs/figures.md, rectification).
 void remapStereoPair(const cv::Mat& left_in, const cv::Mat& right_in, const cv::Mat& left_map1,
                      const cv::Mat& left_map2, const cv::Mat& right_map1, const cv::Mat& right_map2,
                      cv::Mat* left_out, cv::Mat* right_out);

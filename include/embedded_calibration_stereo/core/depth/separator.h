@@ -17,17 +17,15 @@
 //  - kRegionalAlpha (default, our design): alpha per tile, by least squares of I_E against I_C
 //    after high-passing both (a 5x5 box mean removed): the scene is uncorrelated with the
 //    checkerboard's fine structure, so the scene only adds noise to the fit, never bias (without
-//    the high-pass, smooth scene structure correlates with board outlines: 40.8 instead of
-//    45.9 dB on the sim). Fits are pooled over the neighbouring tiles (a 3x3 block of 32 px
-//    tiles by default), then shrunk towards the image-wide alpha by how much of their spread
-//    exceeds their own estimated noise (empirical Bayes), so a uniform light costs little extra
+//    the high-pass, smooth scene structure correlates with board outlines and biases alpha).
+//    Fits are pooled over the neighbouring tiles (a 3x3 block of 32 px tiles by default), then
+//    shrunk towards the image-wide alpha by how much of their spread exceeds their own
+//    estimated noise (empirical Bayes), so a uniform light costs little extra
 //    noise while a real light gradient is followed; blocks without enough device contrast
 //    (outside the boards, where I_C is the flat housing) take the image-wide estimate. The tile
 //    grid is interpolated bilinearly to a per-pixel alpha. It needs no alpha curve, follows lamp
-//    ramps and uneven lighting, and is not biased by the scene's brightness.
-//    Measured (test_separator, default sim, 8 teach frames): regional 45.7-46.4 dB, paper
-//    46.6-47.1 dB on the teach scene; a darker scene: regional 46.1 dB, paper 19.2 dB; a light
-//    ramp 0.7..1.0 across the image: regional 44.2 dB, paper 35.0 dB.
+//    ramps and uneven lighting, and is not biased by the scene's brightness (test_separator
+//    prints both methods' PSNR on the teach scene, a darker scene and a light ramp).
 //
 // Where I_C comes from: it is TAUGHT, not predicted: frames with the light on and the scene dark
 // (a lens cap over the half-mirror's scene side, or a dark room), averaged (teachDeviceImage) to
@@ -41,8 +39,7 @@
 //
 // bgr8: the regional fit uses the green channel (the device is lit white, so all channels share
 // alpha) and the subtraction applies to all three; mono8 and bgr8 are the only inputs.
-// Speed (bench_separator, 752x480, 2 cores, both images): regional 1.3 ms mono8 / 2.4 ms bgr8,
-// paper 0.17 / 0.96 ms per stereo frame (budget 3 ms).
+// Speed: bench_separator prints each method's time per stereo frame against the 3 ms budget.
 //
 // Saturation: where I_E is 255 the true sum is unknown; the output there is a lower bound.
 //

@@ -4,8 +4,8 @@
 // most max_diff belong to one region; every region of at most max_speckle_size pixels is set to
 // new_value. (test_speckle_filter checks the output equals cv::filterSpeckles'.)
 //
-// Why not cv::filterSpeckles itself: it flood-fills pixel by pixel through a label image and
-// took 1.7 ms of the 7 ms default disparity at 752x480 (bench_disparity). This finds the same
+// Why not cv::filterSpeckles itself: it flood-fills pixel by pixel through a label image, a
+// large share of the default disparity's time (bench_disparity). This finds the same
 // regions with a union-find over the horizontal runs of connected pixels, linking runs of
 // neighbouring rows where they overlap, which is several times faster.
 //

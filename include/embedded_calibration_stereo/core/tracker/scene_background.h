@@ -3,14 +3,12 @@
 // to the current frame so that the tracker can refine corners on I_on - I_off = r * device.
 //
 // Why: the scene behind the half-mirror is superimposed on the boards; its texture pulls every
-// local corner refinement (measured on the simulated rig: ~0.3 px RMS with the scene, ~0.03 px on
-// the difference). The background is only valid for a static scene: it is re-registered when the
+// local corner refinement, by far more than the sensor noise does; on the difference the scene
+// is gone. The background is only valid for a static scene: it is re-registered when the
 // boards move in the image (zoom step, knock: the whole image moves, the scene with the boards)
 // by a cubic polynomial warp fitted to the tracked corners' displacement since the background was
-// taken. Resampling cannot recreate the scene exactly (on the simulated rig the re-registered
-// background differs from the re-rendered scene by ~1 grey level RMS with the exact warp, and
-// corners are then ~0.043 px RMS instead of ~0.03 px), so a fresh light-off frame should replace
-// it when one is available.
+// taken. Resampling cannot recreate the scene exactly (corners are then somewhat less
+// accurate), so a fresh light-off frame should replace it when one is available.
 // A scene that changes by itself (moving objects) is not modelled: set a fresh light-off frame
 // (the driver takes one every time the light goes off) or clear the background.
 //
@@ -36,7 +34,7 @@ class SceneBackground {
 
   // gray - background + kDifferenceOffset, saturated to CV_8U, smoothed by a Gaussian of
   // smoothing_sigma px (0 = none): with the scene gone, smoothing only helps cv::cornerSubPix
-  // (it halves its error on the anti-aliased edges of the simulated boards).
+  // (on the anti-aliased edges of the boards).
   cv::Mat difference(const cv::Mat& gray, double smoothing_sigma) const;
   // The background as currently registered (CV_8UC1; empty when none).
   const cv::Mat& image() const { return image_; }

@@ -1,0 +1,271 @@
+// rostest (light_controller_inputs.test): the LightController (sim light) in the head's graph of
+// launch/external_driver.launch, fed by this test node playing an external driver: it renders
+// the simulated head (zoomed 3 %, so that the calibration in force no longer fits), applies the
+// light level the LightController publishes TWO frames late, switches it in the middle of an
+// exposure (that frame is half lit), and stamps the right camera 5 ms after the left.
+//  A. recalibrate: every settled frame carries the light its images were rendered with, never
+//     a half-lit one; the calibrator solves but set_camera_info is absent (the driver serves
+//     none): it says so and does not commit;
+//  B. no device in view while the light is on: the LightController reports the light as not
+//     working (diagnostics ERROR and a throttled error); a recalibration answers false, "no
+//     boards seen"; with the light off again the report clears;
+//  C. uncalibrated camera_info: a warning naming the topic, frames keep flowing;
+//  D. no right camera_info: frames are held back with an error naming the topic, and flow again
+//     once it is back.
+#include <cv_bridge/cv_bridge.h>
+#include <diagnostic_msgs/DiagnosticArray.h>
+#include <gtest/gtest.h>
+#include <rosgraph_msgs/Log.h>
+#include <sensor_msgs/CameraInfo.h>
+#include <sensor_msgs/Image.h>
+#include <std_msgs/Float64.h>
+#include <std_srvs/SetBool.h>
+
+#include <atomic>
+#include <deque>
+#include <map>
+#include <mutex>
+#include <thread>
+
+#include "child_launch.h"
+#include "driver_test_utils.h"
+#include "embedded_calibration_stereo/CalibrationMode.h"
+#include "embedded_calibration_stereo/Recalibrate.h"
+#include "embedded_calibration_stereo/core/sim/sim_rig.h"
+#include "embedded_calibration_stereo/ros/conversions.h"
+
+using embedded_calibration_stereo::CalibrationMode;
+using embedded_calibration_stereo::Recalibrate;
+using ecs_test::Collector;
+
+namespace {
+
+constexpr double kFps = 15.0;
+constexpr int kDelayFrames = 2;
+
+// The stand-in external driver.
+class FakeDriver {
+ public:
+  enum class Info { kCalibrated, kUncalibrated, kRightMissing };
+
+  explicit FakeDriver(ros::NodeHandle& nh) {
+    ecs::SimRigConfig config = ecs::loadSimRigConfig(std::string(ECS_SOURCE_DIR) + "/config/sim_rig.yaml");
+    std::tie(left_info_, right_info_) = embedded_calibration_stereo::toStereoCameraInfo(config.rig);
+    noise_sigma_ = config.noise_sigma;
+    config.noise_sigma = 0.0;
+    ecs::SimRig sim(config);
+    ecs::DriftRequest zoom;
+    zoom.focal_scale = 1.03;
+    sim.setDrift(zoom, 0.0);
+    const ecs::SimFrame off = sim.render(0.0, 0.0, 1), on = sim.render(0.0, 1.0, 1);
+    off.left.convertTo(off_[0], CV_32F);
+    off.right.convertTo(off_[1], CV_32F);
+    on.left.convertTo(on_[0], CV_32F);
+    on.right.convertTo(on_[1], CV_32F);
+    left_pub_ = nh.advertise<sensor_msgs::Image>("left_driver/image_raw", 2);
+    right_pub_ = nh.advertise<sensor_msgs::Image>("right_driver/image_raw", 2);
+    left_info_pub_ = nh.advertise<sensor_msgs::CameraInfo>("left_driver/camera_info", 2);
+    right_info_pub_ = nh.advertise<sensor_msgs::CameraInfo>("right_driver/camera_info", 2);
+    level_sub_ = nh.subscribe<std_msgs::Float64>("sim/light_level", 5, [this](const std_msgs::Float64::ConstPtr& m) {
+      commanded_ = m->data;
+    });
+    thread_ = std::thread([this] { run(); });
+  }
+  ~FakeDriver() {
+    running_ = false;
+    thread_.join();
+    level_sub_.shutdown();
+  }
+
+  std::atomic<bool> device_visible{true};
+  std::atomic<Info> info{Info::kCalibrated};
+
+  // Fraction of the exposure with the light on, for the frame of this (left) stamp; -1 unknown.
+  double truthAt(const ros::Time& stamp) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    const auto it = truth_.find(stamp);
+    return it == truth_.end() ? -1.0 : it->second;
+  }
+
+ private:
+  void run() {
+    ros::WallRate rate(kFps);
+    std::deque<double> delay(kDelayFrames, 0.0);
+    double level = 0.0;
+    uint64_t k = 0;
+    while (running_ && ros::ok()) {
+      delay.push_back(commanded_.load());
+      const double target = device_visible ? delay.front() : 0.0;
+      delay.pop_front();
+      // The light changes in the middle of this exposure: half of it lit at the old level.
+      const double exposed = target != level ? 0.5 * (level + target) : target;
+      level = target;
+      const ros::Time stamp = ros::Time::now();
+      {
+        std::lock_guard<std::mutex> lock(mutex_);
+        truth_[stamp] = exposed;
+      }
+      publish(0, stamp, exposed, k);
+      publish(1, stamp + ros::Duration(0.005), exposed, k);
+      ++k;
+      rate.sleep();
+    }
+  }
+
+  void publish(int c, const ros::Time& stamp, double p, uint64_t k) {
+    cv::Mat noise(off_[c].size(), CV_32F), image;
+    cv::RNG rng(2 * k + c + 1);
+    rng.fill(noise, cv::RNG::NORMAL, 0.0, noise_sigma_);
+    cv::Mat((1.0 - p) * off_[c] + p * on_[c] + noise).convertTo(image, CV_8U);
+    std_msgs::Header header;
+    header.stamp = stamp;
+    header.frame_id = "stereo_left_optical_frame";
+    (c == 0 ? left_pub_ : right_pub_).publish(cv_bridge::CvImage(header, "mono8", image).toImageMsg());
+    const Info mode = info.load();
+    if (mode == Info::kRightMissing && c == 1) return;
+    sensor_msgs::CameraInfo camera = c == 0 ? left_info_ : right_info_;
+    if (mode == Info::kUncalibrated) {
+      sensor_msgs::CameraInfo blank;
+      blank.width = camera.width;
+      blank.height = camera.height;
+      camera = blank;
+    }
+    camera.header = header;
+    (c == 0 ? left_info_pub_ : right_info_pub_).publish(camera);
+  }
+
+  cv::Mat off_[2], on_[2];
+  double noise_sigma_ = 1.0;
+  sensor_msgs::CameraInfo left_info_, right_info_;
+  ros::Publisher left_pub_, right_pub_, left_info_pub_, right_info_pub_;
+  ros::Subscriber level_sub_;
+  std::atomic<double> commanded_{0.0};
+  std::atomic<bool> running_{true};
+  std::mutex mutex_;
+  std::map<ros::Time, double> truth_;
+  std::thread thread_;
+};
+
+// Waits for a light_controller status of /diagnostics whose level and message match.
+bool waitForDiagnostic(Collector<diagnostic_msgs::DiagnosticArray>& diagnostics, size_t from, int level,
+                       const std::string& needle, double timeout_s, std::string* seen) {
+  return diagnostics.waitFor(
+      [&](const std::vector<diagnostic_msgs::DiagnosticArray::ConstPtr>& arrays) {
+        for (size_t i = from; i < arrays.size(); ++i)
+          for (const auto& status : arrays[i]->status) {
+            if (status.name.find("light_controller") == std::string::npos) continue;
+            *seen = status.message;
+            if (status.level == level && status.message.find(needle) != std::string::npos) return true;
+          }
+        return false;
+      },
+      timeout_s);
+}
+
+template <class Srv>
+bool callService(const std::string& name, Srv* srv) {
+  return ros::service::waitForService(name, ros::Duration(20.0)) && ros::service::call(name, *srv);
+}
+
+}  // namespace
+
+TEST(LightControllerInputs, DelayedLightAndBadInputs) {
+  using diagnostic_msgs::DiagnosticStatus;
+  ros::NodeHandle nh;
+  ecs_test::TempDir dir("ecs_light_inputs");
+  ASSERT_FALSE(dir.path.empty());
+  Collector<rosgraph_msgs::Log> log(nh, "/rosout", 5000);
+  Collector<diagnostic_msgs::DiagnosticArray> diagnostics(nh, "/diagnostics", 2000);
+  Collector<CalibrationMode> modes(nh, "calibration_mode", 5000);
+  ecs_test::ChildLaunch head({"embedded_calibration_stereo", "external_driver.launch", "light_backend:=sim",
+                              "calibration_period_s:=0", "prior_file:=" + dir.path + "/prior.yaml"},
+                             dir.path + "/head.log");
+  ASSERT_TRUE(head.started());
+  ASSERT_TRUE(ros::service::waitForService("/stereo/set_light", ros::Duration(30.0))) << head.logTail();
+  FakeDriver driver(nh);
+  ASSERT_TRUE(modes.waitForCount(10, 20.0)) << "no calibration_mode from the LightController\n" << head.logTail();
+
+  // A. A recalibration with the light two frames late; set_camera_info absent.
+  Recalibrate recalibrate;
+  recalibrate.request.frames = 5;
+  recalibrate.request.timeout_s = 15.0;
+  ASSERT_TRUE(callService("/stereo/calibration/recalibrate", &recalibrate));
+  std::printf("recalibrate without set_camera_info: success %d, '%s'\n", recalibrate.response.success,
+              recalibrate.response.message.c_str());
+  EXPECT_FALSE(recalibrate.response.success);
+  EXPECT_NE(recalibrate.response.message.find("not committed"), std::string::npos) << recalibrate.response.message;
+  EXPECT_NE(recalibrate.response.message.find("left_driver/set_camera_info is not available"), std::string::npos)
+      << recalibrate.response.message;
+  int settled_on = 0, settled_off = 0, half_lit = 0;
+  for (const auto& mode : modes.snapshot()) {
+    const double p = driver.truthAt(mode->header.stamp);
+    ASSERT_GE(p, 0.0) << "a calibration_mode stamp the driver never published";
+    if (p > 0 && p < 1) {
+      ++half_lit;
+      EXPECT_FALSE(mode->settled) << "a half-lit frame was marked settled";
+      continue;
+    }
+    if (!mode->settled) continue;
+    EXPECT_EQ(mode->light_on, p == 1.0);
+    ++(mode->light_on ? settled_on : settled_off);
+  }
+  std::printf("light two frames late: %d settled on, %d settled off, %d half-lit frames unsettled\n", settled_on,
+              settled_off, half_lit);
+  EXPECT_GE(settled_on, 5);
+  EXPECT_GE(half_lit, 2) << "the switches must have produced half-lit frames";
+
+  // B. No device in view with the light on.
+  driver.device_visible = false;
+  size_t from = diagnostics.snapshot().size();
+  std_srvs::SetBool on;
+  on.request.data = true;
+  ASSERT_TRUE(callService("/stereo/set_light", &on) && on.response.success);
+  std::string seen;
+  EXPECT_TRUE(waitForDiagnostic(diagnostics, from, DiagnosticStatus::ERROR, "light not working", 8.0, &seen))
+      << "last light_controller status: " << seen;
+  EXPECT_TRUE(ecs_test::waitForLog(log, {"LightController", "the light is not working"}, 5.0));
+  Recalibrate no_boards;
+  no_boards.request.frames = 5;
+  no_boards.request.timeout_s = 1.5;
+  ASSERT_TRUE(callService("/stereo/calibration/recalibrate", &no_boards));
+  EXPECT_FALSE(no_boards.response.success);
+  EXPECT_NE(no_boards.response.message.find("no boards seen"), std::string::npos) << no_boards.response.message;
+  // The recalibration switched the light off again: the images agree, the report clears.
+  from = diagnostics.snapshot().size();
+  EXPECT_TRUE(waitForDiagnostic(diagnostics, from, DiagnosticStatus::OK, "confirming the light", 8.0, &seen))
+      << "last light_controller status: " << seen;
+  driver.device_visible = true;
+
+  // C. Uncalibrated camera_info: a warning, frames keep flowing.
+  driver.info = FakeDriver::Info::kUncalibrated;
+  from = diagnostics.snapshot().size();
+  EXPECT_TRUE(waitForDiagnostic(diagnostics, from, DiagnosticStatus::WARN, "uncalibrated", 8.0, &seen))
+      << "last light_controller status: " << seen;
+  EXPECT_TRUE(ecs_test::waitForLog(log, {"/stereo/left_driver/camera_info is uncalibrated"}, 5.0));
+  size_t count = modes.snapshot().size();
+  EXPECT_TRUE(modes.waitForCount(count + 10, 5.0)) << "frames stopped with an uncalibrated camera_info";
+
+  // D. No right camera_info: frames held back, with the topic named; back when it is back.
+  driver.info = FakeDriver::Info::kRightMissing;
+  from = diagnostics.snapshot().size();
+  EXPECT_TRUE(waitForDiagnostic(diagnostics, from, DiagnosticStatus::ERROR,
+                                "no camera_info on /stereo/right_driver/camera_info", 8.0, &seen))
+      << "last light_controller status: " << seen;
+  EXPECT_TRUE(ecs_test::waitForLog(log, {"frames held back", "/stereo/right_driver/camera_info"}, 5.0));
+  count = modes.snapshot().size();
+  ros::WallDuration(1.0).sleep();  // a quiet second (the control below shows the pipe works)
+  EXPECT_LE(modes.snapshot().size(), count + 1) << "frames went out without the right camera_info";
+  driver.info = FakeDriver::Info::kCalibrated;
+  EXPECT_TRUE(modes.waitForCount(count + 10, 5.0)) << "frames did not resume with the camera_info back";
+}
+
+int main(int argc, char** argv) {
+  testing::InitGoogleTest(&argc, argv);
+  ros::init(argc, argv, "light_controller_inputs_test");
+  ros::AsyncSpinner spinner(4);
+  spinner.start();
+  const int result = RUN_ALL_TESTS();
+  spinner.stop();
+  ros::shutdown();
+  return result;
+}
