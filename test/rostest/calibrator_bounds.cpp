@@ -11,7 +11,9 @@
 //  - a caller killed during its request: the request ends, the light goes off, the window
 //    stays within max_frames, and automatic calibration resumes;
 //  - observations repeated under one stamp, 2 % off: counted once (the window holds the live
-//    frames only).
+//    frames only);
+//  - an automatic window that stops growing (the light held on) ends after window_timeout_s,
+//    saying why, and is solved.
 #include <diagnostic_msgs/DiagnosticArray.h>
 #include <gtest/gtest.h>
 #include <sensor_msgs/CameraInfo.h>
@@ -419,6 +421,29 @@ TEST(CalibratorBounds, ObservationsRepeatedUnderOneStampAreCountedOnce) {
   EXPECT_LT(status.rms_left_px, 0.01);
   EXPECT_LT(status.rms_right_px, 0.01);
   EXPECT_NEAR(status.left_intrinsics[0], truth->K[0], 1e-4 * truth->K[0]);
+}
+
+TEST(CalibratorBounds, AnAutomaticWindowThatStopsGrowingEndsWithAReason) {
+  // The light held on by the driver's own set_light: the window fills to max_frames and then
+  // receives nothing more; it never closes by the light going off.
+  ASSERT_TRUE(lightOffFor(2, 5.0));
+  const size_t statuses_before = fixture->status.snapshot().size();
+  std_srvs::SetBool on;
+  on.request.data = true;
+  ASSERT_TRUE(ros::service::call("set_light", on) && on.response.success);
+  std::string found;
+  // max_frames at 15 fps, then window_timeout_s (5 s), with a margin.
+  const bool ended = ecs_test::waitForLog(fixture->log, {"calibration window ended", "window_timeout_s", "solving"},
+                                          kMaxFrames / 15.0 + 5.0 + 5.0, &found);
+  const bool solved = fixture->status.waitForCount(statuses_before + 1, 5.0);
+  std_srvs::SetBool off;
+  off.request.data = false;
+  ASSERT_TRUE(ros::service::call("set_light", off) && off.response.success);
+  ASSERT_TRUE(ended) << "the window never ended with the light held on";
+  std::printf("logged: %s\n", found.c_str());
+  ASSERT_TRUE(solved);
+  EXPECT_EQ(fixture->status.snapshot()[statuses_before]->frames_used, static_cast<uint32_t>(kMaxFrames));
+  EXPECT_TRUE(lightOffFor(5, 5.0));
 }
 
 int main(int argc, char** argv) {
