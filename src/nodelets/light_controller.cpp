@@ -49,6 +49,7 @@
 #include "embedded_calibration_stereo/core/calibration/light_schedule.h"
 #include "embedded_calibration_stereo/core/geometry/config_error.h"
 #include "embedded_calibration_stereo/ros/camera_calibration.h"
+#include "embedded_calibration_stereo/ros/lazy_synced_input.h"
 #include "embedded_calibration_stereo/ros/light_backend.h"
 #include "embedded_calibration_stereo/ros/parameter_reader.h"
 #include "embedded_calibration_stereo/ros/tracker_teaching.h"
@@ -225,15 +226,33 @@ class LightControllerNodelet : public nodelet::Nodelet {
     left_info_sub_.registerCallback([this](const CameraInfoConstPtr&) { ++arrived_[1]; });
     right_sub_.registerCallback([this](const ImageConstPtr&) { ++arrived_[2]; });
     right_info_sub_.registerCallback([this](const CameraInfoConstPtr&) { ++arrived_[3]; });
+    // Stamps far from the other inputs' (and unreadable images) never reach the synchroniser,
+    // whose queue they would fill (stamp_guard.h, as every synchronised input of the head).
+    guard_ = std::make_unique<StampGuard>(
+        std::vector<std::string>{left_sub_.getTopic(), left_info_sub_.getTopic(), right_sub_.getTopic(),
+                                 right_info_sub_.getTopic()},
+        readStampTolerance(pnh), "LightController", [this](const std::string& text) { NODELET_WARN("%s", text.c_str()); });
+    const auto admit_image = [this](size_t index) {
+      return [this, index](const Image& image) {
+        return malformedImage(image).empty() && guard_->admit(index, image.header.stamp);
+      };
+    };
+    const auto admit_info = [this](size_t index) {
+      return [this, index](const CameraInfo& info) { return guard_->admit(index, info.header.stamp); };
+    };
+    left_admit_ = std::make_unique<AdmissionFilter<Image>>(left_sub_, admit_image(0));
+    left_info_admit_ = std::make_unique<AdmissionFilter<CameraInfo>>(left_info_sub_, admit_info(1));
+    right_admit_ = std::make_unique<AdmissionFilter<Image>>(right_sub_, admit_image(2));
+    right_info_admit_ = std::make_unique<AdmissionFilter<CameraInfo>>(right_info_sub_, admit_info(3));
     if (params_.approximate_sync) {
       approximate_sync_ = std::make_unique<message_filters::Synchronizer<ApproximatePolicy>>(
-          ApproximatePolicy(params_.queue_size), left_sub_, left_info_sub_, right_sub_, right_info_sub_);
+          ApproximatePolicy(params_.queue_size), *left_admit_, *left_info_admit_, *right_admit_, *right_info_admit_);
       if (params_.max_interval_s > 0)
         approximate_sync_->setMaxIntervalDuration(ros::Duration(params_.max_interval_s));
       approximate_sync_->registerCallback(&LightControllerNodelet::frameCb, this);
     } else {
       exact_sync_ = std::make_unique<message_filters::Synchronizer<ExactPolicy>>(
-          ExactPolicy(params_.queue_size), left_sub_, left_info_sub_, right_sub_, right_info_sub_);
+          ExactPolicy(params_.queue_size), *left_admit_, *left_info_admit_, *right_admit_, *right_info_admit_);
       exact_sync_->registerCallback(&LightControllerNodelet::frameCb, this);
     }
 
@@ -572,6 +591,9 @@ class LightControllerNodelet : public nodelet::Nodelet {
   std::unique_ptr<image_transport::ImageTransport> it_;
   image_transport::SubscriberFilter left_sub_, right_sub_;
   message_filters::Subscriber<CameraInfo> left_info_sub_, right_info_sub_;
+  std::unique_ptr<StampGuard> guard_;  // the subscribers -> the admissions -> the synchroniser
+  std::unique_ptr<AdmissionFilter<Image>> left_admit_, right_admit_;
+  std::unique_ptr<AdmissionFilter<CameraInfo>> left_info_admit_, right_info_admit_;
   std::unique_ptr<message_filters::Synchronizer<ExactPolicy>> exact_sync_;
   std::unique_ptr<message_filters::Synchronizer<ApproximatePolicy>> approximate_sync_;
   image_transport::CameraPublisher left_pub_, right_pub_;

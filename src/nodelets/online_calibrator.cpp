@@ -3,8 +3,16 @@
 // and on acceptance commits through the driver's set_camera_info services and /tf_static
 // (CalibrationSession). calibration/recalibrate switches the light on, collects, solves,
 // commits unless dry_run or rejected, switches the light off and answers with the status; one
-// request at a time (a second one is answered "busy" at once), and nothing is solved or
-// committed when set_light fails either way.
+// request at a time (a second one is answered "busy" at once, naming the caller holding it),
+// and nothing is solved or committed when set_light fails either way. A request is bounded:
+// frames at most max_frames, timeout_s at most max_request_timeout_s (a non-finite one is
+// refused), every driver service call at most service_timeout_s to appear and as much to
+// answer, and a caller that goes away (killed) ends it early; the light is switched off on
+// every way out. Inputs whose stamps lie far from the others' are dropped (stamp_guard.h), an
+// observation is counted once per stamp, and an automatic window to which no settled frame was
+// added for window_timeout_s ends (solved when it has min_frames). An accepted calibration the
+// driver could not store is committed again every commit_retry_s while the calibration in force
+// is unchanged and no later solve replaced it.
 // For a bag replay (launch/replay.launch: no driver, use_sim_time) the parameter commit:=none
 // solves and gates every window as usual but commits nowhere except /tf_static; only header
 // stamps (sim time) order the frames, and solve durations are wall time.
@@ -16,7 +24,10 @@
 #include <ros/ros.h>
 #include <std_srvs/SetBool.h>
 
+#include <algorithm>
 #include <atomic>
+#include <chrono>
+#include <cmath>
 #include <condition_variable>
 #include <deque>
 #include <future>
@@ -30,22 +41,29 @@
 #include "embedded_calibration_stereo/core/geometry/config_error.h"
 #include "embedded_calibration_stereo/core/geometry/config_io.h"
 #include "embedded_calibration_stereo/ros/calibration_session.h"
+#include "embedded_calibration_stereo/ros/caller_probe.h"
 #include "embedded_calibration_stereo/ros/conversions.h"
+#include "embedded_calibration_stereo/ros/service_call.h"
+#include "embedded_calibration_stereo/ros/stamp_guard.h"
 #include "embedded_calibration_stereo/ros/stereo_input_check.h"
 
 namespace embedded_calibration_stereo {
 
 // Threads:
 //  - the manager's single-threaded queue of this nodelet runs the subscribers (observations,
-//    calibration_mode, camera_info) and the diagnostics timer;
+//    calibration_mode, camera_info), the diagnostics timer, the window age timer and the commit
+//    retry timer (which only queues a job for the worker);
 //  - calibration/recalibrate runs on this nodelet's own service queue and its two spinner
 //    threads: a call blocks while the window fills and the worker solves (up to timeout_s), and
 //    on the manager's shared pool it would hold one of its worker threads that long (with 4
 //    threads, the tracker and the depth nodelets then fell behind and dropped frames during the
 //    call); the second thread answers a call arriving meanwhile ("busy") instead of queueing it;
+//    the running call probes its caller (CallerProbe) and the driver's services (callService:
+//    a thread per call, detached if it does not answer in time) without holding mutex_;
 //  - the worker thread (started in onInit, joined in the destructor) alone runs session_, and
 //    after a commit waits for the driver's first frame carrying it (its epoch).
-// Everything they share is guarded by mutex_; session_->boards() is immutable after onInit.
+// Everything they share is guarded by mutex_; session_->boards() is immutable after onInit;
+// guard_ (created before the subscribers) locks itself.
 class OnlineCalibratorNodelet : public nodelet::Nodelet {
  public:
   ~OnlineCalibratorNodelet() override {
@@ -59,6 +77,7 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
     std::vector<ecs::StereoObservation> frames;
     bool dry_run = false;
     std::shared_ptr<std::promise<CalibrationStatus>> result;  // null for automatic windows
+    bool commit_again = false;  // no solve: commit uncommitted_ again
   };
 
   void onInit() override {
@@ -71,6 +90,8 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
       if (service_spinner_) service_spinner_->stop();
       recalibrate_srv_.shutdown();
       diagnostics_timer_.stop();
+      window_timer_.stop();
+      commit_retry_timer_.stop();
       for (ros::Subscriber* sub : {&observations_sub_, &mode_sub_, &left_info_sub_, &right_info_sub_}) sub->shutdown();
       throw;
     }
@@ -89,6 +110,11 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
       throw ecs::ConfigError("device_config", "'" + params_.device_config + "': " + e.what());
     }
     session_ = std::make_unique<CalibrationSession>(nh, params_, device);
+    guard_ = std::make_unique<StampGuard>(
+        std::vector<std::string>{nh.resolveName("calibration_mode"), nh.resolveName("calibration/observations"),
+                                 nh.resolveName("left/camera_info"), nh.resolveName("right/camera_info")},
+        params_.stamp_tolerance_s, "OnlineCalibrator",
+        [this](const std::string& text) { NODELET_WARN("%s", text.c_str()); });
 
     status_pub_ = nh.advertise<CalibrationStatus>("calibration/status", 1, /*latch=*/true);
     observations_sub_ = nh.subscribe("calibration/observations", 10, &OnlineCalibratorNodelet::onObservation, this);
@@ -97,13 +123,17 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
         "left/camera_info", 1, [this](const sensor_msgs::CameraInfoConstPtr& m) { storeInfo(true, m); });
     right_info_sub_ = nh.subscribe<sensor_msgs::CameraInfo>(
         "right/camera_info", 1, [this](const sensor_msgs::CameraInfoConstPtr& m) { storeInfo(false, m); });
-    set_light_client_ = nh.serviceClient<std_srvs::SetBool>("set_light");
+    set_light_client_ = nh.serviceClient<std_srvs::SetBool>("set_light");  // exists() only: calls are bounded
     diagnostics_ = std::make_unique<diagnostic_updater::Updater>(nh, pnh, getName());
     diagnostics_->setHardwareID("online_calibrator");
     diagnostics_->add("online_calibrator", this, &OnlineCalibratorNodelet::diagnose);
     diagnostics_timer_ = nh.createWallTimer(ros::WallDuration(1.0), [this](const ros::WallTimerEvent&) {
       diagnostics_->update();
     });
+    window_timer_ = nh.createWallTimer(ros::WallDuration(0.25), [this](const ros::WallTimerEvent&) { endIdleWindow(); });
+    if (params_.commit_retry_s > 0)
+      commit_retry_timer_ = nh.createWallTimer(ros::WallDuration(params_.commit_retry_s),
+                                               [this](const ros::WallTimerEvent&) { scheduleCommitAgain(); });
     worker_ = std::thread(&OnlineCalibratorNodelet::workerLoop, this);
     ros::NodeHandle service_nh(nh);
     service_nh.setCallbackQueue(&service_queue_);
@@ -135,6 +165,7 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
   // The first pair's geometry goes on /tf_static at once, so that tf (rviz, points2 users) has
   // the right camera before the first commit; every commit replaces it.
   void storeInfo(bool left, const sensor_msgs::CameraInfoConstPtr& info) {
+    if (!guard_->admit(left ? kLeftInfoInput : kRightInfoInput, info->header.stamp)) return;
     const std::string topic = (left ? left_info_sub_ : right_info_sub_).getTopic();
     const std::string other_topic = (left ? right_info_sub_ : left_info_sub_).getTopic();
     std::string problem = checkCameraInfo(*info, topic, info->width, info->height);
@@ -178,6 +209,7 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
   }
 
   void onObservation(const StereoPatternObservationConstPtr& msg) {
+    if (!guard_->admit(kObservationInput, msg->header.stamp)) return;
     ecs::StereoObservation observation = fromMsg(*msg);
     const std::vector<std::string> defects = observationDefects(observation, session_->boards());
     if (!defects.empty()) {
@@ -190,8 +222,9 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
       return;
     }
     std::lock_guard<std::mutex> lock(mutex_);
-    // A stamp not after the previous one (a replayed or restarted source) would put a frame in
-    // the window twice, or a frame of another timeline: dropped. A time jump of the driver's
+    // A stamp not after the previous one (a replayed or restarted source, or the same frame
+    // sent again) would put a frame in the window twice, or a frame of another timeline:
+    // dropped, so that a window counts one frame per stamp. A time jump of the driver's
     // calibration_mode (forgetFramesAfterTimeJump) starts a new timeline for both.
     if (!last_observation_stamp_.isZero() && msg->header.stamp <= last_observation_stamp_) {
       ++backwards_messages_;
@@ -215,13 +248,35 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
   }
 
   void onMode(const CalibrationModeConstPtr& mode) {
+    if (!guard_->admit(kModeInput, mode->header.stamp)) return;
     const bool calibrating = mode->light_on && mode->settled;
     std::optional<Job> job;
     {
       std::lock_guard<std::mutex> lock(mutex_);
-      if (!modes_.empty() && mode->header.stamp < modes_.back().stamp) forgetFramesAfterTimeJump(mode->header.stamp);
-      epoch_ = mode->calibration_epoch;
-      modes_.push_back({mode->header.stamp, calibrating, mode->calibration_epoch});
+      const ros::Time& stamp = mode->header.stamp;
+      // One frame per stamp: a second message of a stamp is ignored.
+      for (const ModeSeen& seen : modes_)
+        if (seen.stamp == stamp) return;
+      // Older than the newest frame: a time jump of the driver when by more than the stamp
+      // tolerance (the stamp guard lets such a jump through only once every input made it),
+      // otherwise a late or stray message: kept for matching its observation, but it says
+      // nothing about the light now.
+      bool late = false;
+      if (!modes_.empty() && stamp < modes_.back().stamp) {
+        if (modes_.back().stamp.toSec() - stamp.toSec() > params_.stamp_tolerance_s)
+          forgetFramesAfterTimeJump(stamp);
+        else
+          late = true;
+      }
+      const ModeSeen seen{stamp, calibrating, mode->calibration_epoch};
+      if (late) {
+        modes_.insert(std::upper_bound(modes_.begin(), modes_.end(), stamp,
+                                       [](const ros::Time& t, const ModeSeen& m) { return t < m.stamp; }),
+                      seen);
+      } else {
+        epoch_ = mode->calibration_epoch;
+        modes_.push_back(seen);
+      }
       if (modes_.size() > kKeptFrames) modes_.pop_front();
       if (awaiting_commit_) cv_.notify_all();
       for (auto it = pending_.begin(); it != pending_.end(); ++it) {
@@ -232,13 +287,41 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
         }
       }
       // The light went off: the window of the driver's schedule is complete.
-      if (!mode->light_on && !request_active_ && !window_.empty()) {
+      if (!late && !mode->light_on && !request_active_ && !window_.empty()) {
         window_closed_at_ = mode->header.stamp;
         if (params_.auto_calibrate && static_cast<int>(window_.size()) >= params_.min_frames)
           job = Job{std::move(window_), false, nullptr};
         window_.clear();
       }
     }
+    if (job) submit(std::move(*job));
+  }
+
+  // Window age timer (subscriber queue). An automatic window to which no settled frame was
+  // added for window_timeout_s (the light stuck on, the driver silent, frames never settling)
+  // ends: solved when it has min_frames, dropped otherwise, with a warning saying why.
+  void endIdleWindow() {
+    std::optional<Job> job;
+    char text[300];
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      if (request_active_ || window_.empty()) return;
+      const double idle_s = (ros::WallTime::now() - last_window_frame_wall_).toSec();
+      if (idle_s < params_.window_timeout_s) return;
+      const bool solve = params_.auto_calibrate && static_cast<int>(window_.size()) >= params_.min_frames;
+      std::snprintf(text, sizeof(text),
+                    "calibration window ended: no settled light-on frame added for %.1f s (window_timeout_s); "
+                    "%zu frames, %s",
+                    idle_s, window_.size(),
+                    solve                     ? "solving them"
+                    : params_.auto_calibrate ? "fewer than min_frames: not solved"
+                                             : "not solved (auto_calibrate is off)");
+      last_window_end_ = text;
+      if (!modes_.empty()) window_closed_at_ = modes_.back().stamp;
+      if (solve) job = Job{std::move(window_), false, nullptr};
+      window_.clear();
+    }
+    if (params_.auto_calibrate) NODELET_WARN("OnlineCalibrator: %s", text);
     if (job) submit(std::move(*job));
   }
 
@@ -280,6 +363,7 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
     if (window_.size() >= cap) return;
     observation.stamp = stamp.toSec();
     window_.push_back(std::move(observation));
+    last_window_frame_wall_ = ros::WallTime::now();
     if (request_active_ && window_.size() >= request_frames_) cv_.notify_all();
   }
 
@@ -310,9 +394,21 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
         right = right_info_;
         epoch = epoch_;
       }
+      if (job.commit_again) {
+        commitAgain();
+        continue;
+      }
       std::optional<CommittedCalibration> committed;
-      CalibrationStatus status = session_->solve(job.frames, left.get(), right.get(), epoch, job.dry_run, &committed);
+      std::optional<UncommittedCalibration> uncommitted;
+      CalibrationStatus status =
+          session_->solve(job.frames, left.get(), right.get(), epoch, job.dry_run, &committed, &uncommitted);
       if (committed) readCommittedEpoch(*committed, epoch, &status);
+      if (!job.dry_run) {
+        // The newest solve decides: a calibration not stored is tried again (scheduleCommitAgain);
+        // a later one, committed, rejected or not stored either, replaces it.
+        std::lock_guard<std::mutex> lock(mutex_);
+        uncommitted_ = std::move(uncommitted);
+      }
       NODELET_INFO("OnlineCalibrator: %zu frames, %s%s%s%s (rms %.3f / %.3f px, %.0f ms)", job.frames.size(),
                    job.dry_run ? "dry run, " : "", status.accepted ? "accepted" : "not accepted",
                    status.reason.empty() ? "" : ": ", status.reason.c_str(), status.rms_left_px,
@@ -328,6 +424,68 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
       if (!job.dry_run) status_pub_.publish(status);  // a dry run is answered, not announced
       if (job.result) job.result->set_value(status);
     }
+  }
+
+  // Caller holds mutex_. The driver still publishes the calibration `u` was gated against (its
+  // epoch may have moved: a failed commit puts the left calibration back).
+  bool stillInForce(const UncommittedCalibration& u) const {
+    return left_info_ && right_info_ && carriesCalibration(*left_info_, u.left_in_force) &&
+           carriesCalibration(*right_info_, u.right_in_force);
+  }
+
+  // Commit retry timer (subscriber queue): a calibration the driver could not store (a full
+  // disk, a driver restarting) is committed again every commit_retry_s, on the worker, while
+  // the calibration in force is still the one it was gated against.
+  void scheduleCommitAgain() {
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      if (!uncommitted_ || commit_again_queued_) return;
+      if (!stillInForce(*uncommitted_)) {
+        NODELET_WARN("OnlineCalibrator: the calibration in force changed: the calibration the driver could not "
+                     "store is not committed again");
+        uncommitted_.reset();
+        return;
+      }
+      commit_again_queued_ = true;
+    }
+    Job job;
+    job.commit_again = true;
+    submit(std::move(job));
+  }
+
+  // Worker thread.
+  void commitAgain() {
+    std::optional<UncommittedCalibration> calibration;
+    uint32_t before;
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      commit_again_queued_ = false;
+      if (uncommitted_ && stillInForce(*uncommitted_)) calibration = uncommitted_;
+      before = epoch_;
+    }
+    if (!calibration) return;
+    const std::string error = session_->commitAgain(*calibration);
+    if (!error.empty()) {
+      NODELET_WARN_THROTTLE(60.0, "OnlineCalibrator: the accepted calibration is still not committed: %s; trying "
+                            "again every %.0f s",
+                            error.c_str(), params_.commit_retry_s);
+      return;
+    }
+    CalibrationStatus status = calibration->status;
+    status.header.stamp = ros::Time::now();
+    status.accepted = true;
+    status.reason.clear();
+    readCommittedEpoch(calibration->infos, before, &status);
+    NODELET_INFO("OnlineCalibrator: the accepted calibration the driver could not store before is committed now "
+                 "(epoch %u)",
+                 status.epoch);
+    {
+      std::lock_guard<std::mutex> lock(mutex_);  // no solve ran meanwhile: the worker runs one job at a time
+      uncommitted_.reset();
+      last_solve_ = status;
+      last_solve_time_ = last_commit_time_ = ros::WallTime::now();
+    }
+    status_pub_.publish(status);
   }
 
   // Worker thread. Waits (bounded by service_timeout_s: the driver publishes the new
@@ -358,15 +516,31 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
     NODELET_WARN("OnlineCalibrator: %s", text);
   }
 
-  bool recalibrate(Recalibrate::Request& req, Recalibrate::Response& res) {
-    const size_t frames = req.frames > 0 ? req.frames : static_cast<size_t>(params_.min_frames);
-    const double timeout_s = req.timeout_s > 0.0 ? req.timeout_s : 10.0;
+  bool recalibrate(ros::ServiceEvent<Recalibrate::Request, Recalibrate::Response>& event) {
+    const Recalibrate::Request& req = event.getRequest();
+    Recalibrate::Response& res = event.getResponse();
+    const std::string caller = event.getCallerName();
+    const BoundedRequest bounded = boundRecalibrateRequest(req.frames, req.timeout_s, params_);
+    if (!bounded.refusal.empty()) {
+      NODELET_WARN("OnlineCalibrator: recalibrate from %s %s", caller.c_str(), bounded.refusal.c_str());
+      return answer(&res, false, bounded.refusal);
+    }
+    if (!bounded.note.empty())
+      NODELET_WARN("OnlineCalibrator: recalibrate from %s: %s", caller.c_str(), bounded.note.c_str());
+    const size_t frames = bounded.frames;
+    const double timeout_s = bounded.timeout_s;
+    // Every answer says what was limited.
+    const auto noted = [&bounded](std::string message) {
+      return bounded.note.empty() ? message : message + " (" + bounded.note + ")";
+    };
     {
       std::lock_guard<std::mutex> lock(mutex_);
       // Answered at once (the second service thread): a queued request would switch the light
       // and clear the window of the one running.
-      if (request_in_flight_) return answer(&res, false, "busy: a recalibration is already running");
+      if (request_in_flight_)
+        return answer(&res, false, "busy: a recalibration is already running (requested by " + request_caller_ + ")");
       request_in_flight_ = true;
+      request_caller_ = caller;
       request_active_ = true;
       request_frames_ = frames;
       window_.clear();
@@ -378,8 +552,10 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
         std::lock_guard<std::mutex> lock(self->mutex_);
         self->request_in_flight_ = false;
         self->request_active_ = false;
+        self->request_caller_.clear();
       }
     } in_flight{this};
+    const CallerProbe probe(caller);
     std::string error;
     if (!setLight(true, &error)) {
       // The driver may have switched the light on all the same (an answer lost in a timeout, or
@@ -389,25 +565,24 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
       if (set_light_client_.exists() && !setLight(false, &off_error))
         message += "; switching it off failed too: " + off_error;
       NODELET_ERROR("OnlineCalibrator: recalibrate: %s", message.c_str());
-      return answer(&res, false, message + "; nothing solved or committed");
+      return answer(&res, false, noted(message + "; nothing solved or committed"));
     }
     Job job;
     job.dry_run = req.dry_run;
-    {
-      std::unique_lock<std::mutex> lock(mutex_);
-      cv_.wait_for(lock, std::chrono::duration<double>(timeout_s),
-                   [&] { return stopping_ || window_.size() >= frames; });
-      job.frames = std::move(window_);
-      window_.clear();
-      if (!modes_.empty()) window_closed_at_ = modes_.back().stamp;
-      request_active_ = false;
-    }
+    const std::string abandoned = collectRequestWindow(frames, timeout_s, probe, &job.frames);
+    // From here on the light goes off whatever happened: an early end, a shutdown, a timeout.
     if (!setLight(false, &error)) {
       // The head is not back in its normal state (the boards may still be over the scene):
       // nothing is committed on its behalf.
-      const std::string message = "cannot switch the light off: " + error + "; nothing solved or committed";
+      const std::string message = (abandoned.empty() ? "" : abandoned + "; ") + "cannot switch the light off: " +
+                                  error + "; nothing solved or committed";
       NODELET_ERROR("OnlineCalibrator: recalibrate: %s", message.c_str());
-      return answer(&res, false, message);
+      return answer(&res, false, noted(message));
+    }
+    if (!abandoned.empty()) {
+      const std::string message = abandoned + ": light switched off, nothing solved or committed";
+      NODELET_WARN("OnlineCalibrator: recalibrate: %s", message.c_str());
+      return answer(&res, false, noted(message));
     }
     if (job.frames.size() < frames) {
       char text[160];
@@ -416,18 +591,55 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
       else
         snprintf(text, sizeof(text), "timeout: only %zu of %zu frames with boards in %.1f s", job.frames.size(),
                  frames, timeout_s);
-      return answer(&res, false, text);
+      return answer(&res, false, noted(text));
     }
     job.result = std::make_shared<std::promise<CalibrationStatus>>();
     std::future<CalibrationStatus> result = job.result->get_future();
     submit(std::move(job));
-    res.status = result.get();
+    res.status = result.get();  // the solve and commit are bounded (service calls: callService)
     // A solve that fits no better than the calibration in force confirms it: nothing to change.
     const bool confirmed = res.status.reason.rfind(kInForceConfirmedReason, 0) == 0;
     res.success = res.status.accepted || confirmed;
     // An accepted status has an empty reason only when committed to the driver.
-    res.message = res.status.accepted && res.status.reason.empty() ? "committed" : res.status.reason;
+    res.message = noted(res.status.accepted && res.status.reason.empty() ? "committed" : res.status.reason);
     return true;
+  }
+
+  // Service thread. Waits until the request's window has `frames` frames or `timeout_s` passed,
+  // then moves the window to `*frames_out` and ends the request's collection. Returns why it
+  // ended early ("" when it did not): the caller went away (probed every kProbePeriodS without
+  // mutex_ held) or the calibrator is shutting down.
+  std::string collectRequestWindow(size_t frames, double timeout_s, const CallerProbe& probe,
+                                   std::vector<ecs::StereoObservation>* frames_out) {
+    using Clock = std::chrono::steady_clock;
+    const auto deadline = Clock::now() + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(timeout_s));
+    const auto probe_period = std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(kProbePeriodS));
+    std::string abandoned;
+    std::unique_lock<std::mutex> lock(mutex_);
+    while (true) {
+      if (stopping_) {
+        abandoned = "the calibrator is shutting down";
+        break;
+      }
+      const auto now = Clock::now();
+      if (window_.size() >= frames || now >= deadline) break;
+      if (cv_.wait_until(lock, std::min(deadline, now + probe_period),
+                         [&] { return stopping_ || window_.size() >= frames; }))
+        continue;
+      if (Clock::now() >= deadline) continue;
+      lock.unlock();
+      const CallerState caller = probe.check();
+      lock.lock();
+      if (caller == CallerState::kGone) {
+        abandoned = "the caller " + probe.callerId() + " went away";
+        break;
+      }
+    }
+    *frames_out = std::move(window_);
+    window_.clear();
+    if (!modes_.empty()) window_closed_at_ = modes_.back().stamp;
+    request_active_ = false;
+    return abandoned;
   }
 
   bool answer(Recalibrate::Response* res, bool success, const std::string& message) {
@@ -446,17 +658,11 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
     return status;
   }
 
+  // Bounded: service_timeout_s for set_light to appear, as much for its answer.
   bool setLight(bool on, std::string* error) {
     std_srvs::SetBool srv;
     srv.request.data = on;
-    if (!set_light_client_.waitForExistence(ros::Duration(params_.service_timeout_s))) {
-      *error = set_light_client_.getService() + " is not available";
-      return false;
-    }
-    if (!set_light_client_.call(srv)) {
-      *error = set_light_client_.getService() + " call failed";
-      return false;
-    }
+    if (!callService(getNodeHandle(), "set_light", &srv, params_.service_timeout_s, error)) return false;
     if (!srv.response.success) {
       *error = set_light_client_.getService() + " refused: " + srv.response.message;
       return false;
@@ -484,10 +690,16 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
     status.add("frames in window", window_.size());
     status.add("dropped observation messages", dropped_messages_);
     status.add("observations dropped for a stamp going back", backwards_messages_);
+    status.add("messages dropped for a stamp far from the others", guard_->dropped());
+    status.add("last window ended early", last_window_end_);
+    status.add("accepted calibration waiting to be committed again", uncommitted_.has_value());
   }
 
   static constexpr size_t kKeptFrames = 64;  // modes / unmatched observations remembered
   static constexpr size_t kKeptInfos = 16;   // camera_info per side (the commit's epoch)
+  static constexpr double kProbePeriodS = 0.5;  // a running request looks for its caller this often
+  // guard_'s inputs.
+  static constexpr size_t kModeInput = 0, kObservationInput = 1, kLeftInfoInput = 2, kRightInfoInput = 3;
 
   struct ModeSeen {
     ros::Time stamp;
@@ -504,7 +716,8 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
   std::unique_ptr<ros::AsyncSpinner> service_spinner_;
   ros::ServiceClient set_light_client_;
   std::unique_ptr<diagnostic_updater::Updater> diagnostics_;
-  ros::WallTimer diagnostics_timer_;
+  ros::WallTimer diagnostics_timer_, window_timer_, commit_retry_timer_;
+  std::unique_ptr<StampGuard> guard_;
   ErrorThrottle info_errors_{5.0};  // thread-safe
 
   std::mutex mutex_;  // guards everything below
@@ -518,6 +731,11 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
   ros::Time window_closed_at_;  // frames up to this stamp belong to a finished window
   bool request_active_ = false;      // a recalibrate call is collecting its window
   bool request_in_flight_ = false;   // a recalibrate call is running (from its start to its answer)
+  std::string request_caller_;       // the node that made it
+  ros::WallTime last_window_frame_wall_;  // when a frame was last added to window_
+  std::string last_window_end_;      // why the last window ended without the light going off
+  std::optional<UncommittedCalibration> uncommitted_;  // accepted, not stored by the driver: tried again
+  bool commit_again_queued_ = false;
   size_t request_frames_ = 0;
   sensor_msgs::CameraInfoConstPtr left_info_, right_info_;  // the latest valid pair (storeInfo)
   sensor_msgs::CameraInfoConstPtr latest_left_info_, latest_right_info_;  // the latest valid side

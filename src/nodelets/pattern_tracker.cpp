@@ -8,7 +8,8 @@
 // automatically when the file is missing and teach_on_start is true) runs the core BoardTeacher
 // on the next settled light-on frame with the latest settled light-off frame, writes the prior
 // atomically (temp file + rename) and starts tracking. A corrupt prior file leaves the nodelet
-// idle with an error naming the file until teaching runs.
+// idle with an error naming the file until teaching runs. A prior taught but not written (a
+// full disk) is tracked with from memory and written again every kPriorRetryS until it is.
 #include <cv_bridge/cv_bridge.h>
 #include <diagnostic_updater/diagnostic_updater.h>
 #include <nodelet/nodelet.h>
@@ -22,6 +23,7 @@
 #include <future>
 #include <memory>
 #include <mutex>
+#include <optional>
 
 #include "embedded_calibration_stereo/CalibrationMode.h"
 #include "embedded_calibration_stereo/StereoPatternObservation.h"
@@ -56,7 +58,8 @@ const char* toString(PriorState s) {
 
 // Threads:
 //  - the nodelet's single-threaded callback queue runs frameCb, the ~teach service, the connect
-//    callbacks and the diagnostics timer: all state below is touched there only.
+//    callbacks, the diagnostics timer and the prior write retry timer: all state below is
+//    touched there only.
 //    Tracking runs in frameCb (both cameras in parallel through cv::parallel_for_): it takes a
 //    fraction of a frame period, so it needs no thread of its own;
 //  - teaching (cv::findChessboardCornersSB: many frame periods long) runs on a std::async worker that receives
@@ -236,6 +239,7 @@ class PatternTrackerNodelet : public nodelet::Nodelet {
     right_frame.light_off = cv_bridge::toCvShare(light_off_right_)->image.clone();
     state_ = PriorState::kTeaching;
     tracker_.reset();
+    unwritten_prior_.reset();  // the new teaching's prior replaces it
     NODELET_INFO("PatternTracker: teaching from a light-on frame and the latest light-off frame (worker thread)");
     teach_result_ = std::async(std::launch::async, teachStereoPrior, left_frame, right_frame, order, device_,
                                prior_file_);
@@ -249,9 +253,22 @@ class PatternTrackerNodelet : public nodelet::Nodelet {
     if (outcome.error.empty()) {
       try {
         startTracking(outcome.prior);
-        NODELET_INFO("PatternTracker: taught %zu + %zu boards in %.0f ms, prior written to %s (%s)",
-                     outcome.prior.cameras[0].boards.size(), outcome.prior.cameras[1].boards.size(), outcome.ms,
-                     prior_file_.c_str(), outcome.notes.c_str());
+        if (outcome.write_error.empty()) {
+          unwritten_prior_.reset();
+          NODELET_INFO("PatternTracker: taught %zu + %zu boards in %.0f ms, prior written to %s (%s)",
+                       outcome.prior.cameras[0].boards.size(), outcome.prior.cameras[1].boards.size(), outcome.ms,
+                       prior_file_.c_str(), outcome.notes.c_str());
+        } else {
+          // Tracking needs no file: keep the prior in memory and write it when the disk allows.
+          unwritten_prior_ = outcome.prior;
+          prior_write_error_ = outcome.write_error;
+          NODELET_ERROR("PatternTracker: taught %zu + %zu boards in %.0f ms and tracking, but the prior file '%s' "
+                        "could not be written (%s); trying again every %.0f s",
+                        outcome.prior.cameras[0].boards.size(), outcome.prior.cameras[1].boards.size(), outcome.ms,
+                        prior_file_.c_str(), outcome.write_error.c_str(), kPriorRetryS);
+          prior_retry_timer_ = getNodeHandle().createWallTimer(
+              ros::WallDuration(kPriorRetryS), [this](const ros::WallTimerEvent&) { retryPriorWrite(); });
+        }
         updateNeed();
         return;
       } catch (const std::exception& e) {
@@ -263,6 +280,26 @@ class PatternTrackerNodelet : public nodelet::Nodelet {
     state_ = PriorState::kTeachFailed;
     NODELET_ERROR("%s", idleMessage().c_str());
     updateNeed();
+  }
+
+  // Retry timer: writes the prior taught but not written yet; stops once written (or replaced
+  // by another teaching).
+  void retryPriorWrite() {
+    if (!unwritten_prior_) {
+      prior_retry_timer_.stop();
+      return;
+    }
+    const std::string error = writeStereoPrior(prior_file_, *unwritten_prior_);
+    if (error.empty()) {
+      NODELET_INFO("PatternTracker: prior written to %s (it could not be written when taught)", prior_file_.c_str());
+      unwritten_prior_.reset();
+      prior_write_error_.clear();
+      prior_retry_timer_.stop();
+      return;
+    }
+    prior_write_error_ = error;
+    NODELET_WARN_THROTTLE(60.0, "PatternTracker: the prior file '%s' still cannot be written (%s); trying again every %.0f s",
+                          prior_file_.c_str(), error.c_str(), kPriorRetryS);
   }
 
   void track(const ImageConstPtr& left_msg, const cv::Mat& left, const cv::Mat& right, ecs::ColorOrder order) {
@@ -297,7 +334,12 @@ class PatternTrackerNodelet : public nodelet::Nodelet {
   void diagnose(diagnostic_updater::DiagnosticStatusWrapper& status) {
     using diagnostic_msgs::DiagnosticStatus;
     switch (state_) {
-      case PriorState::kLoaded: status.summary(DiagnosticStatus::OK, "tracking"); break;
+      case PriorState::kLoaded:
+        if (unwritten_prior_)
+          status.summary(DiagnosticStatus::WARN, "tracking; prior file not written yet: " + prior_write_error_);
+        else
+          status.summary(DiagnosticStatus::OK, "tracking");
+        break;
       case PriorState::kTeaching: status.summary(DiagnosticStatus::OK, "teaching"); break;
       case PriorState::kMissing:
         status.summary(teach_requested_ ? DiagnosticStatus::WARN : DiagnosticStatus::ERROR,
@@ -312,6 +354,7 @@ class PatternTrackerNodelet : public nodelet::Nodelet {
     }
     status.add("prior file", prior_file_);
     status.add("prior state", toString(state_));
+    status.add("prior file written", !unwritten_prior_);
     status.add("teach requested", teach_requested_);
     status.add("frames tracked", tracked_frames_);
     status.add("left boards found", boards_found_[0]);
@@ -334,6 +377,10 @@ class PatternTrackerNodelet : public nodelet::Nodelet {
   std::string prior_error_;
   bool teach_requested_ = false;
   std::future<TeachOutcome> teach_result_;
+  static constexpr double kPriorRetryS = 3.0;  // s between writes of a prior that could not be written
+  std::optional<ecs::PatternPrior> unwritten_prior_;  // taught, in use, not in the file yet
+  std::string prior_write_error_;
+  ros::WallTimer prior_retry_timer_;
   std::unique_ptr<ecs::PatternTracker> tracker_;
   ImageConstPtr light_off_left_, light_off_right_;  // latest settled light-off pair
   ros::Time background_stamp_;                      // stamp of the pair the tracker has as background

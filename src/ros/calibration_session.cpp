@@ -13,6 +13,8 @@
 #include "embedded_calibration_stereo/core/calibration/observation_validator.h"
 #include "embedded_calibration_stereo/ros/conversions.h"
 #include "embedded_calibration_stereo/ros/parameter_reader.h"
+#include "embedded_calibration_stereo/ros/service_call.h"
+#include "embedded_calibration_stereo/ros/stamp_guard.h"
 
 namespace embedded_calibration_stereo {
 namespace {
@@ -47,6 +49,10 @@ CalibratorParams loadCalibratorParams(const ros::NodeHandle& pnh, const std::str
   p.min_frames = read.atLeast("min_frames", p.min_frames, 1);
   p.max_frames = read.atLeast("max_frames", p.max_frames, p.min_frames);
   non_negative("service_timeout_s", &p.service_timeout_s);
+  p.max_request_timeout_s = read.atLeast("max_request_timeout_s", p.max_request_timeout_s, 0.1);
+  p.window_timeout_s = read.atLeast("window_timeout_s", p.window_timeout_s, 0.1);
+  p.stamp_tolerance_s = readStampTolerance(pnh);
+  non_negative("commit_retry_s", &p.commit_retry_s);
   p.commit = parseCommitTarget(read.get("commit", "driver"));
   p.rectification_alpha = read.get("rectification_alpha", p.rectification_alpha);
   if (!(p.rectification_alpha == -1.0 || (p.rectification_alpha >= 0.0 && p.rectification_alpha <= 1.0)))
@@ -68,6 +74,32 @@ CalibratorParams loadCalibratorParams(const ros::NodeHandle& pnh, const std::str
   if (const std::string e = p.adjustment.Check(); !e.empty()) throw ecs::ConfigError("loss_scale_px", e);
   if (const std::string e = p.gate.Check(); !e.empty()) throw ecs::ConfigError("quality gate", e);
   return p;
+}
+
+BoundedRequest boundRecalibrateRequest(uint32_t frames, double timeout_s, const CalibratorParams& params) {
+  BoundedRequest r;
+  char text[200];
+  if (!std::isfinite(timeout_s)) {
+    std::snprintf(text, sizeof(text), "refused: timeout_s must be a finite number of seconds, got %g (at most %g s)",
+                  timeout_s, params.max_request_timeout_s);
+    r.refusal = text;
+    return r;
+  }
+  r.frames = frames > 0 ? frames : static_cast<size_t>(params.min_frames);
+  r.timeout_s = timeout_s > 0.0 ? timeout_s : std::min(kDefaultRequestTimeoutS, params.max_request_timeout_s);
+  const auto add_note = [&r](const std::string& note) { r.note += (r.note.empty() ? "" : ", ") + note; };
+  if (r.frames > static_cast<size_t>(params.max_frames)) {
+    std::snprintf(text, sizeof(text), "frames %u limited to %d (max_frames)", frames, params.max_frames);
+    add_note(text);
+    r.frames = static_cast<size_t>(params.max_frames);
+  }
+  if (r.timeout_s > params.max_request_timeout_s) {
+    std::snprintf(text, sizeof(text), "timeout_s %g limited to %g s (max_request_timeout_s)", timeout_s,
+                  params.max_request_timeout_s);
+    add_note(text);
+    r.timeout_s = params.max_request_timeout_s;
+  }
+  return r;
 }
 
 std::vector<std::string> observationDefects(const ecs::StereoObservation& observation,
@@ -125,8 +157,10 @@ CalibrationSession::CalibrationSession(ros::NodeHandle nh, CalibratorParams para
 CalibrationStatus CalibrationSession::solve(const std::vector<ecs::StereoObservation>& frames,
                                             const sensor_msgs::CameraInfo* left_info,
                                             const sensor_msgs::CameraInfo* right_info, uint32_t epoch,
-                                            bool dry_run, std::optional<CommittedCalibration>* committed) {
+                                            bool dry_run, std::optional<CommittedCalibration>* committed,
+                                            std::optional<UncommittedCalibration>* uncommitted) {
   committed->reset();
+  if (uncommitted) uncommitted->reset();
   if (!left_info || !right_info) {
     CalibrationStatus status;
     status.header.stamp = ros::Time::now();
@@ -185,12 +219,17 @@ CalibrationStatus CalibrationSession::solve(const std::vector<ecs::StereoObserva
   if (!commit_error.empty()) {
     status.accepted = false;
     status.reason = "not committed: " + commit_error;
+    if (uncommitted) *uncommitted = UncommittedCalibration{infos, candidate.rig, *left_info, *right_info, status};
     return status;
   }
   // status.epoch stays `epoch`: how far the driver moves its epoch per set_camera_info is the
   // driver's business, so the caller reads the new epoch from the driver's frames.
   *committed = std::move(infos);
   return status;
+}
+
+std::string CalibrationSession::commitAgain(const UncommittedCalibration& calibration) {
+  return commit(calibration.infos, calibration.rig, calibration.left_in_force);
 }
 
 std::string CalibrationSession::commit(const CommittedCalibration& infos, const ecs::StereoRig& rig,
@@ -221,19 +260,11 @@ void CalibrationSession::broadcastTransform(const ecs::StereoRig& rig) {
 bool CalibrationSession::callSetCameraInfo(const std::string& side, const sensor_msgs::CameraInfo& info,
                                            std::string* error, std::string* answer) {
   const std::string name = side + "/set_camera_info";
-  ros::ServiceClient client = nh_.serviceClient<sensor_msgs::SetCameraInfo>(name);
   sensor_msgs::SetCameraInfo srv;
   srv.request.camera_info = info;
-  if (!client.waitForExistence(ros::Duration(params_.service_timeout_s))) {
-    *error = client.getService() + " is not available";
-    return false;
-  }
-  if (!client.call(srv)) {
-    *error = client.getService() + " call failed";
-    return false;
-  }
+  if (!callService(nh_, name, &srv, params_.service_timeout_s, error)) return false;  // bounded
   if (!srv.response.success) {
-    *error = client.getService() + " refused: " + srv.response.status_message;
+    *error = nh_.resolveName(name) + " refused: " + srv.response.status_message;
     return false;
   }
   if (answer) *answer = srv.response.status_message;

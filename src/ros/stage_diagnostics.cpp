@@ -31,7 +31,8 @@ void StageDiagnostics::frameIn() {
 }
 
 void StageDiagnostics::framePublished(const ros::Time& stamp, double processing_ms) {
-  const double latency_ms = (ros::Time::now() - stamp).toSec() * 1e3;
+  // In double: a stamp decades off (from another node) would overflow ros::Duration, which throws.
+  const double latency_ms = (ros::Time::now().toSec() - stamp.toSec()) * 1e3;
   std::lock_guard<std::mutex> lock(mutex_);
   ++window_out_;
   ++total_out_;

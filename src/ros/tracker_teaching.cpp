@@ -29,14 +29,23 @@ TeachOutcome teachStereoPrior(const ecs::TeachFrame& left, const ecs::TeachFrame
     out.prior.cameras = {left_result.prior, right_taught.prior};
     for (const ecs::TeachResult* r : {static_cast<const ecs::TeachResult*>(&left_result), &right_taught})
       for (const std::string& note : r->notes) out.notes += (out.notes.empty() ? "" : "; ") + note;
-    const std::filesystem::path target(path);
-    if (target.has_parent_path()) std::filesystem::create_directories(target.parent_path());
-    ecs::writePatternPrior(path, out.prior);  // atomic
   } catch (const std::exception& e) {
     out.error = e.what();
   }
+  if (out.error.empty()) out.write_error = writeStereoPrior(path, out.prior);
   out.ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
   return out;
+}
+
+std::string writeStereoPrior(const std::string& path, const ecs::PatternPrior& prior) {
+  try {
+    const std::filesystem::path target(path);
+    if (target.has_parent_path()) std::filesystem::create_directories(target.parent_path());
+    ecs::writePatternPrior(path, prior);  // atomic
+  } catch (const std::exception& e) {
+    return e.what();
+  }
+  return "";
 }
 
 std::string defaultPatternPriorFile() {

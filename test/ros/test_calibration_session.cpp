@@ -173,3 +173,39 @@ TEST(CarriesCalibration, TellsTheCommittedCalibrationFromAnother) {
   // The header is not part of the calibration.
   EXPECT_TRUE(changed([](auto* i) { i->header.frame_id = "elsewhere"; }));
 }
+
+TEST(BoundRecalibrateRequest, LimitsFramesAndTimeoutAndRefusesNonFiniteTimeouts) {
+  ecsr::CalibratorParams params;
+  params.min_frames = 5;
+  params.max_frames = 30;
+  params.max_request_timeout_s = 60.0;
+  // Within the limits: unchanged, no note.
+  ecsr::BoundedRequest r = ecsr::boundRecalibrateRequest(10, 3.0, params);
+  EXPECT_EQ(r.refusal, "");
+  EXPECT_EQ(r.frames, 10u);
+  EXPECT_EQ(r.timeout_s, 3.0);
+  EXPECT_EQ(r.note, "");
+  // Defaults: 0 frames -> min_frames, timeout <= 0 -> 10 s.
+  r = ecsr::boundRecalibrateRequest(0, 0.0, params);
+  EXPECT_EQ(r.frames, 5u);
+  EXPECT_EQ(r.timeout_s, 10.0);
+  r = ecsr::boundRecalibrateRequest(0, -4.0, params);
+  EXPECT_EQ(r.timeout_s, 10.0);
+  // The request: 4e9 frames, 1e9 s.
+  r = ecsr::boundRecalibrateRequest(4000000000u, 1e9, params);
+  EXPECT_EQ(r.refusal, "");
+  EXPECT_EQ(r.frames, 30u);
+  EXPECT_EQ(r.timeout_s, 60.0);
+  EXPECT_NE(r.note.find("max_frames"), std::string::npos) << r.note;
+  EXPECT_NE(r.note.find("max_request_timeout_s"), std::string::npos) << r.note;
+  // Non-finite: refused, saying why.
+  for (double bad : {std::numeric_limits<double>::infinity(), -std::numeric_limits<double>::infinity(),
+                     std::numeric_limits<double>::quiet_NaN()}) {
+    r = ecsr::boundRecalibrateRequest(10, bad, params);
+    EXPECT_NE(r.refusal.find("timeout_s must be a finite number"), std::string::npos) << r.refusal;
+  }
+  // A default above a small limit is limited too.
+  params.max_request_timeout_s = 4.0;
+  r = ecsr::boundRecalibrateRequest(10, 0.0, params);
+  EXPECT_EQ(r.timeout_s, 4.0);
+}

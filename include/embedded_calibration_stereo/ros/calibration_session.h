@@ -44,7 +44,11 @@ struct CalibratorParams {
   bool auto_calibrate = true;  // solve at the end of every light-on window of the driver
   int min_frames = 5;          // a light-on window with fewer frames is not solved
   int max_frames = 30;         // frames kept per window (the first ones)
-  double service_timeout_s = 2.0;  // for each set_light / set_camera_info call (wall time)
+  double service_timeout_s = 2.0;  // for each set_light / set_camera_info call: to appear, then to answer (wall)
+  double max_request_timeout_s = 60.0;  // recalibrate's timeout_s is limited to it
+  double window_timeout_s = 5.0;   // an automatic window with no settled frame added for this long ends (wall)
+  double stamp_tolerance_s = 2.0;  // inputs stamped further from the others are dropped (stamp_guard.h)
+  double commit_retry_s = 10.0;    // s between commits again of a calibration the driver could not store; 0: never
   CommitTarget commit = CommitTarget::kDriver;
   // cv::stereoRectify's alpha for the committed CameraInfo R and P: 0 every rectified pixel
   // valid, 1 every raw pixel kept, -1 OpenCV's default scaling.
@@ -56,6 +60,19 @@ struct CalibratorParams {
 
 // Reads the private parameters; throws ecs::ConfigError naming a bad one.
 CalibratorParams loadCalibratorParams(const ros::NodeHandle& pnh, const std::string& default_device_config);
+
+// A recalibrate request within the calibrator's limits: `frames` (0: min_frames) at most
+// max_frames, `timeout_s` (<= 0: kDefaultRequestTimeoutS) at most max_request_timeout_s. A
+// non-finite timeout_s is refused (`refusal` says why: nothing may be done). `note` says what
+// was limited ("" when nothing was).
+struct BoundedRequest {
+  std::string refusal;
+  size_t frames = 0;
+  double timeout_s = 0.0;
+  std::string note;
+};
+constexpr double kDefaultRequestTimeoutS = 10.0;
+BoundedRequest boundRecalibrateRequest(uint32_t frames, double timeout_s, const CalibratorParams& params);
 
 // The defects of one observation message that make the calibrator drop it (non-finite
 // coordinates, duplicate ids, ids outside the board, unknown board, mismatched lengths), from
@@ -76,6 +93,17 @@ struct CommittedCalibration {
 // store the calibration as text and read it back). Header, binning and ROI are not compared.
 bool carriesCalibration(const sensor_msgs::CameraInfo& published, const sensor_msgs::CameraInfo& committed);
 
+// An accepted calibration the driver did not store (its set_camera_info failed): what
+// CalibrationSession::commitAgain() needs to try again.
+struct UncommittedCalibration {
+  CommittedCalibration infos;
+  ecs::StereoRig rig;
+  // The calibration in force it was gated against (the left one is put back when only the right
+  // side is refused): committed again only while the driver still publishes these.
+  sensor_msgs::CameraInfo left_in_force, right_in_force;
+  CalibrationStatus status;  // the solve's status (accepted false, reason "not committed: ...")
+};
+
 // Solve, gate and commit. Threading: solve() runs on the calibrator's worker thread only (it
 // blocks on service calls and on the solver); broadcastTransform() may also be called from a
 // subscriber callback (the calibration in force at start-up), so the broadcaster is guarded.
@@ -93,10 +121,15 @@ class CalibrationSession {
   // kAcceptedNotCommittedReason and its epoch `epoch` (still in force: nothing was committed).
   // status.epoch is always `epoch`: after a commit, `*committed` holds the pair sent to the
   // driver, and the caller reads the epoch the driver put in force from the driver's frames
-  // (see carriesCalibration); `*committed` is reset otherwise.
+  // (see carriesCalibration); `*committed` is reset otherwise. When a commit failed,
+  // `*uncommitted` (if given) holds what commitAgain() needs; it is reset otherwise.
   CalibrationStatus solve(const std::vector<ecs::StereoObservation>& frames,
                           const sensor_msgs::CameraInfo* left_info, const sensor_msgs::CameraInfo* right_info,
-                          uint32_t epoch, bool dry_run, std::optional<CommittedCalibration>* committed);
+                          uint32_t epoch, bool dry_run, std::optional<CommittedCalibration>* committed,
+                          std::optional<UncommittedCalibration>* uncommitted = nullptr);
+
+  // Commits `calibration` again (worker thread). Empty on success, otherwise why not.
+  std::string commitAgain(const UncommittedCalibration& calibration);
 
   // The left->right optical transform of `rig` on /tf_static (also sent at every commit).
   void broadcastTransform(const ecs::StereoRig& rig);

@@ -5,11 +5,16 @@
 // is joined by ExactTime, or by ApproximateTime with approximate_sync (stereo_image_proc's
 // parameters: queue_size, approximate_sync). Images come through image_transport's raw transport:
 // within one manager the published message itself is delivered (zero-copy).
+// In front of the synchroniser, every message passes a StampGuard (stamp_guard.h: a message
+// stamped far from the other inputs is dropped with a warning, so that it never fills the
+// synchroniser's queue; tolerance: the private parameter stamp_tolerance_s), and every image a
+// check that its data can be read (malformedImage: dropped with a throttled error).
 //
 // Use: construct, pass connectCallback()/imageConnectCallback() to the outputs' advertise(),
 // watch() each output, then start().
 //
-// Threads: every (un)subscription happens under the object's own mutex. The frame callback runs
+// Threads: every (un)subscription happens under the object's own mutex; the stamp guard has its
+// own. The frame callback runs
 // on the queue of the node handle given to the constructor, the connect callbacks on the outputs'
 // queue. need() may be called from the frame callback (roscpp lets a subscriber be shut down from
 // its own callback) when both kinds of callback share one single-threaded queue, as in the
@@ -25,6 +30,8 @@
 #include <sensor_msgs/Image.h>
 
 #include <array>
+#include <atomic>
+#include <chrono>
 #include <functional>
 #include <memory>
 #include <mutex>
@@ -33,6 +40,8 @@
 #include <type_traits>
 #include <utility>
 #include <vector>
+
+#include "embedded_calibration_stereo/ros/stamp_guard.h"
 
 namespace embedded_calibration_stereo {
 
@@ -69,6 +78,25 @@ class LazySubscription {
   bool started_ = false, needed_ = false, subscribed_ = false;
 };
 
+// A message_filters stage that passes on the messages `admit` accepts (LazySyncedInput's guard).
+template <class M>
+class AdmissionFilter : public message_filters::SimpleFilter<M> {
+ public:
+  using Admit = std::function<bool(const M&)>;
+  template <class F>
+  AdmissionFilter(F& input, Admit admit) : admit_(std::move(admit)) {
+    connection_ = input.registerCallback(&AdmissionFilter::add, this);
+  }
+  ~AdmissionFilter() { connection_.disconnect(); }
+
+ private:
+  void add(const ros::MessageEvent<M const>& event) {
+    if (admit_(*event.getMessage())) this->signalMessage(event);
+  }
+  const Admit admit_;
+  message_filters::Connection connection_;
+};
+
 // Inputs of types M... on `topics` (relative to the node handle; sensor_msgs::Image topics are
 // subscribed through image_transport, raw), joined before `callback` sees them.
 template <class... M>
@@ -78,7 +106,9 @@ class LazySyncedInput : public LazySubscription {
   using Callback = std::function<void(const boost::shared_ptr<const M>&...)>;
   using Topics = std::array<std::string, kTopics>;
 
-  // `private_nh`: where image_transport reads its transport hint parameter.
+  // `private_nh`: where image_transport reads its transport hint parameter and the guard its
+  // stamp_tolerance_s (throws ecs::ConfigError naming it when unusable); its namespace (the
+  // nodelet's name) names the owner in warnings.
   LazySyncedInput(const ros::NodeHandle& nh, const ros::NodeHandle& private_nh, Topics topics,
                   bool approximate_sync, int queue_size, Callback callback)
       : LazySubscription([this] { subscribeAll(std::index_sequence_for<M...>()); },
@@ -90,18 +120,21 @@ class LazySyncedInput : public LazySubscription {
         queue_size_(queue_size),
         callback_(std::move(callback)) {
     for (size_t i = 0; i < kTopics; ++i) resolved_[i] = nh_.resolveName(topics_[i]);
+    guard_ = std::make_unique<StampGuard>(std::vector<std::string>(resolved_.begin(), resolved_.end()),
+                                          readStampTolerance(private_nh_), private_nh_.getNamespace());
+    makeAdmissions(std::index_sequence_for<M...>());
     std::apply(
-        [&](auto&... filters) {
+        [&](auto&... admissions) {
           if (approximate_sync) {
             approximate_ = std::make_unique<message_filters::Synchronizer<Approximate>>(Approximate(queue_size),
-                                                                                       filters...);
+                                                                                       *admissions...);
             approximate_->registerCallback(&LazySyncedInput::onMessages, this);
           } else {
-            exact_ = std::make_unique<message_filters::Synchronizer<Exact>>(Exact(queue_size), filters...);
+            exact_ = std::make_unique<message_filters::Synchronizer<Exact>>(Exact(queue_size), *admissions...);
             exact_->registerCallback(&LazySyncedInput::onMessages, this);
           }
         },
-        filters_);
+        admissions_);
   }
 
   ~LazySyncedInput() { stop(); }
@@ -109,6 +142,9 @@ class LazySyncedInput : public LazySubscription {
   // The resolved name of topic `i` (as given to the constructor), for messages.
   const std::string& topic(size_t i) const { return resolved_.at(i); }
   bool approximate() const { return approximate_ != nullptr; }
+  // Messages dropped for their stamp, and images dropped as unreadable, since the start.
+  uint64_t droppedForStamp() const { return guard_->dropped(); }
+  uint64_t droppedMalformed() const { return malformed_; }
 
  private:
   template <class T>
@@ -121,7 +157,29 @@ class LazySyncedInput : public LazySubscription {
   void onMessages(const boost::shared_ptr<const M>&... messages) { callback_(messages...); }
 
   template <size_t... I>
+  void makeAdmissions(std::index_sequence<I...>) {
+    admissions_ = std::make_tuple(std::make_unique<AdmissionFilter<M>>(
+        std::get<I>(filters_), [this](const M& message) { return admit(I, message); })...);
+  }
+  template <class T>
+  bool admit(size_t index, const T& message) {
+    return guard_->admit(index, message.header.stamp);
+  }
+  bool admit(size_t index, const sensor_msgs::Image& image) {
+    const std::string problem = malformedImage(image);
+    if (problem.empty()) return guard_->admit(index, image.header.stamp);
+    ++malformed_;
+    const double now = std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
+    double last = last_malformed_report_s_.load();
+    if (now - last >= StampGuard::kWarnPeriodS && last_malformed_report_s_.compare_exchange_strong(last, now))
+      ROS_ERROR("%s: image dropped on %s: %s", private_nh_.getNamespace().c_str(), resolved_[index].c_str(),
+                problem.c_str());
+    return false;
+  }
+
+  template <size_t... I>
   void subscribeAll(std::index_sequence<I...>) {
+    guard_->reset();  // stamps from before an unsubscription are no reference
     (subscribeOne(std::get<I>(filters_), topics_[I]), ...);
   }
   template <size_t... I>
@@ -142,7 +200,11 @@ class LazySyncedInput : public LazySubscription {
   Topics resolved_;
   const int queue_size_;
   const Callback callback_;
-  std::tuple<Filter<M>...> filters_;  // declared before the synchronisers: they outlive them
+  std::unique_ptr<StampGuard> guard_;
+  std::atomic<uint64_t> malformed_{0};
+  std::atomic<double> last_malformed_report_s_{-1e9};
+  std::tuple<Filter<M>...> filters_;  // declared before the admissions and synchronisers: they outlive them
+  std::tuple<std::unique_ptr<AdmissionFilter<M>>...> admissions_;  // filters_ -> admissions_ -> synchroniser
   std::unique_ptr<message_filters::Synchronizer<Exact>> exact_;
   std::unique_ptr<message_filters::Synchronizer<Approximate>> approximate_;
 };

@@ -12,19 +12,25 @@
 
 namespace embedded_calibration_stereo {
 
-// What teaching hands back: a stereo prior (left, right) already written to the file, or an error.
+// What teaching hands back: a stereo prior (left, right), written to the file unless
+// write_error says why not, or an error.
 struct TeachOutcome {
   ecs::PatternPrior prior;
-  std::string error;  // empty on success
+  std::string error;        // empty when taught
+  std::string write_error;  // taught, but the file could not be written (a full disk): empty when written
   std::string notes;  // the teacher's notes of both cameras
   double ms = 0.0;    // wall time of teaching and writing
 };
 
 // Teaches left and right with the device's virtual boards seen by the nominal cameras of
-// `device` (as track_pattern teach --device does), then writes `path` through a temporary file
-// in the same directory and a rename (creating missing directories). Never throws.
+// `device` (as track_pattern teach --device does), then writes `path` (writeStereoPrior). Never
+// throws.
 TeachOutcome teachStereoPrior(const ecs::TeachFrame& left, const ecs::TeachFrame& right, ecs::ColorOrder order,
                               const ecs::SimRigConfig& device, const std::string& path);
+
+// Writes `prior` to `path` through a temporary file in the same directory and a rename
+// (creating missing directories). Returns "" on success, otherwise why not. Never throws.
+std::string writeStereoPrior(const std::string& path, const ecs::PatternPrior& prior);
 
 // $ROS_HOME/ecs_pattern_prior.yaml, or ~/.ros/ecs_pattern_prior.yaml without ROS_HOME.
 std::string defaultPatternPriorFile();
