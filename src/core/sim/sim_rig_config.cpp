@@ -29,7 +29,8 @@ Problem planeProblem(const ScenePlane& p, const std::string& key) {
   if (!(p.width_m > 0) || !std::isfinite(p.width_m)) return {key + ".width_m", "must be > 0"};
   if (!(p.height_m > 0) || !std::isfinite(p.height_m)) return {key + ".height_m", "must be > 0"};
   if (!(p.texel_m > 0) || !std::isfinite(p.texel_m)) return {key + ".texel_m", "must be > 0"};
-  if (p.width_m / p.texel_m > kMaxTexels || p.height_m / p.texel_m > kMaxTexels)
+  // (A photograph is shrunk to fit instead.)
+  if (p.texture_image.empty() && (p.width_m / p.texel_m > kMaxTexels || p.height_m / p.texel_m > kMaxTexels))
     return {key + ".texel_m", "too small: the texture would exceed 4096 texels per side"};
   if (!p.texture_image.empty()) {
     const Eigen::Vector2d& tile = p.texture_tile_m;
