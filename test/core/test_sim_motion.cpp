@@ -87,7 +87,11 @@ TEST(SimTrajectory, HandheldStartsAtStartIsBoundedAndPeriodicPerAxis) {
   t.translation_amplitude_m = Eigen::Vector3d(0.05, 0, 0);
   t.translation_period_s = Eigen::Vector3d(3.0, 4.0, 5.0);
   ASSERT_EQ(t.validate(), "");
-  EXPECT_TRUE(trajectoryPose(t, 0.0).isApprox(t.start, 1e-12));
+  SimTrajectory all_axes = t;
+  all_axes.translation_amplitude_m = Eigen::Vector3d(0.05, 0.04, 0.03);
+  all_axes.rotation_amplitude_deg = Eigen::Vector3d(2, 3, 4);
+  EXPECT_TRUE(trajectoryPose(all_axes, 0.0).isApprox(t.start, 1e-12));
+  EXPECT_FALSE(trajectoryPose(all_axes, 0.5).isApprox(t.start, 1e-3));
   double max_dx = 0;
   for (double s = 0; s < 6; s += 0.01) {
     const Eigen::Vector3d d = trajectoryPose(t, s).translation() - t.start.translation();

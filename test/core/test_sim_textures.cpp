@@ -277,11 +277,12 @@ TEST(SimScenarioConfig, ErrorsNameTheKey) {
   EXPECT_NE(c.validate().find("trajectory.waypoints"), std::string::npos) << c.validate();
 }
 
-// A file that exists but is not an image passes the loader's quick check only if OpenCV thinks
-// it can decode it; either way the rig refuses to start naming the key.
+// A file with a PNG signature but no image in it passes the quick readability check of the
+// config; reading it when the rig is built fails, and the rig refuses to start naming the key.
 TEST(SimScenarioConfig, UndecodableImageIsRefusedWithItsKey) {
   const std::string bogus = ::testing::TempDir() + "sim_not_an_image.png";
-  std::ofstream(bogus) << "not a png";
+  std::ofstream(bogus, std::ios::binary) << std::string("\x89PNG\r\n\x1a\n", 8) << "no image data follows";
+  ASSERT_TRUE(cv::haveImageReader(bogus)) << "the file must pass the signature check for this test";
   SimRigConfig c = idealConfig();
   ScenePlane p;
   p.texture_image = bogus;
