@@ -6,6 +6,7 @@
 #include <opencv2/imgproc.hpp>
 #include <stdexcept>
 
+#include "board_alignment.h"
 #include "board_geometry.h"
 #include "embedded_calibration_stereo/core/geometry/config_error.h"
 #include "embedded_calibration_stereo/core/tracker/pattern_tracker.h"
@@ -206,7 +207,44 @@ CameraTracker::CameraTracker(CameraPrior prior, TrackerOptions options)
   if (!problem.empty()) throw ConfigError("prior", problem);
   const std::string bad_option = options_.check();
   if (!bad_option.empty()) throw ConfigError("tracker options", bad_option);
+  auto templates = std::make_shared<std::vector<tracker::AlignmentTemplate>>();
+  // Pixels away from every board (outside the taught margins, with a band for drift), every
+  // 4th pixel: where a background difference shows only what is left of the scene.
+  away_from_boards_ = cv::Mat(prior_.height, prior_.width, CV_8UC1, cv::Scalar(0));
+  for (int y = 0; y < prior_.height; y += 4)
+    for (int x = 0; x < prior_.width; x += 4) away_from_boards_.at<uchar>(y, x) = 1;
+  for (const BoardPrior& board : prior_.boards) {
+    templates->push_back(tracker::buildAlignmentTemplate(board, options_.alignment_blur_px));
+    const cv::Matx33d h = tracker::homographyFromOuter(board, board.meanOuterCorners());
+    std::vector<cv::Point> hull;
+    for (const cv::Point2f& g : {cv::Point2f(-2.5f, -2.5f), cv::Point2f(board.cols + 1.5f, -2.5f),
+                                 cv::Point2f(board.cols + 1.5f, board.rows + 1.5f),
+                                 cv::Point2f(-2.5f, board.rows + 1.5f)})
+      hull.push_back(applyHomography(h, g.x, g.y));
+    cv::fillConvexPoly(away_from_boards_, hull, cv::Scalar(0));
+  }
+  templates_ = templates;
   reset();
+}
+
+double CameraTracker::backgroundResidual(const cv::Mat& difference) const {
+  std::vector<uchar> values;
+  for (int y = 0; y < difference.rows; y += 4) {
+    const uchar* m = away_from_boards_.ptr<uchar>(y);
+    const uchar* d = difference.ptr<uchar>(y);
+    for (int x = 0; x < difference.cols; x += 4)
+      if (m[x]) values.push_back(d[x]);
+  }
+  if (values.size() < 100) return 0.0;
+  auto mid = values.begin() + values.size() / 2;
+  std::nth_element(values.begin(), mid, values.end());
+  const int median = *mid;
+  // Mean absolute deviation from the median, as a normal sigma (continuous, unlike the median
+  // of integer deviations).
+  double sum = 0;
+  for (uchar v : values) sum += std::abs(v - median);
+  const double spread = 1.2533 * sum / values.size();
+  return spread;
 }
 
 void CameraTracker::reset() {
@@ -223,6 +261,7 @@ void CameraTracker::setBackground(const cv::Mat& light_off, ColorOrder order) {
   if (gray.cols != prior_.width || gray.rows != prior_.height)
     throw std::invalid_argument("background image size differs from the prior's image size");
   background_.set(gray);
+  background_known_stale_ = false;
 }
 
 namespace {
@@ -235,26 +274,47 @@ size_t cornerCount(const std::vector<BoardCorners>& boards) {
 
 std::vector<BoardCorners> CameraTracker::track(const cv::Mat& image, ColorOrder order) {
   const cv::Mat gray = toGrayImage(image, order);
-  if (background_.empty()) return trackAll(gray, false);
+  background_stale_ = false;
+  if (background_.empty()) {
+    background_residual_ = 0.0;
+    return trackAll(gray, false, true);
+  }
   if (gray.size() != cv::Size(prior_.width, prior_.height))
     throw std::invalid_argument("image size differs from the prior's image size");
-  std::vector<BoardCorners> found =
-      trackAll(background_.difference(gray, options_.difference_smoothing_px), true);
+  if (background_known_stale_) {
+    background_stale_ = true;
+    std::vector<BoardCorners> found = trackAll(gray, false, true);
+    last_found_ = cornerCount(found);
+    return found;
+  }
+  cv::Mat diff = background_.difference(gray, options_.difference_smoothing_px);
+  std::vector<BoardCorners> found = trackAll(diff, true, false);
   if (cornerCount(found) < last_found_ / 2) {
-    // A stale background (the image moved since) can hide the boards: find them without it.
-    std::vector<BoardCorners> raw = trackAll(gray, false);
+    // A stale background (the image moved since) can hide the boards: find them without it
+    // (unaligned: the background is re-registered to them and the frame tracked again).
+    std::vector<BoardCorners> raw = trackAll(gray, false, false);
     if (cornerCount(raw) > cornerCount(found)) found = std::move(raw);
   }
-  for (int round = 0; round < 3 && background_.follow(found, options_.background_motion_px); ++round)
-    found = trackAll(background_.difference(gray, options_.difference_smoothing_px), true);
+  for (int round = 0; round < 3 && background_.follow(found, options_.background_motion_px); ++round) {
+    diff = background_.difference(gray, options_.difference_smoothing_px);
+    found = trackAll(diff, true, false);
+  }
+  // The scene left in the difference away from the boards: a still scene cancels to the noise,
+  // a moved one leaves two superimposed scenes, worse than one. Then track the raw image, and
+  // keep doing so until the next background.
+  background_residual_ = backgroundResidual(diff);
+  if (background_residual_ > options_.stale_background_level) {
+    background_stale_ = background_known_stale_ = true;
+    found = trackAll(gray, false, true);
+  }
   last_found_ = cornerCount(found);
   return found;
 }
 
-std::vector<BoardCorners> CameraTracker::trackAll(const cv::Mat& gray, bool on_difference) {
+std::vector<BoardCorners> CameraTracker::trackAll(const cv::Mat& gray, bool on_difference, bool align) {
   std::vector<BoardCorners> out(prior_.boards.size());
   auto body = [&](const cv::Range& range) {
-    for (int i = range.start; i < range.end; ++i) out[i] = trackBoard(gray, i, on_difference);
+    for (int i = range.start; i < range.end; ++i) out[i] = trackBoard(gray, i, on_difference, align);
   };
   if (options_.parallel)
     cv::parallel_for_(cv::Range(0, boardCount()), body);
@@ -266,15 +326,16 @@ std::vector<BoardCorners> CameraTracker::trackAll(const cv::Mat& gray, bool on_d
   return found;
 }
 
-BoardCorners CameraTracker::trackBoard(const cv::Mat& gray, int index, bool on_difference) {
-  BoardCorners out = trackBoardOnce(gray, index, on_difference, false);
+BoardCorners CameraTracker::trackBoard(const cv::Mat& gray, int index, bool on_difference, bool align) {
+  BoardCorners out = trackBoardOnce(gray, index, on_difference, align, false);
   // The quick steady-state path can be fooled by a move of about half a square (the score at the
   // old position is still high): retry with the full re-centring search.
-  if (out.size() == 0 && !stats_[index].wide_search) out = trackBoardOnce(gray, index, on_difference, true);
+  if (out.size() == 0 && !stats_[index].wide_search) out = trackBoardOnce(gray, index, on_difference, align, true);
   return out;
 }
 
-BoardCorners CameraTracker::trackBoardOnce(const cv::Mat& gray, int index, bool on_difference, bool wide) {
+BoardCorners CameraTracker::trackBoardOnce(const cv::Mat& gray, int index, bool on_difference, bool align,
+                                           bool wide) {
   CV_Assert(gray.type() == CV_8UC1);
   const BoardPrior& board = prior_.boards.at(index);
   BoardState& state = states_[index];
@@ -403,6 +464,54 @@ BoardCorners CameraTracker::trackBoardOnce(const cv::Mat& gray, int index, bool 
     }
   }
   if (!fitted || static_cast<int>(accepted.size()) < needed) return out;
+
+  // Without a background: align the whole board; its corners replace the refined ones when the
+  // two agree (the refined ones verify the alignment's geometry and ids).
+  if (align && !on_difference && options_.whole_board_alignment && !(*templates_)[index].empty()) {
+    const tracker::AlignmentTemplate& tmpl = (*templates_)[index];
+    std::vector<cv::Point2f> refined;
+    for (int id : accepted) refined.push_back(pos[id]);
+    cv::Matx33d a0;
+    bool aligned = false;
+    if (tracker::fitAlignmentStart(tmpl, accepted, refined, &a0)) {
+      const tracker::AlignmentResult fit = tracker::alignBoard(tmpl, gray, a0, 4);
+      if (fit.ok && fit.contrast >= 0.5 * min_contrast) {
+        double sq = 0;
+        for (size_t k = 0; k < accepted.size(); ++k) {
+          const cv::Point2f c = tmpl.corners[accepted[k]];
+          sq += std::pow(cv::norm(applyHomography(fit.a, c.x, c.y) - refined[k]), 2);
+        }
+        aligned = std::sqrt(sq / accepted.size()) <= max_residual;
+        if (aligned) {
+          // Every corner inside the image whose saddle is there at its aligned position.
+          std::vector<int> kept;
+          for (int id = 0; id < n; ++id) {
+            const cv::Point2f c = tmpl.corners[id];
+            const cv::Point2f p = applyHomography(fit.a, c.x, c.y);
+            if (!insideImage(p)) continue;
+            const cv::Point2f g = gridPoint(id, board.cols);
+            cv::Point2f ac, ar;
+            tracker::gridAxes(h, g.x, g.y, &ac, &ar);
+            const int bright =
+                ((static_cast<int>(g.x) + static_cast<int>(g.y)) & 1) == 0 ? board.sign : -board.sign;
+            if (tracker::saddleContrast(saddle_sampler, p, ac, ar, bright) < min_contrast) continue;
+            pos[id] = p;
+            kept.push_back(id);
+          }
+          if (static_cast<int>(kept.size()) < needed) return out;
+          accepted = kept;
+          std::vector<cv::Point2f> grid, image;
+          for (int id : accepted) {
+            grid.push_back(gridPoint(id, board.cols));
+            image.push_back(pos[id] - offsets[id]);
+          }
+          cv::Matx33d refit;
+          if (tracker::fitHomographyLeastSquares(grid, image, &refit)) h = refit;
+        }
+      }
+    }
+    stats.aligned = aligned;
+  }
 
   std::sort(accepted.begin(), accepted.end());
   double sq = 0;

@@ -26,6 +26,9 @@ std::string TrackerOptions::check() const {
   if (!(offset_update_rate >= 0 && offset_update_rate <= 1)) return "offset_update_rate must be in [0, 1]";
   if (!(difference_smoothing_px >= 0 && difference_smoothing_px <= 5))
     return "difference_smoothing_px must be in [0, 5]";
+  if (!(alignment_blur_px >= 0.3 && alignment_blur_px <= 5)) return "alignment_blur_px must be in [0.3, 5]";
+  if (!(stale_background_level > 0 && std::isfinite(stale_background_level)))
+    return "stale_background_level must be > 0";
   if (!(background_motion_px > 0 && std::isfinite(background_motion_px)))
     return "background_motion_px must be > 0";
   return "";

@@ -20,6 +20,14 @@
 // run on light-on minus background, which removes the scene's pull on the refinement; the
 // background follows zoom steps and knocks by re-registration (the frame is then re-tracked;
 // a resampled background is less exact than a fresh light-off frame, see scene_background.h).
+// Without a still scene (no background, or one taken before the head or the scene moved, which
+// track() detects from what remains of the scene in the difference away from the boards):
+// steps 1-5 run on the raw image, where the scene's texture pulls each refined corner by a few
+// tenths of a pixel. Each board found that way is then aligned as a whole (board_alignment.h):
+// the taught board, moved by one homography, is fitted photometrically to every pixel near an
+// edge of its pattern, so the scene, uncorrelated with the pattern, averages out. The aligned
+// corners replace the refined ones when the alignment agrees with them (a verified board); a
+// corner is reported only where the saddle test passes at its aligned position.
 // Corner ids come from the grid, so partial boards (occlusion, a board leaving the image) keep
 // correct ids; a board with fewer than the minimum number of accepted corners gives nothing and
 // keeps its previous state.
@@ -28,6 +36,7 @@
 // with cv::parallel_for_ (each board task reads the image and writes only its own board state).
 // A CameraTracker shares nothing mutable with another, so PatternTracker tracks the two cameras
 // in parallel (cv::parallel_for_ over cameras) and a caller may use two threads as well.
+#include <memory>
 #include <opencv2/core.hpp>
 #include <string>
 #include <vector>
@@ -35,6 +44,12 @@
 #include "embedded_calibration_stereo/core/tracker/board_prior.h"
 #include "embedded_calibration_stereo/core/geometry/observation.h"
 #include "embedded_calibration_stereo/core/tracker/scene_background.h"
+
+namespace ecs {
+namespace tracker {
+struct AlignmentTemplate;
+}
+}  // namespace ecs
 
 namespace ecs {
 
@@ -69,6 +84,16 @@ struct TrackerOptions {
   double background_motion_px = 0.1;
   // Gaussian sigma (px) applied to the light-on minus background difference (0 = none).
   double difference_smoothing_px = 1.5;
+  // Without a usable background: refine each found board by photometric alignment of the whole
+  // board (see "Without a still scene" above) and report the aligned corners.
+  bool whole_board_alignment = true;
+  // Standard deviation (px) of the edge blur the alignment's pattern model assumes (lens PSF and
+  // pixel area); a mismatch costs precision, not accuracy (the blur is symmetric).
+  double alignment_blur_px = 1.2;
+  // Robust spread (grey levels) of light-on minus background away from the boards above which the
+  // background no longer shows the current scene (the head or the scene moved since the light-off
+  // frame): it is then not used for this frame.
+  double stale_background_level = 2.5;
   // Track boards and cameras in parallel (cv::parallel_for_).
   bool parallel = true;
   // Empty when usable; otherwise a message naming the bad field.
@@ -94,6 +119,7 @@ struct BoardTrackStats {
   // Distance (px, RMS over the 4 outer corners) of the tracked board from the taught prior's
   // mean + modes: grows with drift beyond what was taught.
   double prior_deviation_px = 0.0;
+  bool aligned = false;  // the whole-board alignment set the reported corners
 };
 
 class CameraTracker {
@@ -106,8 +132,15 @@ class CameraTracker {
   void reset();
   // A light-off frame of this camera (same size as the tracked frames), or clear it.
   void setBackground(const cv::Mat& light_off, ColorOrder order = ColorOrder::kBgr);
-  void clearBackground() { background_.clear(); }
+  void clearBackground() {
+    background_.clear();
+    background_known_stale_ = false;
+  }
   const SceneBackground& background() const { return background_; }
+  // Robust spread (grey levels) of the last difference away from the boards, and whether it made
+  // the background count as stale (see TrackerOptions::stale_background_level); 0/false without one.
+  double lastBackgroundResidual() const { return background_residual_; }
+  bool lastBackgroundStale() const { return background_stale_; }
 
   const CameraPrior& prior() const { return prior_; }
   const std::vector<BoardTrackStats>& lastStats() const { return stats_; }
@@ -116,7 +149,8 @@ class CameraTracker {
   // Tracks board `index` (of prior().boards) in a grey image; touches only that board's state
   // and stats, so different boards may run concurrently.
   // on_difference: `gray` is light-on minus background (window and residual gate differ).
-  BoardCorners trackBoard(const cv::Mat& gray, int index, bool on_difference);
+  // align: on a raw image, align the found board as a whole (TrackerOptions::whole_board_alignment).
+  BoardCorners trackBoard(const cv::Mat& gray, int index, bool on_difference, bool align = true);
 
  private:
   struct BoardState {
@@ -125,14 +159,22 @@ class CameraTracker {
     cv::Matx33d homography;   // grid (col, row) -> pixel, minus offsets
     std::vector<cv::Point2f> offsets;
   };
-  std::vector<BoardCorners> trackAll(const cv::Mat& gray, bool on_difference);
+  std::vector<BoardCorners> trackAll(const cv::Mat& gray, bool on_difference, bool align);
   // wide: skip the quick steady-state check, search the whole re-centring window.
-  BoardCorners trackBoardOnce(const cv::Mat& gray, int index, bool on_difference, bool wide);
+  BoardCorners trackBoardOnce(const cv::Mat& gray, int index, bool on_difference, bool align, bool wide);
 
   CameraPrior prior_;
   TrackerOptions options_;
   SceneBackground background_;
+  // Robust spread of `difference` on the pixels away from every board.
+  double backgroundResidual(const cv::Mat& difference) const;
   size_t last_found_ = 0;
+  double background_residual_ = 0.0;
+  bool background_stale_ = false;
+  bool background_known_stale_ = false;  // this background was found stale: skip it until replaced
+  cv::Mat away_from_boards_;  // CV_8UC1, non-zero on the sampled pixels away from every board
+  // Per board; built at construction, then only read (shared by copies of this tracker).
+  std::shared_ptr<const std::vector<tracker::AlignmentTemplate>> templates_;
   std::vector<BoardState> states_;
   std::vector<BoardTrackStats> stats_;
 };

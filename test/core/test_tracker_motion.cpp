@@ -1,0 +1,140 @@
+// PatternTracker in a moving world (config/drive_photo.yaml, config/handheld_photo.yaml): the head
+// moves through photographed scenes with moving objects, so the light-off frame the tracker may
+// hold shows a scene that has moved since (a stale background), or there is none. Taught once
+// from a light-on/light-off pair, then tracked over windows of light-on frames 3-10 frames after
+// their light-off frame, with a zoom step and a knock between windows (the boards move in the
+// image; a tracker that repeated its last corners would fail). Every reported corner is compared
+// with the simulator's true corner of the same (board id, corner id).
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <map>
+#include <string>
+
+#include "embedded_calibration_stereo/core/tracker/board_teacher.h"
+#include "embedded_calibration_stereo/core/tracker/pattern_tracker.h"
+#include "embedded_calibration_stereo/core/sim/sim_rig.h"
+
+namespace ecs {
+namespace {
+
+const std::string kConfigDir = std::string(ECS_SOURCE_DIR) + "/config/";
+// A reported corner farther than this from the true corner of its id is a wrong id (a slipped
+// square is >= 11 px off; a correct corner is within a few tenths of a pixel).
+constexpr double kWrongIdPx = 1.0;
+constexpr double kFps = 30.0;
+
+struct Score {
+  size_t truth = 0, matched = 0, wrong = 0;
+  double sum_sq = 0.0;
+  void add(const std::vector<BoardCorners>& tracked, const std::vector<BoardCorners>& truth_boards) {
+    std::map<std::pair<int, int>, cv::Point2f> gt;
+    for (const BoardCorners& b : truth_boards)
+      for (size_t i = 0; i < b.size(); ++i) gt[{b.board_id, b.corner_ids[i]}] = cv::Point2f(b.u[i], b.v[i]);
+    truth += gt.size();
+    for (const BoardCorners& b : tracked)
+      for (size_t i = 0; i < b.size(); ++i) {
+        const auto it = gt.find({b.board_id, b.corner_ids[i]});
+        const double err = it == gt.end() ? 1e9 : cv::norm(it->second - cv::Point2f(b.u[i], b.v[i]));
+        if (err > kWrongIdPx) {
+          ++wrong;
+        } else {
+          sum_sq += err * err;
+          ++matched;
+        }
+      }
+  }
+  void add(const StereoObservation& tracked, const StereoObservation& truth_obs) {
+    add(tracked.left, truth_obs.left);
+    add(tracked.right, truth_obs.right);
+  }
+  double foundFraction() const { return truth ? static_cast<double>(matched) / truth : 0.0; }
+  double rms() const { return matched ? std::sqrt(sum_sq / matched) : 0.0; }
+  std::string str() const {
+    char buf[200];
+    std::snprintf(buf, sizeof(buf), "found %zu/%zu (%.2f%%), wrong ids %zu, RMS %.4f px", matched, truth,
+                  100.0 * foundFraction(), wrong, rms());
+    return buf;
+  }
+};
+
+PatternPrior teach(const SimRig& sim, double time_s) {
+  const SimFrame on = sim.render(time_s, 1.0, 1), off = sim.render(time_s, 0.0, 2);
+  const StereoRig& rig = sim.config().rig;
+  PatternPrior prior;
+  prior.cameras.push_back(
+      teachCamera({{on.left, off.left}},
+                  BoardLayout::device(sim.virtualBoards(), rig.left, Eigen::Isometry3d::Identity()), "left")
+          .prior);
+  prior.cameras.push_back(
+      teachCamera({{on.right, off.right}},
+                  BoardLayout::device(sim.virtualBoards(), rig.right, rig.right_from_left), "right")
+          .prior);
+  return prior;
+}
+
+enum class Background { kStale, kNone };
+
+struct MotionRun {
+  Score score;
+  int stale_frames = 0;  // frames where the tracker found its background stale (both cameras)
+  int tracked_frames = 0;
+};
+
+// Windows of light-on frames: the light-off frame at frame j, light-on frames j+3 .. j+10 (the
+// tracker keeps the light-off frame as its background in kStale mode). Between windows the rig
+// drifts: a zoom step, then a knock of the right camera.
+MotionRun runWindows(SimRig* sim, Background mode, int first_frame) {
+  PatternTracker tracker(teach(*sim, first_frame / kFps), TrackerOptions());
+  MotionRun run;
+  const int kWindows = 3;
+  const int kOnFrames[] = {3, 6, 10};
+  for (int w = 0; w < kWindows; ++w) {
+    const int j = first_frame + 15 + 25 * w;
+    if (w == 1) {
+      DriftRequest zoom;
+      zoom.focal_scale = 1.02;
+      EXPECT_TRUE(sim->setDrift(zoom, (j - 5) / kFps).empty());
+    } else if (w == 2) {
+      DriftRequest knock;
+      knock.knock_rotation_deg = Eigen::Vector3d(0.2, -0.25, 0.1);
+      EXPECT_TRUE(sim->setDrift(knock, (j - 5) / kFps).empty());
+    }
+    if (mode == Background::kStale) {
+      const SimFrame off = sim->render(j / kFps, 0.0, 500 + j);
+      tracker.setBackground(off.left, off.right);
+    }
+    for (int d : kOnFrames) {
+      const double t = (j + d) / kFps;
+      const SimFrame f = sim->render(t, 1.0, 1000 + j + d);
+      run.score.add(tracker.trackStereo(f.left, f.right, t), f.observations);
+      run.stale_frames += tracker.camera(0).lastBackgroundStale() && tracker.camera(1).lastBackgroundStale();
+      ++run.tracked_frames;
+    }
+  }
+  return run;
+}
+
+void expectAccurate(const std::string& scenario, Background mode, int first_frame) {
+  SimRig sim(loadSimRigConfig(kConfigDir + scenario + ".yaml"));
+  const MotionRun run = runWindows(&sim, mode, first_frame);
+  std::printf("  %s, %s background: %s (stale detected in %d/%d frames)\n", scenario.c_str(),
+              mode == Background::kStale ? "stale (3-10 frames old)" : "no", run.score.str().c_str(),
+              run.stale_frames, run.tracked_frames);
+  EXPECT_GE(run.score.foundFraction(), 0.99) << run.score.str();
+  EXPECT_LE(run.score.rms(), 0.05) << run.score.str();
+  EXPECT_EQ(run.score.wrong, 0u) << run.score.str();
+  if (mode == Background::kStale) {
+    EXPECT_EQ(run.stale_frames, run.tracked_frames);
+  }
+}
+
+TEST(TrackerMotion, DrivePhotoStaleBackground) { expectAccurate("drive_photo", Background::kStale, 30); }
+TEST(TrackerMotion, DrivePhotoNoBackground) { expectAccurate("drive_photo", Background::kNone, 30); }
+TEST(TrackerMotion, HandheldPhotoStaleBackground) { expectAccurate("handheld_photo", Background::kStale, 30); }
+TEST(TrackerMotion, HandheldPhotoNoBackground) { expectAccurate("handheld_photo", Background::kNone, 30); }
+
+}  // namespace
+}  // namespace ecs
