@@ -1,7 +1,9 @@
 // Pattern tracker timing and detection rates on simulated stereo frames, against OpenCV's
 // chessboard detectors on the same frames.
-//   bench_tracker [sim_rig.yaml] [frames]
-// (default: $ECS_SOURCE_DIR/config/sim_rig.yaml, 40 frames). Prints wall-clock ms per stereo
+//   bench_tracker [sim_rig.yaml | drive_photo.yaml | ...] [frames]
+// (default: $ECS_SOURCE_DIR/config/sim_rig.yaml, 40 frames). Runs: with a light-off frame taken
+// at t = 0 (a still world: the fresh background; a moving one: stale), with light-off frames
+// 3-10 frames old (windows of 8), and without any. Prints wall-clock ms per stereo
 // pair and the process CPU time per pair (all threads; on a loaded machine the wall time is
 // inflated by other processes, the CPU time much less).
 #include <algorithm>
@@ -19,6 +21,7 @@
 #include "embedded_calibration_stereo/core/tracker/board_teacher.h"
 #include "embedded_calibration_stereo/core/tracker/pattern_tracker.h"
 #include "embedded_calibration_stereo/core/sim/sim_rig.h"
+#include "embedded_calibration_stereo/core/sim/trajectory.h"
 
 using namespace ecs;
 using Clock = std::chrono::steady_clock;
@@ -83,13 +86,14 @@ PatternPrior teach(const SimRig& sim, const SimFrame& on, const SimFrame& off) {
   return prior;
 }
 
-void trackRun(const char* name, const PatternPrior& prior, const SimFrame* background,
+// backgrounds[k]: the light-off frame set before tracking frame k (nullptr: keep the one set).
+void trackRun(const char* name, const PatternPrior& prior, const std::vector<const SimFrame*>& backgrounds,
               const std::vector<SimFrame>& frames) {
   PatternTracker tracker(prior, TrackerOptions());
-  if (background) tracker.setBackground(background->left, background->right);
   Stats time, cpu;
   Accuracy acc;
   for (size_t k = 0; k < frames.size(); ++k) {
+    if (backgrounds[k]) tracker.setBackground(backgrounds[k]->left, backgrounds[k]->right);
     const Clock::time_point t0 = Clock::now();
     const std::clock_t c0 = std::clock();
     const StereoObservation obs = tracker.trackStereo(frames[k].left, frames[k].right, k / 30.0);
@@ -140,13 +144,28 @@ int main(int argc, char** argv) {
   }
   teach_time.print("teach (on/off pair, both cameras)");
 
-  trackRun("track with background", prior, &off, frames);
-  trackRun("track without background", prior, nullptr, frames);
+  // A fresh light-off frame of a still world (the teaching one), as the driver takes before every
+  // light-on burst; in a moving scenario it is stale from the first frame on.
+  std::vector<const SimFrame*> teach_off(frames.size(), nullptr), none(frames.size(), nullptr);
+  teach_off[0] = &off;
+  trackRun(config.trajectory.kind == SimTrajectory::Kind::kStatic ? "track with background"
+                                                                   : "track with the t=0 light-off frame",
+           prior, teach_off, frames);
+  // Windows of 8 light-on frames, each after a light-off frame taken 3 frames before the first.
+  std::vector<SimFrame> offs;
+  offs.reserve(frames.size());
+  std::vector<const SimFrame*> stale(frames.size(), nullptr);
+  for (size_t k = 0; k < frames.size(); k += 8) {
+    offs.push_back(sim.render(0.1 + (static_cast<double>(k) - 3) / 30.0, 0.0, 5000 + k));
+    stale[k] = &offs.back();
+  }
+  trackRun("track with a light-off frame 3-10 frames old", prior, stale, frames);
+  trackRun("track without background", prior, none, frames);
 
   // OpenCV's detectors on the same light-on frames (one 8x6 board searched per image; each
   // image holds six). Detection rate = images where a board was found.
   const cv::Size pattern(sim.virtualBoards().front().cols, sim.virtualBoards().front().rows);
-  const int opencv_frames = std::min(frame_count, 5);
+  const int opencv_frames = std::min(frame_count, 10);
   for (int detector = 0; detector < 2; ++detector) {
     Stats time;
     int found = 0, images = 0;

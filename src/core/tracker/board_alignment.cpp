@@ -4,6 +4,8 @@
 #include <Eigen/Dense>
 #include <algorithm>
 #include <cmath>
+#include <cstring>
+#include <cstdlib>
 #include <opencv2/imgproc.hpp>
 
 #include "board_geometry.h"
@@ -99,7 +101,9 @@ AlignmentTemplate buildAlignmentTemplate(const BoardPrior& taught_board, double 
       const cv::Point2f p = applyHomography(h0, gx, gy) + offsetAt(board, gx, gy);
       umin = std::min(umin, p.x), vmin = std::min(vmin, p.y), umax = std::max(umax, p.x), vmax = std::max(vmax, p.y);
     }
-  const double reach = 3.0 * blur_px;
+  // Samples within 2.5 blur widths of an edge, on every other pixel (a quincunx): the scene's pull
+  // is spatially correlated over a few pixels, so the skipped pixels would add little but time.
+  const double reach = 2.5 * blur_px;
   // Cells: a third of a square (and of the margin) on a side. One level per square leaves the
   // scene's variation inside a square to pull the edges; finer cells would start to take the
   // edges' own profile.
@@ -145,6 +149,7 @@ AlignmentTemplate buildAlignmentTemplate(const BoardPrior& taught_board, double 
   };
   for (int v = static_cast<int>(std::floor(vmin)) - 2; v <= static_cast<int>(std::ceil(vmax)) + 2; ++v) {
     for (int u = static_cast<int>(std::floor(umin)) - 2; u <= static_cast<int>(std::ceil(umax)) + 2; ++u) {
+      if ((u + v) & 1) continue;
       double value = 0.0;
       if (!valueAt(u, v, true, &value)) continue;
       double vx0, vx1, vy0, vy1;  // template gradient by central differences (half a pixel)
@@ -166,97 +171,122 @@ bool fitAlignmentStart(const AlignmentTemplate& t, const std::vector<int>& ids,
   return fitHomographyLeastSquares(from, pixels, a);
 }
 
-AlignmentResult alignBoard(const AlignmentTemplate& t, const cv::Mat& gray, const cv::Matx33d& a0,
-                           int iterations) {
+AlignmentResult alignBoard(const AlignmentTemplate& t, const cv::Mat& gray, const AlignmentResult& start,
+                           bool warm, int max_steps) {
   // Parameters: the 8 of the homography and the contrast b; each cell's own brightness a_c is
   // eliminated (Schur complement), which is cheap since a sample belongs to one cell.
   constexpr int kP = 9;
   using Vec = Eigen::Matrix<double, kP, 1>;
   using Mat = Eigen::Matrix<double, kP, kP>;
   AlignmentResult result;
-  const cv::Matx33d a_norm = a0 * (1.0 / a0(2, 2));
+  const cv::Matx33d a_norm = start.a * (1.0 / start.a(2, 2));
   double h[8] = {a_norm(0, 0), a_norm(0, 1), a_norm(0, 2), a_norm(1, 0),
                  a_norm(1, 1), a_norm(1, 2), a_norm(2, 0), a_norm(2, 1)};
-  double b = 0.0;
-  std::vector<double> level(t.cells, 0.0);  // a_c
+  double b = warm ? start.contrast : 0.0;
+  std::vector<double> level(t.cells, 0.0);  // a_c (solved with the first step whatever they start at)
   struct CellSums {
-    double w = 0, wr = 0;
-    Vec wj = Vec::Zero();
+    double w, wr, wj[kP];
   };
   std::vector<CellSums> sums(t.cells);
   const size_t n = t.ref.size();
   std::vector<float> absres;
-  double huber = 1e30;
-  for (int it = 0; it <= iterations; ++it) {
-    // Iteration 0 fits only the photometric terms (the start map is close).
+  absres.reserve(n);
+  double huber = warm ? start.huber : 1e30;
+  for (int it = warm ? 1 : 0; it <= max_steps; ++it) {
+    // Pass 0 fits only the photometric terms (the start map is close): parameters first..8.
     const bool geometric = it > 0;
-    Mat jtj = Mat::Zero();
-    Vec jtr = Vec::Zero();
-    std::fill(sums.begin(), sums.end(), CellSums());
+    const int first = geometric ? 0 : kP - 1;
+    double hs[kP][kP] = {};  // upper triangle used
+    double gs[kP] = {};
+    std::memset(sums.data(), 0, sums.size() * sizeof(CellSums));
     absres.clear();
     int used = 0;
+    double j[kP] = {};
     for (size_t k = 0; k < n; ++k) {
       const double u = t.ref[k].x, v = t.ref[k].y;
-      const double w = h[6] * u + h[7] * v + 1.0;
-      const double px = (h[0] * u + h[1] * v + h[2]) / w, py = (h[3] * u + h[4] * v + h[5]) / w;
+      const double iw = 1.0 / (h[6] * u + h[7] * v + 1.0);
+      const double px = (h[0] * u + h[1] * v + h[2]) * iw, py = (h[3] * u + h[4] * v + h[5]) * iw;
       float val;
       if (!bilinear(gray, static_cast<float>(px), static_cast<float>(py), &val)) continue;
       const double tv = t.value[k];
       const int c = t.cell[k];
       const double r = val - (level[c] + b * tv);
-      absres.push_back(static_cast<float>(std::abs(r)));
-      const double wr = std::abs(r) <= huber ? 1.0 : huber / std::abs(r);
-      Vec j;
+      const double ar = std::abs(r);
+      absres.push_back(static_cast<float>(ar));
+      const double wr = ar <= huber ? 1.0 : huber / ar;
       if (geometric) {
         // The gradient of the fitted pattern, not of the image: the scene's own texture then
         // enters only through the residual, weighted by the pattern's edges (a matched filter).
-        const double iw = 1.0 / w;
         const double j00 = (h[0] - px * h[6]) * iw, j01 = (h[1] - px * h[7]) * iw;
         const double j10 = (h[3] - py * h[6]) * iw, j11 = (h[4] - py * h[7]) * iw;
-        const double det = j00 * j11 - j01 * j10;
+        const double bdet = b / (j00 * j11 - j01 * j10);
         const double tu = t.grad[k].x, tw = t.grad[k].y;
-        const double gx = b * (j11 * tu - j10 * tw) / det, gy = b * (-j01 * tu + j00 * tw) / det;
-        j << gx * u * iw, gx * v * iw, gx * iw, gy * u * iw, gy * v * iw, gy * iw, -(gx * px + gy * py) * u * iw,
-            -(gx * px + gy * py) * v * iw, -tv;
-      } else {
-        j << 0, 0, 0, 0, 0, 0, 0, 0, -tv;
+        const double gx = bdet * (j11 * tu - j10 * tw), gy = bdet * (-j01 * tu + j00 * tw);
+        const double gp = -(gx * px + gy * py) * iw;
+        j[0] = gx * u * iw, j[1] = gx * v * iw, j[2] = gx * iw;
+        j[3] = gy * u * iw, j[4] = gy * v * iw, j[5] = gy * iw;
+        j[6] = gp * u, j[7] = gp * v;
       }
-      jtj.selfadjointView<Eigen::Upper>().rankUpdate(j, wr);
-      jtr += wr * r * j;
+      j[8] = -tv;
       CellSums& cs = sums[c];
       cs.w += wr;
       cs.wr += wr * r;
-      cs.wj += wr * j;
+      for (int p = first; p < kP; ++p) {
+        const double wj = wr * j[p];
+        for (int q = p; q < kP; ++q) hs[p][q] += wj * j[q];
+        gs[p] += wj * r;
+        cs.wj[p] += wj;
+      }
       ++used;
     }
     if (used < 50) return result;
     // Robust scale from this pass's residuals (normal: MAD * 1.4826), Huber at 1.345 sigma.
     std::nth_element(absres.begin(), absres.begin() + absres.size() / 2, absres.end());
     huber = std::max(1.0, 1.345 * 1.4826 * absres[absres.size() / 2]);
+    Mat full = Mat::Identity();
+    Vec g = Vec::Zero();
+    for (int p = first; p < kP; ++p) {
+      g[p] = gs[p];
+      for (int q = p; q < kP; ++q) full(p, q) = full(q, p) = hs[p][q];
+    }
     // Eliminate the cell levels (their Jacobian is -1): H -= wj wj^T / w, g -= wj wr / w.
-    Mat full = jtj.selfadjointView<Eigen::Upper>();
-    Vec g = jtr;
     for (const CellSums& cs : sums) {
       if (cs.w <= 0) continue;
-      full.noalias() -= cs.wj * cs.wj.transpose() / cs.w;
-      g -= cs.wj * cs.wr / cs.w;
-    }
-    if (!geometric) {  // keep the map: identity rows for its parameters
-      full.topRows(8).setZero();
-      full.leftCols(8).setZero();
-      full.topLeftCorner(8, 8).setIdentity();
-      g.head(8).setZero();
+      for (int p = first; p < kP; ++p) {
+        for (int q = first; q < kP; ++q) full(p, q) -= cs.wj[p] * cs.wj[q] / cs.w;
+        g[p] -= cs.wj[p] * cs.wr / cs.w;
+      }
     }
     const Vec delta = full.ldlt().solve(-g);
     if (!delta.allFinite()) return result;
-    if (geometric)
-      for (int p = 0; p < 8; ++p) h[p] += delta[p];
+    for (int p = first; p < 8; ++p) h[p] += delta[p];
     b += delta[8];
+    ++result.passes;
     // Back-substitute each level: w da = wr - wj . delta (its Jacobian is -1).
-    for (int c = 0; c < t.cells; ++c)
-      if (sums[c].w > 0) level[c] += (sums[c].wr + sums[c].wj.dot(delta)) / sums[c].w;
+    for (int c = 0; c < t.cells; ++c) {
+      const CellSums& cs = sums[c];
+      if (cs.w <= 0) continue;
+      double dot = 0;
+      for (int p = first; p < kP; ++p) dot += cs.wj[p] * delta[p];
+      level[c] += (cs.wr + dot) / cs.w;
+    }
     result.samples = used;
+    if (geometric) {
+      // Corner motion of this step (at the outer corners; the map is projective).
+      const cv::Matx33d moved(h[0], h[1], h[2], h[3], h[4], h[5], h[6], h[7], 1.0);
+      const cv::Matx33d before = moved - cv::Matx33d(delta[0], delta[1], delta[2], delta[3], delta[4], delta[5],
+                                                     delta[6], delta[7], 0.0);
+      double shift = 0;
+      for (size_t id : {size_t(0), t.corners.size() - 1}) {
+        const cv::Point2f c = t.corners[id];
+        shift = std::max(shift, cv::norm(applyHomography(moved, c.x, c.y) - applyHomography(before, c.x, c.y)));
+      }
+      // Near-linear within the edge blur: after a step this small the next one would be ~100
+      // times smaller.
+      if (shift < 0.03) break;
+    }
   }
+  result.huber = huber;
   result.a = cv::Matx33d(h[0], h[1], h[2], h[3], h[4], h[5], h[6], h[7], 1.0);
   result.contrast = b;
   result.ok = std::isfinite(b) && b > 0;

@@ -41,20 +41,25 @@ struct AlignmentTemplate {
   bool empty() const { return ref.empty(); }
 };
 
-// Samples every taught pixel within ~3 blur widths of an edge of the pattern (squares and the
-// inner half of the margin). blur_px: standard deviation of the expected edge blur.
+// Samples taught pixels within 2.5 blur widths of an edge of the pattern (squares and the inner
+// half of the margin), every other pixel. blur_px: standard deviation of the expected edge blur.
 AlignmentTemplate buildAlignmentTemplate(const BoardPrior& board, double blur_px);
 
 struct AlignmentResult {
   bool ok = false;
   cv::Matx33d a;            // normalised taught coordinates -> pixel
   double contrast = 0.0;    // b: half the bright-dark difference, grey levels
+  double huber = 0.0;       // robust residual scale of the last pass, grey levels
   int samples = 0;
+  int passes = 0;
 };
 
-// gray: CV_8UC1 image. a0: the starting map (within a pixel or so).
-AlignmentResult alignBoard(const AlignmentTemplate& t, const cv::Mat& gray, const cv::Matx33d& a0,
-                           int iterations);
+// gray: CV_8UC1 image. start.a: the starting map (within a pixel or so). With warm (the last
+// frame's result, the board not moved since) its contrast and residual scale are taken as they
+// are, which saves the photometric-only first pass. Gauss-Newton steps stop after max_steps or
+// when a step moved the board's corners by less than 0.03 px.
+AlignmentResult alignBoard(const AlignmentTemplate& t, const cv::Mat& gray, const AlignmentResult& start,
+                           bool warm, int max_steps);
 
 // Least-squares homography normalised taught coordinates -> pixel through listed corners.
 bool fitAlignmentStart(const AlignmentTemplate& t, const std::vector<int>& ids,

@@ -471,10 +471,27 @@ BoardCorners CameraTracker::trackBoardOnce(const cv::Mat& gray, int index, bool 
     const tracker::AlignmentTemplate& tmpl = (*templates_)[index];
     std::vector<cv::Point2f> refined;
     for (int id : accepted) refined.push_back(pos[id]);
-    cv::Matx33d a0;
     bool aligned = false;
-    if (tracker::fitAlignmentStart(tmpl, accepted, refined, &a0)) {
-      const tracker::AlignmentResult fit = tracker::alignBoard(tmpl, gray, a0, 4);
+    tracker::AlignmentResult start;
+    // Start from the last frame's alignment while the board stays where it was (its corners
+    // agree with this frame's refined ones): one step then usually suffices.
+    bool warm = false;
+    if (state.align_valid) {
+      double sq = 0;
+      for (size_t k = 0; k < accepted.size(); ++k) {
+        const cv::Point2f c = tmpl.corners[accepted[k]];
+        sq += std::pow(cv::norm(applyHomography(state.align_a, c.x, c.y) - refined[k]), 2);
+      }
+      warm = std::sqrt(sq / accepted.size()) <= max_residual;
+    }
+    state.align_valid = false;
+    if (warm) {
+      start.a = state.align_a;
+      start.contrast = state.align_contrast;
+      start.huber = state.align_huber;
+    }
+    if (warm || tracker::fitAlignmentStart(tmpl, accepted, refined, &start.a)) {
+      const tracker::AlignmentResult fit = tracker::alignBoard(tmpl, gray, start, warm, 3);
       if (fit.ok && fit.contrast >= 0.5 * min_contrast) {
         double sq = 0;
         for (size_t k = 0; k < accepted.size(); ++k) {
@@ -507,6 +524,10 @@ BoardCorners CameraTracker::trackBoardOnce(const cv::Mat& gray, int index, bool 
           }
           cv::Matx33d refit;
           if (tracker::fitHomographyLeastSquares(grid, image, &refit)) h = refit;
+          state.align_valid = true;
+          state.align_a = fit.a;
+          state.align_contrast = fit.contrast;
+          state.align_huber = fit.huber;
         }
       }
     }

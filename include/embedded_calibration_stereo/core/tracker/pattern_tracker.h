@@ -158,6 +158,11 @@ class CameraTracker {
     double last_score = 0.0;  // re-centring score of the last good frame
     cv::Matx33d homography;   // grid (col, row) -> pixel, minus offsets
     std::vector<cv::Point2f> offsets;
+    // Last whole-board alignment (normalised taught coordinates -> pixel), its contrast and
+    // robust residual scale; valid while the board is aligned frame after frame.
+    bool align_valid = false;
+    cv::Matx33d align_a;
+    double align_contrast = 0.0, align_huber = 0.0;
   };
   std::vector<BoardCorners> trackAll(const cv::Mat& gray, bool on_difference, bool align);
   // wide: skip the quick steady-state check, search the whole re-centring window.
