@@ -532,6 +532,9 @@ BoardCorners CameraTracker::trackBoardOnce(const cv::Mat& gray, int index, bool 
       }
     }
     stats.aligned = aligned;
+    // Refined corners alone are not trusted on a raw image: the scene can pull one by more than
+    // a pixel. A board that does not align gives nothing this frame.
+    if (!aligned) return out;
   }
 
   std::sort(accepted.begin(), accepted.end());
