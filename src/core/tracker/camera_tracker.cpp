@@ -288,6 +288,8 @@ std::vector<BoardCorners> CameraTracker::track(const cv::Mat& image, ColorOrder 
     return found;
   }
   cv::Mat diff = background_.difference(gray, options_.difference_smoothing_px);
+  // Kept to undo what tracking on a difference found stale below taught the boards' states.
+  const std::vector<BoardState> before = states_;
   std::vector<BoardCorners> found = trackAll(diff, true, false);
   if (cornerCount(found) < last_found_ / 2) {
     // A stale background (the image moved since) can hide the boards: find them without it
@@ -305,6 +307,7 @@ std::vector<BoardCorners> CameraTracker::track(const cv::Mat& image, ColorOrder 
   background_residual_ = backgroundResidual(diff);
   if (background_residual_ > options_.stale_background_level) {
     background_stale_ = background_known_stale_ = true;
+    states_ = before;
     found = trackAll(gray, false, true);
   }
   last_found_ = cornerCount(found);
