@@ -305,7 +305,7 @@ SimFrame SimRig::render(const SimRenderRequest& request) const {
     }
   }
   // Metered on the image the sensor delivered (both cameras share one exposure setting).
-  impl_->exposure.meter(cv::mean(frame.left)[0]);
+  if (optics.exposure.mode == "auto") impl_->exposure.meter(cv::mean(frame.left)[0]);
   frame.left_depth = impl_->layers[0].depth.clone();
   frame.observations = observe(frame.truth, boards_, time_s);
   return frame;
