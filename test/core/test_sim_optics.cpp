@@ -232,7 +232,7 @@ TEST(SimOptics, AutoExposureFollowsItsLawOverFrames) {
   const double a = 1.0 - std::exp(-1.0 / 4.0);
   const SimRig ae(real), reference(ideal);
 
-  double previous_gain = 0.0, previous_mean = 0.0;
+  double previous_gain = 0.0, previous_mean = 0.0, worst = 0.0;
   int checked = 0;
   for (int k = 0; k < 40; ++k) {
     const double light = (k >= 25 && k < 30) ? 1.0 : 0.0;  // a light window: the AE reacts to it
@@ -248,7 +248,8 @@ TEST(SimOptics, AutoExposureFollowsItsLawOverFrames) {
     if (k == 0) EXPECT_NEAR(gain, 2.5, 0.01);
     if (k > 0) {
       const double predicted = std::clamp(previous_gain * std::pow(100.0 / previous_mean, a), 0.25, 4.0);
-      EXPECT_NEAR(gain, predicted, 0.01 * predicted) << "frame " << k;
+      EXPECT_NEAR(gain, predicted, 0.002 * predicted) << "frame " << k;
+      worst = std::max(worst, std::abs(gain / predicted - 1.0));
       ++checked;
     }
     if (k == 24) EXPECT_NEAR(mean, 100.0, 1.5) << "converged before the light window";
@@ -257,6 +258,7 @@ TEST(SimOptics, AutoExposureFollowsItsLawOverFrames) {
     previous_mean = mean;
   }
   EXPECT_EQ(checked, 39);
+  std::printf("auto-exposure: measured gain within %.3f %% of the law over 39 frames\n", 100.0 * worst);
 }
 
 TEST(SimOptics, FixedGainScalesTheWholeSignalAndSaturates) {

@@ -19,6 +19,7 @@ std::shared_ptr<ecs::SimRig> responseRig() {
   c.optics.light.model = "response";
   c.optics.light.rise_time_s = 0.05;
   c.optics.light.fall_time_s = 0.05;
+  c.optics.light.delay_s = 0.01;
   c.optics.exposure.time_s = 0.008;
   return std::make_shared<ecs::SimRig>(c);
 }
@@ -50,10 +51,11 @@ std::vector<double> renderedLevels(bool with_command, std::vector<double>* sched
 TEST(SimLightResponse, TheDriverPassesTheCommandAndItsSwitchTime) {
   std::vector<double> schedule;
   const std::vector<double> levels = renderedLevels(true, &schedule);
-  // Switched on at frame 2 (t = 2/30): a 0.05 s linear rise averaged over 8 ms exposures.
-  const double T = 0.008, rise = 0.05, frame = 1.0 / 30;
-  const double expected[12] = {0, 0, (T / 2) / rise, (frame + T / 2) / rise, 1, 1, 1, 1,
-                               1 - (T / 2) / rise, 1 - (frame + T / 2) / rise, 0, 0};
+  // Switched on at frame 2 (t = 2/30): 10 ms later a 0.05 s linear rise, averaged over 8 ms
+  // exposures (the switched frame's exposure ends before the light starts); off at frame 8.
+  const double T = 0.008, delay = 0.01, rise = 0.05, frame = 1.0 / 30;
+  const double ramp = (frame + T / 2 - delay) / rise;
+  const double expected[12] = {0, 0, 0, ramp, 1, 1, 1, 1, 1, 1 - ramp, 0, 0};
   for (int k = 0; k < 12; ++k) EXPECT_NEAR(levels[k], expected[k], 1e-9) << "frame " << k;
 }
 
