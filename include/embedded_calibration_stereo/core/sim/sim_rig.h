@@ -13,7 +13,8 @@
 //
 // Threading: render() may run on one thread while setDrift()/truthAt() run on another;
 // the drift state is guarded by a mutex and render() works on a snapshot of it. render() itself
-// is meant for one thread at a time (its layer caches are serialised by a second mutex).
+// is meant for one thread at a time (its layer caches, the auto-exposure and the light response
+// state are serialised by a second mutex).
 #include <Eigen/Geometry>
 #include <cstdint>
 #include <memory>
