@@ -139,7 +139,7 @@ bool readBool(const cv::FileNode& node, const std::string& key, const std::strin
 }
 
 // A string field; OpenCV's YAML reader keeps a trailing "# comment" in unquoted strings: cut it off.
-std::string readString(const cv::FileNode& node, const std::string& key, const std::string& path,
+std::string readOptionalString(const cv::FileNode& node, const std::string& key, const std::string& path,
                        const std::string& fallback) {
   const cv::FileNode n = node[key];
   if (n.empty() || n.isNone()) return fallback;
@@ -178,7 +178,7 @@ void loadRealOptics(const cv::FileNode& optics, SimOpticsConfig* o) {
   if (!exposure.empty()) {
     const std::string p = "optics.exposure";
     SimExposureConfig& e = o->exposure;
-    e.mode = readString(exposure, "mode", p, e.mode);
+    e.mode = readOptionalString(exposure, "mode", p, e.mode);
     e.gain = readDouble(exposure, "gain", p, e.gain);
     e.target_mean = readDouble(exposure, "target_mean", p, e.target_mean);
     e.time_constant_frames = readDouble(exposure, "time_constant_frames", p, e.time_constant_frames);
@@ -190,7 +190,7 @@ void loadRealOptics(const cv::FileNode& optics, SimOpticsConfig* o) {
   if (!light.empty()) {
     const std::string p = "optics.light";
     SimLightResponseConfig& l = o->light;
-    l.model = readString(light, "model", p, l.model);
+    l.model = readOptionalString(light, "model", p, l.model);
     l.rise_time_s = readDouble(light, "rise_time_s", p, l.rise_time_s);
     l.fall_time_s = readDouble(light, "fall_time_s", p, l.fall_time_s);
     l.delay_s = readDouble(light, "delay_s", p, l.delay_s);
@@ -213,7 +213,7 @@ double readRequired(const cv::FileNode& node, const std::string& key, const std:
 }
 
 // A string value; OpenCV's YAML reader keeps a trailing "# comment" in unquoted strings: cut it off.
-std::string readString(const cv::FileNode& node, const std::string& key, const std::string& path,
+std::string readRequiredString(const cv::FileNode& node, const std::string& key, const std::string& path,
                        const std::string& what) {
   const cv::FileNode n = node[key];
   const std::string full = path.empty() ? key : path + "." + key;
@@ -254,7 +254,7 @@ SimTrajectory loadTrajectory(const cv::FileNode& node, const std::string& path) 
   SimTrajectory t;
   if (node.empty() || node.isNone()) return t;
   if (!node.isMap()) throw ConfigError(path, "must be a map (kind: static, drive, handheld or waypoints)");
-  const std::string kind = readString(node, "kind", path, "static, drive, handheld or waypoints");
+  const std::string kind = readRequiredString(node, "kind", path, "static, drive, handheld or waypoints");
   std::set<std::string> known = {"kind", "start", "loop_s"};
   if (kind == "static") {
     t.kind = SimTrajectory::Kind::kStatic;
@@ -287,7 +287,7 @@ SimTrajectory loadTrajectory(const cv::FileNode& node, const std::string& path) 
   t.rotation_period_s = readVector3Or(node, "rotation_period_s", path, t.rotation_period_s);
   if (t.kind == SimTrajectory::Kind::kWaypoints) {
     if (!node["interpolation"].empty()) {
-      const std::string interpolation = readString(node, "interpolation", path, "linear or spline");
+      const std::string interpolation = readRequiredString(node, "interpolation", path, "linear or spline");
       if (interpolation != "linear" && interpolation != "spline")
         throw ConfigError(path + ".interpolation", "must be linear or spline, not '" + interpolation + "'");
       t.spline = interpolation == "spline";
@@ -328,7 +328,7 @@ ScenePlane loadPlane(const cv::FileNode& node, const std::string& path, int inde
     const std::string tp = path + ".texture";
     if (!texture.isMap()) throw ConfigError(tp, "must be a map (image, tile_m)");
     checkKeys(texture, tp, {"image", "tile_m"});
-    p.texture_image = resolveImagePath(readString(texture, "image", tp, "an image file"), config_dir);
+    p.texture_image = resolveImagePath(readRequiredString(texture, "image", tp, "an image file"), config_dir);
     const cv::FileNode tile = texture["tile_m"];
     if (!tile.empty() && !tile.isNone()) {
       if (!tile.isSeq() || tile.size() != 2 || !(tile[0].isReal() || tile[0].isInt()) ||
