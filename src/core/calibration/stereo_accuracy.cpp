@@ -221,7 +221,7 @@ StereoAccuracy predictStereoAccuracy(const StereoRig& estimate, const RigCovaria
   FigureAccumulator acc(options);
   Eigen::Vector3d variance;
   for (int s = 0; s < n; ++s) {
-    for (int q = 0; q < 3; ++q) variance[q] = std::max(0.0, J[q].row(s) * C * J[q].row(s).transpose());
+    for (int q = 0; q < 3; ++q) variance[q] = std::max(0.0, J[q].row(s).dot(C * J[q].row(s).transpose()));
     acc.add(samples[s].depth_index, variance);
   }
   return acc.result();
