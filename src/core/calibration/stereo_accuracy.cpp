@@ -6,6 +6,8 @@
 #include <stdexcept>
 #include <string>
 
+#include "embedded_calibration_stereo/core/geometry/plumb_bob_distortion.h"
+
 namespace ecs {
 
 namespace {
@@ -52,33 +54,63 @@ struct Residual {
   double misalignment_px = 0, bias_px = 0, depth_error_pct = 0;
 };
 
-// The residuals of one sample; false when the reference right camera does not see it (only
-// checked when `check_visible`: the prediction holds the samples of the unperturbed rig).
-bool sampleResidual(const EstimatedRectification& est, const StereoRig& reference, const Sample& s, double depth,
-                    bool check_visible, Residual* out) {
-  const Eigen::Vector2d xn = reference.left.pixelToNormalized(s.left_pixel);
-  const Eigen::Vector3d ray(xn.x(), xn.y(), 1.0);
-  const bool far = std::isinf(depth);
-  // At infinity only the direction counts: the right camera sees the rotated ray.
-  const Eigen::Vector3d in_right = far ? Eigen::Vector3d(reference.right_from_left.linear() * ray)
-                                       : Eigen::Vector3d(reference.right_from_left * (depth * ray));
-  Eigen::Vector2d right_pixel;
-  if (!reference.right.project(in_right, &right_pixel)) return false;
-  if (check_visible && !reference.right.inImage(right_pixel)) return false;
-
-  const Eigen::Vector2d l = EstimatedRectification::rectify(est.rig.left, est.H1, s.left_pixel);
-  const Eigen::Vector2d r = EstimatedRectification::rectify(est.rig.right, est.H2, right_pixel);
+// The residuals of a correspondence rectified to `l` and `r` by the estimate, of the point at
+// `depth` along `ray` (the reference left camera's, z = 1).
+Residual residualOf(const EstimatedRectification& est, const Eigen::Vector2d& l, const Eigen::Vector2d& r,
+                    const Eigen::Vector3d& ray, double depth) {
+  Residual out;
   const double disparity = l.x() - r.x();
-  out->misalignment_px = l.y() - r.y();
-  if (far) {
-    out->bias_px = disparity - est.disparityOf(depth);
-    out->depth_error_pct = std::numeric_limits<double>::quiet_NaN();
-    return true;
+  out.misalignment_px = l.y() - r.y();
+  if (std::isinf(depth)) {
+    out.bias_px = disparity - est.disparityOf(depth);
+    out.depth_error_pct = std::numeric_limits<double>::quiet_NaN();
+    return out;
   }
   const double true_depth = (est.R1 * (depth * ray)).z();
-  out->bias_px = disparity - est.disparityOf(true_depth);
-  out->depth_error_pct = 100.0 * (est.depthOf(disparity) / true_depth - 1.0);
+  out.bias_px = disparity - est.disparityOf(true_depth);
+  out.depth_error_pct = 100.0 * (est.depthOf(disparity) / true_depth - 1.0);
+  return out;
+}
+
+// Where the reference right camera sees the point at `depth` along `ray`; false behind it.
+bool rightPixelOf(const StereoRig& reference, const Eigen::Vector3d& ray, double depth, Eigen::Vector2d* pixel) {
+  // At infinity only the direction counts: the right camera sees the rotated ray.
+  const Eigen::Vector3d in_right = std::isinf(depth) ? Eigen::Vector3d(reference.right_from_left.linear() * ray)
+                                                     : Eigen::Vector3d(reference.right_from_left * (depth * ray));
+  return reference.right.project(in_right, pixel);
+}
+
+Eigen::Vector3d leftRay(const StereoRig& reference, const Eigen::Vector2d& left_pixel) {
+  const Eigen::Vector2d xn = reference.left.pixelToNormalized(left_pixel);
+  return Eigen::Vector3d(xn.x(), xn.y(), 1.0);
+}
+
+// The residuals of one sample; false when the reference right camera does not see it.
+bool sampleResidual(const EstimatedRectification& est, const StereoRig& reference, const Sample& s, double depth,
+                    Residual* out) {
+  const Eigen::Vector3d ray = leftRay(reference, s.left_pixel);
+  Eigen::Vector2d right_pixel;
+  if (!rightPixelOf(reference, ray, depth, &right_pixel) || !reference.right.inImage(right_pixel)) return false;
+  *out = residualOf(est, EstimatedRectification::rectify(est.rig.left, est.H1, s.left_pixel),
+                    EstimatedRectification::rectify(est.rig.right, est.H2, right_pixel), ray, depth);
   return true;
+}
+
+// d(rectified right pixel) / d(raw right pixel) of the estimate, analytically: the inverse of
+// the distortion's Jacobian, then the rectifying homography's.
+Eigen::Matrix2d rightRectificationJacobian(const EstimatedRectification& est, const Eigen::Vector2d& raw) {
+  const PinholeCamera& cam = est.rig.right;
+  const Eigen::Vector2d xn = cam.pixelToNormalized(raw);
+  Eigen::Vector2d distorted;
+  Eigen::Matrix2d J;
+  plumb_bob::distortWithJacobian(cam.dist.data(), xn.x(), xn.y(), &distorted.x(), &distorted.y(), &J);
+  Eigen::Matrix2d pixel_to_distorted;
+  pixel_to_distorted << 1.0 / cam.fx, -cam.skew / (cam.fx * cam.fy), 0.0, 1.0 / cam.fy;
+  const Eigen::Matrix2d dxn_draw = J.inverse() * pixel_to_distorted;
+  const Eigen::Vector3d h = est.H2 * xn.homogeneous();
+  const Eigen::Vector2d uv = h.hnormalized();
+  const Eigen::Matrix2d duv_dxn = (est.H2.topLeftCorner<2, 2>() - uv * est.H2.block<1, 2>(2, 0)) / h.z();
+  return duv_dxn * dxn_draw;
 }
 
 void checkInputs(const StereoRig& estimate, const StereoRig& reference, const StereoAccuracyOptions& options) {
@@ -109,7 +141,7 @@ std::vector<Sample> visibleSamples(const EstimatedRectification& est, const Ster
         s.left_pixel = Eigen::Vector2d((i + 0.5) * w / options.grid_cols - 0.5, (j + 0.5) * h / options.grid_rows - 0.5);
         s.depth_index = static_cast<int>(d);
         Residual unused;
-        if (sampleResidual(est, reference, s, options.depths_m[d], true, &unused)) samples.push_back(s);
+        if (sampleResidual(est, reference, s, options.depths_m[d], &unused)) samples.push_back(s);
       }
   return samples;
 }
@@ -176,7 +208,7 @@ StereoAccuracy evaluateStereoAccuracy(const StereoRig& estimate, const StereoRig
   for (const Sample& s : visibleSamples(est, reference, options)) {
     const double depth = options.depths_m[s.depth_index];
     Residual r;
-    sampleResidual(est, reference, s, depth, true, &r);
+    sampleResidual(est, reference, s, depth, &r);
     acc.add(s.depth_index, asVector(r, std::isinf(depth)).cwiseAbs2());
   }
   return acc.result();
@@ -195,24 +227,51 @@ StereoAccuracy predictStereoAccuracy(const StereoRig& estimate, const RigCovaria
   for (int k = 0; k < kRigParameterCount; ++k)
     if (covariance(k, k) > 0) free.push_back(k);
   const int n = static_cast<int>(samples.size()), m = static_cast<int>(free.size());
+  // Per sample at the estimate: the left rectified pixel (the reference moves only the right
+  // one), the ray, the right raw pixel and the derivative of its rectification. A moved
+  // reference moves the right raw pixel by a small fraction of a pixel: its rectification is
+  // linear there, which spares a Newton undistortion per sample and parameter.
+  struct Base {
+    Eigen::Vector2d left_rect, right_raw, right_rect;
+    Eigen::Vector3d ray;
+    Eigen::Matrix2d right_jacobian;
+  };
+  std::vector<Base> base(n);
+  for (int s = 0; s < n; ++s) {
+    Base& b = base[s];
+    b.left_rect = EstimatedRectification::rectify(estimate.left, est.H1, samples[s].left_pixel);
+    b.ray = leftRay(estimate, samples[s].left_pixel);
+    rightPixelOf(estimate, b.ray, options.depths_m[samples[s].depth_index], &b.right_raw);
+    b.right_rect = EstimatedRectification::rectify(estimate.right, est.H2, b.right_raw);
+    b.right_jacobian = rightRectificationJacobian(est, b.right_raw);
+  }
   // Jacobians of (misalignment, bias, depth error) of every sample over the free parameters.
   Eigen::MatrixXd J[3];
   for (Eigen::MatrixXd& j : J) j = Eigen::MatrixXd::Zero(n, m);
-  const RigParameters base = rigParameters(estimate);
+  const RigParameters parameters = rigParameters(estimate);
   for (int c = 0; c < m; ++c) {
     const int k = free[c];
     const double step = std::sqrt(covariance(k, k));
-    RigParameters plus = base, minus = base;
-    plus[k] += step;
-    minus[k] -= step;
-    const StereoRig ref_plus = rigFromParameters(plus, estimate), ref_minus = rigFromParameters(minus, estimate);
-    for (int s = 0; s < n; ++s) {
-      const double depth = options.depths_m[samples[s].depth_index];
-      Residual a, b;
-      sampleResidual(est, ref_plus, samples[s], depth, false, &a);
-      sampleResidual(est, ref_minus, samples[s], depth, false, &b);
-      const Eigen::Vector3d d = (asVector(a, std::isinf(depth)) - asVector(b, std::isinf(depth))) / (2.0 * step);
-      for (int q = 0; q < 3; ++q) J[q](s, c) = d[q];
+    const bool moves_left_ray = k < 9;  // the reference left camera's intrinsics
+    for (int side = 0; side < 2; ++side) {
+      RigParameters moved = parameters;
+      moved[k] += side == 0 ? step : -step;
+      const StereoRig reference = rigFromParameters(moved, estimate);
+      for (int s = 0; s < n; ++s) {
+        const Base& b = base[s];
+        const double depth = options.depths_m[samples[s].depth_index];
+        const Eigen::Vector3d ray = moves_left_ray ? leftRay(reference, samples[s].left_pixel) : b.ray;
+        Eigen::Vector2d right_raw;
+        rightPixelOf(reference, ray, depth, &right_raw);
+        const Eigen::Vector2d right_rect = b.right_rect + b.right_jacobian * (right_raw - b.right_raw);
+        const Residual r = residualOf(est, b.left_rect, right_rect, ray, depth);
+        const Eigen::Vector3d v = asVector(r, std::isinf(depth));
+        if (side == 0) {
+          for (int q = 0; q < 3; ++q) J[q](s, c) = v[q];
+        } else {
+          for (int q = 0; q < 3; ++q) J[q](s, c) = (J[q](s, c) - v[q]) / (2.0 * step);
+        }
+      }
     }
   }
   Eigen::MatrixXd C(m, m);

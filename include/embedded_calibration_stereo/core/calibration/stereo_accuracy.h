@@ -33,10 +33,12 @@
 // distributed as its covariance says. The per-sample residuals (m, b, e) are linear in the
 // rig's parameter error for errors of this size, so their Jacobian J_s with respect to the
 // reference's parameters (central differences, one step of one standard deviation per
-// parameter, the reference starting at the estimate and the samples held) gives each sample's
-// variance J_s C J_s^T, and the expected RMS is sqrt(mean over samples of those). Deterministic
-// and cheap (one rectification, 2 evaluations per estimated parameter), unlike Monte Carlo
-// sampling, which needs hundreds of rectifications for a few per cent and depends on a seed.
+// parameter, the reference starting at the estimate and the samples held; the rectification of
+// the right pixel, which such a step moves by a fraction of a pixel, linearised) gives each
+// sample's variance J_s C J_s^T, and the expected RMS is sqrt(mean over samples of those).
+// Deterministic and cheap (one rectification, 2 projections per sample and estimated
+// parameter), unlike Monte Carlo sampling, which needs hundreds of rectifications for a few per
+// cent and depends on a seed.
 //
 // Threading: free functions without shared state; safe from any thread.
 #include <Eigen/Core>
