@@ -6,13 +6,28 @@ namespace {
 
 class SimFrameSource : public FrameSource {
  public:
-  SimFrameSource(std::shared_ptr<ecs::SimRig> sim, SharedLightLevel light_level)
-      : sim_(std::move(sim)), light_level_(std::move(light_level)) {}
+  SimFrameSource(std::shared_ptr<ecs::SimRig> sim, SharedLightLevel light_level, SharedLightCommand light_command)
+      : sim_(std::move(sim)), light_level_(std::move(light_level)), light_command_(std::move(light_command)) {}
 
   bool grab(double time_s, StereoFrame* frame, std::string*) override {
-    const double level = light_level_ ? light_level_->load() : 0.0;
+    ecs::SimRenderRequest request;
+    request.time_s = time_s;
+    request.light_level = light_level_ ? light_level_->load() : 0.0;
     // The frame counter seeds the noise: a replay of the same run renders the same images.
-    auto truth = std::make_shared<ecs::SimFrame>(sim_->render(time_s, level, ++frame_count_));
+    request.noise_seed = ++frame_count_;
+    if (light_command_) {
+      // The light backend is applied just before each grab: a new switch count means the
+      // command changed for this frame.
+      const uint64_t command = light_command_->load();
+      if (command >> 1 != switches_seen_) {
+        switches_seen_ = command >> 1;
+        switch_time_s_ = time_s;
+      }
+      request.has_light_command = true;
+      request.light_command.on = (command & 1) != 0;
+      request.light_command.switch_time_s = switch_time_s_;
+    }
+    auto truth = std::make_shared<ecs::SimFrame>(sim_->render(request));
     frame->left = truth->left;
     frame->right = truth->right;
     frame->encoding = sim_->config().encoding;
@@ -29,14 +44,22 @@ class SimFrameSource : public FrameSource {
  private:
   std::shared_ptr<ecs::SimRig> sim_;
   SharedLightLevel light_level_;
+  SharedLightCommand light_command_;  // null: the schedule's level only
   uint64_t frame_count_ = 0;
+  uint64_t switches_seen_ = 0;
+  double switch_time_s_ = -1e300;  // never switched: off since forever
 };
 
 }  // namespace
 
 std::unique_ptr<FrameSource> makeSimFrameSource(std::shared_ptr<ecs::SimRig> sim,
                                                 SharedLightLevel light_level) {
-  return std::make_unique<SimFrameSource>(std::move(sim), std::move(light_level));
+  return std::make_unique<SimFrameSource>(std::move(sim), std::move(light_level), nullptr);
+}
+
+std::unique_ptr<FrameSource> makeSimFrameSource(std::shared_ptr<ecs::SimRig> sim, SharedLightLevel light_level,
+                                                SharedLightCommand light_command) {
+  return std::make_unique<SimFrameSource>(std::move(sim), std::move(light_level), std::move(light_command));
 }
 
 }  // namespace embedded_calibration_stereo
