@@ -3,7 +3,9 @@
 #include <image_geometry/stereo_camera_model.h>
 #include <sensor_msgs/CameraInfo.h>
 #include <sensor_msgs/Image.h>
+#include <nav_msgs/Odometry.h>
 #include <std_srvs/SetBool.h>
+#include <tf2_msgs/TFMessage.h>
 
 #include <set>
 
@@ -159,6 +161,45 @@ TEST(DriverSim, GroundTruthAndDriftService) {
   drift.request.reset = true;
   ASSERT_TRUE(ros::service::call("sim/set_drift", drift));
   EXPECT_TRUE(drift.response.success);
+}
+
+// The head pose truth: on ground_truth/head_pose and /tf under the ground_truth/ prefix, stamped
+// as the images. The default scenario's head is static: the world frame is the left optical
+// frame at t = 0, so every pose is the identity and the velocity zero.
+TEST(DriverSim, GroundTruthHeadPose) {
+  ros::NodeHandle nh;
+  ASSERT_TRUE(waitForDriver(20.0));
+  Collector<sensor_msgs::Image> left(nh, "left/image_raw");
+  Collector<nav_msgs::Odometry> pose(nh, "ground_truth/head_pose");
+  Collector<tf2_msgs::TFMessage> tf(nh, "/tf");
+  ASSERT_TRUE(pose.waitForCount(10, 5.0)) << "no ground_truth/head_pose";
+  ASSERT_TRUE(tf.waitForCount(10, 5.0)) << "no /tf";
+  ASSERT_TRUE(left.waitForCount(10, 5.0));
+  std::set<ros::Time> image_stamps;
+  for (const auto& m : left.snapshot()) image_stamps.insert(m->header.stamp);
+  size_t matched = 0;
+  for (const auto& m : pose.snapshot()) {
+    EXPECT_EQ(m->header.frame_id, "ground_truth/world");
+    EXPECT_EQ(m->child_frame_id, "ground_truth/stereo_left_optical_frame");
+    matched += image_stamps.count(m->header.stamp);
+    const auto& p = m->pose.pose;
+    EXPECT_NEAR(p.position.x, 0.0, 1e-12);
+    EXPECT_NEAR(p.position.y, 0.0, 1e-12);
+    EXPECT_NEAR(p.position.z, 0.0, 1e-12);
+    EXPECT_NEAR(std::abs(p.orientation.w), 1.0, 1e-12);
+    const auto& v = m->twist.twist;
+    EXPECT_NEAR(std::abs(v.linear.x) + std::abs(v.linear.y) + std::abs(v.linear.z), 0.0, 1e-12);
+    EXPECT_NEAR(std::abs(v.angular.x) + std::abs(v.angular.y) + std::abs(v.angular.z), 0.0, 1e-12);
+  }
+  // Subscriptions start at slightly different frames: most, not all, poses have their image.
+  EXPECT_GE(matched + 2, pose.snapshot().size()) << "head poses not stamped as the images";
+  for (const auto& m : tf.snapshot())
+    for (const auto& t : m->transforms) {
+      EXPECT_EQ(t.header.frame_id, "ground_truth/world");
+      EXPECT_EQ(t.child_frame_id, "ground_truth/stereo_left_optical_frame");
+      EXPECT_NEAR(t.transform.translation.z, 0.0, 1e-12);
+      EXPECT_NEAR(std::abs(t.transform.rotation.w), 1.0, 1e-12);
+    }
 }
 
 int main(int argc, char** argv) {

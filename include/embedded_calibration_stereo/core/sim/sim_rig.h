@@ -78,6 +78,8 @@ struct SimFrame {
   cv::Mat left_depth;               // CV_32FC1, z in metres per raw left pixel; +inf = no hit
   StereoObservation observations;   // every visible corner, true raw pixel positions
   StereoRig truth;                  // the calibration in force for this frame
+  // Head pose: the left optical frame in the world frame (identity for a static head).
+  Eigen::Isometry3d world_from_left = Eigen::Isometry3d::Identity();
 };
 
 class SimRig {
