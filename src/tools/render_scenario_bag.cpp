@@ -28,6 +28,8 @@
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
+#include <fstream>
+#include <iterator>
 #include <set>
 #include <stdexcept>
 #include <string>
@@ -159,7 +161,18 @@ struct DriftStep {
 // The drift script: a YAML list (or a map whose `drift` key is the list) of sim/set_drift
 // requests with their scene time. Unknown keys are refused, so a misspelt field is not ignored.
 std::vector<DriftStep> loadDriftScript(const std::string& path) {
-  cv::FileStorage fs = ecs::openYaml(path);
+  std::ifstream in(path);
+  if (!in.good()) throw ecs::ConfigError(path, "file not found or not readable");
+  std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  // OpenCV's YAML reader wants its "%YAML:1.0" directive; a hand-written script has none.
+  if (text.rfind("%YAML", 0) != 0) text = "%YAML:1.0\n---\n" + text;
+  cv::FileStorage fs;
+  try {
+    fs.open(text, cv::FileStorage::READ | cv::FileStorage::MEMORY | cv::FileStorage::FORMAT_YAML);
+  } catch (const cv::Exception& e) {
+    throw ecs::ConfigError(path, std::string("malformed YAML: ") + e.err);
+  }
+  if (!fs.isOpened()) throw ecs::ConfigError(path, "malformed YAML");
   cv::FileNode list = fs.root();
   std::string base = "drift";
   if (list.isMap()) list = list["drift"];
@@ -259,10 +272,10 @@ int run(const Options& o) {
     bag.open(active, rosbag::bagmode::Write);
     if (o.lz4) bag.setCompression(rosbag::compression::LZ4);
   }
-  std::printf("render_scenario_bag: %s, %.1f s at %.1f fps (%lld frames), light window every %s, %zu drift steps\n",
-              o.config.c_str(), o.seconds, fps, static_cast<long long>(frames),
-              o.schedule.period_s > 0.0 ? (std::to_string(o.schedule.period_s) + " s").c_str() : "never",
-              drift.size());
+  char light_text[64] = "no light windows";
+  if (o.schedule.period_s > 0.0) std::snprintf(light_text, sizeof(light_text), "a light window every %g s", o.schedule.period_s);
+  std::printf("render_scenario_bag: %s, %g s at %g fps (%lld frames), %s, %zu drift steps\n", o.config.c_str(),
+              o.seconds, fps, static_cast<long long>(frames), light_text, drift.size());
   std::fflush(stdout);
 
   const auto wall_start = std::chrono::steady_clock::now();
@@ -339,8 +352,7 @@ int run(const Options& o) {
     }
   }
   if (!snapshot_written)
-    throw std::runtime_error("--snapshot: no settled light-on frame in " + std::to_string(o.seconds) +
-                             " s (set --period)");
+    throw std::runtime_error("--snapshot: no settled light-on frame in the rendered time (set --period)");
   if (!write_bag) return 0;
   bag.close();
   std::filesystem::rename(active, o.out);

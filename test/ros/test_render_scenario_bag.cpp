@@ -113,7 +113,9 @@ TEST(RenderScenarioBag, WritesTheDriversTopicsWithTheScheduleAndTheDrift) {
     } else if (auto info = m.instantiate<sensor_msgs::CameraInfo>()) {
       EXPECT_EQ(info->header.stamp, expected_stamp);
       if (m.getTopic() == "/stereo/ground_truth/left/camera_info") truth_fx.push_back(info->K[0]);
-      if (m.getTopic() == "/stereo/left/camera_info") EXPECT_EQ(info->K[0], config.rig.left.fx);  // nominal
+      if (m.getTopic() == "/stereo/left/camera_info") {
+        EXPECT_EQ(info->K[0], config.rig.left.fx);  // nominal
+      }
     } else if (auto odom = m.instantiate<nav_msgs::Odometry>()) {
       EXPECT_EQ(odom->header.frame_id, "ground_truth/world");
       EXPECT_EQ(odom->child_frame_id, "ground_truth/stereo_left_optical_frame");
@@ -162,6 +164,7 @@ TEST(RenderScenarioBag, RefusesBadInputNamingIt) {
       {"drift refused by the rig", "--config " + kConfig, "- {time_s: 0, thermal_rate_deg_per_s: 5}\n",
        {"drift[0]", "thermal_rate_deg_per_s must be finite and within"}},
       {"drift not a list", "--config " + kConfig, "focal_scale: 1.01\n", {"drift", "missing"}},
+      {"drift not YAML", "--config " + kConfig, "- {time_s: [1, \n", {"drift.yaml", "malformed YAML"}},
   };
   for (const Case& c : cases) {
     std::string args = c.args + out;
