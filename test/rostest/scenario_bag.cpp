@@ -6,7 +6,8 @@
 // end. It checks, from the bag's own calibration_mode (the windows it holds):
 //  - the PatternTracker publishes observations in the light windows after the one it teaches
 //    itself at (the window at 0 s has no light-off frame before it, the next one teaches);
-//  - the OnlineCalibrator publishes one calibration/status per tracked window;
+//  - the OnlineCalibrator publishes one calibration/status per tracked window, each a solve of
+//    at least min_frames (5) frames;
 //  - Disparity produces frames for at least half the bag's images;
 //  - /rosout holds no ERROR or FATAL from the nodelet manager of the replay (our nodelets) nor
 //    from rosbag play, while it does hold the nodelets' INFO messages (the log pipe works).
@@ -140,6 +141,7 @@ TEST(ScenarioBag, ReplaysThroughTheGraphWithoutErrors) {
     tracked += per_window[w] >= 5u;
   }
   EXPECT_EQ(solved.size(), tracked) << "one calibration/status per tracked window";
+  for (const auto& s : solved) EXPECT_GE(s->frames_used, 5u) << "a status without a solve: " << s->reason;
   EXPECT_GE(disparity_frames, left_images / 2) << "disparity did not keep up with the replay";
 
   // ---- /rosout --------------------------------------------------------------------------
