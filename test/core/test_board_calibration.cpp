@@ -101,7 +101,7 @@ TEST(BoardCalibration, SimulatedPosesAreSeenWholeAndDetectedAccurately) {
   EXPECT_LT(d.detection_rms_px, 0.06);
 }
 
-TEST(BoardCalibration, RecoversTheTruthWithinIssueBounds) {
+TEST(BoardCalibration, RecoversTheTruthWithinTheAccuracyTargets) {
   const DataSet& d = dataSet();
   const BoardCalibrationResult r =
       calibrateStereoBoard(d.board, cv::Size(d.truth.left.width, d.truth.left.height), d.detections,

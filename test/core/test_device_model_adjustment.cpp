@@ -202,7 +202,7 @@ TEST(DeviceModel, NoisyFramesAreWithinTheReportedStddevsAndBelowTheFreePoseBound
 
 // The calibrator's coverage bound, and its k1 bound at 10 frames, over 20 trials; a fresh nominal
 // device (1 mm, 0.5 deg off) per trial.
-TEST(DeviceModel, IssueBoundsThatAreMetOverTwentyTrials) {
+TEST(DeviceModel, AccuracyTargetsThatAreMetOverTwentyTrials) {
   const SimScenario s;
   for (int frames : {1, 10}) {
     int inside = 0, total = 0;
