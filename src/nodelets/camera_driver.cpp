@@ -231,7 +231,7 @@ class CameraDriverNodelet : public nodelet::Nodelet {
     mode_pub_.publish(mode);
     if (frame.truth) {
       // Every frame, subscribed or not: the velocity is a difference over consecutive frames.
-      head_pose_->update(frame.truth->world_from_left, frame.scene_time_s);
+      head_pose_->update(frame.truth->world_from_left, frame.truth->time_s);
       publishGroundTruth(*frame.truth, left_header, right_header);
     }
     ++frames_published_;

@@ -25,7 +25,6 @@ class SimFrameSource : public FrameSource {
     frame->encoding = sim_->config().encoding;
     frame->light_on.reset();
     frame->truth = std::move(truth);
-    frame->scene_time_s = scene_time_s;
     return true;
   }
 

@@ -291,7 +291,7 @@ int run(const Options& o) {
     const ecs::LightState light = schedule.step(time_s);
     if (light.light_on && light.switched) ++light_windows;
     const ecs::SimFrame frame = sim.render(time_s, light.light_level, static_cast<uint64_t>(k + 1));
-    head_pose.update(frame.world_from_left, time_s);
+    head_pose.update(frame.world_from_left, frame.time_s);
     if (!snapshot_written && light.light_on && light.settled) {
       writeSnapshot(o.snapshot, frame);
       snapshot_written = true;

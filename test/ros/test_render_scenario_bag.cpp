@@ -20,6 +20,7 @@
 #include "embedded_calibration_stereo/CalibrationMode.h"
 #include "embedded_calibration_stereo/StereoPatternObservation.h"
 #include "embedded_calibration_stereo/core/sim/sim_rig.h"
+#include "embedded_calibration_stereo/core/sim/trajectory.h"
 
 namespace {
 
@@ -139,6 +140,68 @@ TEST(RenderScenarioBag, WritesTheDriversTopicsWithTheScheduleAndTheDrift) {
   ASSERT_EQ(truth_fx.size(), 20u);
   for (size_t k = 0; k < truth_fx.size(); ++k)
     EXPECT_NEAR(truth_fx[k], (k < 15 ? 1.0 : 1.03) * config.rig.left.fx, 1e-9) << "frame " << k;
+}
+
+// A moving head (drive_photo): ground_truth/head_pose and /tf of frame k are the scenario's
+// trajectory evaluated here at k / fps, and the twist is the velocity of that trajectory
+// half-way through the frame period (by a fine central difference in the world, independent of
+// the tool's frame-to-frame difference).
+TEST(RenderScenarioBag, HeadPoseFollowsTheTrajectory) {
+  const std::string scenario = std::string(ECS_SOURCE_DIR) + "/config/drive_photo.yaml";
+  const ecs::SimRigConfig config = ecs::loadSimRigConfig(scenario);
+  ASSERT_FALSE(config.trajectory.isStatic()) << "drive_photo should move";
+  TempDir dir;
+  ASSERT_FALSE(dir.path.empty());
+  const std::string bag_path = dir.path + "/drive.bag";
+  const double fps = 10.0;
+  const Result r = runTool("--config " + scenario + " --out " + bag_path + " --seconds 1.5 --fps 10 --start 50");
+  ASSERT_EQ(r.status, 0) << r.output;
+  rosbag::Bag bag(bag_path, rosbag::bagmode::Read);
+  size_t k = 0, tf_count = 0;
+  double largest_move_m = 0.0;
+  for (const rosbag::MessageInstance& m :
+       rosbag::View(bag, rosbag::TopicQuery(std::vector<std::string>{"/stereo/ground_truth/head_pose", "/tf"}))) {
+    if (auto tf = m.instantiate<tf2_msgs::TFMessage>()) {
+      ASSERT_EQ(tf->transforms.size(), 1u);
+      const double t = (tf->transforms[0].header.stamp - ros::Time(50.0)).toSec();
+      const Eigen::Isometry3d truth = ecs::trajectoryPose(config.trajectory, t);
+      const auto& tr = tf->transforms[0].transform.translation;
+      EXPECT_NEAR((Eigen::Vector3d(tr.x, tr.y, tr.z) - truth.translation()).norm(), 0.0, 1e-9) << "tf at " << t;
+      ++tf_count;
+      continue;
+    }
+    const auto odom = m.instantiate<nav_msgs::Odometry>();
+    ASSERT_TRUE(odom);
+    const double t = k / fps;
+    EXPECT_NEAR((odom->header.stamp - ros::Time(50.0)).toSec(), t, 1e-6);
+    const Eigen::Isometry3d truth = ecs::trajectoryPose(config.trajectory, t);
+    const auto& p = odom->pose.pose;
+    const Eigen::Quaterniond q(p.orientation.w, p.orientation.x, p.orientation.y, p.orientation.z);
+    EXPECT_NEAR((Eigen::Vector3d(p.position.x, p.position.y, p.position.z) - truth.translation()).norm(), 0.0, 1e-9)
+        << "frame " << k;
+    EXPECT_LT(q.angularDistance(Eigen::Quaterniond(truth.rotation())), 1e-9) << "frame " << k;
+    largest_move_m = std::max(largest_move_m, (truth.translation() - ecs::trajectoryPose(config.trajectory, 0.0).translation()).norm());
+    if (k > 0) {
+      // Velocity half-way through the period, in the body frame there.
+      const double mid = t - 0.5 / fps, h = 1e-4;
+      const Eigen::Isometry3d a = ecs::trajectoryPose(config.trajectory, mid - h);
+      const Eigen::Isometry3d b = ecs::trajectoryPose(config.trajectory, mid + h);
+      const Eigen::Isometry3d c = ecs::trajectoryPose(config.trajectory, mid);
+      const Eigen::Vector3d v_body = c.rotation().transpose() * (b.translation() - a.translation()) / (2 * h);
+      const Eigen::AngleAxisd turn(a.rotation().transpose() * b.rotation());
+      const Eigen::Vector3d w_body = turn.axis() * turn.angle() / (2 * h);
+      const auto& tw = odom->twist.twist;
+      // A mean over the period against the midpoint value: second order in the period.
+      EXPECT_NEAR((Eigen::Vector3d(tw.linear.x, tw.linear.y, tw.linear.z) - v_body).norm(), 0.0, 0.02 + 0.02 * v_body.norm())
+          << "frame " << k << ": linear velocity, expected " << v_body.transpose();
+      EXPECT_NEAR((Eigen::Vector3d(tw.angular.x, tw.angular.y, tw.angular.z) - w_body).norm(), 0.0, 0.02 + 0.05 * w_body.norm())
+          << "frame " << k << ": angular velocity, expected " << w_body.transpose();
+    }
+    ++k;
+  }
+  EXPECT_EQ(k, 15u);
+  EXPECT_EQ(tf_count, 15u);
+  EXPECT_GT(largest_move_m, 0.5) << "the head hardly moved: the comparison would be weak";
 }
 
 TEST(RenderScenarioBag, RefusesBadInputNamingIt) {

@@ -25,7 +25,6 @@ struct StereoFrame {
   std::string encoding;                // sensor_msgs encoding of left and right
   std::optional<bool> light_on;        // recorded light state (files backend with a CSV)
   std::shared_ptr<const ecs::SimFrame> truth;  // sim backend only
-  double scene_time_s = 0.0;           // sim backend: the scene time the frame was rendered at
 };
 
 class FrameSource {

@@ -4,13 +4,17 @@
 #include <cmath>
 #include <limits>
 #include <opencv2/core/hal/intrin.hpp>
+#include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
+
+#include "embedded_calibration_stereo/core/geometry/config_error.h"
 
 namespace ecs {
 namespace sim {
 
 namespace {
 constexpr size_t kMaxMipLevels = 8;
+constexpr double kMaxTextureSide = 4096.0;  // texels: bounds a photograph's memory (64 MB)
 }  // namespace
 
 cv::Mat makeNoiseTexture(int width, int height, int seed) {
@@ -45,22 +49,63 @@ cv::Mat makeNoiseTexture(int width, int height, int seed) {
   return texture;
 }
 
-SceneRenderer::SceneRenderer(const SimSceneConfig& config) : enabled_(config.enabled) {
-  if (!enabled_) return;
-  for (const ScenePlane& p : config.planes) {
-    TexturedPlane tp;
-    tp.plane = p;
-    tp.normal = p.u_axis.cross(p.v_axis).normalized();
+cv::Mat loadPhotoTexture(const std::string& path) {
+  const cv::Mat grey = cv::imread(path, cv::IMREAD_GRAYSCALE);
+  if (grey.empty()) return cv::Mat();
+  cv::Mat texture;
+  grey.convertTo(texture, CV_32F, 239.0 / 255.0, 16.0);
+  return texture;
+}
+
+SceneRenderer::TexturedPlane SceneRenderer::makeTexturedPlane(const ScenePlane& p, const std::string& key) {
+  TexturedPlane tp;
+  tp.plane = p;
+  tp.normal = p.u_axis.cross(p.v_axis).normalized();
+  if (p.texture_image.empty()) {
     const int w = static_cast<int>(std::ceil(p.width_m / p.texel_m)) + 2;
     const int h = static_cast<int>(std::ceil(p.height_m / p.texel_m)) + 2;
     tp.mips.push_back(makeNoiseTexture(w, h, p.texture_seed));
-    while (tp.mips.size() < kMaxMipLevels && std::min(tp.mips.back().cols, tp.mips.back().rows) >= 4) {
-      cv::Mat next;
-      cv::pyrDown(tp.mips.back(), next);
-      tp.mips.push_back(next);
+    tp.inv_texel_u = tp.inv_texel_v = static_cast<float>(1.0 / p.texel_m);
+  } else {
+    cv::Mat photo = loadPhotoTexture(p.texture_image);
+    if (photo.empty()) throw ConfigError(key + ".texture.image", "cannot read the image '" + p.texture_image + "'");
+    const bool tiled = p.texture_tile_m.x() > 0 && p.texture_tile_m.y() > 0;
+    const double tile_w = tiled ? p.texture_tile_m.x() : p.width_m;
+    const double tile_h = tiled ? p.texture_tile_m.y() : p.height_m;
+    const double copies_x = tiled ? std::ceil(p.width_m / tile_w) : 1.0;
+    const double copies_y = tiled ? std::ceil(p.height_m / tile_h) : 1.0;
+    // Bound the texture's memory: shrink the photograph until its copies fit kMaxTextureSide.
+    const double shrink = std::max({1.0, copies_x * photo.cols / kMaxTextureSide, copies_y * photo.rows / kMaxTextureSide});
+    if (shrink > 1.0) {
+      cv::Mat small;
+      cv::resize(photo, small, cv::Size(std::max(1, static_cast<int>(photo.cols / shrink)),
+                                        std::max(1, static_cast<int>(photo.rows / shrink))), 0, 0, cv::INTER_AREA);
+      photo = small;
     }
-    planes_.push_back(tp);
+    tp.inv_texel_u = static_cast<float>(photo.cols / tile_w);
+    tp.inv_texel_v = static_cast<float>(photo.rows / tile_h);
+    tp.texel_offset = 0.5f;
+    if (tiled && (copies_x > 1 || copies_y > 1)) {
+      cv::Mat repeated;
+      cv::repeat(photo, static_cast<int>(copies_y), static_cast<int>(copies_x), repeated);
+      photo = repeated;
+    }
+    tp.mips.push_back(photo);
   }
+  while (tp.mips.size() < kMaxMipLevels && std::min(tp.mips.back().cols, tp.mips.back().rows) >= 4) {
+    cv::Mat next;
+    cv::pyrDown(tp.mips.back(), next);
+    tp.mips.push_back(next);
+  }
+  return tp;
+}
+
+SceneRenderer::SceneRenderer(const SimSceneConfig& config) : enabled_(config.enabled) {
+  if (!enabled_) return;
+  for (size_t i = 0; i < config.planes.size(); ++i)
+    planes_.push_back(makeTexturedPlane(config.planes[i], "scene.planes[" + std::to_string(i) + "]"));
+  for (size_t i = 0; i < config.movers.size(); ++i)
+    movers_.push_back(makeTexturedPlane(config.movers[i].panel, "scene.movers[" + std::to_string(i) + "]"));
 }
 
 namespace {
@@ -190,35 +235,60 @@ void castRowSegment(const PlaneInCamera& pc, int plane_index, const float* x, co
 
 }  // namespace
 
-void SceneRenderer::render(const CameraRays& rays, const Eigen::Isometry3d& rig_from_camera,
-                           cv::Mat* radiance, cv::Mat* depth_z) const {
+void SceneRenderer::render(const CameraRays& rays, const Eigen::Isometry3d& world_from_camera,
+                           const Eigen::Isometry3d& depth_from_world,
+                           const std::vector<Eigen::Isometry3d>& world_from_movers, cv::Mat* radiance,
+                           cv::Mat* depth_z) const {
   const int W = rays.camera.width, H = rays.camera.height;
   radiance->create(H, W, CV_32F);
   if (depth_z) depth_z->create(H, W, CV_32F);
-  const Eigen::Matrix3d R = rig_from_camera.linear();
-  const Eigen::Vector3d C = rig_from_camera.translation();
-  std::vector<PlaneInCamera> planes;
+  const Eigen::Matrix3d R = world_from_camera.linear();
+  const Eigen::Vector3d C = world_from_camera.translation();
+  // The fixed planes, then the movers placed at this frame's poses (same textures).
+  std::vector<const TexturedPlane*> sources;
+  std::vector<ScenePlane> placed;
+  std::vector<Eigen::Vector3d> normals;
   for (const TexturedPlane& tp : planes_) {
+    sources.push_back(&tp);
+    placed.push_back(tp.plane);
+    normals.push_back(tp.normal);
+  }
+  for (size_t i = 0; i < movers_.size(); ++i) {
+    const TexturedPlane& tp = movers_[i];
+    const Eigen::Isometry3d& pose = world_from_movers.at(i);
+    ScenePlane p = tp.plane;
+    p.origin = pose * tp.plane.origin;
+    p.u_axis = pose.linear() * tp.plane.u_axis;
+    p.v_axis = pose.linear() * tp.plane.v_axis;
+    sources.push_back(&tp);
+    placed.push_back(p);
+    normals.push_back(pose.linear() * tp.normal);
+  }
+  std::vector<PlaneInCamera> planes;
+  const Eigen::Isometry3d camera_from_world = world_from_camera.inverse();
+  for (size_t i = 0; i < placed.size(); ++i) {
+    const ScenePlane& plane = placed[i];
     PlaneInCamera pc;
-    const Eigen::Vector3d n = R.transpose() * tp.normal;
-    const Eigen::Vector3d u = R.transpose() * tp.plane.u_axis;
-    const Eigen::Vector3d v = R.transpose() * tp.plane.v_axis;
-    for (int i = 0; i < 3; ++i) {
-      pc.n[i] = static_cast<float>(n[i]);
-      pc.u[i] = static_cast<float>(u[i]);
-      pc.v[i] = static_cast<float>(v[i]);
+    const Eigen::Vector3d n = R.transpose() * normals[i];
+    const Eigen::Vector3d u = R.transpose() * plane.u_axis;
+    const Eigen::Vector3d v = R.transpose() * plane.v_axis;
+    for (int k = 0; k < 3; ++k) {
+      pc.n[k] = static_cast<float>(n[k]);
+      pc.u[k] = static_cast<float>(u[k]);
+      pc.v[k] = static_cast<float>(v[k]);
     }
-    pc.numerator = static_cast<float>(tp.normal.dot(tp.plane.origin - C));
-    pc.a0 = static_cast<float>((C - tp.plane.origin).dot(tp.plane.u_axis));
-    pc.b0 = static_cast<float>((C - tp.plane.origin).dot(tp.plane.v_axis));
-    pc.width = static_cast<float>(tp.plane.width_m);
-    pc.height = static_cast<float>(tp.plane.height_m);
-    pc.box = planeBoundingBox(tp.plane, rays, rig_from_camera.inverse());
+    pc.numerator = static_cast<float>(normals[i].dot(plane.origin - C));
+    pc.a0 = static_cast<float>((C - plane.origin).dot(plane.u_axis));
+    pc.b0 = static_cast<float>((C - plane.origin).dot(plane.v_axis));
+    pc.width = static_cast<float>(plane.width_m);
+    pc.height = static_cast<float>(plane.height_m);
+    pc.box = planeBoundingBox(plane, rays, camera_from_world);
     planes.push_back(pc);
   }
-  std::vector<float> inv_texel;
-  for (const TexturedPlane& tp : planes_) inv_texel.push_back(static_cast<float>(1.0 / tp.plane.texel_m));
-  const Eigen::Vector3d rz = R.transpose().col(2);  // rig z of the ray direction, per unit t
+  // Depth z of a hit C + t R m: e.(C + t R m) + d with (e, d) the z row of depth_from_world.
+  const Eigen::Vector3d e = depth_from_world.linear().row(2).transpose();
+  const double zC = e.dot(C) + depth_from_world.translation().z();
+  const Eigen::Vector3d rz = R.transpose() * e;  // z of the ray direction, per unit t
   const float inf = std::numeric_limits<float>::infinity();
 
   cv::parallel_for_(cv::Range(0, H), [&](const cv::Range& range) {
@@ -253,13 +323,15 @@ void SceneRenderer::render(const CameraRays& rays, const Eigen::Isometry3d& rig_
         }
         const int next_col = col + 1 < W ? col + 1 : col - 1;
         const float col_sign = col + 1 < W ? 1.0f : -1.0f;
+        const TexturedPlane& tp = *sources[p];
         const float footprint =
             pixelFootprint(planes[p], best_t[col], x[col], y[col], col_sign * (x[next_col] - x[col]),
                            col_sign * (y[next_col] - y[col]), row_sign * (xn[col] - x[col]),
-                           row_sign * (yn[col] - y[col])) * inv_texel[p];
-        out[col] = sampleTrilinear(planes_[p].mips, best_a[col] * inv_texel[p], best_b[col] * inv_texel[p], footprint);
+                           row_sign * (yn[col] - y[col])) * std::max(tp.inv_texel_u, tp.inv_texel_v);
+        out[col] = sampleTrilinear(tp.mips, best_a[col] * tp.inv_texel_u - tp.texel_offset,
+                                   best_b[col] * tp.inv_texel_v - tp.texel_offset, footprint);
         if (depth)
-          depth[col] = static_cast<float>(C.z() + best_t[col] * (rz.x() * x[col] + rz.y() * y[col] + rz.z()));
+          depth[col] = static_cast<float>(zC + best_t[col] * (rz.x() * x[col] + rz.y() * y[col] + rz.z()));
       }
     }
   });

@@ -1,7 +1,8 @@
 #pragma once
-// The simulated rig's 3D scene: textured planar rectangles ray cast per pixel. Each plane
-// carries a procedural multi-scale noise texture defined ON the plane (generated once from its
-// texture_seed), so both cameras see the same surface and stereo matching has real detail.
+// The simulated rig's 3D scene: textured planar rectangles ray cast per pixel, fixed in the world
+// or moving (movers, placed per frame). Each plane carries a texture defined ON the plane: a
+// procedural multi-scale noise (generated once from its texture_seed) or a photograph (read
+// once as grey), so both cameras see the same surface and stereo matching has real detail.
 // Textures are sampled from mip levels chosen by each pixel's footprint on the plane (trilinear):
 // a far or grazing surface (the floor) would otherwise alias, and a frame re-rendered after a
 // zoom or a knock would not match the earlier frame resampled, as it does through a real lens.
@@ -19,25 +20,38 @@ namespace sim {
 
 class SceneRenderer {
  public:
+  // Throws ConfigError (naming e.g. scene.planes[2].texture.image) when a photograph cannot be read.
   explicit SceneRenderer(const SimSceneConfig& config);
 
   // Scene radiance (grey levels 0..255, CV_32F) seen through each pixel of `rays` by a camera
-  // at rig_from_camera; 0 where no plane is hit. When depth_z is non-null it receives the z
-  // coordinate of each hit in the rig (left optical) frame, +inf where nothing is hit.
-  void render(const CameraRays& rays, const Eigen::Isometry3d& rig_from_camera,
+  // at world_from_camera, movers placed at world_from_movers (one pose per mover); 0 where no
+  // plane is hit. When depth_z is non-null it receives the z coordinate of each hit in the
+  // frame depth_from_world maps to (the left optical frame), +inf where nothing is hit.
+  void render(const CameraRays& rays, const Eigen::Isometry3d& world_from_camera,
+              const Eigen::Isometry3d& depth_from_world, const std::vector<Eigen::Isometry3d>& world_from_movers,
               cv::Mat* radiance, cv::Mat* depth_z) const;
+
+  size_t moverCount() const { return movers_.size(); }
 
  private:
   struct TexturedPlane {
     ScenePlane plane;
     Eigen::Vector3d normal;
-    // Mip levels of the texture (CV_32F grey levels): level 0 has one texel per texel_m, texel
-    // (i, j) at (i, j) * texel_m; level k+1 is level k low-passed and halved (cv::pyrDown).
+    // Mip levels of the texture (CV_32F grey levels): level 0 has texel (i, j) at plane
+    // coordinates ((i + texel_offset) / inv_texel_u, (j + texel_offset) / inv_texel_v): noise
+    // at texel corners (offset 0), photographs at pixel centres (offset 0.5); level k+1 is
+    // level k low-passed and halved (cv::pyrDown).
     std::vector<cv::Mat> mips;
+    float inv_texel_u = 1.0f, inv_texel_v = 1.0f, texel_offset = 0.0f;
   };
+  static TexturedPlane makeTexturedPlane(const ScenePlane& plane, const std::string& key);
   bool enabled_;
-  std::vector<TexturedPlane> planes_;
+  std::vector<TexturedPlane> planes_, movers_;
 };
+
+// A photograph as a texture: grey levels mapped linearly to [16, 255] (no surface is perfectly
+// black: zero radiance means "no hit"), CV_32F; empty when the file cannot be read.
+cv::Mat loadPhotoTexture(const std::string& path);
 
 // Multi-scale value noise (grey levels, mean 128) of the given size, deterministic for a seed.
 cv::Mat makeNoiseTexture(int width, int height, int seed);

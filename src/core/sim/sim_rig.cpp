@@ -70,16 +70,46 @@ std::string checkRequest(const DriftRequest& r) {
   return "";
 }
 
-// What one camera sees that only changes with its truth (intrinsics and pose), cached between
-// frames: rendering it is the expensive part, composing a frame from it is cheap.
+// What one camera sees, cached between frames: rendering it is the expensive part, composing a
+// frame from it is cheap. The device layer changes only with the camera's truth (intrinsics and
+// pose in the rig); the scene layer also with the head's and the movers' poses.
 struct CameraLayers {
   bool valid = false;
   PinholeCamera camera;
   Eigen::Isometry3d rig_from_camera = Eigen::Isometry3d::Identity();
+  std::vector<double> scene_key;  // poses the scene layer was rendered for (see ScenePoses)
   cv::Mat scene;     // CV_32F transmittance * scene radiance, grey levels
   cv::Mat scene_u8;  // the same, saturated to 8 bit in the output encoding
   cv::Mat device;    // CV_32F device radiance, fraction of full scale
-  cv::Mat depth;     // CV_32F z of the scene hit in the rig frame (left camera only)
+  cv::Mat depth;     // CV_32F z of the scene hit in the left optical frame (left camera only)
+};
+
+// Where the scene is seen from during one exposure: per sample (the first at the frame's time,
+// the others earlier in the exposure) the camera's and every mover's pose in the world.
+struct ScenePoses {
+  std::vector<Eigen::Isometry3d> world_from_camera;
+  std::vector<std::vector<Eigen::Isometry3d>> world_from_movers;
+  Eigen::Isometry3d left_from_world = Eigen::Isometry3d::Identity();  // at the frame's time
+
+  std::vector<double> key() const {
+    std::vector<double> k;
+    const auto add = [&](const Eigen::Isometry3d& pose) {
+      k.insert(k.end(), pose.matrix().data(), pose.matrix().data() + 16);
+    };
+    for (size_t i = 0; i < world_from_camera.size(); ++i) {
+      add(world_from_camera[i]);
+      for (const Eigen::Isometry3d& m : world_from_movers[i]) add(m);
+    }
+    return k;
+  }
+  bool samplesDiffer() const {
+    for (size_t i = 1; i < world_from_camera.size(); ++i) {
+      if (!(world_from_camera[i].matrix().array() == world_from_camera[0].matrix().array()).all()) return true;
+      for (size_t m = 0; m < world_from_movers[i].size(); ++m)
+        if (!(world_from_movers[i][m].matrix().array() == world_from_movers[0][m].matrix().array()).all()) return true;
+    }
+    return false;
+  }
 };
 
 void toEncoding(const cv::Mat& mono, const std::string& encoding, cv::Mat* out) {
@@ -105,39 +135,57 @@ struct SimRig::Impl {
   CameraLayers layers[2];
 
   void updateLayers(int index, const SimRigConfig& config, const std::vector<VirtualBoard>& boards,
-                    const PinholeCamera& camera, const Eigen::Isometry3d& rig_from_camera);
+                    const PinholeCamera& camera, const Eigen::Isometry3d& rig_from_camera,
+                    const ScenePoses& poses);
   void compose(const CameraLayers& layers, double device_gain, double noise_sigma, uint64_t seed,
                const std::string& encoding, cv::Mat* image) const;
 };
 
 void SimRig::Impl::updateLayers(int index, const SimRigConfig& config,
                                 const std::vector<VirtualBoard>& boards, const PinholeCamera& camera,
-                                const Eigen::Isometry3d& rig_from_camera) {
+                                const Eigen::Isometry3d& rig_from_camera, const ScenePoses& poses) {
   CameraLayers& l = layers[index];
   const bool same_pose = (l.rig_from_camera.matrix().array() == rig_from_camera.matrix().array()).all();
-  if (l.valid && same_pose && sim::sameIntrinsics(l.camera, camera)) return;
+  const bool same_device = l.valid && same_pose && sim::sameIntrinsics(l.camera, camera);
+  std::vector<double> scene_key = poses.key();
+  if (same_device && scene_key == l.scene_key) return;
   if (!rays_valid[index] || !sim::sameIntrinsics(rays[index].camera, camera)) {
     rays[index] = sim::computeCameraRays(camera);
     rays_valid[index] = true;
   }
   // Fresh buffers each time: frames handed out earlier never alias the cache.
   CameraLayers fresh;
-  scene.render(rays[index], rig_from_camera, &fresh.scene, index == 0 ? &fresh.depth : nullptr);
+  const size_t samples = poses.samplesDiffer() ? poses.world_from_camera.size() : 1;
+  scene.render(rays[index], poses.world_from_camera[0], poses.left_from_world, poses.world_from_movers[0],
+               &fresh.scene, index == 0 ? &fresh.depth : nullptr);
+  if (samples > 1) {
+    // Motion blur: the mean radiance over the exposure; depth stays the frame time's.
+    cv::Mat sub;
+    for (size_t k = 1; k < samples; ++k) {
+      scene.render(rays[index], poses.world_from_camera[k], poses.left_from_world, poses.world_from_movers[k],
+                   &sub, nullptr);
+      fresh.scene += sub;
+    }
+    fresh.scene *= 1.0 / static_cast<double>(samples);
+  }
   fresh.scene *= config.optics.transmittance;
-  sim::renderDevice(boards, rays[index], rig_from_camera, config.optics.device_white,
-                    config.optics.device_black, &fresh.device);
   // The lens blurs the sum of both light paths; by linearity each layer is blurred alone.
   // A symmetric PSF moves no corner and no edge.
-  if (config.optics.psf_sigma_px > 0) {
-    const double sigma = config.optics.psf_sigma_px;
-    cv::GaussianBlur(fresh.scene, fresh.scene, cv::Size(), sigma, 0, cv::BORDER_REPLICATE);
-    cv::GaussianBlur(fresh.device, fresh.device, cv::Size(), sigma, 0, cv::BORDER_REPLICATE);
+  const double sigma = config.optics.psf_sigma_px;
+  if (sigma > 0) cv::GaussianBlur(fresh.scene, fresh.scene, cv::Size(), sigma, 0, cv::BORDER_REPLICATE);
+  if (same_device) {
+    fresh.device = l.device;  // read-only from here on
+  } else {
+    sim::renderDevice(boards, rays[index], rig_from_camera, config.optics.device_white,
+                      config.optics.device_black, &fresh.device);
+    if (sigma > 0) cv::GaussianBlur(fresh.device, fresh.device, cv::Size(), sigma, 0, cv::BORDER_REPLICATE);
   }
   cv::Mat mono;
   fresh.scene.convertTo(mono, CV_8U);
   toEncoding(mono, config.encoding, &fresh.scene_u8);
   fresh.camera = camera;
   fresh.rig_from_camera = rig_from_camera;
+  fresh.scene_key = std::move(scene_key);
   fresh.valid = true;
   l = fresh;
 }
@@ -255,9 +303,32 @@ SimFrame SimRig::render(double time_s, double light_level, uint64_t noise_seed) 
   const double level = std::min(std::max(light_level, 0.0), 1.0);
   const double device_gain = level * config_.optics.reflectance * 255.0;
 
+  frame.time_s = time_s;
+  frame.world_from_left = trajectoryPose(config_.trajectory, time_s);
+  // Exposure samples, evenly over [t - exposure, t], the first at t.
+  const int samples = config_.motion_blur.exposure_s > 0 ? config_.motion_blur.samples : 1;
+  std::vector<double> sample_times(samples, time_s);
+  for (int k = 1; k < samples; ++k)
+    sample_times[k] = time_s - config_.motion_blur.exposure_s * k / (samples - 1);
+  ScenePoses poses[2];
+  const Eigen::Isometry3d rig_from_camera[2] = {Eigen::Isometry3d::Identity(), frame.truth.leftFromRight()};
+  for (double t : sample_times) {
+    const Eigen::Isometry3d world_from_left = t == time_s ? frame.world_from_left : trajectoryPose(config_.trajectory, t);
+    // The static world is the rig frame: keep the camera poses exactly as they are.
+    const bool identity = world_from_left.matrix() == Eigen::Matrix4d::Identity();
+    std::vector<Eigen::Isometry3d> movers;
+    for (const SimMover& m : config_.scene.movers) movers.push_back(trajectoryPose(m.trajectory, t));
+    for (int c = 0; c < 2; ++c) {
+      poses[c].world_from_camera.push_back(identity ? rig_from_camera[c] : world_from_left * rig_from_camera[c]);
+      poses[c].world_from_movers.push_back(movers);
+    }
+  }
+  if (!(frame.world_from_left.matrix() == Eigen::Matrix4d::Identity()))
+    poses[0].left_from_world = poses[1].left_from_world = frame.world_from_left.inverse();
+
   std::lock_guard<std::mutex> lock(impl_->render_mutex);
-  impl_->updateLayers(0, config_, boards_, frame.truth.left, Eigen::Isometry3d::Identity());
-  impl_->updateLayers(1, config_, boards_, frame.truth.right, frame.truth.leftFromRight());
+  impl_->updateLayers(0, config_, boards_, frame.truth.left, rig_from_camera[0], poses[0]);
+  impl_->updateLayers(1, config_, boards_, frame.truth.right, rig_from_camera[1], poses[1]);
   const uint64_t seed = mixSeed(noise_seed);
   impl_->compose(impl_->layers[0], device_gain, config_.noise_sigma, seed, config_.encoding, &frame.left);
   impl_->compose(impl_->layers[1], device_gain, config_.noise_sigma, mixSeed(seed ^ 0x5bd1e995ULL),

@@ -1,6 +1,8 @@
 // Loading and validation of the simulated rig's configuration (config/sim_rig.yaml).
 #include <cmath>
 #include <limits>
+#include <opencv2/imgcodecs.hpp>
+#include <set>
 #include <utility>
 
 #include "embedded_calibration_stereo/core/geometry/config_error.h"
@@ -13,8 +15,39 @@ namespace {
 
 // Largest texture side in texels: bounds the memory a plane can take (4096^2 floats = 64 MB).
 constexpr double kMaxTexels = 4096.0;
+constexpr int kMaxBlurSamples = 64;
+// Where Debian's python3-skimage installs its sample photographs ("skimage:NAME" in a config).
+const char* const kSkimageData = "/usr/lib/python3/dist-packages/skimage/data/";
 
 using Problem = std::pair<std::string, std::string>;  // (parameter path, what is wrong)
+
+Problem planeProblem(const ScenePlane& p, const std::string& key) {
+  if (!p.origin.allFinite()) return {key + ".origin", "must be finite"};
+  if (!(std::abs(p.u_axis.norm() - 1.0) < 1e-6)) return {key + ".u_axis", "must be a unit vector"};
+  if (!(std::abs(p.v_axis.norm() - 1.0) < 1e-6)) return {key + ".v_axis", "must be a unit vector"};
+  if (!(std::abs(p.u_axis.dot(p.v_axis)) < 1e-6)) return {key + ".v_axis", "must be orthogonal to u_axis"};
+  if (!(p.width_m > 0) || !std::isfinite(p.width_m)) return {key + ".width_m", "must be > 0"};
+  if (!(p.height_m > 0) || !std::isfinite(p.height_m)) return {key + ".height_m", "must be > 0"};
+  if (!(p.texel_m > 0) || !std::isfinite(p.texel_m)) return {key + ".texel_m", "must be > 0"};
+  // (A photograph is shrunk to fit instead.)
+  if (p.texture_image.empty() && (p.width_m / p.texel_m > kMaxTexels || p.height_m / p.texel_m > kMaxTexels))
+    return {key + ".texel_m", "too small: the texture would exceed 4096 texels per side"};
+  if (!p.texture_image.empty()) {
+    const Eigen::Vector2d& tile = p.texture_tile_m;
+    if (!(tile.allFinite() && ((tile.x() == 0 && tile.y() == 0) || (tile.x() > 0 && tile.y() > 0))))
+      return {key + ".texture.tile_m", "must be two sizes > 0 m (or absent: the image is stretched over the plane)"};
+    if (!cv::haveImageReader(p.texture_image))
+      return {key + ".texture.image", "cannot read the image '" + p.texture_image + "' (missing or not an image)"};
+  }
+  return {"", ""};
+}
+
+Problem trajectoryProblem(const SimTrajectory& t, const std::string& key) {
+  const std::string e = t.validate();
+  if (e.empty()) return {"", ""};
+  const size_t colon = e.find(": ");
+  return {key + "." + e.substr(0, colon), colon == std::string::npos ? e : e.substr(colon + 2)};
+}
 
 Problem findProblem(const SimRigConfig& c) {
   std::string e = c.rig.validate();
@@ -24,18 +57,23 @@ Problem findProblem(const SimRigConfig& c) {
   if (c.rig.left.width != c.rig.right.width || c.rig.left.height != c.rig.right.height)
     return {"rig.right", "must have the same image size as rig.left"};
   for (size_t i = 0; i < c.scene.planes.size(); ++i) {
-    const ScenePlane& p = c.scene.planes[i];
-    const std::string key = "scene.planes[" + std::to_string(i) + "]";
-    if (!p.origin.allFinite()) return {key + ".origin", "must be finite"};
-    if (!(std::abs(p.u_axis.norm() - 1.0) < 1e-6)) return {key + ".u_axis", "must be a unit vector"};
-    if (!(std::abs(p.v_axis.norm() - 1.0) < 1e-6)) return {key + ".v_axis", "must be a unit vector"};
-    if (!(std::abs(p.u_axis.dot(p.v_axis)) < 1e-6)) return {key + ".v_axis", "must be orthogonal to u_axis"};
-    if (!(p.width_m > 0) || !std::isfinite(p.width_m)) return {key + ".width_m", "must be > 0"};
-    if (!(p.height_m > 0) || !std::isfinite(p.height_m)) return {key + ".height_m", "must be > 0"};
-    if (!(p.texel_m > 0) || !std::isfinite(p.texel_m)) return {key + ".texel_m", "must be > 0"};
-    if (p.width_m / p.texel_m > kMaxTexels || p.height_m / p.texel_m > kMaxTexels)
-      return {key + ".texel_m", "too small: the texture would exceed 4096 texels per side"};
+    const Problem p = planeProblem(c.scene.planes[i], "scene.planes[" + std::to_string(i) + "]");
+    if (!p.first.empty()) return p;
   }
+  for (size_t i = 0; i < c.scene.movers.size(); ++i) {
+    const std::string key = "scene.movers[" + std::to_string(i) + "]";
+    Problem p = planeProblem(c.scene.movers[i].panel, key);
+    if (!p.first.empty()) return p;
+    p = trajectoryProblem(c.scene.movers[i].trajectory, key + ".trajectory");
+    if (!p.first.empty()) return p;
+  }
+  const Problem head = trajectoryProblem(c.trajectory, "trajectory");
+  if (!head.first.empty()) return head;
+  if (!(c.motion_blur.samples >= 1 && c.motion_blur.samples <= kMaxBlurSamples))
+    return {"motion_blur.samples", "must be in [1, 64] (1 = no motion blur)"};
+  if (!(std::isfinite(c.motion_blur.exposure_s) && c.motion_blur.exposure_s >= 0.0 &&
+        c.motion_blur.exposure_s <= 1.0 / c.fps))
+    return {"motion_blur.exposure_s", "must be in [0, 1/fps] s (an exposure cannot outlast the frame)"};
   const SimOpticsConfig& o = c.optics;
   const std::pair<const char*, double> unit_values[] = {{"optics.transmittance", o.transmittance},
                                                         {"optics.reflectance", o.reflectance},
@@ -69,7 +107,101 @@ double readRequired(const cv::FileNode& node, const std::string& key, const std:
   return v;
 }
 
-ScenePlane loadPlane(const cv::FileNode& node, const std::string& path, int index) {
+// A string value; OpenCV's YAML reader keeps a trailing "# comment" in unquoted strings: cut it off.
+std::string readString(const cv::FileNode& node, const std::string& key, const std::string& path,
+                       const std::string& what) {
+  const cv::FileNode n = node[key];
+  const std::string full = path.empty() ? key : path + "." + key;
+  if (n.empty() || n.isNone()) throw ConfigError(full, "missing (" + what + ")");
+  if (!n.isString()) throw ConfigError(full, "must be a string (" + what + ")");
+  std::string value = static_cast<std::string>(n);
+  const size_t comment = value.find(" #");
+  if (comment != std::string::npos) value = value.substr(0, comment);
+  value.erase(value.find_last_not_of(" \t") + 1);
+  return value;
+}
+
+// Refuses keys a section does not know (a misspelt key would otherwise be silently ignored).
+void checkKeys(const cv::FileNode& node, const std::string& path, const std::set<std::string>& known) {
+  for (const std::string& key : node.keys())
+    if (!known.count(key)) {
+      std::string list;
+      for (const std::string& k : known) list += (list.empty() ? "" : ", ") + k;
+      throw ConfigError(path + "." + key, "unknown key (known here: " + list + ")");
+    }
+}
+
+std::string resolveImagePath(const std::string& value, const std::string& config_dir) {
+  const std::string prefix = "skimage:";
+  if (value.compare(0, prefix.size(), prefix) == 0) return kSkimageData + value.substr(prefix.size());
+  if (!value.empty() && value[0] == '/') return value;
+  return config_dir + value;
+}
+
+Eigen::Vector3d readVector3Or(const cv::FileNode& node, const std::string& key, const std::string& path,
+                              const Eigen::Vector3d& fallback) {
+  const cv::FileNode n = node[key];
+  if (n.empty() || n.isNone()) return fallback;
+  return readVector3(node, key, path);
+}
+
+SimTrajectory loadTrajectory(const cv::FileNode& node, const std::string& path) {
+  SimTrajectory t;
+  if (node.empty() || node.isNone()) return t;
+  if (!node.isMap()) throw ConfigError(path, "must be a map (kind: static, drive, handheld or waypoints)");
+  const std::string kind = readString(node, "kind", path, "static, drive, handheld or waypoints");
+  std::set<std::string> known = {"kind", "start", "loop_s"};
+  if (kind == "static") {
+    t.kind = SimTrajectory::Kind::kStatic;
+  } else if (kind == "drive") {
+    t.kind = SimTrajectory::Kind::kDrive;
+    known.insert({"speed_m_s", "yaw_rate_amplitude_deg_s", "yaw_period_s", "bump_amplitude_m",
+                  "pitch_amplitude_deg", "roll_amplitude_deg", "bump_period_s"});
+  } else if (kind == "handheld") {
+    t.kind = SimTrajectory::Kind::kHandheld;
+    known.insert({"translation_amplitude_m", "translation_period_s", "rotation_amplitude_deg", "rotation_period_s"});
+  } else if (kind == "waypoints") {
+    t.kind = SimTrajectory::Kind::kWaypoints;
+    known.insert({"interpolation", "waypoints"});
+  } else {
+    throw ConfigError(path + ".kind", "must be static, drive, handheld or waypoints, not '" + kind + "'");
+  }
+  checkKeys(node, path, known);
+  if (!node["start"].empty() && !node["start"].isNone()) t.start = loadPose(node["start"], path + ".start");
+  t.loop_s = readDouble(node, "loop_s", path, t.loop_s);
+  t.speed_m_s = readDouble(node, "speed_m_s", path, t.speed_m_s);
+  t.yaw_rate_amplitude_deg_s = readDouble(node, "yaw_rate_amplitude_deg_s", path, t.yaw_rate_amplitude_deg_s);
+  t.yaw_period_s = readDouble(node, "yaw_period_s", path, t.yaw_period_s);
+  t.bump_amplitude_m = readDouble(node, "bump_amplitude_m", path, t.bump_amplitude_m);
+  t.pitch_amplitude_deg = readDouble(node, "pitch_amplitude_deg", path, t.pitch_amplitude_deg);
+  t.roll_amplitude_deg = readDouble(node, "roll_amplitude_deg", path, t.roll_amplitude_deg);
+  t.bump_period_s = readDouble(node, "bump_period_s", path, t.bump_period_s);
+  t.translation_amplitude_m = readVector3Or(node, "translation_amplitude_m", path, t.translation_amplitude_m);
+  t.translation_period_s = readVector3Or(node, "translation_period_s", path, t.translation_period_s);
+  t.rotation_amplitude_deg = readVector3Or(node, "rotation_amplitude_deg", path, t.rotation_amplitude_deg);
+  t.rotation_period_s = readVector3Or(node, "rotation_period_s", path, t.rotation_period_s);
+  if (t.kind == SimTrajectory::Kind::kWaypoints) {
+    if (!node["interpolation"].empty()) {
+      const std::string interpolation = readString(node, "interpolation", path, "linear or spline");
+      if (interpolation != "linear" && interpolation != "spline")
+        throw ConfigError(path + ".interpolation", "must be linear or spline, not '" + interpolation + "'");
+      t.spline = interpolation == "spline";
+    }
+    const cv::FileNode list = node["waypoints"];
+    if (list.empty() || !list.isSeq())
+      throw ConfigError(path + ".waypoints", "must be a list of {t_s, rotation_deg, translation_m}");
+    for (int i = 0; i < static_cast<int>(list.size()); ++i) {
+      const std::string wp = path + ".waypoints[" + std::to_string(i) + "]";
+      SimWaypoint w;
+      w.t_s = readRequired(list[i], "t_s", wp);
+      w.pose = loadPose(list[i], wp);
+      t.waypoints.push_back(w);
+    }
+  }
+  return t;
+}
+
+ScenePlane loadPlane(const cv::FileNode& node, const std::string& path, int index, const std::string& config_dir) {
   if (!node.isMap()) throw ConfigError(path, "must be a map (origin, u_axis, v_axis, width_m, height_m)");
   ScenePlane p;
   p.origin = readVector3(node, "origin", path);
@@ -86,6 +218,23 @@ ScenePlane loadPlane(const cv::FileNode& node, const std::string& path, int inde
   p.height_m = readRequired(node, "height_m", path);
   p.texture_seed = static_cast<int>(readDouble(node, "texture_seed", path, index + 1));
   p.texel_m = readDouble(node, "texel_m", path, p.texel_m);
+  const cv::FileNode texture = node["texture"];
+  if (!texture.empty() && !texture.isNone()) {
+    const std::string tp = path + ".texture";
+    if (!texture.isMap()) throw ConfigError(tp, "must be a map (image, tile_m)");
+    checkKeys(texture, tp, {"image", "tile_m"});
+    p.texture_image = resolveImagePath(readString(texture, "image", tp, "an image file"), config_dir);
+    const cv::FileNode tile = texture["tile_m"];
+    if (!tile.empty() && !tile.isNone()) {
+      if (!tile.isSeq() || tile.size() != 2 || !(tile[0].isReal() || tile[0].isInt()) ||
+          !(tile[1].isReal() || tile[1].isInt()))
+        throw ConfigError(tp + ".tile_m", "must be [width, height] in metres");
+      p.texture_tile_m = Eigen::Vector2d(static_cast<double>(tile[0]), static_cast<double>(tile[1]));
+    }
+    // Checked here too (validate() checks it again) so the error names the key as written.
+    if (!cv::haveImageReader(p.texture_image))
+      throw ConfigError(tp + ".image", "cannot read the image '" + p.texture_image + "' (missing or not an image)");
+  }
   return p;
 }
 
@@ -98,6 +247,8 @@ std::string SimRigConfig::validate() const {
 
 SimRigConfig loadSimRigConfig(const std::string& path) {
   cv::FileStorage fs = openYaml(path);
+  const size_t slash = path.find_last_of('/');
+  const std::string config_dir = slash == std::string::npos ? std::string() : path.substr(0, slash + 1);
   const cv::FileNode root = fs.root();
   SimRigConfig c;
   c.rig = loadStereoRig(root["rig"], "rig");
@@ -111,8 +262,31 @@ SimRigConfig loadSimRigConfig(const std::string& path) {
     if (!planes.empty() && !planes.isNone()) {
       if (!planes.isSeq()) throw ConfigError("scene.planes", "must be a list");
       for (int i = 0; i < static_cast<int>(planes.size()); ++i)
-        c.scene.planes.push_back(loadPlane(planes[i], "scene.planes[" + std::to_string(i) + "]", i));
+        c.scene.planes.push_back(loadPlane(planes[i], "scene.planes[" + std::to_string(i) + "]", i, config_dir));
     }
+    const cv::FileNode movers = scene["movers"];
+    if (!movers.empty() && !movers.isNone()) {
+      if (!movers.isSeq()) throw ConfigError("scene.movers", "must be a list");
+      for (int i = 0; i < static_cast<int>(movers.size()); ++i) {
+        const std::string key = "scene.movers[" + std::to_string(i) + "]";
+        SimMover m;
+        // Movers' default noise seeds follow the planes' so every surface differs.
+        m.panel = loadPlane(movers[i], key, static_cast<int>(c.scene.planes.size()) + i, config_dir);
+        m.trajectory = loadTrajectory(movers[i]["trajectory"], key + ".trajectory");
+        c.scene.movers.push_back(m);
+      }
+    }
+  }
+  c.trajectory = loadTrajectory(root["trajectory"], "trajectory");
+  const cv::FileNode blur = root["motion_blur"];
+  if (!blur.empty() && !blur.isNone()) {
+    if (!blur.isMap()) throw ConfigError("motion_blur", "must be a map (exposure_s, samples)");
+    checkKeys(blur, "motion_blur", {"exposure_s", "samples"});
+    c.motion_blur.exposure_s = readDouble(blur, "exposure_s", "motion_blur", c.motion_blur.exposure_s);
+    const double samples = readDouble(blur, "samples", "motion_blur", c.motion_blur.samples);
+    if (samples != std::floor(samples) || samples < 1 || samples > kMaxBlurSamples)
+      throw ConfigError("motion_blur.samples", "must be an integer in [1, 64] (1 = no motion blur)");
+    c.motion_blur.samples = static_cast<int>(samples);
   }
   const cv::FileNode optics = root["optics"];
   if (!optics.empty() && !optics.isNone()) {

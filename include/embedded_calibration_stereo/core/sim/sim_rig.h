@@ -5,8 +5,12 @@
 //   I = PSF * (transmittance * I_scene + light_level * reflectance * I_device) + noise
 // with anti-aliased boards (analytic pixel-area averaging) and a symmetric Gaussian lens PSF, so
 // that rendered corners agree with the ground-truth corner positions to 0.02 px.
-// Per-camera layers (scene, device, depth) are cached and re-rendered only when that camera's
-// truth changes (zoom, drift; every frame while a thermal rate is set).
+// The head (cameras and device, one rigid body) may move through the world along a trajectory
+// and panels may move in it; the scene is rendered with world_from_camera = world_from_left(t) *
+// left_from_camera, the device stays fixed to the rig.
+// Per-camera layers are cached: the device layer is re-rendered only when that camera's truth
+// changes (zoom, drift; every frame while a thermal rate is set), the scene layer also when the
+// head or a mover moves.
 //
 // Threading: render() may run on one thread while setDrift()/truthAt() run on another;
 // the drift state is guarded by a mutex and render() works on a snapshot of it. render() itself
@@ -22,10 +26,12 @@
 #include "embedded_calibration_stereo/core/geometry/calibration_device.h"
 #include "embedded_calibration_stereo/core/geometry/observation.h"
 #include "embedded_calibration_stereo/core/geometry/stereo_rig.h"
+#include "embedded_calibration_stereo/core/sim/trajectory.h"
 
 namespace ecs {
 
-// A textured planar rectangle of the scene, in the rig (left optical) frame.
+// A textured planar rectangle of the scene, in the world frame (a mover's: in its own frame).
+// The texture is multi-scale noise from texture_seed, or a photograph (texture_image).
 struct ScenePlane {
   Eigen::Vector3d origin = Eigen::Vector3d(0, 0, 5);  // one corner of the rectangle
   Eigen::Vector3d u_axis = Eigen::Vector3d::UnitX();  // unit, along the width
@@ -33,11 +39,32 @@ struct ScenePlane {
   double width_m = 1.0, height_m = 1.0;
   int texture_seed = 1;
   double texel_m = 0.005;  // size of one texture cell on the plane
+  // A photograph instead of the noise: path of an image file (read as grey at run time), and
+  // the metric size of one copy of it on the plane: (0, 0) = stretched over the whole plane,
+  // otherwise tiled from the origin.
+  std::string texture_image;
+  Eigen::Vector2d texture_tile_m = Eigen::Vector2d::Zero();
+};
+
+// A textured panel moving through the world (a person crossing, a door swinging): `panel` is
+// given in the mover's own frame, placed in the world by world_from_mover = trajectory(t).
+struct SimMover {
+  ScenePlane panel;
+  SimTrajectory trajectory;
 };
 
 struct SimSceneConfig {
   bool enabled = true;      // false: an empty (black) scene, e.g. for corner accuracy tests
   std::vector<ScenePlane> planes;  // nearest hit wins; the first is usually a background wall
+  std::vector<SimMover> movers;    // occlude the planes like any other plane
+};
+
+// Motion blur of the scene under head or mover motion: the scene layer is the mean of `samples`
+// renders evenly spread over the exposure [t - exposure_s, t]. samples = 1: off. The device is
+// not blurred: it moves with the cameras.
+struct SimMotionBlurConfig {
+  double exposure_s = 0.0;
+  int samples = 1;
 };
 
 struct SimOpticsConfig {
@@ -53,13 +80,17 @@ struct SimRigConfig {
   CalibrationDevice device;
   SimSceneConfig scene;
   SimOpticsConfig optics;
+  SimTrajectory trajectory;    // head: world_from_left(t); static = the world is the rig frame
+  SimMotionBlurConfig motion_blur;
   double noise_sigma = 1.0;    // Gaussian sensor noise, grey levels (0..255)
   double fps = 30.0;
   std::string encoding = "mono8";  // "mono8" or "bgr8"
   std::string validate() const;
 };
 
-// Loads and validates config/sim_rig.yaml; throws ConfigError naming the parameter.
+// Loads and validates config/sim_rig.yaml; throws ConfigError naming the parameter. Relative
+// texture image paths resolve against the file's folder; "skimage:NAME" names an image of
+// scikit-image's data folder (/usr/lib/python3/dist-packages/skimage/data/NAME).
 SimRigConfig loadSimRigConfig(const std::string& path);
 
 // Mirrors SetRigDrift.srv.
@@ -75,11 +106,12 @@ struct DriftRequest {
 struct SimFrame {
   cv::Mat left, right;              // CV_8UC1 (mono8) or CV_8UC3 (bgr8)
   cv::Mat left_scene, right_scene;  // transmittance * scene, no device, no noise; same type
-  cv::Mat left_depth;               // CV_32FC1, z in metres per raw left pixel; +inf = no hit
+  cv::Mat left_depth;               // CV_32FC1, z in metres per raw left pixel in the left optical
+                                    // frame at time_s; +inf = no hit
   StereoObservation observations;   // every visible corner, true raw pixel positions
   StereoRig truth;                  // the calibration in force for this frame
-  // Head pose: the left optical frame in the world frame (identity for a static head).
-  Eigen::Isometry3d world_from_left = Eigen::Isometry3d::Identity();
+  Eigen::Isometry3d world_from_left = Eigen::Isometry3d::Identity();  // head pose at time_s
+  double time_s = 0.0;              // scene time of the frame (end of its exposure)
 };
 
 class SimRig {
