@@ -74,20 +74,21 @@ class CameraDriverNodelet : public nodelet::Nodelet {
     params_ = loadDriverParams(pnh, package_path.empty() ? "" : package_path + "/config/sim_rig.yaml");
 
     auto light_level = std::make_shared<std::atomic<double>>(0.0);
+    auto light_command = std::make_shared<std::atomic<uint64_t>>(0);  // for the sim's light response
     if (params_.backend == "sim") {
       try {
         sim_ = std::make_shared<ecs::SimRig>(ecs::loadSimRigConfig(params_.sim_config));
       } catch (const std::exception& e) {
         throw ecs::ConfigError("sim_config", "'" + params_.sim_config + "': " + e.what());
       }
-      source_ = makeSimFrameSource(sim_, light_level, params_.fps);
+      source_ = makeSimFrameSource(sim_, light_level, light_command, params_.fps);
     } else if (params_.backend == "files") {
       source_ = makeFilesFrameSource(params_.files);
     } else {
       source_ = makeV4l2FrameSource(params_.v4l2);
     }
     if (params_.light_backend == "sim") {
-      light_ = makeSimLight(light_level);
+      light_ = makeSimLight(light_level, light_command);
     } else if (params_.light_backend == "serial") {
       light_ = makeSerialLight(params_.serial);
     } else if (params_.light_backend == "gpio") {

@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <cstdio>
 #include <stdexcept>
 #include <tuple>
@@ -11,6 +12,7 @@
 
 #include "embedded_calibration_stereo/core/geometry/config_error.h"
 #include "embedded_calibration_stereo/core/calibration/observation_validator.h"
+#include "embedded_calibration_stereo/core/calibration/stereo_accuracy.h"
 #include "embedded_calibration_stereo/ros/conversions.h"
 #include "embedded_calibration_stereo/ros/parameter_reader.h"
 #include "embedded_calibration_stereo/ros/service_call.h"
@@ -25,6 +27,27 @@ void appendIntrinsics(const ecs::PinholeCamera& camera, const ecs::CameraStddev&
   values->insert(values->end(), camera.dist.begin(), camera.dist.end());
   *stddevs = {sd.fx, sd.fy, sd.cx, sd.cy};
   stddevs->insert(stddevs->end(), sd.dist.begin(), sd.dist.end());
+}
+
+// The predicted depth accuracy of a solve with a covariance; zeros otherwise (also for a rig
+// that cannot be rectified: such a one is never committed).
+void fillPredictedAccuracy(const ecs::BundleAdjustmentSummary& summary, const ecs::RectificationOptions& rectification,
+                           CalibrationStatus* status) {
+  ecs::StereoAccuracyOptions options;
+  options.rectification = rectification;
+  options.depths_m = {1.0, 2.0, 5.0, 10.0, std::numeric_limits<double>::infinity()};
+  for (size_t i = 0; i < status->predicted_depths_m.size(); ++i) status->predicted_depths_m[i] = options.depths_m[i];
+  if (!summary.success || !summary.covariance_ok) return;
+  ecs::StereoAccuracy predicted;
+  try {
+    predicted = ecs::predictStereoAccuracy(summary.rig, summary.rig_covariance, options);
+  } catch (const std::invalid_argument&) {
+    return;
+  }
+  status->predicted_misalignment_rms_px = predicted.misalignment_px.rms;
+  status->predicted_disparity_bias_rms_px = predicted.disparity_bias_px.rms;
+  for (size_t i = 0; i < status->predicted_depth_error_pct.size(); ++i)
+    status->predicted_depth_error_pct[i] = predicted.at_depth[i].depth_error_pct.rms;
 }
 
 }  // namespace
@@ -117,7 +140,8 @@ std::vector<std::string> observationDefects(const ecs::StereoObservation& observ
   return defects;
 }
 
-CalibrationStatus makeStatus(const ecs::BundleAdjustmentSummary& summary, const ecs::GateDecision& decision) {
+CalibrationStatus makeStatus(const ecs::BundleAdjustmentSummary& summary, const ecs::GateDecision& decision,
+                             const ecs::RectificationOptions& rectification) {
   CalibrationStatus status;
   status.header.stamp = ros::Time::now();
   status.accepted = decision.accepted;
@@ -133,6 +157,7 @@ CalibrationStatus makeStatus(const ecs::BundleAdjustmentSummary& summary, const 
   status.baseline_stddev_m = summary.baseline_stddev_m;
   status.rotation_stddev_deg = summary.rotation_stddev_deg;
   status.solve_ms = summary.solve_ms;
+  fillPredictedAccuracy(summary, rectification, &status);
   return status;
 }
 
@@ -188,7 +213,9 @@ CalibrationStatus CalibrationSession::solve(const std::vector<ecs::StereoObserva
   } else {
     decision = gate_.evaluate(candidate, have_in_force ? &in_force_fit : nullptr);
   }
-  CalibrationStatus status = makeStatus(candidate, decision);
+  ecs::RectificationOptions rectification;  // as toStereoCameraInfo() commits it
+  rectification.alpha = params_.rectification_alpha;
+  CalibrationStatus status = makeStatus(candidate, decision, rectification);
   status.epoch = epoch;
   if (decision.in_force_confirmed) {
     char rms[96];

@@ -11,15 +11,23 @@ class NoLight : public LightBackend {
 
 class SimLight : public LightBackend {
  public:
-  explicit SimLight(SharedLightLevel level) : level_(std::move(level)) {}
-  // The sim renders the ramping level, so the settling frames really show a half-lit device.
+  SimLight(SharedLightLevel level, SharedLightCommand command)
+      : level_(std::move(level)), command_(std::move(command)) {}
+  // The sim renders the ramping level, so the settling frames really show a half-lit device
+  // (or, with a light response model, the level that follows the command).
   bool apply(const ecs::LightState& state, std::string*) override {
     level_->store(state.light_level);
+    if (command_) {
+      if (state.switched) switches_ += 1;
+      command_->store(2 * switches_ + (state.light_on ? 1 : 0));
+    }
     return true;
   }
 
  private:
   SharedLightLevel level_;
+  SharedLightCommand command_;
+  uint64_t switches_ = 0;
 };
 
 int hexDigit(char c) {
@@ -71,7 +79,11 @@ bool unescapeBytes(const std::string& text, std::string* bytes, std::string* err
 std::unique_ptr<LightBackend> makeNoLight() { return std::make_unique<NoLight>(); }
 
 std::unique_ptr<LightBackend> makeSimLight(SharedLightLevel level) {
-  return std::make_unique<SimLight>(std::move(level));
+  return std::make_unique<SimLight>(std::move(level), nullptr);
+}
+
+std::unique_ptr<LightBackend> makeSimLight(SharedLightLevel level, SharedLightCommand command) {
+  return std::make_unique<SimLight>(std::move(level), std::move(command));
 }
 
 }  // namespace embedded_calibration_stereo

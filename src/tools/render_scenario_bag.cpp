@@ -280,6 +280,7 @@ int run(const Options& o) {
 
   const auto wall_start = std::chrono::steady_clock::now();
   size_t next_drift = 0, light_windows = 0, messages = 0;
+  double switch_time_s = -1e300;  // the light's last switch: never
   bool snapshot_written = o.snapshot.empty();
   for (int64_t k = 0; k < frames && (write_bag || !snapshot_written); ++k) {
     const double time_s = static_cast<double>(k) / fps;
@@ -290,7 +291,17 @@ int run(const Options& o) {
     }
     const ecs::LightState light = schedule.step(time_s);
     if (light.light_on && light.switched) ++light_windows;
-    const ecs::SimFrame frame = sim.render(time_s, light.light_level, static_cast<uint64_t>(k + 1));
+    // As the driver's sim light and sim source pass them: the schedule's level, and the command
+    // with the scene time of its last switch (for a scenario with a light response model).
+    if (light.switched) switch_time_s = time_s;
+    ecs::SimRenderRequest request;
+    request.time_s = time_s;
+    request.light_level = light.light_level;
+    request.noise_seed = static_cast<uint64_t>(k + 1);
+    request.has_light_command = true;
+    request.light_command.on = light.light_on;
+    request.light_command.switch_time_s = switch_time_s;
+    const ecs::SimFrame frame = sim.render(request);
     head_pose.update(frame.world_from_left, frame.time_s);
     if (!snapshot_written && light.light_on && light.settled) {
       writeSnapshot(o.snapshot, frame);

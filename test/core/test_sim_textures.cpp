@@ -255,7 +255,7 @@ TEST(SimScenarioConfig, ErrorsNameTheKey) {
       {"drive_photo.yaml", "{t_s: 4.2,", "{t_s: 0.0,", "scene.movers[0].trajectory.waypoints[1].t_s: must be later"},
       {"drive_photo.yaml", "interpolation: spline", "interpolation: cubic", "scene.movers[0].trajectory.interpolation"},
       {"drive_photo.yaml", "samples: 1", "samples: 0", "motion_blur.samples"},
-      {"drive_photo.yaml", "  exposure_s: 0.0\n", "  exposure_s: 0.05\n", "motion_blur.exposure_s: must be in [0, 1/fps]"},
+      {"drive_photo.yaml", "  exposure_s: 0.008\n", "  exposure_s: 0.05\n", "motion_blur.exposure_s: must be in [0, 1/fps]"},
       {"drive_photo.yaml", "tile_m: [1.5, 1.5]", "tile_m: [1.5, -1.5]", "scene.planes[0].texture.tile_m"},
       {"handheld_photo.yaml", "rotation_amplitude_deg: [3.0, 5.0, 2.0]", "rotation_amplitude_deg: [3.0, 90.0, 2.0]",
        "trajectory.rotation_amplitude_deg[1]: must be in [0, 45] deg"},

@@ -13,6 +13,7 @@
 #include "embedded_calibration_stereo/ros/calibration_file.h"
 #include "embedded_calibration_stereo/ros/calibration_session.h"
 #include "embedded_calibration_stereo/ros/conversions.h"
+#include "embedded_calibration_stereo/test_support/synthetic_observations.h"
 
 namespace ecsr = embedded_calibration_stereo;
 
@@ -126,6 +127,38 @@ TEST(MakeStatus, FillsEveryFieldInCameraInfoOrder) {
   EXPECT_EQ(status.rotation_stddev_deg, 0.02);
   EXPECT_EQ(status.solve_ms, 80);
   EXPECT_TRUE(ecsr::makeStatus(s, ecs::GateDecision{true, "ignored"}).reason.empty());
+}
+
+// The predicted depth accuracy comes from the solve's covariance: an uncertain rotation of the
+// right camera about x is a vertical misalignment of about f' times its sd, an uncertain
+// baseline a depth error of its relative sd at every depth; no covariance, no prediction.
+TEST(MakeStatus, CarriesThePredictedDepthAccuracyOfTheCovariance) {
+  ros::Time::init();
+  ecs::BundleAdjustmentSummary s;
+  s.success = true;
+  s.rig = ecs::makeSimLikeStereoRig();
+  const ecs::GateDecision accepted{true, ""};
+  const std::vector<double> depths = {1, 2, 5, 10};
+  auto status = ecsr::makeStatus(s, accepted);
+  EXPECT_EQ(std::vector<double>(status.predicted_depths_m.begin(), status.predicted_depths_m.end()), depths);
+  EXPECT_EQ(status.predicted_misalignment_rms_px, 0.0);  // no covariance
+  EXPECT_EQ(status.predicted_depth_error_pct[0], 0.0);
+
+  s.covariance_ok = true;
+  const double angle_sd = 0.05 * M_PI / 180.0;
+  s.rig_covariance(18, 18) = angle_sd * angle_sd;  // rotation vector x
+  status = ecsr::makeStatus(s, accepted);
+  const double f = s.rig.left.fx;
+  EXPECT_GT(status.predicted_misalignment_rms_px, 0.95 * f * angle_sd);
+  EXPECT_LT(status.predicted_misalignment_rms_px, 1.3 * f * angle_sd);
+  EXPECT_LT(status.predicted_disparity_bias_rms_px, 0.2 * status.predicted_misalignment_rms_px);
+
+  s.rig_covariance.setZero();
+  const double baseline_sd = 0.01 * s.rig.baseline();
+  s.rig_covariance(21, 21) = baseline_sd * baseline_sd;  // translation x: the baseline
+  status = ecsr::makeStatus(s, accepted);
+  EXPECT_LT(status.predicted_misalignment_rms_px, 0.01);
+  for (size_t d = 0; d < depths.size(); ++d) EXPECT_NEAR(status.predicted_depth_error_pct[d], 1.0, 0.05) << depths[d];
 }
 
 TEST(CarriesCalibration, TellsTheCommittedCalibrationFromAnother) {

@@ -19,6 +19,7 @@
 #include "embedded_calibration_stereo/core/geometry/calibration_device.h"
 #include "embedded_calibration_stereo/core/geometry/observation.h"
 #include "embedded_calibration_stereo/core/calibration/quality_gate.h"
+#include "embedded_calibration_stereo/core/depth/rectification.h"
 
 namespace embedded_calibration_stereo {
 
@@ -81,7 +82,10 @@ std::vector<std::string> observationDefects(const ecs::StereoObservation& observ
                                             const std::vector<ecs::VirtualBoard>& boards);
 
 // CalibrationStatus of a solve (every field filled; intrinsics fx, fy, cx, cy, k1, k2, p1, p2, k3).
-CalibrationStatus makeStatus(const ecs::BundleAdjustmentSummary& summary, const ecs::GateDecision& decision);
+// The predicted accuracy for depth is that of the rig rectified with `rectification` (the
+// committed CameraInfo's), from the solve's covariance; zero without one.
+CalibrationStatus makeStatus(const ecs::BundleAdjustmentSummary& summary, const ecs::GateDecision& decision,
+                             const ecs::RectificationOptions& rectification = {});
 
 // The pair a successful commit sent to the driver's set_camera_info services.
 struct CommittedCalibration {

@@ -10,6 +10,7 @@
 // Threading: a source is used by one thread at a time (the driver's capture thread).
 #include <Eigen/Geometry>
 #include <atomic>
+#include <cstdint>
 #include <memory>
 #include <opencv2/core.hpp>
 #include <optional>
@@ -46,6 +47,10 @@ class FrameSource {
 // Light level in [0, 1] shared between the sim light backend (writer) and the sim source
 // (reader); atomic because they may run on different threads.
 using SharedLightLevel = std::shared_ptr<std::atomic<double>>;
+// The sim light's commanded state, written by the sim light backend and read by the sim source
+// so that the simulated rig can model the light's rise and fall (optics.light): 2 * (number of
+// switches) + (1 if on), in one atomic so that the pair is always consistent.
+using SharedLightCommand = std::shared_ptr<std::atomic<uint64_t>>;
 
 struct FilesSourceParams {
   std::string dir;                         // files_dir: directory of image pairs
@@ -75,6 +80,9 @@ cv::Mat convertToEncoding(const cv::Mat& image, const std::string& encoding);
 // Throws std::invalid_argument when fps is not > 0.
 std::unique_ptr<FrameSource> makeSimFrameSource(std::shared_ptr<ecs::SimRig> sim,
                                                 SharedLightLevel light_level, double fps);
+// Same, with the light's command (from makeSimLight with the same object).
+std::unique_ptr<FrameSource> makeSimFrameSource(std::shared_ptr<ecs::SimRig> sim, SharedLightLevel light_level,
+                                                SharedLightCommand light_command, double fps);
 std::unique_ptr<FrameSource> makeFilesFrameSource(const FilesSourceParams& params);
 std::unique_ptr<FrameSource> makeV4l2FrameSource(const V4l2SourceParams& params);
 

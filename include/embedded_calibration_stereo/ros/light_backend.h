@@ -43,6 +43,8 @@ bool unescapeBytes(const std::string& text, std::string* bytes, std::string* err
 
 std::unique_ptr<LightBackend> makeNoLight();
 std::unique_ptr<LightBackend> makeSimLight(SharedLightLevel level);
+// Also publishes the commanded state and its switches for the sim source (optional: null).
+std::unique_ptr<LightBackend> makeSimLight(SharedLightLevel level, SharedLightCommand command);
 std::unique_ptr<LightBackend> makeSerialLight(const SerialLightParams& params);
 std::unique_ptr<LightBackend> makeGpioLight(const GpioLightParams& params);
 

@@ -37,6 +37,37 @@ std::string BundleAdjustmentOptions::Check() const {
   return "";
 }
 
+RigParameters rigParameters(const StereoRig& rig) {
+  RigParameters p;
+  const PinholeCamera* cameras[2] = {&rig.left, &rig.right};
+  for (int c = 0; c < 2; ++c) {
+    const PinholeCamera& cam = *cameras[c];
+    p.segment<9>(9 * c) << cam.fx, cam.fy, cam.cx, cam.cy, cam.dist[0], cam.dist[1], cam.dist[2],
+        cam.dist[3], cam.dist[4];
+  }
+  // The rotation vector as the bundle adjuster's extrinsics block holds it.
+  const Eigen::AngleAxisd aa(rig.right_from_left.linear());
+  p.segment<3>(18) = aa.angle() * aa.axis();
+  p.segment<3>(21) = rig.right_from_left.translation();
+  return p;
+}
+
+StereoRig rigFromParameters(const RigParameters& p, const StereoRig& like) {
+  StereoRig rig = like;
+  PinholeCamera* cameras[2] = {&rig.left, &rig.right};
+  for (int c = 0; c < 2; ++c) {
+    PinholeCamera& cam = *cameras[c];
+    const auto b = p.segment<9>(9 * c);
+    cam.fx = b[0], cam.fy = b[1], cam.cx = b[2], cam.cy = b[3];
+    for (int k = 0; k < 5; ++k) cam.dist[k] = b[4 + k];
+  }
+  const Eigen::Vector3d r = p.segment<3>(18);
+  rig.right_from_left = Eigen::Isometry3d::Identity();
+  if (r.norm() > 0) rig.right_from_left.linear() = Eigen::AngleAxisd(r.norm(), r.normalized()).toRotationMatrix();
+  rig.right_from_left.translation() = p.segment<3>(21);
+  return rig;
+}
+
 std::string BundleAdjustmentConfig::Check() const {
   if (constant_board_poses && !board_poses_from_layout)
     return "constant_board_poses requires board_poses_from_layout";
@@ -489,10 +520,13 @@ class AdjustmentRun {
       // Dense SVD is exact and cheap for small problems; sparse QR scales with per-frame poses.
       co.algorithm_type = free_parameters_ <= 300 ? ceres::DENSE_SVD : ceres::SPARSE_QR;
       ceres::Covariance covariance(co);
+      // Every pair of camera blocks: the cross terms carry the joint covariance of the rig.
       std::vector<std::pair<const double*, const double*>> pairs;
-      for (double* b : camera_blocks_) pairs.emplace_back(b, b);
+      for (size_t a = 0; a < camera_blocks_.size(); ++a)
+        for (size_t b = a; b < camera_blocks_.size(); ++b) pairs.emplace_back(camera_blocks_[a], camera_blocks_[b]);
       if (covariance.Compute(pairs, &problem_)) {
         out_.covariance_ok = true;
+        fillRigCovariance(covariance);
         CameraStddev* stddev[2] = {&out_.left_stddev, &out_.right_stddev};
         for (int c = 0; c < 2; ++c) {
           if (!problem_.HasParameterBlock(intrinsics_[c].data())) continue;
@@ -517,6 +551,26 @@ class AdjustmentRun {
       }
     }
     out_.covariance_ms = msSince(covariance_start);
+  }
+
+  // Offset of a camera block in rigParameters() order.
+  int rigOffset(const double* block) const {
+    if (block == intrinsics_[0].data()) return 0;
+    if (block == intrinsics_[1].data()) return kIntrinsicsSize;
+    return 2 * kIntrinsicsSize;
+  }
+  static int blockSize(int offset) { return offset < 2 * kIntrinsicsSize ? kIntrinsicsSize : kExtrinsicsSize; }
+
+  void fillRigCovariance(const ceres::Covariance& covariance) {
+    for (size_t a = 0; a < camera_blocks_.size(); ++a)
+      for (size_t b = a; b < camera_blocks_.size(); ++b) {
+        const int oa = rigOffset(camera_blocks_[a]), ob = rigOffset(camera_blocks_[b]);
+        const int na = blockSize(oa), nb = blockSize(ob);
+        Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> cov(na, nb);
+        covariance.GetCovarianceBlock(camera_blocks_[a], camera_blocks_[b], cov.data());
+        out_.rig_covariance.block(oa, ob, na, nb) = cov * sigma2_;
+        out_.rig_covariance.block(ob, oa, nb, na) = cov.transpose() * sigma2_;
+      }
   }
 
   const BundleAdjustmentOptions& options_;

@@ -7,8 +7,10 @@
 
 #include "camera_rays.h"
 #include "device_renderer.h"
+#include "half_mirror_optics.h"
 #include "embedded_calibration_stereo/core/geometry/config_error.h"
 #include "scene_renderer.h"
+#include "sensor_model.h"
 
 namespace ecs {
 
@@ -122,7 +124,8 @@ void toEncoding(const cv::Mat& mono, const std::string& encoding, cv::Mat* out) 
 }  // namespace
 
 struct SimRig::Impl {
-  explicit Impl(const SimRigConfig& config) : scene(config.scene) {}
+  explicit Impl(const SimRigConfig& config)
+      : scene(config.scene), light_response(config.optics.light), exposure(config.optics.exposure) {}
   sim::SceneRenderer scene;  // immutable textures
 
   std::mutex drift_mutex;  // guards drift and latest_time_s
@@ -133,6 +136,8 @@ struct SimRig::Impl {
   sim::CameraRays rays[2];
   bool rays_valid[2] = {false, false};
   CameraLayers layers[2];
+  sim::LightResponse light_response;  // the light's level over time (optics.light)
+  sim::AutoExposure exposure;         // the gain of the next frame (optics.exposure)
 
   void updateLayers(int index, const SimRigConfig& config, const std::vector<VirtualBoard>& boards,
                     const PinholeCamera& camera, const Eigen::Isometry3d& rig_from_camera,
@@ -179,7 +184,9 @@ void SimRig::Impl::updateLayers(int index, const SimRigConfig& config,
     sim::renderDevice(boards, rays[index], rig_from_camera, config.optics.device_white,
                       config.optics.device_black, &fresh.device);
     if (sigma > 0) cv::GaussianBlur(fresh.device, fresh.device, cv::Size(), sigma, 0, cv::BORDER_REPLICATE);
+    sim::applyDeviceOptics(config.optics, boards, rays[index], rig_from_camera, &fresh.device);
   }
+  sim::applySceneOptics(config.optics, rays[index], &fresh.scene);
   cv::Mat mono;
   fresh.scene.convertTo(mono, CV_8U);
   toEncoding(mono, config.encoding, &fresh.scene_u8);
@@ -294,22 +301,30 @@ StereoObservation observe(const StereoRig& rig, const std::vector<VirtualBoard>&
 }  // namespace
 
 SimFrame SimRig::render(double time_s, double light_level, uint64_t noise_seed) const {
+  SimRenderRequest request;
+  request.time_s = time_s;
+  request.light_level = light_level;
+  request.noise_seed = noise_seed;
+  return render(request);
+}
+
+SimFrame SimRig::render(const SimRenderRequest& request) const {
+  const double time_s = request.time_s;
   {
     std::lock_guard<std::mutex> lock(impl_->drift_mutex);
     impl_->latest_time_s = std::max(impl_->latest_time_s, time_s);
   }
   SimFrame frame;
   frame.truth = truthAt(time_s);
-  const double level = std::min(std::max(light_level, 0.0), 1.0);
-  const double device_gain = level * config_.optics.reflectance * 255.0;
 
   frame.time_s = time_s;
   frame.world_from_left = trajectoryPose(config_.trajectory, time_s);
-  // Exposure samples, evenly over [t - exposure, t], the first at t.
+  // Exposure samples, evenly over [t, t + exposure] (t starts the exposure, as for the light),
+  // the first at t.
   const int samples = config_.motion_blur.exposure_s > 0 ? config_.motion_blur.samples : 1;
   std::vector<double> sample_times(samples, time_s);
   for (int k = 1; k < samples; ++k)
-    sample_times[k] = time_s - config_.motion_blur.exposure_s * k / (samples - 1);
+    sample_times[k] = time_s + config_.motion_blur.exposure_s * k / (samples - 1);
   ScenePoses poses[2];
   const Eigen::Isometry3d rig_from_camera[2] = {Eigen::Isometry3d::Identity(), frame.truth.leftFromRight()};
   for (double t : sample_times) {
@@ -327,14 +342,43 @@ SimFrame SimRig::render(double time_s, double light_level, uint64_t noise_seed) 
     poses[0].left_from_world = poses[1].left_from_world = frame.world_from_left.inverse();
 
   std::lock_guard<std::mutex> lock(impl_->render_mutex);
+  const SimOpticsConfig& optics = config_.optics;
+  double light_level = request.light_level;
+  if (optics.light.model == "response" && request.has_light_command) {
+    impl_->light_response.command(request.light_command.on, request.light_command.switch_time_s);
+    impl_->light_response.forgetBefore(time_s);
+    light_level = impl_->light_response.meanLevel(time_s, time_s + optics.exposure.time_s);
+  }
+  const double level = std::min(std::max(light_level, 0.0), 1.0);
+  const double device_gain = level * config_.optics.reflectance * 255.0;
+  const double gain = impl_->exposure.gain();
+  frame.light_level = level;
+  frame.exposure_gain = gain;
+
   impl_->updateLayers(0, config_, boards_, frame.truth.left, rig_from_camera[0], poses[0]);
   impl_->updateLayers(1, config_, boards_, frame.truth.right, rig_from_camera[1], poses[1]);
-  const uint64_t seed = mixSeed(noise_seed);
-  impl_->compose(impl_->layers[0], device_gain, config_.noise_sigma, seed, config_.encoding, &frame.left);
-  impl_->compose(impl_->layers[1], device_gain, config_.noise_sigma, mixSeed(seed ^ 0x5bd1e995ULL),
-                 config_.encoding, &frame.right);
-  frame.left_scene = impl_->layers[0].scene_u8.clone();
-  frame.right_scene = impl_->layers[1].scene_u8.clone();
+  const uint64_t seed = mixSeed(request.noise_seed);
+  const uint64_t right_seed = mixSeed(seed ^ 0x5bd1e995ULL);
+  if (gain == 1.0 && !optics.sensor.enabled) {  // the ideal sensor
+    impl_->compose(impl_->layers[0], device_gain, config_.noise_sigma, seed, config_.encoding, &frame.left);
+    impl_->compose(impl_->layers[1], device_gain, config_.noise_sigma, right_seed, config_.encoding, &frame.right);
+    frame.left_scene = impl_->layers[0].scene_u8.clone();
+    frame.right_scene = impl_->layers[1].scene_u8.clone();
+  } else {
+    sim::SensorParams sensor{gain, gain * device_gain, config_.noise_sigma, optics.sensor};
+    const uint64_t seeds[2] = {seed, right_seed};
+    cv::Mat* images[2] = {&frame.left, &frame.right};
+    cv::Mat* scenes[2] = {&frame.left_scene, &frame.right_scene};
+    for (int i = 0; i < 2; ++i) {
+      cv::Mat mono, scene_mono;
+      sim::composeSensor(impl_->layers[i].scene, impl_->layers[i].device, sensor, seeds[i], kNoiseBandRows, &mono);
+      toEncoding(mono, config_.encoding, images[i]);
+      impl_->layers[i].scene.convertTo(scene_mono, CV_8U, gain);
+      toEncoding(scene_mono, config_.encoding, scenes[i]);
+    }
+  }
+  // Metered on the image the sensor delivered (both cameras share one exposure setting).
+  if (optics.exposure.mode == "auto") impl_->exposure.meter(cv::mean(frame.left)[0]);
   frame.left_depth = impl_->layers[0].depth.clone();
   frame.observations = observe(frame.truth, boards_, time_s);
   return frame;

@@ -49,6 +49,41 @@ Problem trajectoryProblem(const SimTrajectory& t, const std::string& key) {
   return {key + "." + e.substr(0, colon), colon == std::string::npos ? e : e.substr(colon + 2)};
 }
 
+bool inRange(double v, double lo, double hi) { return v >= lo && v <= hi; }  // false for NaN
+
+// The real-head optics (ghost, vignetting, exposure, light response, sensor).
+Problem findRealOpticsProblem(const SimOpticsConfig& o, double fps) {
+  const SimGhostConfig& g = o.ghost;
+  if (!inRange(g.thickness_mm, 0.0, 20.0)) return {"optics.ghost.thickness_mm", "must be in [0,20] mm"};
+  if (!(g.angle_deg > 0.0 && g.angle_deg <= 90.0)) return {"optics.ghost.angle_deg", "must be in (0,90] deg"};
+  if (!inRange(g.refractive_index, 1.0, 3.0)) return {"optics.ghost.refractive_index", "must be in [1,3]"};
+  if (!inRange(g.back_reflectance, 0.0, 0.5)) return {"optics.ghost.back_reflectance", "must be in [0,0.5]"};
+  if (!inRange(g.direction_deg, -360.0, 360.0)) return {"optics.ghost.direction_deg", "must be in [-360,360] deg"};
+  if (!inRange(o.vignetting.scene, 0.0, 4.0)) return {"optics.vignetting.scene", "must be in [0,4]"};
+  if (!inRange(o.vignetting.device, 0.0, 4.0)) return {"optics.vignetting.device", "must be in [0,4]"};
+  const SimExposureConfig& e = o.exposure;
+  if (e.mode != "fixed" && e.mode != "auto") return {"optics.exposure.mode", "must be fixed or auto"};
+  if (!inRange(e.min_gain, 1e-3, 64.0)) return {"optics.exposure.min_gain", "must be in [0.001,64]"};
+  if (!inRange(e.max_gain, e.min_gain, 64.0))
+    return {"optics.exposure.max_gain", "must be in [optics.exposure.min_gain,64]"};
+  if (e.mode == "auto" ? !inRange(e.gain, e.min_gain, e.max_gain) : !inRange(e.gain, 1e-3, 64.0))
+    return {"optics.exposure.gain", e.mode == "auto" ? "must be in [min_gain,max_gain]" : "must be in [0.001,64]"};
+  if (!(e.target_mean > 0.0 && e.target_mean < 255.0)) return {"optics.exposure.target_mean", "must be in (0,255) grey levels"};
+  if (!inRange(e.time_constant_frames, 0.1, 1e4))
+    return {"optics.exposure.time_constant_frames", "must be in [0.1,10000] frames"};
+  if (!inRange(e.time_s, 0.0, 1.0 / fps)) return {"optics.exposure.time_s", "must be in [0,1/fps] s"};
+  const SimLightResponseConfig& l = o.light;
+  if (l.model != "schedule" && l.model != "response") return {"optics.light.model", "must be schedule or response"};
+  if (!inRange(l.rise_time_s, 0.0, 10.0)) return {"optics.light.rise_time_s", "must be in [0,10] s"};
+  if (!inRange(l.fall_time_s, 0.0, 10.0)) return {"optics.light.fall_time_s", "must be in [0,10] s"};
+  if (!inRange(l.delay_s, 0.0, 10.0)) return {"optics.light.delay_s", "must be in [0,10] s"};
+  const SimSensorConfig& s = o.sensor;
+  if (!inRange(s.gain_e_per_dn, 0.01, 1e5)) return {"optics.sensor.gain_e_per_dn", "must be in [0.01,100000] e-/grey level"};
+  if (!inRange(s.read_noise_e, 0.0, 1e4)) return {"optics.sensor.read_noise_e", "must be in [0,10000] e-"};
+  if (!inRange(s.full_well_e, 1.0, 1e7)) return {"optics.sensor.full_well_e", "must be in [1,1e7] e-"};
+  return {"", ""};
+}
+
 Problem findProblem(const SimRigConfig& c) {
   std::string e = c.rig.validate();
   if (!e.empty()) return {"rig", e};
@@ -85,6 +120,8 @@ Problem findProblem(const SimRigConfig& c) {
   if (!(o.device_black < o.device_white)) return {"optics.device_black", "must be < optics.device_white"};
   if (!(c.noise_sigma >= 0.0 && c.noise_sigma <= 64.0)) return {"noise_sigma", "must be in [0,64] grey levels"};
   if (!(c.fps > 0.0 && c.fps <= 1000.0)) return {"fps", "must be in (0,1000]"};
+  const Problem real = findRealOpticsProblem(o, c.fps);
+  if (!real.first.empty()) return real;
   if (c.encoding != "mono8" && c.encoding != "bgr8") return {"encoding", "must be mono8 or bgr8"};
   return {"", ""};
 }
@@ -101,6 +138,74 @@ bool readBool(const cv::FileNode& node, const std::string& key, const std::strin
   throw ConfigError(path + "." + key, "must be true or false");
 }
 
+// A string field; OpenCV's YAML reader keeps a trailing "# comment" in unquoted strings: cut it off.
+std::string readOptionalString(const cv::FileNode& node, const std::string& key, const std::string& path,
+                       const std::string& fallback) {
+  const cv::FileNode n = node[key];
+  if (n.empty() || n.isNone()) return fallback;
+  if (!n.isString()) throw ConfigError(path + "." + key, "must be a string");
+  std::string value = static_cast<std::string>(n);
+  value = value.substr(0, value.find('#'));
+  value.erase(value.find_last_not_of(" \t") + 1);
+  return value;
+}
+
+// An optional sub-map of `node`; empty when absent.
+cv::FileNode optionalMap(const cv::FileNode& node, const std::string& key, const std::string& path) {
+  const cv::FileNode n = node[key];
+  if (n.empty() || n.isNone()) return cv::FileNode();
+  if (!n.isMap()) throw ConfigError(path + "." + key, "must be a map");
+  return n;
+}
+
+void loadRealOptics(const cv::FileNode& optics, SimOpticsConfig* o) {
+  const cv::FileNode ghost = optionalMap(optics, "ghost", "optics");
+  if (!ghost.empty()) {
+    const std::string p = "optics.ghost";
+    SimGhostConfig& g = o->ghost;
+    g.thickness_mm = readDouble(ghost, "thickness_mm", p, g.thickness_mm);
+    g.angle_deg = readDouble(ghost, "angle_deg", p, g.angle_deg);
+    g.refractive_index = readDouble(ghost, "refractive_index", p, g.refractive_index);
+    g.back_reflectance = readDouble(ghost, "back_reflectance", p, g.back_reflectance);
+    g.direction_deg = readDouble(ghost, "direction_deg", p, g.direction_deg);
+  }
+  const cv::FileNode vignetting = optionalMap(optics, "vignetting", "optics");
+  if (!vignetting.empty()) {
+    o->vignetting.scene = readDouble(vignetting, "scene", "optics.vignetting", o->vignetting.scene);
+    o->vignetting.device = readDouble(vignetting, "device", "optics.vignetting", o->vignetting.device);
+  }
+  const cv::FileNode exposure = optionalMap(optics, "exposure", "optics");
+  if (!exposure.empty()) {
+    const std::string p = "optics.exposure";
+    SimExposureConfig& e = o->exposure;
+    e.mode = readOptionalString(exposure, "mode", p, e.mode);
+    e.gain = readDouble(exposure, "gain", p, e.gain);
+    e.target_mean = readDouble(exposure, "target_mean", p, e.target_mean);
+    e.time_constant_frames = readDouble(exposure, "time_constant_frames", p, e.time_constant_frames);
+    e.min_gain = readDouble(exposure, "min_gain", p, e.min_gain);
+    e.max_gain = readDouble(exposure, "max_gain", p, e.max_gain);
+    e.time_s = readDouble(exposure, "time_s", p, e.time_s);
+  }
+  const cv::FileNode light = optionalMap(optics, "light", "optics");
+  if (!light.empty()) {
+    const std::string p = "optics.light";
+    SimLightResponseConfig& l = o->light;
+    l.model = readOptionalString(light, "model", p, l.model);
+    l.rise_time_s = readDouble(light, "rise_time_s", p, l.rise_time_s);
+    l.fall_time_s = readDouble(light, "fall_time_s", p, l.fall_time_s);
+    l.delay_s = readDouble(light, "delay_s", p, l.delay_s);
+  }
+  const cv::FileNode sensor = optionalMap(optics, "sensor", "optics");
+  if (!sensor.empty()) {
+    const std::string p = "optics.sensor";
+    SimSensorConfig& s = o->sensor;
+    s.enabled = true;
+    s.gain_e_per_dn = readDouble(sensor, "gain_e_per_dn", p, s.gain_e_per_dn);
+    s.read_noise_e = readDouble(sensor, "read_noise_e", p, s.read_noise_e);
+    s.full_well_e = readDouble(sensor, "full_well_e", p, s.full_well_e);
+  }
+}
+
 double readRequired(const cv::FileNode& node, const std::string& key, const std::string& path) {
   const double v = readDouble(node, key, path, std::numeric_limits<double>::quiet_NaN());
   if (std::isnan(v)) throw ConfigError(path + "." + key, "missing");
@@ -108,7 +213,7 @@ double readRequired(const cv::FileNode& node, const std::string& key, const std:
 }
 
 // A string value; OpenCV's YAML reader keeps a trailing "# comment" in unquoted strings: cut it off.
-std::string readString(const cv::FileNode& node, const std::string& key, const std::string& path,
+std::string readRequiredString(const cv::FileNode& node, const std::string& key, const std::string& path,
                        const std::string& what) {
   const cv::FileNode n = node[key];
   const std::string full = path.empty() ? key : path + "." + key;
@@ -149,7 +254,7 @@ SimTrajectory loadTrajectory(const cv::FileNode& node, const std::string& path) 
   SimTrajectory t;
   if (node.empty() || node.isNone()) return t;
   if (!node.isMap()) throw ConfigError(path, "must be a map (kind: static, drive, handheld or waypoints)");
-  const std::string kind = readString(node, "kind", path, "static, drive, handheld or waypoints");
+  const std::string kind = readRequiredString(node, "kind", path, "static, drive, handheld or waypoints");
   std::set<std::string> known = {"kind", "start", "loop_s"};
   if (kind == "static") {
     t.kind = SimTrajectory::Kind::kStatic;
@@ -182,7 +287,7 @@ SimTrajectory loadTrajectory(const cv::FileNode& node, const std::string& path) 
   t.rotation_period_s = readVector3Or(node, "rotation_period_s", path, t.rotation_period_s);
   if (t.kind == SimTrajectory::Kind::kWaypoints) {
     if (!node["interpolation"].empty()) {
-      const std::string interpolation = readString(node, "interpolation", path, "linear or spline");
+      const std::string interpolation = readRequiredString(node, "interpolation", path, "linear or spline");
       if (interpolation != "linear" && interpolation != "spline")
         throw ConfigError(path + ".interpolation", "must be linear or spline, not '" + interpolation + "'");
       t.spline = interpolation == "spline";
@@ -223,7 +328,7 @@ ScenePlane loadPlane(const cv::FileNode& node, const std::string& path, int inde
     const std::string tp = path + ".texture";
     if (!texture.isMap()) throw ConfigError(tp, "must be a map (image, tile_m)");
     checkKeys(texture, tp, {"image", "tile_m"});
-    p.texture_image = resolveImagePath(readString(texture, "image", tp, "an image file"), config_dir);
+    p.texture_image = resolveImagePath(readRequiredString(texture, "image", tp, "an image file"), config_dir);
     const cv::FileNode tile = texture["tile_m"];
     if (!tile.empty() && !tile.isNone()) {
       if (!tile.isSeq() || tile.size() != 2 || !(tile[0].isReal() || tile[0].isInt()) ||
@@ -296,6 +401,7 @@ SimRigConfig loadSimRigConfig(const std::string& path) {
     c.optics.device_white = readDouble(optics, "device_white", "optics", c.optics.device_white);
     c.optics.device_black = readDouble(optics, "device_black", "optics", c.optics.device_black);
     c.optics.psf_sigma_px = readDouble(optics, "psf_sigma_px", "optics", c.optics.psf_sigma_px);
+    loadRealOptics(optics, &c.optics);
   }
   c.noise_sigma = readDouble(root, "noise_sigma", "", c.noise_sigma);
   c.fps = readDouble(root, "fps", "", c.fps);

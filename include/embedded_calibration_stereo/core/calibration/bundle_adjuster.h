@@ -134,6 +134,17 @@ struct CalibrationInput {
   std::optional<StereoRig> in_force;
 };
 
+// The parameter vector of a rig in the bundle adjuster's order, that of
+// BundleAdjustmentSummary::rig_covariance (its camera and extrinsics blocks): left fx, fy, cx, cy, k1, k2, p1, p2, k3; the same
+// of the right camera; right_from_left rotation vector (rad) then translation (m).
+constexpr int kRigParameterCount = 24;
+using RigParameters = Eigen::Matrix<double, kRigParameterCount, 1>;
+using RigCovariance = Eigen::Matrix<double, kRigParameterCount, kRigParameterCount>;
+RigParameters rigParameters(const StereoRig& rig);
+// The rig of a parameter vector; image sizes (and skew) come from `like`.
+StereoRig rigFromParameters(const RigParameters& parameters, const StereoRig& like);
+
+
 // One standard deviation per reported parameter; zero for parameters held constant.
 struct CameraStddev {
   double fx = 0, fy = 0, cx = 0, cy = 0;
@@ -163,6 +174,11 @@ struct BundleAdjustmentSummary {
   CameraStddev left_stddev, right_stddev;
   double baseline_stddev_m = 0;
   double rotation_stddev_deg = 0;  // sqrt of the largest eigenvalue, rotation vector
+  // The joint covariance of the rig's parameters (rigParameters() order), scaled by the
+  // residual variance like the standard deviations above (their squares are its diagonal);
+  // rows and columns of held parameters are zero. Zero unless covariance_ok. Propagated to
+  // depth accuracy by predictStereoAccuracy() (stereo_accuracy.h).
+  RigCovariance rig_covariance = RigCovariance::Zero();
   // Estimated rig_from_board by virtual board id (shared or device mode) - the device as seen
   // now.
   std::map<int, Eigen::Isometry3d> rig_from_board;

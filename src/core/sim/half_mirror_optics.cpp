@@ -1,0 +1,64 @@
+#include "half_mirror_optics.h"
+
+#include <cmath>
+#include <opencv2/imgproc.hpp>
+
+#include "device_renderer.h"
+
+namespace ecs {
+namespace sim {
+
+namespace {
+constexpr double kDegToRad = M_PI / 180.0;
+}
+
+double ghostSeparationM(const SimGhostConfig& g) {
+  const double incidence = (90.0 - g.angle_deg) * kDegToRad;
+  const double refracted = std::asin(std::sin(incidence) / g.refractive_index);
+  return 2.0 * g.thickness_mm * 1e-3 * std::tan(refracted) * std::cos(incidence);
+}
+
+double ghostRelativeWeight(const SimGhostConfig& g, double front_reflectance) {
+  if (!(front_reflectance > 0.0)) return 0.0;  // no device path at all
+  const double transmitted = 1.0 - front_reflectance;
+  return transmitted * transmitted * g.back_reflectance / front_reflectance;
+}
+
+Eigen::Isometry3d ghostCameraPose(const SimGhostConfig& g, const Eigen::Isometry3d& rig_from_camera) {
+  // A camera moved by c sees a point at depth Z shifted by -f c / Z: move it against the
+  // direction the ghost is to appear in.
+  const double s = ghostSeparationM(g), a = g.direction_deg * kDegToRad;
+  Eigen::Isometry3d moved = Eigen::Isometry3d::Identity();
+  moved.translation() = -s * Eigen::Vector3d(std::cos(a), std::sin(a), 0.0);
+  return rig_from_camera * moved;
+}
+
+cv::Mat vignettingFactor(const CameraRays& rays, double strength) {
+  // cos(theta) = 1 / sqrt(1 + x^2 + y^2) for the ray (x, y, 1): cos^(4 s) = (1 + r^2)^(-2 s).
+  cv::Mat r2 = rays.x.mul(rays.x) + rays.y.mul(rays.y) + 1.0;
+  cv::Mat factor;
+  cv::pow(r2, -2.0 * strength, factor);
+  return factor;
+}
+
+void applyDeviceOptics(const SimOpticsConfig& optics, const std::vector<VirtualBoard>& boards,
+                       const CameraRays& rays, const Eigen::Isometry3d& rig_from_camera, cv::Mat* device) {
+  const double weight = ghostRelativeWeight(optics.ghost, optics.reflectance);
+  if (weight > 0.0) {
+    cv::Mat ghost;
+    renderDevice(boards, rays, ghostCameraPose(optics.ghost, rig_from_camera), optics.device_white,
+                 optics.device_black, &ghost);
+    if (optics.psf_sigma_px > 0)
+      cv::GaussianBlur(ghost, ghost, cv::Size(), optics.psf_sigma_px, 0, cv::BORDER_REPLICATE);
+    cv::scaleAdd(ghost, weight, *device, *device);
+  }
+  if (optics.vignetting.device > 0.0)
+    cv::multiply(*device, vignettingFactor(rays, optics.vignetting.device), *device);
+}
+
+void applySceneOptics(const SimOpticsConfig& optics, const CameraRays& rays, cv::Mat* scene) {
+  if (optics.vignetting.scene > 0.0) cv::multiply(*scene, vignettingFactor(rays, optics.vignetting.scene), *scene);
+}
+
+}  // namespace sim
+}  // namespace ecs

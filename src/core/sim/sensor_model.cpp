@@ -1,0 +1,121 @@
+#include "sensor_model.h"
+
+#include <algorithm>
+#include <cmath>
+#include <opencv2/imgproc.hpp>
+
+namespace ecs {
+namespace sim {
+
+uint64_t mixSeed(uint64_t x) {
+  x += 0x9E3779B97F4A7C15ULL;
+  x = (x ^ (x >> 30)) * 0xBF58476D1CE4E5B9ULL;
+  x = (x ^ (x >> 27)) * 0x94D049BB133111EBULL;
+  return x ^ (x >> 31);
+}
+
+// --- LightResponse ---------------------------------------------------------------------
+
+double LightResponse::Ramp::at(double t) const {
+  if (t <= start_s) return from;
+  if (rate <= 0.0) return to;
+  const double moved = rate * (t - start_s);
+  return to > from ? std::min(to, from + moved) : std::max(to, from - moved);
+}
+
+double LightResponse::Ramp::endS() const { return rate <= 0.0 ? start_s : start_s + std::abs(to - from) / rate; }
+
+LightResponse::LightResponse(const SimLightResponseConfig& config) : config_(config) {
+  ramps_.push_back({-1e300, 0.0, 0.0, 0.0});  // off since forever
+}
+
+void LightResponse::command(bool on, double switch_time_s) {
+  if (on == last_on_ && switch_time_s == last_switch_s_) return;
+  last_on_ = on;
+  last_switch_s_ = switch_time_s;
+  const double start = std::max(switch_time_s + config_.delay_s, ramps_.back().start_s);
+  const double from = levelAt(start);
+  const double time = on ? config_.rise_time_s : config_.fall_time_s;
+  ramps_.push_back({start, from, on ? 1.0 : 0.0, time > 0.0 ? 1.0 / time : 0.0});
+}
+
+double LightResponse::levelAt(double t) const {
+  // The last ramp started at or before t holds.
+  size_t i = ramps_.size() - 1;
+  while (i > 0 && ramps_[i].start_s > t) --i;
+  return ramps_[i].at(t);
+}
+
+double LightResponse::meanLevel(double t0, double t1) const {
+  if (!(t1 > t0)) return levelAt(t0);
+  // Each ramp is piecewise linear (breaks at its start and end): the trapezoid rule on those
+  // pieces is exact.
+  double integral = 0.0;
+  for (size_t i = 0; i < ramps_.size(); ++i) {
+    const double a = std::max(t0, ramps_[i].start_s);
+    const double b = std::min(t1, i + 1 < ramps_.size() ? ramps_[i + 1].start_s : t1);
+    if (!(b > a)) continue;
+    double points[4] = {a, std::clamp(ramps_[i].start_s, a, b), std::clamp(ramps_[i].endS(), a, b), b};
+    std::sort(points, points + 4);
+    for (int k = 0; k < 3; ++k)
+      integral += 0.5 * (ramps_[i].at(points[k]) + ramps_[i].at(points[k + 1])) * (points[k + 1] - points[k]);
+  }
+  return integral / (t1 - t0);
+}
+
+void LightResponse::forgetBefore(double t) {
+  size_t first = 0;
+  while (first + 1 < ramps_.size() && ramps_[first + 1].start_s <= t) ++first;
+  ramps_.erase(ramps_.begin(), ramps_.begin() + first);
+}
+
+// --- AutoExposure -----------------------------------------------------------------------
+
+AutoExposure::AutoExposure(const SimExposureConfig& config) : config_(config), gain_(config.gain) {}
+
+void AutoExposure::meter(double mean_grey) {
+  if (config_.mode != "auto") return;
+  const double a = 1.0 - std::exp(-1.0 / config_.time_constant_frames);
+  // A black frame would ask for infinite gain: meter at least half a grey level.
+  const double step = a * (std::log(config_.target_mean) - std::log(std::max(mean_grey, 0.5)));
+  gain_ = std::clamp(gain_ * std::exp(step), config_.min_gain, config_.max_gain);
+}
+
+// --- composeSensor ----------------------------------------------------------------------
+
+void composeSensor(const cv::Mat& scene, const cv::Mat& device, const SensorParams& p, uint64_t seed,
+                   int band_rows, cv::Mat* mono) {
+  const int W = scene.cols, H = scene.rows;
+  mono->create(H, W, CV_8U);
+  const int bands = (H + band_rows - 1) / band_rows;
+  const double e_per_dn = p.sensor.gain_e_per_dn;
+  const double full_well_dn = p.sensor.full_well_e / e_per_dn;
+  const double read_dn2 = (p.sensor.read_noise_e / e_per_dn) * (p.sensor.read_noise_e / e_per_dn);
+  cv::parallel_for_(cv::Range(0, bands), [&](const cv::Range& range) {
+    cv::Mat sum, noise, sigma;
+    for (int band = range.start; band < range.end; ++band) {
+      const cv::Range rows(band * band_rows, std::min(H, (band + 1) * band_rows));
+      cv::addWeighted(scene.rowRange(rows), p.scene_gain, device.rowRange(rows), p.device_gain, 0.0, sum);
+      cv::RNG rng(mixSeed(seed ^ mixSeed(static_cast<uint64_t>(band) + 1)));
+      if (p.sensor.enabled) {
+        // Electrons: the signal fills the well up to full; Poisson shot noise (Gaussian with the
+        // same variance) plus read noise, back in grey levels.
+        cv::min(cv::max(sum, 0.0), full_well_dn, sum);
+        sigma = sum * (1.0 / e_per_dn) + read_dn2;
+        cv::sqrt(sigma, sigma);
+        noise.create(rows.size(), W, CV_32F);
+        rng.fill(noise, cv::RNG::NORMAL, 0.0, 1.0);
+        sum += noise.mul(sigma);
+      } else if (p.noise_sigma > 0) {
+        noise.create(rows.size(), W, CV_32F);
+        rng.fill(noise, cv::RNG::NORMAL, 0.0, p.noise_sigma);
+        sum += noise;
+      }
+      cv::Mat out = mono->rowRange(rows);
+      sum.convertTo(out, CV_8U);  // rounds to nearest and saturates
+    }
+  });
+}
+
+}  // namespace sim
+}  // namespace ecs
