@@ -12,6 +12,7 @@
 #include <ros/ros.h>
 #include <sensor_msgs/SetCameraInfo.h>
 #include <std_srvs/SetBool.h>
+#include <tf2_msgs/TFMessage.h>
 
 #include <atomic>
 #include <chrono>
@@ -29,6 +30,7 @@
 #include "embedded_calibration_stereo/ros/conversions.h"
 #include "embedded_calibration_stereo/ros/driver_params.h"
 #include "embedded_calibration_stereo/ros/frame_source.h"
+#include "embedded_calibration_stereo/ros/head_pose_truth.h"
 #include "embedded_calibration_stereo/ros/light_backend.h"
 
 namespace embedded_calibration_stereo {
@@ -79,7 +81,7 @@ class CameraDriverNodelet : public nodelet::Nodelet {
       } catch (const std::exception& e) {
         throw ecs::ConfigError("sim_config", "'" + params_.sim_config + "': " + e.what());
       }
-      source_ = makeSimFrameSource(sim_, light_level, light_command);
+      source_ = makeSimFrameSource(sim_, light_level, light_command, params_.fps);
     } else if (params_.backend == "files") {
       source_ = makeFilesFrameSource(params_.files);
     } else {
@@ -113,6 +115,10 @@ class CameraDriverNodelet : public nodelet::Nodelet {
       gt_left_scene_pub_ = it.advertise("ground_truth/left/image_scene", 2);
       gt_right_scene_pub_ = it.advertise("ground_truth/right/image_scene", 2);
       gt_depth_pub_ = it.advertise("ground_truth/left/depth", 2);
+      gt_head_pose_pub_ = nh.advertise<nav_msgs::Odometry>("ground_truth/head_pose", 2);
+      // As tf2_ros::TransformBroadcaster does, but with a subscriber count to skip idle work.
+      gt_tf_pub_ = nh.advertise<tf2_msgs::TFMessage>("/tf", 100);
+      head_pose_ = std::make_unique<HeadPoseTruth>(params_.left_frame_id);
       set_drift_srv_ = nh.advertiseService("sim/set_drift", &CameraDriverNodelet::setDrift, this);
     }
     NODELET_INFO("CameraDriver: backend %s, light %s, %.1f fps", params_.backend.c_str(),
@@ -224,7 +230,11 @@ class CameraDriverNodelet : public nodelet::Nodelet {
     left_pub_.publish(cv_bridge::CvImage(left_header, frame.encoding, frame.left).toImageMsg(), left_info);
     right_pub_.publish(cv_bridge::CvImage(right_header, frame.encoding, frame.right).toImageMsg(), right_info);
     mode_pub_.publish(mode);
-    if (frame.truth) publishGroundTruth(*frame.truth, left_header, right_header);
+    if (frame.truth) {
+      // Every frame, subscribed or not: the velocity is a difference over consecutive frames.
+      head_pose_->update(frame.truth->world_from_left, frame.truth->time_s);
+      publishGroundTruth(*frame.truth, left_header, right_header);
+    }
     ++frames_published_;
     last_light_on_ = light.light_on;
     last_error_.clear();
@@ -281,6 +291,13 @@ class CameraDriverNodelet : public nodelet::Nodelet {
       gt_right_scene_pub_.publish(cv_bridge::CvImage(right_header, encoding, truth.right_scene).toImageMsg());
     if (gt_depth_pub_.getNumSubscribers() > 0)
       gt_depth_pub_.publish(cv_bridge::CvImage(left_header, "32FC1", truth.left_depth).toImageMsg());
+    if (gt_head_pose_pub_.getNumSubscribers() > 0)
+      gt_head_pose_pub_.publish(boost::make_shared<nav_msgs::Odometry>(head_pose_->odometry(left_header.stamp)));
+    if (gt_tf_pub_.getNumSubscribers() > 0) {
+      auto tf = boost::make_shared<tf2_msgs::TFMessage>();
+      tf->transforms.push_back(head_pose_->transform(left_header.stamp));
+      gt_tf_pub_.publish(tf);
+    }
   }
 
   bool setCameraInfo(bool left, sensor_msgs::SetCameraInfo::Request& req, sensor_msgs::SetCameraInfo::Response& res) {
@@ -340,9 +357,11 @@ class CameraDriverNodelet : public nodelet::Nodelet {
   ros::Publisher mode_pub_;
   ros::Publisher gt_left_info_pub_, gt_right_info_pub_, gt_observations_pub_;
   image_transport::Publisher gt_left_scene_pub_, gt_right_scene_pub_, gt_depth_pub_;
+  ros::Publisher gt_head_pose_pub_, gt_tf_pub_;
   ros::ServiceServer left_set_info_srv_, right_set_info_srv_, set_light_srv_, set_drift_srv_;
 
   // Capture thread only.
+  std::unique_ptr<HeadPoseTruth> head_pose_;  // sim backend only
   std::unique_ptr<diagnostic_updater::Updater> diagnostics_;
   int frames_published_ = 0;
   bool last_light_on_ = false;

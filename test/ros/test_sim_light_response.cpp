@@ -30,7 +30,7 @@ std::vector<double> renderedLevels(bool with_command, std::vector<double>* sched
   auto command = std::make_shared<std::atomic<uint64_t>>(0);
   auto rig = responseRig();
   auto light = with_command ? makeSimLight(level, command) : makeSimLight(level);
-  auto source = with_command ? makeSimFrameSource(rig, level, command) : makeSimFrameSource(rig, level);
+  auto source = with_command ? makeSimFrameSource(rig, level, command, 30.0) : makeSimFrameSource(rig, level, 30.0);
   ecs::LightSchedule schedule(ecs::LightScheduleConfig{0.0, 10, 2});
   std::vector<double> levels;
   for (int k = 0; k < 12; ++k) {

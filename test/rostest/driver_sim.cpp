@@ -3,7 +3,9 @@
 #include <image_geometry/stereo_camera_model.h>
 #include <sensor_msgs/CameraInfo.h>
 #include <sensor_msgs/Image.h>
+#include <nav_msgs/Odometry.h>
 #include <std_srvs/SetBool.h>
+#include <tf2_msgs/TFMessage.h>
 
 #include <set>
 
@@ -12,6 +14,7 @@
 #include "embedded_calibration_stereo/SetRigDrift.h"
 #include "embedded_calibration_stereo/StereoPatternObservation.h"
 #include "embedded_calibration_stereo/core/sim/sim_rig.h"
+#include "embedded_calibration_stereo/ros/conversions.h"
 
 using embedded_calibration_stereo::CalibrationMode;
 using ecs_test::Collector;
@@ -159,6 +162,96 @@ TEST(DriverSim, GroundTruthAndDriftService) {
   drift.request.reset = true;
   ASSERT_TRUE(ros::service::call("sim/set_drift", drift));
   EXPECT_TRUE(drift.response.success);
+}
+
+// Scene time is frame index / fps, not the wall clock: under a thermal drift (a rotation of the
+// right camera growing with scene time) the truth's rotation moves by exactly rate / fps per
+// frame (an integer number of frames between two received messages); the wall clock would add
+// the capture thread's wake-up jitter.
+TEST(DriverSim, SceneTimeIsTheFrameIndexOverFps) {
+  ros::NodeHandle nh;
+  ASSERT_TRUE(waitForDriver(20.0));
+  const double fps = param("fps", 10.0);
+  const double rate_deg_per_s = 1.0;
+  Collector<sensor_msgs::CameraInfo> gt_left(nh, "ground_truth/left/camera_info"),
+      gt_right(nh, "ground_truth/right/camera_info");
+  ASSERT_TRUE(gt_right.waitForCount(1, 5.0));
+  embedded_calibration_stereo::SetRigDrift drift;
+  drift.request.focal_scale = 1.0;
+  drift.request.thermal_rate_deg_per_s = rate_deg_per_s;
+  ASSERT_TRUE(ros::service::call("sim/set_drift", drift));
+  ASSERT_TRUE(drift.response.success) << drift.response.message;
+  gt_left.clear();
+  gt_right.clear();
+  ASSERT_TRUE(gt_right.waitForCount(12, 5.0));
+  ASSERT_TRUE(gt_left.waitForCount(12, 5.0));
+  const auto lefts = gt_left.snapshot(), rights = gt_right.snapshot();
+  drift.request.thermal_rate_deg_per_s = 0.0;
+  drift.request.reset = true;
+  ASSERT_TRUE(ros::service::call("sim/set_drift", drift));
+  EXPECT_TRUE(drift.response.success);
+
+  // Rotation angle of right_from_left per message, pairing left and right by stamp.
+  std::vector<std::pair<ros::Time, Eigen::Matrix3d>> rotations;
+  for (const auto& r : rights)
+    for (const auto& l : lefts)
+      if (l->header.stamp == r->header.stamp) {
+        ecs::StereoRig rig;
+        std::string error;
+        ASSERT_TRUE(embedded_calibration_stereo::fromStereoCameraInfo(*l, *r, &rig, &error)) << error;
+        rotations.emplace_back(r->header.stamp, rig.right_from_left.rotation());
+      }
+  ASSERT_GE(rotations.size(), 8u);
+  const double step_deg = rate_deg_per_s / fps;
+  double worst = 0.0;
+  for (size_t i = 1; i < rotations.size(); ++i) {
+    const Eigen::AngleAxisd turn(rotations[i - 1].second.transpose() * rotations[i].second);
+    const double frames = turn.angle() * 180.0 / M_PI / step_deg;
+    EXPECT_GE(std::lround(frames), 1) << "message " << i;
+    worst = std::max(worst, std::abs(frames - std::round(frames)));
+  }
+  std::printf("thermal drift between frames: largest departure from a whole number of frames %.2e\n", worst);
+  // Rounding leaves ~1e-11; the wall clock's wake-up jitter (microseconds at least) >= 1e-5.
+  EXPECT_LT(worst, 1e-7) << "the truth's rotation does not advance by whole frames of 1/fps";
+}
+
+// The head pose truth: on ground_truth/head_pose and /tf under the ground_truth/ prefix, stamped
+// as the images. The default scenario's head is static: the world frame is the left optical
+// frame at t = 0, so every pose is the identity and the velocity zero.
+TEST(DriverSim, GroundTruthHeadPose) {
+  ros::NodeHandle nh;
+  ASSERT_TRUE(waitForDriver(20.0));
+  Collector<sensor_msgs::Image> left(nh, "left/image_raw");
+  Collector<nav_msgs::Odometry> pose(nh, "ground_truth/head_pose");
+  Collector<tf2_msgs::TFMessage> tf(nh, "/tf");
+  ASSERT_TRUE(pose.waitForCount(10, 5.0)) << "no ground_truth/head_pose";
+  ASSERT_TRUE(tf.waitForCount(10, 5.0)) << "no /tf";
+  ASSERT_TRUE(left.waitForCount(10, 5.0));
+  std::set<ros::Time> image_stamps;
+  for (const auto& m : left.snapshot()) image_stamps.insert(m->header.stamp);
+  size_t matched = 0;
+  for (const auto& m : pose.snapshot()) {
+    EXPECT_EQ(m->header.frame_id, "ground_truth/world");
+    EXPECT_EQ(m->child_frame_id, "ground_truth/stereo_left_optical_frame");
+    matched += image_stamps.count(m->header.stamp);
+    const auto& p = m->pose.pose;
+    EXPECT_NEAR(p.position.x, 0.0, 1e-12);
+    EXPECT_NEAR(p.position.y, 0.0, 1e-12);
+    EXPECT_NEAR(p.position.z, 0.0, 1e-12);
+    EXPECT_NEAR(std::abs(p.orientation.w), 1.0, 1e-12);
+    const auto& v = m->twist.twist;
+    EXPECT_NEAR(std::abs(v.linear.x) + std::abs(v.linear.y) + std::abs(v.linear.z), 0.0, 1e-12);
+    EXPECT_NEAR(std::abs(v.angular.x) + std::abs(v.angular.y) + std::abs(v.angular.z), 0.0, 1e-12);
+  }
+  // Subscriptions start at slightly different frames: most, not all, poses have their image.
+  EXPECT_GE(matched + 2, pose.snapshot().size()) << "head poses not stamped as the images";
+  for (const auto& m : tf.snapshot())
+    for (const auto& t : m->transforms) {
+      EXPECT_EQ(t.header.frame_id, "ground_truth/world");
+      EXPECT_EQ(t.child_frame_id, "ground_truth/stereo_left_optical_frame");
+      EXPECT_NEAR(t.transform.translation.z, 0.0, 1e-12);
+      EXPECT_NEAR(std::abs(t.transform.rotation.w), 1.0, 1e-12);
+    }
 }
 
 int main(int argc, char** argv) {

@@ -71,16 +71,18 @@ struct V4l2SourceParams {
   std::string encoding = "mono8";           // encoding
 };
 
-// `sim` is shared with the driver, which changes its drift (sim/set_drift) from another
-// thread; ecs::SimRig guards its drift state itself.
 // Converts a grey or BGR image to "mono8" or "bgr8" (no copy when it already matches).
 cv::Mat convertToEncoding(const cv::Mat& image, const std::string& encoding);
 
+// `sim` is shared with the driver, which changes its drift (sim/set_drift) from another
+// thread; ecs::SimRig guards its drift state itself. Frame k (from 0) is rendered at scene time
+// k / fps whatever the `time_s` given to grab(): a run is deterministic (ecs::SimRig::render).
+// Throws std::invalid_argument when fps is not > 0.
 std::unique_ptr<FrameSource> makeSimFrameSource(std::shared_ptr<ecs::SimRig> sim,
-                                                SharedLightLevel light_level);
+                                                SharedLightLevel light_level, double fps);
 // Same, with the light's command (from makeSimLight with the same object).
 std::unique_ptr<FrameSource> makeSimFrameSource(std::shared_ptr<ecs::SimRig> sim, SharedLightLevel light_level,
-                                                SharedLightCommand light_command);
+                                                SharedLightCommand light_command, double fps);
 std::unique_ptr<FrameSource> makeFilesFrameSource(const FilesSourceParams& params);
 std::unique_ptr<FrameSource> makeV4l2FrameSource(const V4l2SourceParams& params);
 
