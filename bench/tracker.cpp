@@ -22,6 +22,7 @@
 #include "embedded_calibration_stereo/core/tracker/pattern_tracker.h"
 #include "embedded_calibration_stereo/core/sim/sim_rig.h"
 #include "embedded_calibration_stereo/core/sim/trajectory.h"
+#include "embedded_calibration_stereo/test_support/corner_score.h"
 
 using namespace ecs;
 using Clock = std::chrono::steady_clock;
@@ -45,33 +46,6 @@ struct Stats {
   }
 };
 
-struct Accuracy {
-  size_t truth = 0, matched = 0, wrong = 0;
-  double sum_sq = 0;
-  void add(const std::vector<BoardCorners>& tracked, const std::vector<BoardCorners>& gt_boards) {
-    std::map<std::pair<int, int>, cv::Point2f> gt;
-    for (const BoardCorners& b : gt_boards)
-      for (size_t i = 0; i < b.size(); ++i) gt[{b.board_id, b.corner_ids[i]}] = cv::Point2f(b.u[i], b.v[i]);
-    truth += gt.size();
-    for (const BoardCorners& b : tracked)
-      for (size_t i = 0; i < b.size(); ++i) {
-        const auto it = gt.find({b.board_id, b.corner_ids[i]});
-        const double e = it == gt.end() ? 1e9 : cv::norm(it->second - cv::Point2f(b.u[i], b.v[i]));
-        if (e > 1.0) {
-          ++wrong;
-        } else {
-          ++matched;
-          sum_sq += e * e;
-        }
-      }
-  }
-  void print(const char* what) const {
-    std::printf("%-46s found %zu/%zu corners (%.2f%%), wrong ids %zu, RMS %.4f px\n", what, matched, truth,
-                100.0 * matched / std::max<size_t>(1, truth), wrong,
-                matched ? std::sqrt(sum_sq / matched) : 0.0);
-  }
-};
-
 PatternPrior teach(const SimRig& sim, const SimFrame& on, const SimFrame& off) {
   const StereoRig& rig = sim.config().rig;
   PatternPrior prior;
@@ -91,7 +65,7 @@ void trackRun(const char* name, const PatternPrior& prior, const std::vector<con
               const std::vector<SimFrame>& frames) {
   PatternTracker tracker(prior, TrackerOptions());
   Stats time, cpu;
-  Accuracy acc;
+  CornerScore acc;
   for (size_t k = 0; k < frames.size(); ++k) {
     if (backgrounds[k]) tracker.setBackground(backgrounds[k]->left, backgrounds[k]->right);
     const Clock::time_point t0 = Clock::now();
@@ -108,7 +82,7 @@ void trackRun(const char* name, const PatternPrior& prior, const std::vector<con
   }
   time.print((std::string(name) + ": ms per stereo pair").c_str());
   cpu.print((std::string(name) + ": CPU ms per pair (all threads)").c_str());
-  acc.print((std::string(name) + ": accuracy").c_str());
+  std::printf("%-46s %s\n", (std::string(name) + ": accuracy").c_str(), acc.str().c_str());
 }
 
 }  // namespace

@@ -15,6 +15,7 @@
 #include "embedded_calibration_stereo/core/geometry/config_error.h"
 #include "embedded_calibration_stereo/core/tracker/pattern_tracker.h"
 #include "embedded_calibration_stereo/core/sim/sim_rig.h"
+#include "embedded_calibration_stereo/test_support/corner_score.h"
 
 namespace ecs {
 namespace {
@@ -25,48 +26,9 @@ cv::Point2f tracker_test_apply(const cv::Matx33d& h, double x, double y) {
 }
 
 const std::string kSimConfig = std::string(ECS_SOURCE_DIR) + "/config/sim_rig.yaml";
-// A reported corner farther than this from the true corner of its id is a wrong id (a slipped
-// square is ~12 px off; a correct corner is within a few tenths of a pixel).
-constexpr double kWrongIdPx = 1.0;
+constexpr double kWrongIdPx = CornerScore::kWrongIdPx;
 
-struct Score {
-  size_t truth = 0;     // visible corners in the ground truth
-  size_t reported = 0;  // corners the tracker reported
-  size_t wrong = 0;     // reported corners with no true corner of that id within kWrongIdPx
-  double sum_sq = 0.0;  // over correctly identified corners
-  size_t matched = 0;
-  void add(const std::vector<BoardCorners>& tracked, const std::vector<BoardCorners>& truth_boards) {
-    std::map<std::pair<int, int>, cv::Point2f> gt;
-    for (const BoardCorners& b : truth_boards)
-      for (size_t i = 0; i < b.size(); ++i) gt[{b.board_id, b.corner_ids[i]}] = cv::Point2f(b.u[i], b.v[i]);
-    truth += gt.size();
-    for (const BoardCorners& b : tracked) {
-      for (size_t i = 0; i < b.size(); ++i) {
-        ++reported;
-        const auto it = gt.find({b.board_id, b.corner_ids[i]});
-        const double err = it == gt.end() ? 1e9 : cv::norm(it->second - cv::Point2f(b.u[i], b.v[i]));
-        if (err > kWrongIdPx) {
-          ++wrong;
-          continue;
-        }
-        sum_sq += err * err;
-        ++matched;
-      }
-    }
-  }
-  void add(const StereoObservation& tracked, const StereoObservation& truth_obs) {
-    add(tracked.left, truth_obs.left);
-    add(tracked.right, truth_obs.right);
-  }
-  double foundFraction() const { return truth ? static_cast<double>(matched) / truth : 0.0; }
-  double rms() const { return matched ? std::sqrt(sum_sq / matched) : 0.0; }
-  std::string str() const {
-    char buf[200];
-    std::snprintf(buf, sizeof(buf), "found %zu/%zu (%.2f%%), wrong ids %zu, RMS %.4f px", matched, truth,
-                  100.0 * foundFraction(), wrong, rms());
-    return buf;
-  }
-};
+using Score = CornerScore;
 
 struct Taught {
   PatternPrior prior;
