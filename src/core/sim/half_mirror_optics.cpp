@@ -56,9 +56,5 @@ void applyDeviceOptics(const SimOpticsConfig& optics, const std::vector<VirtualB
     cv::multiply(*device, vignettingFactor(rays, optics.vignetting.device), *device);
 }
 
-void applySceneOptics(const SimOpticsConfig& optics, const CameraRays& rays, cv::Mat* scene) {
-  if (optics.vignetting.scene > 0.0) cv::multiply(*scene, vignettingFactor(rays, optics.vignetting.scene), *scene);
-}
-
 }  // namespace sim
 }  // namespace ecs

@@ -36,9 +36,6 @@ cv::Mat vignettingFactor(const CameraRays& rays, double strength);
 // place. Does nothing (not even touch the layer) when the optics are ideal.
 void applyDeviceOptics(const SimOpticsConfig& optics, const std::vector<VirtualBoard>& boards,
                        const CameraRays& rays, const Eigen::Isometry3d& rig_from_camera, cv::Mat* device);
-// Applies the scene path's vignetting to `scene`, in place (untouched when ideal). Separate from
-// the device's: under motion the scene layer is rendered every frame, the device layer is not.
-void applySceneOptics(const SimOpticsConfig& optics, const CameraRays& rays, cv::Mat* scene);
 
 }  // namespace sim
 }  // namespace ecs

@@ -138,6 +138,9 @@ struct SimRig::Impl {
   CameraLayers layers[2];
   sim::LightResponse light_response;  // the light's level over time (optics.light)
   sim::AutoExposure exposure;         // the gain of the next frame (optics.exposure)
+  // The scene path's vignetting per camera: fixed by the rays, applied to a scene layer that a
+  // moving head re-renders every frame. Empty until needed or after the rays change.
+  cv::Mat scene_vignetting[2];
 
   void updateLayers(int index, const SimRigConfig& config, const std::vector<VirtualBoard>& boards,
                     const PinholeCamera& camera, const Eigen::Isometry3d& rig_from_camera,
@@ -157,6 +160,7 @@ void SimRig::Impl::updateLayers(int index, const SimRigConfig& config,
   if (!rays_valid[index] || !sim::sameIntrinsics(rays[index].camera, camera)) {
     rays[index] = sim::computeCameraRays(camera);
     rays_valid[index] = true;
+    scene_vignetting[index].release();
   }
   // Fresh buffers each time: frames handed out earlier never alias the cache.
   CameraLayers fresh;
@@ -186,7 +190,11 @@ void SimRig::Impl::updateLayers(int index, const SimRigConfig& config,
     if (sigma > 0) cv::GaussianBlur(fresh.device, fresh.device, cv::Size(), sigma, 0, cv::BORDER_REPLICATE);
     sim::applyDeviceOptics(config.optics, boards, rays[index], rig_from_camera, &fresh.device);
   }
-  sim::applySceneOptics(config.optics, rays[index], &fresh.scene);
+  if (config.optics.vignetting.scene > 0.0) {
+    if (scene_vignetting[index].empty())
+      scene_vignetting[index] = sim::vignettingFactor(rays[index], config.optics.vignetting.scene);
+    cv::multiply(fresh.scene, scene_vignetting[index], fresh.scene);
+  }
   cv::Mat mono;
   fresh.scene.convertTo(mono, CV_8U);
   toEncoding(mono, config.encoding, &fresh.scene_u8);
