@@ -9,6 +9,9 @@ std::string LightScheduleConfig::validate() const {
   if (!std::isfinite(period_s) || period_s < 0.0) return "calibration_period_s must be >= 0";
   if (calibration_frames < 1) return "calibration_frames must be >= 1";
   if (settle_frames < 0) return "settle_frames must be >= 0";
+  if (!std::isfinite(min_interval_s) || min_interval_s < 0.0) return "min_calibration_interval_s must be >= 0";
+  if (!std::isfinite(verification_period_s) || verification_period_s < 0.0)
+    return "verification_period_s must be >= 0";
   return "";
 }
 
@@ -19,21 +22,43 @@ void LightSchedule::request(bool on) {
   if (!on) burst_frames_left_ = 0;
 }
 
+void LightSchedule::startBurst(double time_s) {
+  if (burst_frames_left_ == 0) burst_frames_left_ = config_.settle_frames + config_.calibration_frames;
+  flash_frames_left_ = 0;  // the burst's frames verify as well
+  last_burst_s_ = time_s;
+  if (config_.verification_period_s > 0.0) next_flash_s_ = time_s + config_.verification_period_s;
+}
+
 LightState LightSchedule::step(double time_s) {
-  if (config_.period_s > 0.0) {
-    if (!started_) {
-      started_ = true;
-      next_burst_s_ = time_s;
-    }
-    if (time_s >= next_burst_s_) {
-      if (burst_frames_left_ == 0) burst_frames_left_ = config_.settle_frames + config_.calibration_frames;
-      // Skip bursts missed while the driver was stalled instead of firing them back to back.
-      while (next_burst_s_ <= time_s) next_burst_s_ += config_.period_s;
-    }
+  const bool on_demand = config_.trigger == CalibrationTrigger::kOnDemand;
+  if (!started_) {
+    started_ = true;
+    next_burst_s_ = time_s;
+    next_flash_s_ = time_s + config_.verification_period_s;
+    // The first burst at the first frame when there is a period; on demand, right away.
+    last_burst_s_ = time_s - config_.min_interval_s;
   }
-  const bool commanded_on = hold_on_ || burst_frames_left_ > 0;
+  if (config_.period_s > 0.0 && time_s >= next_burst_s_) {
+    startBurst(time_s);
+    // Skip bursts missed while the driver was stalled instead of firing them back to back.
+    while (next_burst_s_ <= time_s) next_burst_s_ += config_.period_s;
+  } else if (on_demand && demand_ && burst_frames_left_ == 0 && time_s - last_burst_s_ >= config_.min_interval_s) {
+    startBurst(time_s);
+    if (config_.period_s > 0.0) next_burst_s_ = time_s + config_.period_s;  // the safety net restarts
+  }
+  if (config_.verification_period_s > 0.0 && burst_frames_left_ == 0 && flash_frames_left_ == 0 && !hold_on_ &&
+      (verify_soon_ || time_s >= next_flash_s_)) {
+    verify_soon_ = false;
+    flash_frames_left_ = config_.settle_frames + 1;
+    while (next_flash_s_ <= time_s) next_flash_s_ += config_.verification_period_s;
+  }
+  const bool flash = burst_frames_left_ == 0 && flash_frames_left_ > 0;
+  const bool commanded_on = hold_on_ || burst_frames_left_ > 0 || flash;
   if (burst_frames_left_ > 0) --burst_frames_left_;
-  return advance(commanded_on);
+  if (flash) --flash_frames_left_;
+  LightState state = advance(commanded_on);
+  state.verification = flash && !hold_on_;
+  return state;
 }
 
 LightState LightSchedule::follow(bool light_on) { return advance(light_on); }

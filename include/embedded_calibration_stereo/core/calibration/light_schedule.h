@@ -3,9 +3,17 @@
 //
 // The schedule is stepped once per stereo frame. The light is on
 //  - while a request (set_light true) holds it on, until set_light false, or
-//  - during a periodic calibration burst: every `period_s` seconds (0 = never; only on
-//    request), starting with the first frame, for `settle_frames + calibration_frames` frames,
-//    so that each burst yields `calibration_frames` settled frames.
+//  - during a calibration burst, for `settle_frames + calibration_frames` frames, so that each
+//    burst yields `calibration_frames` settled frames. Bursts start
+//      - trigger kPeriodic: every `period_s` seconds (0 = never; only on request), starting
+//        with the first frame;
+//      - trigger kOnDemand: while demand(true) holds (the calibration is not healthy), at most
+//        once every `min_interval_s`, and as a safety net `period_s` after the previous burst
+//        (0 = no safety net), the first one at the first frame as with kPeriodic; or
+//  - during a verification flash, for `settle_frames + 1` frames (one settled light-on frame,
+//    for checking the calibration in force against the boards): every `verification_period_s`
+//    (0 = none) after the previous flash or burst, and at the next frame after verifySoon()
+//    (a new calibration came into force). A flash never interrupts a burst.
 // A switch takes effect at the next step(): `light_on` is the commanded state from that frame
 // on, and the first `settle_frames` frames after a switch are reported unsettled. During them
 // the physical light level ramps linearly (what the simulated rig renders).
@@ -16,10 +24,15 @@
 
 namespace ecs {
 
+enum class CalibrationTrigger { kPeriodic, kOnDemand };
+
 struct LightScheduleConfig {
-  double period_s = 0.0;       // time between calibration bursts; 0 = only on request
+  double period_s = 0.0;       // time between calibration bursts (kOnDemand: the longest); 0 = only on request
   int calibration_frames = 10; // settled frames with the light on per burst (>= 1)
   int settle_frames = 2;       // frames reported unsettled after each switch (>= 0)
+  CalibrationTrigger trigger = CalibrationTrigger::kPeriodic;
+  double min_interval_s = 0.0;         // kOnDemand: shortest time between two burst starts
+  double verification_period_s = 0.0;  // time between verification flashes; 0 = none
   // Empty when usable; otherwise a message naming the bad field.
   std::string validate() const;
 };
@@ -29,6 +42,7 @@ struct LightState {
   bool settled = true;       // false while the light is still changing
   double light_level = 0.0;  // physical level in [0, 1] (ramps during settling)
   bool switched = false;     // light_on differs from the previous frame (drive the hardware)
+  bool verification = false; // on for a verification flash, not a calibration burst
 };
 
 class LightSchedule {
@@ -39,6 +53,13 @@ class LightSchedule {
   // at the next step(). Releasing also ends a periodic burst in progress.
   void request(bool on);
   bool requestedOn() const { return hold_on_; }
+  // kOnDemand: whether the calibration needs a burst (true while it is not healthy). Takes
+  // effect at the next step(), subject to min_interval_s. Ignored with kPeriodic.
+  void demand(bool needed) { demand_ = needed; }
+  bool demanded() const { return demand_; }
+  // A verification flash at the next step() (unless a burst or a flash is in progress, which
+  // is then followed by one); no effect when verification_period_s is 0.
+  void verifySoon() { verify_soon_ = config_.verification_period_s > 0.0; }
 
   // Advances one frame taken at `time_s` (monotonic seconds) and returns its light state.
   LightState step(double time_s);
@@ -50,12 +71,18 @@ class LightSchedule {
 
  private:
   LightState advance(bool commanded_on);
+  void startBurst(double time_s);
 
   LightScheduleConfig config_;
   bool hold_on_ = false;
   bool started_ = false;
-  double next_burst_s_ = 0.0;
+  bool demand_ = false;
+  bool verify_soon_ = false;
+  double next_burst_s_ = 0.0;    // the next periodic burst (kOnDemand: the safety net's)
+  double last_burst_s_ = 0.0;    // start of the latest burst (after started_)
+  double next_flash_s_ = 0.0;    // the next verification flash
   int64_t burst_frames_left_ = 0;
+  int64_t flash_frames_left_ = 0;
   bool previous_on_ = false;
   int64_t frames_since_switch_ = 1 << 30;  // "long ago": the initial off state is settled
 };
