@@ -122,3 +122,116 @@ TEST(LightSchedule, ZeroSettleFramesSwitchesInstantly) {
   EXPECT_TRUE(s.settled);
   EXPECT_EQ(s.light_level, 1.0);
 }
+
+namespace {
+
+ecs::LightScheduleConfig healthConfig(ecs::CalibrationTrigger trigger, double period_s, double min_interval_s,
+                                      double verification_period_s) {
+  ecs::LightScheduleConfig c = config(period_s, 10, 2);
+  c.trigger = trigger;
+  c.min_interval_s = min_interval_s;
+  c.verification_period_s = verification_period_s;
+  return c;
+}
+
+// Runs of commanded light-on frames: (first frame index, length, settled frames, verification).
+struct Run {
+  int first, length, settled;
+  bool verification;
+};
+std::vector<Run> runs(const std::vector<ecs::LightState>& states) {
+  std::vector<Run> out;
+  for (size_t i = 0; i < states.size(); ++i) {
+    if (!states[i].light_on || (i > 0 && states[i - 1].light_on)) continue;
+    Run r{static_cast<int>(i), 0, 0, states[i].verification};
+    for (size_t j = i; j < states.size() && states[j].light_on; ++j) {
+      ++r.length;
+      r.settled += states[j].settled ? 1 : 0;
+      EXPECT_EQ(states[j].verification, r.verification) << "frame " << j << " changes kind inside one run";
+    }
+    out.push_back(r);
+  }
+  return out;
+}
+
+}  // namespace
+
+TEST(LightSchedule, ValidateNamesTheHealthFields) {
+  EXPECT_EQ(healthConfig(ecs::CalibrationTrigger::kOnDemand, 0, 5, 6).validate(), "");
+  EXPECT_NE(healthConfig(ecs::CalibrationTrigger::kOnDemand, 0, -1, 6).validate().find("min_calibration_interval_s"),
+            std::string::npos);
+  EXPECT_NE(healthConfig(ecs::CalibrationTrigger::kOnDemand, 0, 5, -1).validate().find("verification_period_s"),
+            std::string::npos);
+}
+
+// A flash: settle_frames + 1 frames on, exactly one of them settled, every verification period.
+TEST(LightSchedule, VerificationFlashesGiveOneSettledLightOnFrameEachPeriod) {
+  const double fps = 30.0;
+  ecs::LightSchedule schedule(healthConfig(ecs::CalibrationTrigger::kPeriodic, 0.0, 0.0, 2.0));
+  const auto states = run(&schedule, 50.0, fps, static_cast<int>(7 * fps));
+  const auto flashes = runs(states);
+  ASSERT_EQ(flashes.size(), 3u);  // at 2, 4 and 6 s: the first period starts at the first frame
+  for (size_t k = 0; k < flashes.size(); ++k) {
+    EXPECT_TRUE(flashes[k].verification);
+    EXPECT_EQ(flashes[k].length, 3) << k;
+    EXPECT_EQ(flashes[k].settled, 1) << k;
+    EXPECT_NEAR(flashes[k].first / fps, 2.0 * (k + 1), 1.0 / fps + 1e-9) << k;
+  }
+}
+
+TEST(LightSchedule, OnDemandBurstsOnlyWhileDemandedAndAtMostOncePerMinInterval) {
+  const double fps = 30.0;
+  // No safety net (period 0), no flashes: the light stays off until demanded.
+  ecs::LightSchedule schedule(healthConfig(ecs::CalibrationTrigger::kOnDemand, 0.0, 3.0, 0.0));
+  auto idle = run(&schedule, 0.0, fps, 60);
+  EXPECT_TRUE(runs(idle).empty());
+  schedule.demand(true);
+  const auto states = run(&schedule, 2.0, fps, static_cast<int>(7 * fps));  // 2 .. 9 s
+  const auto bursts = runs(states);
+  ASSERT_EQ(bursts.size(), 3u);  // at 2, 5 and 8 s
+  for (size_t k = 0; k < bursts.size(); ++k) {
+    EXPECT_FALSE(bursts[k].verification);
+    EXPECT_EQ(bursts[k].settled, 10) << k;
+    EXPECT_NEAR(bursts[k].first / fps, 3.0 * k, 1.0 / fps + 1e-9) << k;
+  }
+  schedule.demand(false);
+  EXPECT_TRUE(runs(run(&schedule, 9.0, fps, static_cast<int>(10 * fps))).empty());
+}
+
+TEST(LightSchedule, OnDemandSafetyNetRestartsAfterEachDemandedBurst) {
+  const double fps = 30.0;
+  ecs::LightSchedule schedule(healthConfig(ecs::CalibrationTrigger::kOnDemand, 4.0, 1.0, 0.0));
+  auto states = run(&schedule, 0.0, fps, static_cast<int>(3 * fps));  // burst at 0 (the first frame)
+  schedule.demand(true);
+  auto demanded = run(&schedule, 3.0, fps, 1);                        // burst at 3
+  schedule.demand(false);
+  auto rest = run(&schedule, 3.0 + 1 / fps, fps, static_cast<int>(6 * fps));
+  states.insert(states.end(), demanded.begin(), demanded.end());
+  states.insert(states.end(), rest.begin(), rest.end());
+  const auto bursts = runs(states);
+  ASSERT_EQ(bursts.size(), 3u);
+  EXPECT_NEAR(bursts[0].first / fps, 0.0, 1e-9);
+  EXPECT_NEAR(bursts[1].first / fps, 3.0, 1e-9);
+  EXPECT_NEAR(bursts[2].first / fps, 7.0, 1.0 / fps + 1e-9) << "the safety net counts from the demanded burst";
+}
+
+TEST(LightSchedule, VerifySoonFlashesAtTheNextFrameUnlessABurstVerifiesAlready) {
+  ecs::LightSchedule schedule(healthConfig(ecs::CalibrationTrigger::kPeriodic, 100.0, 0.0, 50.0));
+  // The first burst (12 frames) runs; verifySoon during it is answered by the burst's own frames.
+  auto states = run(&schedule, 0.0, 30.0, 3);
+  schedule.verifySoon();
+  auto more = run(&schedule, 0.1, 30.0, 30);
+  states.insert(states.end(), more.begin(), more.end());
+  const auto r = runs(states);
+  ASSERT_EQ(r.size(), 1u);
+  EXPECT_FALSE(r[0].verification);
+  EXPECT_EQ(r[0].length, 12);
+  // verifySoon when idle: a flash from the next frame.
+  schedule.verifySoon();
+  const auto flash = run(&schedule, 2.0, 30.0, 6);
+  const auto f = runs(flash);
+  ASSERT_EQ(f.size(), 1u);
+  EXPECT_EQ(f[0].first, 0);
+  EXPECT_TRUE(f[0].verification);
+  EXPECT_EQ(f[0].settled, 1);
+}
