@@ -1,6 +1,7 @@
 // CameraDriver nodelet: publishes stereo frames from a backend (sim, files, v4l2) with their
 // CameraInfo and one calibration_mode message per frame, all with the same stamp; switches the
-// calibration light on a schedule or on request; stores calibrations sent to set_camera_info
+// calibration light on a schedule (periodic, or on demand: when calibration/health leaves GOOD,
+// plus verification flashes) or on request; stores calibrations sent to set_camera_info
 // (both cameras' files change together, see StereoCalibration) and refuses those no consumer
 // could use.
 #include <cv_bridge/cv_bridge.h>
@@ -21,6 +22,7 @@
 #include <mutex>
 #include <thread>
 
+#include "embedded_calibration_stereo/CalibrationHealth.h"
 #include "embedded_calibration_stereo/CalibrationMode.h"
 #include "embedded_calibration_stereo/SetRigDrift.h"
 #include "embedded_calibration_stereo/core/geometry/config_error.h"
@@ -40,7 +42,7 @@ namespace embedded_calibration_stereo {
 //    light_, the publishers' use and the diagnostics, and takes mutex_ for the shared state
 //    once per frame;
 //  - the manager's callback threads run the services (set_light, set_camera_info, sim/set_drift)
-//    and touch only schedule_ under mutex_, calibration_ (thread-safe: the capture thread reads
+//    and the calibration/health subscriber, and touch only schedule_ under mutex_, calibration_ (thread-safe: the capture thread reads
 //    the pair in force and its epoch from one snapshot, never waiting for a disk write) and
 //    sim_ (thread-safe drift).
 class CameraDriverNodelet : public nodelet::Nodelet {
@@ -65,6 +67,7 @@ class CameraDriverNodelet : public nodelet::Nodelet {
     stopCapture();
     for (ros::ServiceServer* server : {&left_set_info_srv_, &right_set_info_srv_, &set_light_srv_, &set_drift_srv_})
       server->shutdown();
+    health_sub_.shutdown();
   }
 
   void initialise() {
@@ -108,6 +111,8 @@ class CameraDriverNodelet : public nodelet::Nodelet {
     right_set_info_srv_ = nh.advertiseService<sensor_msgs::SetCameraInfo::Request, sensor_msgs::SetCameraInfo::Response>(
         "right/set_camera_info", [this](auto& req, auto& res) { return setCameraInfo(false, req, res); });
     set_light_srv_ = nh.advertiseService("set_light", &CameraDriverNodelet::setLight, this);
+    if (params_.schedule.trigger == ecs::CalibrationTrigger::kOnDemand)
+      health_sub_ = nh.subscribe("calibration/health", 2, &CameraDriverNodelet::onHealth, this);
     if (sim_) {
       gt_left_info_pub_ = nh.advertise<sensor_msgs::CameraInfo>("ground_truth/left/camera_info", 2);
       gt_right_info_pub_ = nh.advertise<sensor_msgs::CameraInfo>("ground_truth/right/camera_info", 2);
@@ -214,6 +219,15 @@ class CameraDriverNodelet : public nodelet::Nodelet {
     }
     // Both CameraInfos and the epoch from one snapshot: a published pair is never mixed.
     StereoCalibration::InForce in_force = calibration_->inForce();
+    if (in_force.epoch != last_epoch_) {
+      // A new calibration in force is checked against the boards at once.
+      if (frames_seen_ > 0) {
+        std::lock_guard<std::mutex> lock(mutex_);
+        schedule_->verifySoon();
+      }
+      last_epoch_ = in_force.epoch;
+    }
+    ++frames_seen_;
     auto left_info = boost::make_shared<sensor_msgs::CameraInfo>(std::move(in_force.left));
     auto right_info = boost::make_shared<sensor_msgs::CameraInfo>(std::move(in_force.right));
     mode->calibration_epoch = in_force.epoch;
@@ -262,6 +276,12 @@ class CameraDriverNodelet : public nodelet::Nodelet {
     status.add("frame rate (fps)", rate);
     status.add("configured fps", params_.fps);
     status.add("light on", last_light_on_);
+    status.add("calibration trigger",
+               params_.schedule.trigger == ecs::CalibrationTrigger::kOnDemand ? "on_demand" : "periodic");
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      status.add("calibration demanded (health not good)", schedule_->demanded());
+    }
     status.add("calibration epoch", epoch);
     status.add("calibration", calibration_->source());
     status.add("calibration problem", calibration_problem.empty() ? "none" : calibration_problem);
@@ -328,6 +348,13 @@ class CameraDriverNodelet : public nodelet::Nodelet {
     return true;
   }
 
+  // On demand: a calibration burst is wanted while the calibration is known not to hold.
+  void onHealth(const CalibrationHealthConstPtr& health) {
+    const bool needed = health->state == CalibrationHealth::DEGRADED || health->state == CalibrationHealth::BAD;
+    std::lock_guard<std::mutex> lock(mutex_);
+    schedule_->demand(needed);
+  }
+
   bool setDrift(SetRigDrift::Request& req, SetRigDrift::Response& res) {
     ecs::DriftRequest drift;
     drift.focal_scale = req.focal_scale;
@@ -359,11 +386,14 @@ class CameraDriverNodelet : public nodelet::Nodelet {
   image_transport::Publisher gt_left_scene_pub_, gt_right_scene_pub_, gt_depth_pub_;
   ros::Publisher gt_head_pose_pub_, gt_tf_pub_;
   ros::ServiceServer left_set_info_srv_, right_set_info_srv_, set_light_srv_, set_drift_srv_;
+  ros::Subscriber health_sub_;  // calibration_trigger on_demand only
 
   // Capture thread only.
   std::unique_ptr<HeadPoseTruth> head_pose_;  // sim backend only
   std::unique_ptr<diagnostic_updater::Updater> diagnostics_;
   int frames_published_ = 0;
+  uint64_t frames_seen_ = 0;
+  uint32_t last_epoch_ = 0;
   bool last_light_on_ = false;
   std::string last_error_;
   std::chrono::steady_clock::time_point diagnosed_at_;

@@ -4,7 +4,11 @@
 // external driver's frames into the head's stereo stream: for each stereo frame of the driver,
 // matched by stamp (ExactTime, or ApproximateTime for two independent drivers), it publishes
 // left|right/image_raw, left|right/camera_info and one calibration_mode message, all with the left
-// image's stamp, so the rest of the graph runs unchanged (ExactTime everywhere).
+// image's stamp, so the rest of the graph runs unchanged (ExactTime everywhere). The light
+// follows the schedule: calibration bursts every calibration_period_s (calibration_trigger
+// periodic) or when calibration/health leaves GOOD (on_demand, with min_calibration_interval_s
+// and calibration_period_s as a safety net), verification flashes every verification_period_s
+// and after every new calibration; or set_light.
 //
 // The driver's latency between a light command and the exposure is unknown, so each frame's
 // light state and settled flag come from the images themselves (core LightLevelTracker: the
@@ -44,11 +48,13 @@
 #include <memory>
 #include <optional>
 
+#include "embedded_calibration_stereo/CalibrationHealth.h"
 #include "embedded_calibration_stereo/CalibrationMode.h"
 #include "embedded_calibration_stereo/core/calibration/light_confirmation.h"
 #include "embedded_calibration_stereo/core/calibration/light_schedule.h"
 #include "embedded_calibration_stereo/core/geometry/config_error.h"
 #include "embedded_calibration_stereo/ros/camera_calibration.h"
+#include "embedded_calibration_stereo/ros/driver_params.h"
 #include "embedded_calibration_stereo/ros/lazy_synced_input.h"
 #include "embedded_calibration_stereo/ros/light_backend.h"
 #include "embedded_calibration_stereo/ros/parameter_reader.h"
@@ -116,6 +122,7 @@ LightControllerParams loadParams(const ros::NodeHandle& pnh) {
   // Frames the light is held on beyond calibration_frames: the driver's delay and the unsettled
   // frames on both sides of each switch.
   p.schedule.settle_frames = read.get("settle_frames", 5);
+  readHealthSchedule(read, &p.schedule);
   refuseProblem(p.schedule.validate());
 
   p.approximate_sync = read.get("approximate_sync", p.approximate_sync);
@@ -161,7 +168,8 @@ struct PendingFrame {
 }  // namespace
 
 // Threads: everything runs on the nodelet's single-threaded callback queue (frame callbacks,
-// set_light, set_camera_info, the diagnostics timer), so the state below needs no lock. The light
+// set_light, set_camera_info, calibration/health, the diagnostics timer), so the state below
+// needs no lock. The light
 // backend is driven from the frame callback only.
 class LightControllerNodelet : public nodelet::Nodelet {
  public:
@@ -178,6 +186,7 @@ class LightControllerNodelet : public nodelet::Nodelet {
       NODELET_FATAL("LightController cannot start: %s", e.what());
       for (ros::ServiceServer* server : {&set_light_srv_, &left_set_info_srv_, &right_set_info_srv_})
         server->shutdown();
+      health_sub_.shutdown();
       throw;
     }
   }
@@ -215,6 +224,11 @@ class LightControllerNodelet : public nodelet::Nodelet {
     right_pub_ = it_->advertiseCamera("right/image_raw", 2);
     mode_pub_ = nh.advertise<CalibrationMode>("calibration_mode", 2);
     set_light_srv_ = nh.advertiseService("set_light", &LightControllerNodelet::setLight, this);
+    if (params_.schedule.trigger == ecs::CalibrationTrigger::kOnDemand)
+      health_sub_ = nh.subscribe<CalibrationHealth>("calibration/health", 2, [this](const auto& health) {
+        // On demand: a calibration burst is wanted while the calibration is known not to hold.
+        schedule_->demand(health->state == CalibrationHealth::DEGRADED || health->state == CalibrationHealth::BAD);
+      });
 
     const image_transport::TransportHints hints("raw", ros::TransportHints(), pnh);
     left_sub_.subscribe(*it_, "driver/left/image_raw", params_.queue_size, hints);
@@ -394,6 +408,7 @@ class LightControllerNodelet : public nodelet::Nodelet {
   void checkCalibration(const CameraInfo& info, const std::string& topic, int side) {
     if (last_info_[side] && !sameCalibration(*last_info_[side], info)) {
       ++epoch_;
+      schedule_->verifySoon();  // a new calibration in force is checked against the boards at once
       NODELET_INFO("LightController: new calibration on %s, calibration epoch %u", topic.c_str(), epoch_);
     }
     last_info_[side] = info;
@@ -554,6 +569,9 @@ class LightControllerNodelet : public nodelet::Nodelet {
       status.summary(DiagnosticStatus::OK, "confirming the light");
     }
     status.add("light backend", params_.light_backend);
+    status.add("calibration trigger",
+               params_.schedule.trigger == ecs::CalibrationTrigger::kOnDemand ? "on_demand" : "periodic");
+    status.add("calibration demanded (health not good)", schedule_->demanded());
     status.add("light commanded on", commanded_on_);
     status.add("light confirmed on", last_light_.light_on);
     status.add("settled", last_light_.settled);
@@ -598,6 +616,7 @@ class LightControllerNodelet : public nodelet::Nodelet {
   std::unique_ptr<message_filters::Synchronizer<ApproximatePolicy>> approximate_sync_;
   image_transport::CameraPublisher left_pub_, right_pub_;
   ros::Publisher mode_pub_, sim_level_pub_;
+  ros::Subscriber health_sub_;  // calibration_trigger on_demand only
   ros::ServiceServer set_light_srv_, left_set_info_srv_, right_set_info_srv_;
   std::unique_ptr<diagnostic_updater::Updater> diagnostics_;
   ros::WallTimer timer_;

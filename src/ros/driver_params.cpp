@@ -15,6 +15,13 @@ std::string readBytes(const ParameterReader& read, const std::string& name, cons
 
 }  // namespace
 
+void readHealthSchedule(const ParameterReader& read, ecs::LightScheduleConfig* schedule) {
+  const std::string trigger = read.choice("calibration_trigger", "periodic", {"periodic", "on_demand"});
+  schedule->trigger = trigger == "on_demand" ? ecs::CalibrationTrigger::kOnDemand : ecs::CalibrationTrigger::kPeriodic;
+  schedule->min_interval_s = read.atLeast("min_calibration_interval_s", schedule->min_interval_s, 0.0);
+  schedule->verification_period_s = read.atLeast("verification_period_s", schedule->verification_period_s, 0.0);
+}
+
 DriverParams loadDriverParams(const ros::NodeHandle& private_nh, const std::string& default_sim_config) {
   const ParameterReader read(private_nh);
   DriverParams p;
@@ -42,6 +49,7 @@ DriverParams loadDriverParams(const ros::NodeHandle& private_nh, const std::stri
   p.schedule.period_s = read.get("calibration_period_s", 0.0);
   p.schedule.calibration_frames = read.get("calibration_frames", p.schedule.calibration_frames);
   p.schedule.settle_frames = read.get("settle_frames", p.schedule.settle_frames);
+  readHealthSchedule(read, &p.schedule);
   const std::string schedule_problem = p.schedule.validate();
   if (!schedule_problem.empty())
     throw ecs::ConfigError(schedule_problem.substr(0, schedule_problem.find(' ')), schedule_problem);

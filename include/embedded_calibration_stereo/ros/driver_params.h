@@ -30,12 +30,17 @@ struct DriverParams {
   // camera's set_camera_info (a stereo calibration sets left, then right) before it is discarded.
   double pair_timeout_s = 10.0;
   std::string sim_config;               // path of sim_rig.yaml (sim backend)
-  ecs::LightScheduleConfig schedule;    // calibration_period_s, calibration_frames, settle_frames
+  ecs::LightScheduleConfig schedule;    // calibration_period_s, calibration_frames, settle_frames, trigger, ...
   FilesSourceParams files;
   V4l2SourceParams v4l2;
   SerialLightParams serial;
   GpioLightParams gpio;
 };
+
+// The schedule's health parameters, shared by the CameraDriver and the LightController:
+// calibration_trigger (periodic | on_demand), min_calibration_interval_s, verification_period_s.
+class ParameterReader;
+void readHealthSchedule(const ParameterReader& read, ecs::LightScheduleConfig* schedule);
 
 // Reads and validates the parameters. `default_sim_config` is used when sim_config is not set.
 // Checks types (ParameterReader), ranges and names (backend, light_backend, encodings, escapes);
