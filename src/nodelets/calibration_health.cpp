@@ -1,0 +1,453 @@
+// CalibrationHealth nodelet: says at every frame whether the calibration in force still holds
+// (core CalibrationMonitor) and restores the previous calibration when a new one does not.
+//  - Depth mode: every depth_every_n_frames-th settled light-off stereo frame (left|right/
+//    image_raw with their camera_info and calibration_mode, ExactTime) goes to the monitor,
+//    which measures the vertical misalignment of scene correspondences rectified with the
+//    frame's calibration.
+//  - Verification: the tracker's board observations (calibration/observations) of settled
+//    light-on frames taken with the calibration in force: the driver's verification flashes
+//    (verification_period_s) and its calibration bursts alike.
+// It publishes calibration/health (CalibrationHealth) after every measurement and the state on
+// diagnostics (GOOD OK, DEGRADED WARN, BAD ERROR, no verdict yet WARN).
+// A new calibration (a new calibration_epoch) resets the monitor. The first verification of it
+// must find it GOOD; when it does not and the previous calibration was doing better (GOOD, or
+// a better state), the previous pair is sent back to the driver's left|right/set_camera_info
+// (rollback true), and calibration/health, calibration/status and the diagnostics say why.
+#include <cv_bridge/cv_bridge.h>
+#include <diagnostic_updater/diagnostic_updater.h>
+#include <message_filters/subscriber.h>
+#include <message_filters/sync_policies/exact_time.h>
+#include <message_filters/synchronizer.h>
+#include <nodelet/nodelet.h>
+#include <pluginlib/class_list_macros.hpp>
+#include <ros/package.h>
+#include <ros/ros.h>
+#include <sensor_msgs/SetCameraInfo.h>
+
+#include <chrono>
+#include <cmath>
+#include <deque>
+#include <future>
+#include <limits>
+#include <memory>
+#include <mutex>
+#include <optional>
+
+#include "embedded_calibration_stereo/CalibrationHealth.h"
+#include "embedded_calibration_stereo/CalibrationMode.h"
+#include "embedded_calibration_stereo/CalibrationStatus.h"
+#include "embedded_calibration_stereo/StereoPatternObservation.h"
+#include "embedded_calibration_stereo/core/calibration/calibration_monitor.h"
+#include "embedded_calibration_stereo/core/geometry/config_error.h"
+#include "embedded_calibration_stereo/core/geometry/config_io.h"
+#include "embedded_calibration_stereo/ros/calibration_session.h"
+#include "embedded_calibration_stereo/ros/conversions.h"
+#include "embedded_calibration_stereo/ros/parameter_reader.h"
+#include "embedded_calibration_stereo/ros/service_call.h"
+
+namespace embedded_calibration_stereo {
+
+namespace {
+
+using sensor_msgs::CameraInfo;
+using sensor_msgs::CameraInfoConstPtr;
+using sensor_msgs::Image;
+using sensor_msgs::ImageConstPtr;
+
+struct HealthParams {
+  std::string device_config;
+  // true: the device's boards sit where device_config puts them (verification against their
+  // poses: a common zoom is seen); false: each board's pose is fitted in each frame.
+  bool boards_posed = true;
+  int depth_every_n_frames = 1;
+  int queue_size = 5;
+  bool rollback = true;
+  double service_timeout_s = 2.0;
+  ecs::CalibrationMonitorOptions monitor;
+};
+
+// Every parameter is read and checked here, once, at start.
+HealthParams loadParams(const ros::NodeHandle& pnh, const std::string& default_device_config) {
+  const ParameterReader read(pnh);
+  HealthParams p;
+  p.device_config = read.get("device_config", default_device_config);
+  if (p.device_config.empty()) throw ecs::ConfigError("device_config", "missing");
+  p.boards_posed = read.get("boards_posed", p.boards_posed);
+  p.depth_every_n_frames = read.atLeast("depth_every_n_frames", p.depth_every_n_frames, 1);
+  p.queue_size = read.atLeast("queue_size", p.queue_size, 1);
+  p.rollback = read.get("rollback", p.rollback);
+  p.service_timeout_s = read.inRange("service_timeout_s", p.service_timeout_s, 0.1, 60.0);
+  ecs::CalibrationMonitorOptions& m = p.monitor;
+  m.rectification.alpha = read.get("rectification_alpha", m.rectification.alpha);
+  if (!(m.rectification.alpha == -1.0 || (m.rectification.alpha >= 0.0 && m.rectification.alpha <= 1.0)))
+    throw ecs::ConfigError("rectification_alpha", "must be in [0, 1], or -1 for OpenCV's default scaling");
+  m.misalignment_degraded_px = read.atLeast("misalignment_degraded_px", m.misalignment_degraded_px, 0.0);
+  m.misalignment_bad_px = read.atLeast("misalignment_bad_px", m.misalignment_bad_px, m.misalignment_degraded_px);
+  m.disparity_bias_degraded_px = read.atLeast("disparity_bias_degraded_px", m.disparity_bias_degraded_px, 0.0);
+  m.disparity_bias_bad_px =
+      read.atLeast("disparity_bias_bad_px", m.disparity_bias_bad_px, m.disparity_bias_degraded_px);
+  m.board_rms_degraded_px = read.atLeast("board_rms_degraded_px", m.board_rms_degraded_px, 0.0);
+  m.board_rms_bad_px = read.atLeast("board_rms_bad_px", m.board_rms_bad_px, m.board_rms_degraded_px);
+  m.hysteresis = read.inRange("hysteresis", m.hysteresis, 0.0, 0.99);
+  m.smoothing_time_s = read.atLeast("smoothing_time_s", m.smoothing_time_s, 0.0);
+  m.max_depth_age_s = read.atLeast("max_depth_age_s", m.max_depth_age_s, 0.0);
+  m.max_verification_age_s = read.atLeast("max_verification_age_s", m.max_verification_age_s, 0.0);
+  const std::string problem = m.Check();
+  if (!problem.empty()) throw ecs::ConfigError(problem.substr(0, problem.find(' ')), problem);
+  return p;
+}
+
+uint8_t toMsgState(ecs::CalibrationHealth state) {
+  switch (state) {
+    case ecs::CalibrationHealth::kGood: return CalibrationHealth::GOOD;
+    case ecs::CalibrationHealth::kDegraded: return CalibrationHealth::DEGRADED;
+    case ecs::CalibrationHealth::kBad: return CalibrationHealth::BAD;
+    default: return CalibrationHealth::UNKNOWN;
+  }
+}
+
+// Worse states rank higher; UNKNOWN ranks nowhere (nothing to compare).
+int rank(ecs::CalibrationHealth state) {
+  switch (state) {
+    case ecs::CalibrationHealth::kGood: return 0;
+    case ecs::CalibrationHealth::kDegraded: return 1;
+    case ecs::CalibrationHealth::kBad: return 2;
+    default: return -1;
+  }
+}
+
+}  // namespace
+
+// Threads: the frame, observation and timer callbacks run on the nodelet's single-threaded
+// queue and alone touch monitor_ and the state below; a restore runs on a std::async thread
+// (bounded service calls) and shares only its future, read from those callbacks.
+class CalibrationHealthNodelet : public nodelet::Nodelet {
+ public:
+  ~CalibrationHealthNodelet() override {
+    timer_.stop();
+    if (restore_.valid()) restore_.wait();  // bounded: two service calls of service_timeout_s
+  }
+
+ private:
+  using Policy = message_filters::sync_policies::ExactTime<Image, CameraInfo, Image, CameraInfo, CalibrationMode>;
+
+  void onInit() override {
+    try {
+      initialise();
+    } catch (const std::exception& e) {
+      NODELET_FATAL("CalibrationHealth cannot start: %s", e.what());
+      timer_.stop();
+      observations_sub_.shutdown();
+      throw;
+    }
+  }
+
+  void initialise() {
+    ros::NodeHandle& nh = getNodeHandle();
+    ros::NodeHandle& pnh = getPrivateNodeHandle();
+    const std::string package_path = ros::package::getPath("embedded_calibration_stereo");
+    params_ = loadParams(pnh, package_path.empty() ? "" : package_path + "/config/sim_rig.yaml");
+    try {
+      cv::FileStorage fs = ecs::openYaml(params_.device_config);
+      boards_ = ecs::loadDevice(fs["device"], "device").virtualBoards();
+    } catch (const std::exception& e) {
+      throw ecs::ConfigError("device_config", "'" + params_.device_config + "': " + e.what());
+    }
+    monitor_ = std::make_unique<ecs::CalibrationMonitor>(params_.monitor);
+
+    health_pub_ = nh.advertise<CalibrationHealth>("calibration/health", 5);
+    status_pub_ = nh.advertise<CalibrationStatus>("calibration/status", 1);
+    left_sub_.subscribe(nh, "left/image_raw", params_.queue_size);
+    left_info_sub_.subscribe(nh, "left/camera_info", params_.queue_size);
+    right_sub_.subscribe(nh, "right/image_raw", params_.queue_size);
+    right_info_sub_.subscribe(nh, "right/camera_info", params_.queue_size);
+    mode_sub_.subscribe(nh, "calibration_mode", params_.queue_size);
+    sync_ = std::make_unique<message_filters::Synchronizer<Policy>>(Policy(params_.queue_size), left_sub_,
+                                                                    left_info_sub_, right_sub_, right_info_sub_,
+                                                                    mode_sub_);
+    sync_->registerCallback(&CalibrationHealthNodelet::onFrame, this);
+    observations_sub_ = nh.subscribe("calibration/observations", 10, &CalibrationHealthNodelet::onObservation, this);
+
+    diagnostics_ = std::make_unique<diagnostic_updater::Updater>(nh, pnh, getName());
+    diagnostics_->setHardwareID("calibration_health");
+    diagnostics_->add("calibration_health", this, &CalibrationHealthNodelet::diagnose);
+    timer_ = nh.createWallTimer(ros::WallDuration(1.0), [this](const ros::WallTimerEvent&) {
+      collectRestore();
+      diagnostics_->update();
+    });
+    NODELET_INFO("CalibrationHealth: depth mode on %s and %s (every %d settled light-off frame%s), verification "
+                 "on %s, boards %s, %s",
+                 left_sub_.getTopic().c_str(), right_sub_.getTopic().c_str(), params_.depth_every_n_frames,
+                 params_.depth_every_n_frames == 1 ? "" : "s", observations_sub_.getTopic().c_str(),
+                 params_.boards_posed ? "at their poses of device_config" : "posed per frame",
+                 params_.rollback ? "a new calibration that verifies worse is rolled back"
+                                  : "no rollback");
+  }
+
+  void onFrame(const ImageConstPtr& left, const CameraInfoConstPtr& left_info, const ImageConstPtr& right,
+               const CameraInfoConstPtr& right_info, const CalibrationModeConstPtr& mode) {
+    collectRestore();
+    const ros::Time stamp = mode->header.stamp;
+    frames_.push_back({stamp, mode->calibration_epoch, mode->light_on && mode->settled});
+    if (frames_.size() > kKeptFrames) frames_.pop_front();
+    if (!epoch_ || *epoch_ != mode->calibration_epoch) newCalibration(*left_info, *right_info, mode->calibration_epoch);
+    if (!monitor_->hasCalibration()) return;
+    if (mode->light_on || !mode->settled) return;
+    if (++light_off_frames_ % params_.depth_every_n_frames != 0) return;
+    cv_bridge::CvImageConstPtr left_cv, right_cv;
+    try {
+      left_cv = cv_bridge::toCvShare(left);
+      right_cv = cv_bridge::toCvShare(right);
+    } catch (const cv_bridge::Exception& e) {
+      NODELET_ERROR_THROTTLE(5.0, "CalibrationHealth: frame of %s not measured: %s", left_sub_.getTopic().c_str(),
+                             e.what());
+      return;
+    }
+    const auto start = std::chrono::steady_clock::now();
+    try {
+      monitor_->addDepthFrame(stamp.toSec(), left_cv->image, right_cv->image);
+    } catch (const std::exception& e) {
+      NODELET_ERROR_THROTTLE(5.0, "CalibrationHealth: frame of %s not measured: %s", left_sub_.getTopic().c_str(),
+                             e.what());
+      return;
+    }
+    depth_ms_ = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+    ++depth_frames_;
+    publish(stamp);
+  }
+
+  void onObservation(const StereoPatternObservationConstPtr& msg) {
+    collectRestore();
+    if (!monitor_->hasCalibration()) return;
+    // Only settled light-on frames taken with the calibration in force verify it.
+    const FrameSeen* seen = nullptr;
+    for (const FrameSeen& frame : frames_)
+      if (frame.stamp == msg->header.stamp) seen = &frame;
+    if (!seen || !seen->lit || seen->epoch != *epoch_) return;
+    const ecs::StereoObservation observation = fromMsg(*msg);
+    if (observation.left.empty() && observation.right.empty()) return;
+    bool verified = false;
+    try {
+      verified = monitor_->addVerification(msg->header.stamp.toSec(), observation);
+    } catch (const std::exception& e) {
+      NODELET_ERROR_THROTTLE(5.0, "CalibrationHealth: observation on %s not used: %s",
+                             observations_sub_.getTopic().c_str(), e.what());
+      return;
+    }
+    if (verified) {
+      ++verifications_;
+      checkNewCalibration();
+    }
+    publish(msg->header.stamp);
+  }
+
+  // A new epoch: the monitor starts again with it; the previous pair is kept for a restore.
+  void newCalibration(const CameraInfo& left, const CameraInfo& right, uint32_t epoch) {
+    const ecs::CalibrationHealth previous_state =
+        monitor_->hasCalibration() ? monitor_->report().state : ecs::CalibrationHealth::kUnknown;
+    const bool is_restore = restored_ && carriesCalibration(left, restored_->first) &&
+                            carriesCalibration(right, restored_->second);
+    if (in_force_ && !is_restore && params_.rollback && rank(previous_state) >= 0) {
+      under_test_ = UnderTest{epoch, *epoch_, *in_force_, previous_state};
+    } else {
+      under_test_.reset();
+    }
+    if (is_restore) {
+      restored_.reset();
+      restored_epoch_ = epoch;  // the health reason keeps saying why while it is in force
+    }
+    epoch_ = epoch;
+    in_force_ = std::make_pair(left, right);
+    ecs::StereoRig rig;
+    std::string error;
+    if (!fromStereoCameraInfo(left, right, &rig, &error)) {
+      calibration_problem_ = "calibration of epoch " + std::to_string(epoch) + " not usable: " + error;
+    } else {
+      try {
+        monitor_->setCalibration(rig, static_cast<int>(epoch), boards_, params_.boards_posed);
+        calibration_problem_.clear();
+      } catch (const std::exception& e) {
+        calibration_problem_ = "calibration of epoch " + std::to_string(epoch) + " not usable: " + e.what();
+      }
+    }
+    if (!calibration_problem_.empty()) {
+      monitor_ = std::make_unique<ecs::CalibrationMonitor>(params_.monitor);  // no calibration: UNKNOWN
+      NODELET_ERROR("CalibrationHealth: %s", calibration_problem_.c_str());
+    }
+  }
+
+  // After a verification: a new calibration under test is kept when GOOD or no worse than the
+  // previous one was, and restored otherwise.
+  void checkNewCalibration() {
+    if (!under_test_ || under_test_->epoch != *epoch_) return;
+    const ecs::HealthReport report = monitor_->report();
+    if (rank(report.state) < 0) return;  // no verdict yet: the next verification decides
+    const UnderTest test = *under_test_;
+    under_test_.reset();
+    const bool worse = report.state != ecs::CalibrationHealth::kGood &&
+                       (test.previous_state == ecs::CalibrationHealth::kGood ||
+                        rank(report.state) > rank(test.previous_state));
+    if (!worse) {
+      NODELET_INFO("CalibrationHealth: the calibration of epoch %u verified %s", test.epoch,
+                   ecs::toString(report.state));
+      return;
+    }
+    char text[400];
+    snprintf(text, sizeof(text),
+             "the calibration of epoch %u verified %s (%s) where the previous one (epoch %u) was %s: restoring the "
+             "previous one",
+             test.epoch, ecs::toString(report.state), report.reason.c_str(), test.previous_epoch,
+             ecs::toString(test.previous_state));
+    last_restore_ = text;
+    NODELET_WARN("CalibrationHealth: %s", text);
+    if (restore_.valid()) {  // a restore still running: this one waits for the next verification
+      last_restore_ += "; not restored yet, an earlier restore is still running";
+      return;
+    }
+    restored_ = test.previous;
+    const ros::NodeHandle nh = getNodeHandle();
+    const double timeout_s = params_.service_timeout_s;
+    restore_ = std::async(std::launch::async, [nh, pair = test.previous, timeout_s]() -> std::string {
+      for (const bool left : {true, false}) {
+        sensor_msgs::SetCameraInfo srv;
+        srv.request.camera_info = left ? pair.first : pair.second;
+        std::string error;
+        const std::string name = left ? "left/set_camera_info" : "right/set_camera_info";
+        if (!callService(nh, name, &srv, timeout_s, &error)) return error;
+        if (!srv.response.success) return name + " refused: " + srv.response.status_message;
+      }
+      return "";
+    });
+    CalibrationStatus status;
+    status.header.stamp = ros::Time::now();
+    status.epoch = test.epoch;
+    status.accepted = false;
+    status.reason = std::string("rolled back: ") + text;
+    status_pub_.publish(status);
+  }
+
+  // Callback queue: the outcome of a finished restore.
+  void collectRestore() {
+    if (!restore_.valid() || restore_.wait_for(std::chrono::seconds(0)) != std::future_status::ready) return;
+    const std::string error = restore_.get();
+    ++restores_;
+    if (error.empty()) {
+      last_restore_ += "; restored";
+      NODELET_WARN("CalibrationHealth: previous calibration restored");
+    } else {
+      restored_.reset();
+      last_restore_ += "; restore failed: " + error;
+      NODELET_ERROR("CalibrationHealth: restoring the previous calibration failed: %s", error.c_str());
+    }
+  }
+
+  void publish(const ros::Time& stamp) {
+    const ecs::HealthReport report = monitor_->report();
+    auto msg = boost::make_shared<CalibrationHealth>();
+    msg->header.stamp = stamp;
+    msg->epoch = epoch_.value_or(0);
+    msg->state = toMsgState(report.state);
+    constexpr double nan = std::numeric_limits<double>::quiet_NaN();
+    const bool depth = report.epipolar_age_s >= 0.0, boards = report.board_age_s >= 0.0;
+    msg->misalignment_px = depth ? report.misalignment_px : nan;
+    msg->misalignment_sd_px = depth ? report.misalignment_sd_px : nan;
+    msg->board_rms_left_px = boards ? report.board_rms_left_px : nan;
+    msg->board_rms_right_px = boards ? report.board_rms_right_px : nan;
+    msg->stereo_consistency_px = boards ? report.stereo_consistency_px : nan;
+    for (size_t i = 0; i < 4; ++i) {
+      msg->predicted_depths_m[i] = ecs::kHealthDepthsM[i];
+      msg->predicted_depth_error_pct[i] = report.predicted_depth_error_pct[i];
+    }
+    msg->misalignment_age_s = report.epipolar_age_s;
+    msg->verification_age_s = report.board_age_s;
+    msg->reason = reasonOf(report);
+    health_pub_.publish(msg);
+    last_ = msg;
+  }
+
+  std::string reasonOf(const ecs::HealthReport& report) const {
+    std::string reason = calibration_problem_.empty() ? report.reason : calibration_problem_;
+    if (under_test_) reason += (reason.empty() ? "" : "; ") + std::string("new calibration awaiting its verification");
+    if (!last_restore_.empty() && (restored_ || epoch_ == restored_epoch_)) reason += (reason.empty() ? "" : "; ") + last_restore_;
+    return reason;
+  }
+
+  void diagnose(diagnostic_updater::DiagnosticStatusWrapper& status) {
+    using diagnostic_msgs::DiagnosticStatus;
+    const ecs::HealthReport report = monitor_->report();
+    const std::string reason = reasonOf(report);
+    if (!calibration_problem_.empty()) {
+      status.summary(DiagnosticStatus::ERROR, calibration_problem_);
+    } else if (!last_restore_.empty() && last_restore_.find("restore failed") != std::string::npos) {
+      status.summary(DiagnosticStatus::ERROR, last_restore_);
+    } else {
+      const int8_t level = report.state == ecs::CalibrationHealth::kGood       ? DiagnosticStatus::OK
+                           : report.state == ecs::CalibrationHealth::kBad      ? DiagnosticStatus::ERROR
+                                                                                : DiagnosticStatus::WARN;
+      const std::string head = report.state == ecs::CalibrationHealth::kUnknown ? "no verdict yet"
+                                                                               : ecs::toString(report.state);
+      status.summary(level, reason.empty() ? head : head + ": " + reason);
+    }
+    status.add("state", ecs::toString(report.state));
+    status.add("calibration epoch", epoch_.value_or(0));
+    status.add("misalignment (px)", report.misalignment_px);
+    status.add("misalignment sd (px)", report.misalignment_sd_px);
+    status.add("board rms left (px)", report.board_rms_left_px);
+    status.add("board rms right (px)", report.board_rms_right_px);
+    status.add("stereo consistency (px)", report.stereo_consistency_px);
+    for (size_t i = 0; i < 4; ++i) {
+      char key[64];
+      snprintf(key, sizeof(key), "predicted depth error at %.0f m (%%)", ecs::kHealthDepthsM[i]);
+      status.add(key, report.predicted_depth_error_pct[i]);
+    }
+    status.add("misalignment age (s)", report.epipolar_age_s);
+    status.add("verification age (s)", report.board_age_s);
+    status.add("frames measured", depth_frames_);
+    status.add("last measurement (ms)", depth_ms_);
+    status.add("verifications", verifications_);
+    status.add("restores", restores_);
+    status.add("last restore", last_restore_.empty() ? "none" : last_restore_);
+  }
+
+  static constexpr size_t kKeptFrames = 64;  // stamps -> epochs remembered for the observations
+
+  struct FrameSeen {
+    ros::Time stamp;
+    uint32_t epoch;
+    bool lit;  // light on and settled
+  };
+  // A new calibration waiting for its first verification.
+  struct UnderTest {
+    uint32_t epoch, previous_epoch;
+    std::pair<CameraInfo, CameraInfo> previous;
+    ecs::CalibrationHealth previous_state;
+  };
+
+  HealthParams params_;
+  std::vector<ecs::VirtualBoard> boards_;
+  std::unique_ptr<ecs::CalibrationMonitor> monitor_;
+  message_filters::Subscriber<Image> left_sub_, right_sub_;
+  message_filters::Subscriber<CameraInfo> left_info_sub_, right_info_sub_;
+  message_filters::Subscriber<CalibrationMode> mode_sub_;
+  std::unique_ptr<message_filters::Synchronizer<Policy>> sync_;
+  ros::Subscriber observations_sub_;
+  ros::Publisher health_pub_, status_pub_;
+  std::unique_ptr<diagnostic_updater::Updater> diagnostics_;
+  ros::WallTimer timer_;
+
+  std::deque<FrameSeen> frames_;
+  std::optional<uint32_t> epoch_;
+  std::optional<std::pair<CameraInfo, CameraInfo>> in_force_;
+  std::optional<UnderTest> under_test_;
+  std::optional<std::pair<CameraInfo, CameraInfo>> restored_;  // sent back to the driver, not seen yet
+  std::future<std::string> restore_;                           // the running restore: "" or why it failed
+  std::optional<uint32_t> restored_epoch_;                     // the epoch of the restored calibration
+  std::string calibration_problem_, last_restore_;
+  CalibrationHealthConstPtr last_;
+  uint64_t light_off_frames_ = 0, depth_frames_ = 0, verifications_ = 0, restores_ = 0;
+  double depth_ms_ = 0.0;
+};
+
+}  // namespace embedded_calibration_stereo
+
+PLUGINLIB_EXPORT_CLASS(embedded_calibration_stereo::CalibrationHealthNodelet, nodelet::Nodelet)
