@@ -57,14 +57,14 @@ struct CalibrationMonitorOptions {
   // --- State thresholds (hysteresis: a level is left below threshold * (1 - hysteresis)).
   // Vertical misalignment RMS over the image (px, rectified), depth mode and verification.
   double misalignment_degraded_px = 0.08;
-  double misalignment_bad_px = 0.5;
+  double misalignment_bad_px = 1.0;
   // Disparity bias RMS (px) of the change seen by the verification (pan, zoom, baseline).
   double disparity_bias_degraded_px = 0.08;
-  double disparity_bias_bad_px = 0.5;
-  // Board corner RMS per camera and stereo consistency (px): what the fitted change leaves
-  // unexplained counts too (distortion, a bent device, a wrong commit).
-  double board_rms_degraded_px = 0.35;
-  double board_rms_bad_px = 1.0;
+  double disparity_bias_bad_px = 1.0;
+  // Corner RMS the fitted change leaves unexplained (HealthReport::board_residual_px): a
+  // distortion change, a bent device, a wrong commit.
+  double board_residual_degraded_px = 0.35;
+  double board_residual_bad_px = 1.0;
   double hysteresis = 0.3;
 
   // --- Depth mode.
@@ -106,6 +106,9 @@ struct HealthReport {
   // Verification: corner RMS per camera, stereo consistency (px), and the change it saw.
   double board_rms_left_px = 0.0, board_rms_right_px = 0.0, stereo_consistency_px = 0.0;
   double disparity_bias_px = 0.0;  // RMS over the accuracy samples, from the fitted change
+  // RMS (px, both cameras) of the corners the fitted change leaves unexplained: a distortion
+  // change, a bent device, a commit that is wrong in a way no rotation or zoom explains.
+  double board_residual_px = 0.0;
   Eigen::Vector3d right_rotation_deg = Eigen::Vector3d::Zero();  // fitted: x, z from depth mode
   double left_focal_scale = 1.0, right_focal_scale = 1.0;      // fitted (left: with board poses)
   // Depth error RMS (%) at kHealthDepthsM, from the observed change.
