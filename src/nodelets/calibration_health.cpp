@@ -86,8 +86,8 @@ HealthParams loadParams(const ros::NodeHandle& pnh, const std::string& default_d
   m.disparity_bias_degraded_px = read.atLeast("disparity_bias_degraded_px", m.disparity_bias_degraded_px, 0.0);
   m.disparity_bias_bad_px =
       read.atLeast("disparity_bias_bad_px", m.disparity_bias_bad_px, m.disparity_bias_degraded_px);
-  m.board_rms_degraded_px = read.atLeast("board_rms_degraded_px", m.board_rms_degraded_px, 0.0);
-  m.board_rms_bad_px = read.atLeast("board_rms_bad_px", m.board_rms_bad_px, m.board_rms_degraded_px);
+  m.board_residual_degraded_px = read.atLeast("board_residual_degraded_px", m.board_residual_degraded_px, 0.0);
+  m.board_residual_bad_px = read.atLeast("board_residual_bad_px", m.board_residual_bad_px, m.board_residual_degraded_px);
   m.hysteresis = read.inRange("hysteresis", m.hysteresis, 0.0, 0.99);
   m.smoothing_time_s = read.atLeast("smoothing_time_s", m.smoothing_time_s, 0.0);
   m.max_depth_age_s = read.atLeast("max_depth_age_s", m.max_depth_age_s, 0.0);
