@@ -190,7 +190,10 @@ class CalibrationHealthNodelet : public nodelet::Nodelet {
     const ros::Time stamp = mode->header.stamp;
     frames_.push_back({stamp, mode->calibration_epoch, mode->light_on && mode->settled});
     if (frames_.size() > kKeptFrames) frames_.pop_front();
-    if (!epoch_ || *epoch_ != mode->calibration_epoch) newCalibration(*left_info, *right_info, mode->calibration_epoch);
+    if (!epoch_ || *epoch_ != mode->calibration_epoch) {
+      newCalibration(*left_info, *right_info, mode->calibration_epoch);
+      publish(stamp);  // no verdict on the new calibration yet
+    }
     if (!monitor_->hasCalibration()) return;
     if (mode->light_on || !mode->settled) return;
     if (++light_off_frames_ % params_.depth_every_n_frames != 0) return;
@@ -254,7 +257,7 @@ class CalibrationHealthNodelet : public nodelet::Nodelet {
     }
     if (is_restore) {
       restored_.reset();
-      restored_epoch_ = epoch;  // the health reason keeps saying why while it is in force
+      restored_epoch_ = epoch;  // the health reason says why until it has a verdict
     }
     epoch_ = epoch;
     in_force_ = std::make_pair(left, right);
@@ -368,7 +371,9 @@ class CalibrationHealthNodelet : public nodelet::Nodelet {
   std::string reasonOf(const ecs::HealthReport& report) const {
     std::string reason = calibration_problem_.empty() ? report.reason : calibration_problem_;
     if (under_test_) reason += (reason.empty() ? "" : "; ") + std::string("new calibration awaiting its verification");
-    if (!last_restore_.empty() && (restored_ || epoch_ == restored_epoch_)) reason += (reason.empty() ? "" : "; ") + last_restore_;
+    // Until the restored calibration has a verdict of its own.
+    const bool restoring = restored_ || (epoch_ == restored_epoch_ && report.state == ecs::CalibrationHealth::kUnknown);
+    if (!last_restore_.empty() && restoring) reason += (reason.empty() ? "" : "; ") + last_restore_;
     return reason;
   }
 
