@@ -291,8 +291,8 @@ class CalibrationHealthNodelet : public nodelet::Nodelet {
                        (test.previous_state == ecs::CalibrationHealth::kGood ||
                         rank(report.state) > rank(test.previous_state));
     if (!worse) {
-      NODELET_INFO("CalibrationHealth: the calibration of epoch %u verified %s", test.epoch,
-                   ecs::toString(report.state));
+      NODELET_INFO("CalibrationHealth: the calibration of epoch %u verified %s%s%s", test.epoch,
+                   ecs::toString(report.state), report.reason.empty() ? "" : ": ", report.reason.c_str());
       return;
     }
     char text[400];
