@@ -4,7 +4,8 @@ script (a 5 % zoom step, a slow thermal rotation of the right camera, a knock), 
 line every two seconds and writes the results folder at the end: calibration YAMLs, status,
 calibration-error timeline (CSV and PNG plot with the drift events), image and disparity
 snapshots, an overview picture (a light-on frame, its separated scene and its disparity side by
-side), and a final report saying whether the calibration after the drift meets the calibrator's accuracy
+side), the calibration health (state in the progress lines and under the plot, lit frames while
+GOOD, how long each drift event took to be seen and corrected), and a final report saying whether the calibration after the drift meets the calibrator's accuracy
 targets against ground truth.
 
 Usage: demo_monitor.py --duration S --out DIR [--ns stereo] [--zoom-at S]
@@ -23,7 +24,7 @@ import numpy as np
 import rospy
 from sensor_msgs.msg import CameraInfo, Image
 from stereo_msgs.msg import DisparityImage
-from embedded_calibration_stereo.msg import CalibrationMode, CalibrationStatus
+from embedded_calibration_stereo.msg import CalibrationHealth, CalibrationMode, CalibrationStatus
 from embedded_calibration_stereo.srv import SetRigDrift, SetRigDriftRequest
 
 # The calibrator's accuracy targets, per error key of calibration_errors().
@@ -32,6 +33,12 @@ BOUNDS = {
     "k1": (0.005, ""), "baseline_pct": (0.1, "%"), "rotation_deg": (0.01, "deg"),
 }
 ERROR_KEYS = list(BOUNDS)
+
+HEALTH_STATES = ["UNKNOWN", "GOOD", "DEGRADED", "BAD"]  # CalibrationHealth.state
+
+
+def health_name(health):
+    return HEALTH_STATES[health.state] if health is not None and health.state < 4 else "-"
 
 
 def write_png(path, width, height, channels, data):
@@ -168,9 +175,9 @@ class DriftScript:
     """The demo's drift events on the sim/set_drift service (absolute requests: each call
     replaces the previous drift state except the knock, which is added once). The thermal
     rotation and the knock follow the zoom (zoom_at s, default a third of the run) at fixed
-    fractions of the run: with the demo's 10 s light period, runs of 60 s or more see a full
-    light window after the knock. An event fires only while the light is off, so no
-    calibration window mixes two rigs. Runs on the main thread only."""
+    fractions of the run: the demo calibrates on demand (when calibration/health leaves GOOD),
+    so runs of 60 s see a light window after the knock. An event fires only while the light is
+    off, so no calibration window mixes two rigs. Runs on the main thread only."""
 
     THERMAL_RATE_DEG_PER_S = 0.01
     ZOOM = 1.05
@@ -259,6 +266,11 @@ class Monitor:
         self.recent_scenes = {}
         self.recent_disparities = {}
         self.separated = None  # (raw, scene, disparity or None), one stamp
+        # calibration/health: frames (and lit frames) counted under the newest verdict, and
+        # every change of state (wall time, message).
+        self.health = None
+        self.frames_by_health = {}  # state name -> [frames, lit frames]
+        self.health_changes = []
         sub = lambda topic, cls, key: rospy.Subscriber(
             ns + "/" + topic, cls, lambda m: self.store(key, m), queue_size=2)
         self.subs = [
@@ -274,7 +286,14 @@ class Monitor:
             rospy.Subscriber(ns + "/left/image_scene", Image, self.on_scene, queue_size=4,
                              buff_size=2 ** 24),
             sub("calibration/status", CalibrationStatus, "status"),
+            rospy.Subscriber(ns + "/calibration/health", CalibrationHealth, self.on_health, queue_size=10),
         ]
+
+    def on_health(self, msg):
+        with self.lock:
+            if self.health is None or msg.state != self.health.state:
+                self.health_changes.append((time.time(), msg))
+            self.health = msg
 
     def store(self, key, msg):
         with self.lock:
@@ -319,6 +338,9 @@ class Monitor:
             self.mode = msg
             if msg.light_on:
                 self.light_on_frames += 1
+            counts = self.frames_by_health.setdefault(health_name(self.health), [0, 0])
+            counts[0] += 1
+            counts[1] += 1 if msg.light_on else 0
             image = self.unpaired_images.pop(msg.header.stamp, None)
             if image is not None:
                 self.classify(image, msg)
@@ -354,10 +376,11 @@ class Monitor:
         return calibration_errors((get("left"), get("right")), (get("gt_left"), get("gt_right")))
 
 
-def plot_errors(path, timeline, events, epochs):
+def plot_errors(path, timeline, events, epochs, health_steps=()):
     """PNG plot of each error against time (log scale), its accuracy target dashed, drift events as
-    vertical lines and calibration commits (epoch changes) as dotted lines. False when
-    matplotlib is missing."""
+    vertical lines and calibration commits (epoch changes) as dotted lines, and below them the
+    calibration health state (health_steps: (t, state) at each change). False when matplotlib
+    is missing."""
     try:
         import matplotlib
         matplotlib.use("Agg")
@@ -369,8 +392,9 @@ def plot_errors(path, timeline, events, epochs):
               ("principal point error (px)", ["cx_px", "cy_px"]),
               ("baseline error (%)", ["baseline_pct"]),
               ("stereo rotation error (deg)", ["rotation_deg"])]
-    fig, axes = plt.subplots(len(panels), 1, figsize=(12, 10), sharex=True)
-    for ax, (title, keys) in zip(axes, panels):
+    fig, axes = plt.subplots(len(panels) + 1, 1, figsize=(12, 12), sharex=True,
+                             gridspec_kw={"height_ratios": [3] * len(panels) + [1.5]})
+    for ax, (title, keys) in zip(axes[:-1], panels):
         for key, colour in zip(keys, ("tab:blue", "tab:purple")):
             values = np.array([row[1][key] for row in timeline])
             per_camera = key not in ("baseline_pct", "rotation_deg")
@@ -388,6 +412,21 @@ def plot_errors(path, timeline, events, epochs):
         ax.set_ylabel(title, fontsize=9)
         ax.grid(True, which="major", alpha=0.3)
         ax.legend(loc="center left", bbox_to_anchor=(1.01, 0.5), fontsize=8)
+    ax = axes[-1]
+    if health_steps:
+        ts = [step[0] for step in health_steps] + [t[-1] if len(t) else health_steps[-1][0]]
+        states = [step[1] for step in health_steps]
+        ax.stairs(states, ts, baseline=None, color="tab:orange", linewidth=2, label="calibration health")
+    for te, _ in events:
+        ax.axvline(te, color="black", linestyle="-.", linewidth=1.2)
+    for te in epochs:
+        ax.axvline(te, color="tab:green", linestyle=":", linewidth=1.2)
+    ax.set_yticks(range(len(HEALTH_STATES)))
+    ax.set_yticklabels(HEALTH_STATES, fontsize=8)
+    ax.set_ylim(-0.5, len(HEALTH_STATES) - 0.5)
+    ax.set_ylabel("health", fontsize=9)
+    ax.grid(True, axis="y", alpha=0.3)
+    ax.legend(loc="center left", bbox_to_anchor=(1.01, 0.5), fontsize=8)
     axes[-1].set_xlabel("time since the first frame (s)")
     fig.suptitle("Calibration error of the published CameraInfo against ground truth "
                  "(log scale, errors below 1e-6 drawn at 1e-6)", y=0.995)
@@ -424,7 +463,30 @@ def verdict(timeline, script, epochs):
     return lines, met
 
 
-def write_results(out, mon, timeline, script, epochs, duration, report_lines, bounds_met):
+def health_report(mon, script, health_steps):
+    """Lines on calibration/health: the share of lit frames while GOOD, and for each drift event
+    how long the health took to leave GOOD and to come back."""
+    with mon.lock:
+        by_state = {k: list(v) for k, v in mon.frames_by_health.items()}
+    if not health_steps:
+        return ["calibration health: no calibration/health message received"]
+    frames, lit = by_state.get("GOOD", [0, 0])
+    lines = ["calibration health: %d frames while GOOD, %d of them lit (%.2f %%); frames per state: %s" % (
+        frames, lit, 100.0 * lit / frames if frames else 0.0,
+        ", ".join("%s %d (lit %d)" % (k, v[0], v[1]) for k, v in sorted(by_state.items())))]
+    for i, (te, name) in enumerate(script.fired):
+        end = script.fired[i + 1][0] if i + 1 < len(script.fired) else float("inf")
+        left = next((t for t, state in health_steps if te <= t < end and state >= 2), None)
+        if left is None:
+            lines.append("  %s at %.1f s: health stayed GOOD until the next event" % (name, te))
+            continue
+        back = next((t for t, state in health_steps if t > left and state == 1), None)
+        lines.append("  %s at %.1f s: health left GOOD after %.1f s, GOOD again %s" % (
+            name, te, left - te, "%.1f s after that" % (back - left) if back is not None else "never"))
+    return lines
+
+
+def write_results(out, mon, timeline, script, epochs, duration, report_lines, bounds_met, health_steps=()):
     with mon.lock:
         disparity = mon.last_disparity
         disparities = mon.disparities
@@ -435,6 +497,7 @@ def write_results(out, mon, timeline, script, epochs, duration, report_lines, bo
                   "left_snapshot_light_on.png": separated[0] if separated else mon.last_light_on_image,
                   "left_scene_light_on.png": separated[1] if separated else None}
         frames, light_frames = mon.frames, mon.light_on_frames
+        health, by_health = mon.health, {k: list(v) for k, v in mon.frames_by_health.items()}
         mode = mon.mode
         span = (mon.last_image_time or 0) - (mon.first_image_time or 0)
     for key in ("left", "right", "gt_left", "gt_right"):
@@ -468,7 +531,7 @@ def write_results(out, mon, timeline, script, epochs, duration, report_lines, bo
     with open(os.path.join(out, "drift_events.csv"), "w") as f:
         f.write("time_s,event\n" + "".join("%.2f,%s\n" % e for e in script.fired))
     plotted = timeline and plot_errors(os.path.join(out, "calibration_error.png"), timeline,
-                                       script.fired, epochs)
+                                       script.fired, epochs, health_steps)
     # Mean over the time images flowed, so start-up does not count against the rate.
     mean_fps = (frames - 1) / span if frames > 1 and span > 0 else 0.0
     status = latest.get("status")
@@ -484,6 +547,11 @@ def write_results(out, mon, timeline, script, epochs, duration, report_lines, bo
             f.write("final_error:\n" + "".join("  %s: %.6g\n" % (k, final[k]) for k in ERROR_KEYS))
         f.write("bounds:\n" + "".join("  %s: %g\n" % (k, BOUNDS[k][0]) for k in ERROR_KEYS))
         f.write("bounds_met_after_drift: %s\n" % str(bounds_met).lower())
+        f.write("health:\n  final_state: %s\n  frames_by_state: {%s}\n  lit_frames_by_state: {%s}\n"
+                "  changes: [%s]\n" % (
+                    health_name(health), ", ".join("%s: %d" % (k, v[0]) for k, v in sorted(by_health.items())),
+                    ", ".join("%s: %d" % (k, v[1]) for k, v in sorted(by_health.items())),
+                    ", ".join("{time_s: %.1f, state: %s}" % (t, HEALTH_STATES[st]) for t, st in health_steps)))
         if status is not None:
             f.write("last_calibration_status:\n  epoch: %d\n  accepted: %s\n  reason: \"%s\"\n"
                     "  frames_used: %d\n  corners_used: %d\n  rms_left_px: %.4f\n  rms_right_px: %.4f\n"
@@ -536,6 +604,8 @@ def main():
     timeline = []  # (t, errors dict, epoch)
     epochs = []  # times at which the calibration in force changed
     last_epoch, last_status = None, None
+    health_steps = []  # (t, state) at each change of calibration/health
+    health_seen = 0
     last_frames, last_disp, last_print = 0, 0, 0.0
     t = 0.0
     while not rospy.is_shutdown() and t < args.duration:
@@ -544,6 +614,13 @@ def main():
         with mon.lock:
             frames, disparities, mode = mon.frames, mon.disparities, mon.mode
             errors, status = mon.errors(), mon.latest.get("status")
+            health, changes = mon.health, mon.health_changes[health_seen:]
+        health_seen += len(changes)
+        for wall, change in changes:
+            th = max(0.0, wall - t0)
+            health_steps.append((th, change.state))
+            print("[%5.1f s] HEALTH %s (epoch %d)%s" % (th, health_name(change), change.epoch,
+                                                       ": " + change.reason if change.reason else ""), flush=True)
         epoch = mode.calibration_epoch if mode else -1
         if last_epoch is not None and epoch != last_epoch and (not epochs or t - epochs[-1] > 1.0):
             epochs.append(t)  # a commit changes the epoch twice (left, right): one mark
@@ -564,12 +641,14 @@ def main():
         span = t - last_print
         fps, dps = (frames - last_frames) / span, (disparities - last_disp) / span
         last_frames, last_disp, last_print = frames, disparities, t
-        print("[%5.1f s] %5.1f fps  disparity %5.1f Hz  light %s  epoch %s  error vs truth: %s" % (
+        print("[%5.1f s] %5.1f fps  disparity %5.1f Hz  light %s  epoch %s  health %-8s  error vs truth: %s" % (
             t, fps, dps, "on " if mode and mode.light_on else "off", epoch if mode else "-",
-            format_errors(errors) if errors else "-"), flush=True)
+            health_name(health), format_errors(errors) if errors else "-"), flush=True)
 
     report_lines, bounds_met = verdict(timeline, script, epochs)
-    summary, frames = write_results(args.out, mon, timeline, script, epochs, t, report_lines, bounds_met)
+    report_lines += health_report(mon, script, health_steps)
+    summary, frames = write_results(args.out, mon, timeline, script, epochs, t, report_lines, bounds_met,
+                                    health_steps)
     for line in summary + report_lines:
         print("demo: " + line, flush=True)
     print("demo: results in %s" % args.out, flush=True)

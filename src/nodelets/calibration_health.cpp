@@ -137,7 +137,8 @@ class CalibrationHealthNodelet : public nodelet::Nodelet {
     } catch (const std::exception& e) {
       NODELET_FATAL("CalibrationHealth cannot start: %s", e.what());
       timer_.stop();
-      observations_sub_.shutdown();
+      for (ros::Subscriber* sub : {&observations_sub_, &mode_record_sub_, &left_info_record_sub_, &right_info_record_sub_})
+        sub->shutdown();
       throw;
     }
   }
@@ -166,7 +167,15 @@ class CalibrationHealthNodelet : public nodelet::Nodelet {
                                                                     left_info_sub_, right_sub_, right_info_sub_,
                                                                     mode_sub_);
     sync_->registerCallback(&CalibrationHealthNodelet::onFrame, this);
-    observations_sub_ = nh.subscribe("calibration/observations", 10, &CalibrationHealthNodelet::onObservation, this);
+    // Every frame's light and epoch, and the calibration of every frame, on deeper queues than the
+    // images': a frame the synchroniser drops (the images queue up under load) must not hide a
+    // new calibration or the light of a verification frame.
+    mode_record_sub_ = nh.subscribe("calibration_mode", kKeptFrames, &CalibrationHealthNodelet::onMode, this);
+    left_info_record_sub_ = nh.subscribe<CameraInfo>(
+        "left/camera_info", kKeptFrames, [this](const CameraInfoConstPtr& info) { keep(&left_infos_, info); });
+    right_info_record_sub_ = nh.subscribe<CameraInfo>(
+        "right/camera_info", kKeptFrames, [this](const CameraInfoConstPtr& info) { keep(&right_infos_, info); });
+    observations_sub_ = nh.subscribe("calibration/observations", 30, &CalibrationHealthNodelet::onObservation, this);
 
     diagnostics_ = std::make_unique<diagnostic_updater::Updater>(nh, pnh, getName());
     diagnostics_->setHardwareID("calibration_health");
@@ -184,17 +193,40 @@ class CalibrationHealthNodelet : public nodelet::Nodelet {
                                   : "no rollback");
   }
 
-  void onFrame(const ImageConstPtr& left, const CameraInfoConstPtr& left_info, const ImageConstPtr& right,
-               const CameraInfoConstPtr& right_info, const CalibrationModeConstPtr& mode) {
+  static void keep(std::deque<CameraInfoConstPtr>* infos, const CameraInfoConstPtr& info) {
+    infos->push_back(info);
+    if (infos->size() > kKeptFrames) infos->pop_front();
+  }
+
+  static CameraInfoConstPtr at(const std::deque<CameraInfoConstPtr>& infos, const ros::Time& stamp) {
+    for (auto it = infos.rbegin(); it != infos.rend(); ++it)
+      if ((*it)->header.stamp == stamp) return *it;
+    return nullptr;
+  }
+
+  // Every frame (the camera_info of its stamp arrived before it: the driver publishes it first).
+  void onMode(const CalibrationModeConstPtr& mode) {
     collectRestore();
     const ros::Time stamp = mode->header.stamp;
     frames_.push_back({stamp, mode->calibration_epoch, mode->light_on && mode->settled});
     if (frames_.size() > kKeptFrames) frames_.pop_front();
-    if (!epoch_ || *epoch_ != mode->calibration_epoch) {
-      newCalibration(*left_info, *right_info, mode->calibration_epoch);
-      publish(stamp);  // no verdict on the new calibration yet
+    if (epoch_ && *epoch_ == mode->calibration_epoch) return;
+    const CameraInfoConstPtr left = at(left_infos_, stamp), right = at(right_infos_, stamp);
+    if (!left || !right) {  // the next frame of this epoch brings it
+      NODELET_WARN_THROTTLE(5.0, "CalibrationHealth: no camera_info on %s and %s for the frame of %.3f s",
+                            left_info_record_sub_.getTopic().c_str(), right_info_record_sub_.getTopic().c_str(),
+                            stamp.toSec());
+      return;
     }
-    if (!monitor_->hasCalibration()) return;
+    newCalibration(*left, *right, mode->calibration_epoch);
+    publish(stamp);  // no verdict on the new calibration yet
+  }
+
+  void onFrame(const ImageConstPtr& left, const CameraInfoConstPtr&, const ImageConstPtr& right,
+               const CameraInfoConstPtr&, const CalibrationModeConstPtr& mode) {
+    collectRestore();
+    const ros::Time stamp = mode->header.stamp;
+    if (!monitor_->hasCalibration() || !epoch_ || *epoch_ != mode->calibration_epoch) return;
     if (mode->light_on || !mode->settled) return;
     if (++light_off_frames_ % params_.depth_every_n_frames != 0) return;
     cv_bridge::CvImageConstPtr left_cv, right_cv;
@@ -435,12 +467,13 @@ class CalibrationHealthNodelet : public nodelet::Nodelet {
   message_filters::Subscriber<CameraInfo> left_info_sub_, right_info_sub_;
   message_filters::Subscriber<CalibrationMode> mode_sub_;
   std::unique_ptr<message_filters::Synchronizer<Policy>> sync_;
-  ros::Subscriber observations_sub_;
+  ros::Subscriber observations_sub_, mode_record_sub_, left_info_record_sub_, right_info_record_sub_;
   ros::Publisher health_pub_, status_pub_;
   std::unique_ptr<diagnostic_updater::Updater> diagnostics_;
   ros::WallTimer timer_;
 
   std::deque<FrameSeen> frames_;
+  std::deque<CameraInfoConstPtr> left_infos_, right_infos_;  // the latest frames' calibrations
   std::optional<uint32_t> epoch_;
   std::optional<std::pair<CameraInfo, CameraInfo>> in_force_;
   std::optional<UnderTest> under_test_;

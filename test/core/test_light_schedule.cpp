@@ -226,12 +226,17 @@ TEST(LightSchedule, VerifySoonFlashesAtTheNextFrameUnlessABurstVerifiesAlready) 
   ASSERT_EQ(r.size(), 1u);
   EXPECT_FALSE(r[0].verification);
   EXPECT_EQ(r[0].length, 12);
-  // verifySoon when idle: a flash from the next frame.
+  // verifySoon when idle: a flash from the next frame; again during that flash (its settled
+  // frame is still to come): no second flash.
   schedule.verifySoon();
-  const auto flash = run(&schedule, 2.0, 30.0, 6);
+  auto flash = run(&schedule, 2.0, 30.0, 1);
+  schedule.verifySoon();
+  const auto rest = run(&schedule, 2.0 + 1 / 30.0, 30.0, 10);
+  flash.insert(flash.end(), rest.begin(), rest.end());
   const auto f = runs(flash);
   ASSERT_EQ(f.size(), 1u);
   EXPECT_EQ(f[0].first, 0);
   EXPECT_TRUE(f[0].verification);
+  EXPECT_EQ(f[0].length, 3);
   EXPECT_EQ(f[0].settled, 1);
 }

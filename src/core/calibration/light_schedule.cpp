@@ -46,7 +46,8 @@ LightState LightSchedule::step(double time_s) {
     startBurst(time_s);
     if (config_.period_s > 0.0) next_burst_s_ = time_s + config_.period_s;  // the safety net restarts
   }
-  if (burst_frames_left_ > 0 || hold_on_) verify_soon_ = false;  // lit settled frames verify already
+  // A burst, a hold or a flash still to reach its settled frame verifies already.
+  if (burst_frames_left_ > 0 || hold_on_ || flash_frames_left_ > 0) verify_soon_ = false;
   if (config_.verification_period_s > 0.0 && burst_frames_left_ == 0 && flash_frames_left_ == 0 && !hold_on_ &&
       (verify_soon_ || time_s >= next_flash_s_)) {
     verify_soon_ = false;

@@ -13,7 +13,8 @@
 //  - during a verification flash, for `settle_frames + 1` frames (one settled light-on frame,
 //    for checking the calibration in force against the boards): every `verification_period_s`
 //    (0 = none) after the previous flash or burst, and at the next frame after verifySoon()
-//    (a new calibration came into force). A burst cuts a flash short and verifies instead.
+//    (a new calibration came into force) unless lit frames to come verify already. A burst cuts
+//    a flash short and verifies instead.
 // A switch takes effect at the next step(): `light_on` is the commanded state from that frame
 // on, and the first `settle_frames` frames after a switch are reported unsettled. During them
 // the physical light level ramps linearly (what the simulated rig renders).
@@ -57,9 +58,8 @@ class LightSchedule {
   // effect at the next step(), subject to min_interval_s. Ignored with kPeriodic.
   void demand(bool needed) { demand_ = needed; }
   bool demanded() const { return demand_; }
-  // A verification flash at the next step(), unless the light is on for a burst or a request
-  // (its frames verify) or a flash runs (then one follows it); no effect when
-  // verification_period_s is 0.
+  // A verification flash at the next step(), unless the light is on for a burst, a request or
+  // a flash (their settled frames to come verify); no effect when verification_period_s is 0.
   void verifySoon() { verify_soon_ = config_.verification_period_s > 0.0; }
 
   // Advances one frame taken at `time_s` (monotonic seconds) and returns its light state.
