@@ -137,7 +137,8 @@ class CalibrationHealthNodelet : public nodelet::Nodelet {
     } catch (const std::exception& e) {
       NODELET_FATAL("CalibrationHealth cannot start: %s", e.what());
       timer_.stop();
-      for (ros::Subscriber* sub : {&observations_sub_, &mode_record_sub_, &left_info_record_sub_, &right_info_record_sub_})
+      for (ros::Subscriber* sub :
+           {&observations_sub_, &status_sub_, &mode_record_sub_, &left_info_record_sub_, &right_info_record_sub_})
         sub->shutdown();
       throw;
     }
@@ -175,6 +176,7 @@ class CalibrationHealthNodelet : public nodelet::Nodelet {
         "left/camera_info", kKeptFrames, [this](const CameraInfoConstPtr& info) { keep(&left_infos_, info); });
     right_info_record_sub_ = nh.subscribe<CameraInfo>(
         "right/camera_info", kKeptFrames, [this](const CameraInfoConstPtr& info) { keep(&right_infos_, info); });
+    status_sub_ = nh.subscribe("calibration/status", 5, &CalibrationHealthNodelet::onStatus, this);
     observations_sub_ = nh.subscribe("calibration/observations", 30, &CalibrationHealthNodelet::onObservation, this);
 
     diagnostics_ = std::make_unique<diagnostic_updater::Updater>(nh, pnh, getName());
@@ -276,6 +278,15 @@ class CalibrationHealthNodelet : public nodelet::Nodelet {
     publish(msg->header.stamp);
   }
 
+  // The calibrator found nothing better than the calibration in force: no more windows are
+  // wanted for it unless its state worsens.
+  void onStatus(const CalibrationStatusConstPtr& status) {
+    if (status->accepted || status->reason.rfind(kInForceConfirmedReason, 0) != 0) return;
+    if (!epoch_ || status->epoch != *epoch_ || !monitor_->hasCalibration()) return;
+    const int level = rank(monitor_->report().state);
+    if (level > 0) confirmed_level_ = level;
+  }
+
   // A new epoch: the monitor starts again with it; the previous pair is kept for a restore.
   void newCalibration(const CameraInfo& left, const CameraInfo& right, uint32_t epoch) {
     const ecs::CalibrationHealth previous_state =
@@ -293,6 +304,7 @@ class CalibrationHealthNodelet : public nodelet::Nodelet {
     }
     epoch_ = epoch;
     in_force_ = std::make_pair(left, right);
+    confirmed_level_.reset();
     ecs::StereoRig rig;
     std::string error;
     if (!fromStereoCameraInfo(left, right, &rig, &error)) {
@@ -396,6 +408,11 @@ class CalibrationHealthNodelet : public nodelet::Nodelet {
     msg->misalignment_age_s = report.epipolar_age_s;
     msg->verification_age_s = report.board_age_s;
     msg->reason = reasonOf(report);
+    const int level = rank(report.state);
+    if (level == 0) confirmed_level_.reset();  // GOOD again: a later change wants a window again
+    msg->calibration_wanted = level > 0 && !(confirmed_level_ && level <= *confirmed_level_);
+    if (level > 0 && !msg->calibration_wanted)
+      msg->reason += "; the calibrator found nothing better: no calibration window until it worsens";
     health_pub_.publish(msg);
     last_ = msg;
   }
@@ -467,7 +484,7 @@ class CalibrationHealthNodelet : public nodelet::Nodelet {
   message_filters::Subscriber<CameraInfo> left_info_sub_, right_info_sub_;
   message_filters::Subscriber<CalibrationMode> mode_sub_;
   std::unique_ptr<message_filters::Synchronizer<Policy>> sync_;
-  ros::Subscriber observations_sub_, mode_record_sub_, left_info_record_sub_, right_info_record_sub_;
+  ros::Subscriber observations_sub_, status_sub_, mode_record_sub_, left_info_record_sub_, right_info_record_sub_;
   ros::Publisher health_pub_, status_pub_;
   std::unique_ptr<diagnostic_updater::Updater> diagnostics_;
   ros::WallTimer timer_;
@@ -479,7 +496,8 @@ class CalibrationHealthNodelet : public nodelet::Nodelet {
   std::optional<UnderTest> under_test_;
   std::optional<std::pair<CameraInfo, CameraInfo>> restored_;  // sent back to the driver, not seen yet
   std::future<std::string> restore_;                           // the running restore: "" or why it failed
-  std::optional<uint32_t> restored_epoch_;                     // the epoch of the restored calibration
+  std::optional<uint32_t> restored_epoch_;
+  std::optional<int> confirmed_level_;  // rank of the state the calibrator confirmed as its best                     // the epoch of the restored calibration
   std::string calibration_problem_, last_restore_;
   CalibrationHealthConstPtr last_;
   uint64_t light_off_frames_ = 0, depth_frames_ = 0, verifications_ = 0, restores_ = 0;

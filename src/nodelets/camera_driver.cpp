@@ -348,11 +348,11 @@ class CameraDriverNodelet : public nodelet::Nodelet {
     return true;
   }
 
-  // On demand: a calibration burst is wanted while the calibration is known not to hold.
+  // On demand: a calibration burst while the health nodelet wants one (the calibration is known
+  // not to hold and the calibrator has not found it to be the best it can do).
   void onHealth(const CalibrationHealthConstPtr& health) {
-    const bool needed = health->state == CalibrationHealth::DEGRADED || health->state == CalibrationHealth::BAD;
     std::lock_guard<std::mutex> lock(mutex_);
-    schedule_->demand(needed);
+    schedule_->demand(health->calibration_wanted);
   }
 
   bool setDrift(SetRigDrift::Request& req, SetRigDrift::Response& res) {

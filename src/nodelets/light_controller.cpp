@@ -226,8 +226,9 @@ class LightControllerNodelet : public nodelet::Nodelet {
     set_light_srv_ = nh.advertiseService("set_light", &LightControllerNodelet::setLight, this);
     if (params_.schedule.trigger == ecs::CalibrationTrigger::kOnDemand)
       health_sub_ = nh.subscribe<CalibrationHealth>("calibration/health", 2, [this](const auto& health) {
-        // On demand: a calibration burst is wanted while the calibration is known not to hold.
-        schedule_->demand(health->state == CalibrationHealth::DEGRADED || health->state == CalibrationHealth::BAD);
+        // On demand: a calibration burst while the health nodelet wants one (the calibration is known
+  // not to hold and the calibrator has not found it to be the best it can do).
+        schedule_->demand(health->calibration_wanted);
       });
 
     const image_transport::TransportHints hints("raw", ros::TransportHints(), pnh);
