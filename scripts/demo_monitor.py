@@ -476,6 +476,10 @@ def health_report(mon, script, health_steps):
         ", ".join("%s %d (lit %d)" % (k, v[0], v[1]) for k, v in sorted(by_state.items())))]
     for i, (te, name) in enumerate(script.fired):
         end = script.fired[i + 1][0] if i + 1 < len(script.fired) else float("inf")
+        before = [state for t, state in health_steps if t <= te]
+        if before and before[-1] >= 2:
+            lines.append("  %s at %.1f s: health was already %s" % (name, te, HEALTH_STATES[before[-1]]))
+            continue
         left = next((t for t, state in health_steps if te <= t < end and state >= 2), None)
         if left is None:
             lines.append("  %s at %.1f s: health stayed GOOD until the next event" % (name, te))

@@ -24,6 +24,7 @@
 #include <ros/ros.h>
 #include <sensor_msgs/SetCameraInfo.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <deque>
@@ -283,8 +284,23 @@ class CalibrationHealthNodelet : public nodelet::Nodelet {
   void onStatus(const CalibrationStatusConstPtr& status) {
     if (status->accepted || status->reason.rfind(kInForceConfirmedReason, 0) != 0) return;
     if (!epoch_ || status->epoch != *epoch_ || !monitor_->hasCalibration()) return;
-    const int level = rank(monitor_->report().state);
-    if (level > 0) confirmed_level_ = level;
+    const ecs::HealthReport report = monitor_->report();
+    const int level = rank(report.state);
+    if (level <= 0) return;
+    confirmed_level_ = level;
+    confirmed_severity_ = severity(report);
+  }
+
+  // The largest signal in units of its DEGRADED threshold (signals not measured count 0).
+  double severity(const ecs::HealthReport& report) const {
+    const ecs::CalibrationMonitorOptions& o = params_.monitor;
+    double worst = 0.0;
+    if (report.epipolar_age_s >= 0.0) worst = std::max(worst, report.misalignment_px / o.misalignment_degraded_px);
+    if (report.board_age_s >= 0.0) {
+      worst = std::max(worst, report.disparity_bias_px / o.disparity_bias_degraded_px);
+      worst = std::max(worst, report.board_residual_px / o.board_residual_degraded_px);
+    }
+    return worst;
   }
 
   // A new epoch: the monitor starts again with it; the previous pair is kept for a restore.
@@ -410,9 +426,11 @@ class CalibrationHealthNodelet : public nodelet::Nodelet {
     msg->reason = reasonOf(report);
     const int level = rank(report.state);
     if (level == 0) confirmed_level_.reset();  // GOOD again: a later change wants a window again
-    msg->calibration_wanted = level > 0 && !(confirmed_level_ && level <= *confirmed_level_);
+    // Wanted again once the state worsens or a signal doubles since the calibrator's confirmation.
+    msg->calibration_wanted = level > 0 && !(confirmed_level_ && level <= *confirmed_level_ &&
+                                             severity(report) < kRearmFactor * confirmed_severity_);
     if (level > 0 && !msg->calibration_wanted)
-      msg->reason += "; the calibrator found nothing better: no calibration window until it worsens";
+      msg->reason += "; the calibrator found nothing better: no calibration window until it doubles or worsens";
     health_pub_.publish(msg);
     last_ = msg;
   }
@@ -463,6 +481,7 @@ class CalibrationHealthNodelet : public nodelet::Nodelet {
     status.add("last restore", last_restore_.empty() ? "none" : last_restore_);
   }
 
+  static constexpr double kRearmFactor = 2.0;  // see calibration_wanted
   static constexpr size_t kKeptFrames = 64;  // stamps -> epochs remembered for the observations
 
   struct FrameSeen {
@@ -497,7 +516,8 @@ class CalibrationHealthNodelet : public nodelet::Nodelet {
   std::optional<std::pair<CameraInfo, CameraInfo>> restored_;  // sent back to the driver, not seen yet
   std::future<std::string> restore_;                           // the running restore: "" or why it failed
   std::optional<uint32_t> restored_epoch_;
-  std::optional<int> confirmed_level_;  // rank of the state the calibrator confirmed as its best                     // the epoch of the restored calibration
+  std::optional<int> confirmed_level_;  // rank of the state the calibrator confirmed as its best
+  double confirmed_severity_ = 0.0;     // severity() then                     // the epoch of the restored calibration
   std::string calibration_problem_, last_restore_;
   CalibrationHealthConstPtr last_;
   uint64_t light_off_frames_ = 0, depth_frames_ = 0, verifications_ = 0, restores_ = 0;
