@@ -7,8 +7,13 @@
 //  - Verification: the tracker's board observations (calibration/observations) of settled
 //    light-on frames taken with the calibration in force: the driver's verification flashes
 //    (verification_period_s) and its calibration bursts alike.
-// It publishes calibration/health (CalibrationHealth) after every measurement and the state on
-// diagnostics (GOOD OK, DEGRADED WARN, BAD ERROR, no verdict yet WARN).
+// Each frame's light, epoch and calibration come from calibration_mode and camera_info on their
+// own subscriptions, so that a frame the image synchroniser drops hides neither.
+// It publishes calibration/health (CalibrationHealth) at every new calibration and after every
+// measurement, and the state on diagnostics (GOOD OK, DEGRADED WARN, BAD ERROR, no verdict yet
+// WARN). calibration_wanted tells an on-demand driver to calibrate: DEGRADED or BAD, until the
+// calibrator confirms the calibration in force as the best it can do (calibration/status) and
+// neither the state worsens nor a signal doubles.
 // A new calibration (a new calibration_epoch) resets the monitor. The first verification of it
 // must find it GOOD; when it does not and the previous calibration was doing better (GOOD, or
 // a better state), the previous pair is sent back to the driver's left|right/set_camera_info
@@ -280,7 +285,7 @@ class CalibrationHealthNodelet : public nodelet::Nodelet {
   }
 
   // The calibrator found nothing better than the calibration in force: no more windows are
-  // wanted for it unless its state worsens.
+  // wanted for it unless its state worsens or a signal doubles.
   void onStatus(const CalibrationStatusConstPtr& status) {
     if (status->accepted || status->reason.rfind(kInForceConfirmedReason, 0) != 0) return;
     if (!epoch_ || status->epoch != *epoch_ || !monitor_->hasCalibration()) return;
@@ -432,7 +437,6 @@ class CalibrationHealthNodelet : public nodelet::Nodelet {
     if (level > 0 && !msg->calibration_wanted)
       msg->reason += "; the calibrator found nothing better: no calibration window until it doubles or worsens";
     health_pub_.publish(msg);
-    last_ = msg;
   }
 
   std::string reasonOf(const ecs::HealthReport& report) const {
@@ -519,7 +523,6 @@ class CalibrationHealthNodelet : public nodelet::Nodelet {
   std::optional<int> confirmed_level_;  // rank of the state the calibrator confirmed as its best
   double confirmed_severity_ = 0.0;     // severity() then                     // the epoch of the restored calibration
   std::string calibration_problem_, last_restore_;
-  CalibrationHealthConstPtr last_;
   uint64_t light_off_frames_ = 0, depth_frames_ = 0, verifications_ = 0, restores_ = 0;
   double depth_ms_ = 0.0;
 };
