@@ -21,6 +21,7 @@
 #include <std_msgs/Float64.h>
 #include <std_srvs/SetBool.h>
 
+#include <algorithm>
 #include <atomic>
 #include <deque>
 #include <map>
@@ -29,11 +30,13 @@
 
 #include "child_launch.h"
 #include "driver_test_utils.h"
+#include "embedded_calibration_stereo/CalibrationHealth.h"
 #include "embedded_calibration_stereo/CalibrationMode.h"
 #include "embedded_calibration_stereo/Recalibrate.h"
 #include "embedded_calibration_stereo/core/sim/sim_rig.h"
 #include "embedded_calibration_stereo/ros/conversions.h"
 
+using embedded_calibration_stereo::CalibrationHealth;
 using embedded_calibration_stereo::CalibrationMode;
 using embedded_calibration_stereo::Recalibrate;
 using ecs_test::Collector;
@@ -177,8 +180,11 @@ TEST(LightControllerInputs, DelayedLightAndBadInputs) {
   Collector<rosgraph_msgs::Log> log(nh, "/rosout", 5000);
   Collector<diagnostic_msgs::DiagnosticArray> diagnostics(nh, "/diagnostics", 2000);
   Collector<CalibrationMode> modes(nh, "calibration_mode", 5000);
+  // On demand with no calibration/health publisher but the test's (section E): the light
+  // follows set_light only until then, as with the periodic trigger and no period.
   ecs_test::ChildLaunch head({"embedded_calibration_stereo", "external_driver.launch", "light_backend:=sim",
-                              "calibration_period_s:=0", "prior_file:=" + dir.path + "/prior.yaml"},
+                              "calibration_period_s:=0", "calibration_trigger:=on_demand", "health:=false",
+                              "prior_file:=" + dir.path + "/prior.yaml"},
                              dir.path + "/head.log");
   ASSERT_TRUE(head.started());
   ASSERT_TRUE(ros::service::waitForService("/stereo/set_light", ros::Duration(30.0))) << head.logTail();
@@ -257,6 +263,47 @@ TEST(LightControllerInputs, DelayedLightAndBadInputs) {
   EXPECT_LE(modes.snapshot().size(), count + 1) << "frames went out without the right camera_info";
   driver.info = FakeDriver::Info::kCalibrated;
   EXPECT_TRUE(modes.waitForCount(count + 10, 5.0)) << "frames did not resume with the camera_info back";
+
+  // E. On demand: a calibration burst (settled light-on frames confirmed from the images; a
+  //    verification flash would give one, and there are none here) while calibration/health
+  //    wants one; none while it does not, frames flowing all the while.
+  std::mutex health_mutex;
+  CalibrationHealth health;
+  health.state = CalibrationHealth::DEGRADED;
+  health.calibration_wanted = true;
+  ros::Publisher health_pub = nh.advertise<CalibrationHealth>("calibration/health", 1);
+  ros::WallTimer health_timer = nh.createWallTimer(ros::WallDuration(0.1), [&](const ros::WallTimerEvent&) {
+    std::lock_guard<std::mutex> lock(health_mutex);
+    health_pub.publish(health);
+  });
+  const auto longest_lit_run = [](const std::vector<CalibrationMode::ConstPtr>& m, size_t from) {
+    int run = 0, longest = 0;
+    for (size_t i = from; i < m.size(); ++i) {
+      run = m[i]->light_on && m[i]->settled ? run + 1 : 0;
+      longest = std::max(longest, run);
+    }
+    return longest;
+  };
+  size_t before = modes.snapshot().size();
+  EXPECT_TRUE(modes.waitFor([&](const auto& m) { return longest_lit_run(m, before) >= 5; }, 10.0))
+      << "no calibration burst while calibration/health wants one (" << health_pub.getNumSubscribers()
+      << " subscribers of " << health_pub.getTopic() << ", longest settled lit run "
+      << longest_lit_run(modes.snapshot(), before) << ")\n" << head.logTail();
+  {
+    std::lock_guard<std::mutex> lock(health_mutex);
+    health.state = CalibrationHealth::GOOD;
+    health.calibration_wanted = false;
+  }
+  // After the burst in progress, 60 frames without light.
+  ASSERT_TRUE(modes.waitFor(
+      [](const auto& m) { return !m.empty() && !m.back()->light_on && m.back()->settled; }, 5.0));
+  before = modes.snapshot().size();
+  ASSERT_TRUE(modes.waitForCount(before + 60, 10.0)) << "frames stopped";
+  const auto quiet = modes.snapshot();
+  int lit = 0;
+  for (size_t i = before; i < quiet.size(); ++i) lit += quiet[i]->light_on ? 1 : 0;
+  EXPECT_EQ(lit, 0) << "the light went on while calibration/health wanted no calibration";
+  health_timer.stop();
 }
 
 int main(int argc, char** argv) {
