@@ -70,7 +70,7 @@ struct BadConfig {
 std::ostream& operator<<(std::ostream& out, const BadConfig& c) { return out << c.label; }
 
 const std::vector<std::string> kNodelets = {"CameraDriver", "PatternTracker", "OnlineCalibrator", "Separator",
-                                            "Rectifier",    "Disparity",      "LightController"};
+                                            "Rectifier",    "Disparity",      "LightController",  "CalibrationHealth"};
 
 }  // namespace
 
@@ -86,7 +86,10 @@ TEST(NodeletGoodConfig, EveryNodeletStarts) {
       {"Rectifier", {{"queue_size", 1}, {"approximate_sync", true}, {"rectification_method", "fusiello"}}},
       {"Disparity", {{"queue_size", 1}, {"approximate_sync", false}, {"disparity_range", 32}, {"uniqueness_ratio", 10}}},
       {"LightController", {{"min_step", 8}, {"max_delay_frames", 0}, {"approximate_sync", false},
-                           {"plateau_fraction", 0.1}, {"calibration_store", "driver"}}},
+                           {"plateau_fraction", 0.1}, {"calibration_store", "driver"},
+                           {"calibration_trigger", "on_demand"}, {"verification_period_s", 6.0}}},
+      {"CalibrationHealth", {{"depth_every_n_frames", 2}, {"boards_posed", false}, {"misalignment_degraded_px", 0.1},
+                             {"misalignment_bad_px", 0.5}}},
   };
   for (const std::string& nodelet : kNodelets) {
     Params params = baseParams(nodelet);
@@ -148,7 +151,12 @@ INSTANTIATE_TEST_SUITE_P(
         BadConfig{"LightController", "LightControllerMaxDelayRange", "max_delay_frames", -1, "must be >= 0"},
         BadConfig{"LightController", "LightControllerPlateauFractionRange", "plateau_fraction", 0.9, "(0, switch_fraction)"},
         BadConfig{"LightController", "LightControllerApproximateSyncInt", "approximate_sync", 1, "must be true or false"},
-        BadConfig{"LightController", "LightControllerStoreChoice", "calibration_store", "cloud", "cloud"}),
+        BadConfig{"LightController", "LightControllerStoreChoice", "calibration_store", "cloud", "cloud"},
+        BadConfig{"LightController", "LightControllerTriggerChoice", "calibration_trigger", "hourly", "hourly"},
+        BadConfig{"LightController", "LightControllerVerificationRange", "verification_period_s", -1.0, "must be >= 0"},
+        BadConfig{"CalibrationHealth", "HealthEveryNRange", "depth_every_n_frames", 0, "must be >= 1"},
+        BadConfig{"CalibrationHealth", "HealthBoardsPosedInt", "boards_posed", 1, "must be true or false"},
+        BadConfig{"CalibrationHealth", "HealthBadBelowDegraded", "misalignment_bad_px", 0.01, "must be >= 0.08"}),
     [](const testing::TestParamInfo<BadConfig>& info) { return info.param.label; });
 
 int main(int argc, char** argv) {
