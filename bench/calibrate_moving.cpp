@@ -295,6 +295,7 @@ int main(int argc, char** argv) {
     worse += is_worse;
     print("replaced:", old_a);
     print(is_worse ? "new (WORSE):" : "new:", new_a);
+    if (candidate.covariance_ok) print("predicted:", predictStereoAccuracy(candidate.rig, candidate.rig_covariance));
     worst_after_mis = std::max(worst_after_mis, new_a.misalignment_px.rms);
     worst_after_bias = std::max(worst_after_bias, new_a.disparity_bias_px.rms);
     in_force = candidate.rig;
