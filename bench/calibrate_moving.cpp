@@ -49,6 +49,7 @@ struct Args {
   int combine = 0;  // 1: track the mean of the window's light-on frames (the scene moves, the boards do not)
   int align = 1;    // whole-board alignment of the tracker (TrackerOptions::whole_board_alignment)
   double min_improvement = GateOptions().min_rms_improvement_rel;
+  double min_change = 0.0;  // GateOptions::min_change_in_predicted
   int truth_background = 0;  // 1: the simulator's scene of each frame as its background (a still-world reference)
   double truth_noise = -1;  // >= 0: the simulator's true corners plus this Gaussian noise instead of tracking
 };
@@ -183,6 +184,7 @@ int main(int argc, char** argv) {
     else if (!std::strcmp(argv[i], "--align")) args.align = std::atoi(value());
     else if (!std::strcmp(argv[i], "--truth-noise")) args.truth_noise = std::atof(value());
     else if (!std::strcmp(argv[i], "--min-improvement")) args.min_improvement = std::atof(value());
+    else if (!std::strcmp(argv[i], "--min-change")) args.min_change = std::atof(value());
     else if (!std::strcmp(argv[i], "--truth-background")) args.truth_background = std::atoi(value());
     else {
       std::fprintf(stderr, "usage: bench_calibrate_moving [--config FILE] [--minutes M] [--period S] [--frames N] "
@@ -212,6 +214,7 @@ int main(int argc, char** argv) {
   const BundleAdjuster adjuster(BundleAdjustmentOptions(), terms);
   GateOptions gate_options;
   gate_options.min_rms_improvement_rel = args.min_improvement;
+  gate_options.min_change_in_predicted = args.min_change;
   const QualityGate gate{gate_options};
   const std::vector<VirtualBoard> boards = config.device.virtualBoards();
   StereoRig in_force = config.rig;  // the head starts calibrated

@@ -93,6 +93,7 @@ CalibratorParams loadCalibratorParams(const ros::NodeHandle& pnh, const std::str
   non_negative("max_baseline_stddev_rel", &p.gate.max_baseline_stddev_rel);
   non_negative("max_rotation_stddev_deg", &p.gate.max_rotation_stddev_deg);
   non_negative("min_rms_improvement_rel", &p.gate.min_rms_improvement_rel);
+  non_negative("min_change_in_predicted", &p.gate.min_change_in_predicted);
   non_negative("in_force_max_rms_px", &p.gate.in_force_max_rms_px);
   if (const std::string e = p.adjustment.Check(); !e.empty()) throw ecs::ConfigError("loss_scale_px", e);
   if (const std::string e = p.gate.Check(); !e.empty()) throw ecs::ConfigError("quality gate", e);
