@@ -470,7 +470,7 @@ def plot_errors(path, timeline, events, epochs):
     for ax, (title, curves, target) in zip(axes, panels):
         for key, source, label, colour, style in curves:
             values = np.array([row[source][key] if row[source] and key in row[source] else np.nan for row in rows])
-            ax.semilogy(t, np.maximum(values, 1e-6), color=colour, linestyle=style, linewidth=1.5, label=label)
+            ax.semilogy(t, np.maximum(values, 1e-3), color=colour, linestyle=style, linewidth=1.5, label=label)
         ax.axhline(target, color="red", linestyle="--", linewidth=1, label="accuracy target")
         for i, (te, name) in enumerate(events):
             ax.axvline(te, color="black", linestyle="-.", linewidth=1.2, label="drift event" if i == 0 else None)
@@ -485,7 +485,7 @@ def plot_errors(path, timeline, events, epochs):
         ax.legend(loc="center left", bbox_to_anchor=(1.01, 0.5), fontsize=8)
     axes[-1].set_xlabel("time since the first frame (s)")
     fig.suptitle("Accuracy for depth of the published calibration: true (against the simulator's truth) "
-                 "and predicted by the calibrator (log scale)", y=0.995)
+                 "and predicted by the calibrator (log scale, below 1e-3 drawn at 1e-3)", y=0.995)
     fig.tight_layout()
     fig.savefig(path, dpi=90)
     plt.close(fig)

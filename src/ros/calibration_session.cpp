@@ -222,7 +222,10 @@ CalibrationStatus CalibrationSession::solve(const std::vector<ecs::StereoObserva
     char rms[96];
     std::snprintf(rms, sizeof(rms), " (RMS %.3f px; the new solve %.3f px, no better)", ecs::combinedRms(in_force_fit),
                   ecs::combinedRms(candidate));
-    status.reason = kInForceConfirmedReason + std::string(rms);
+    // The gate's words when the new solve fits better but changes too little to trust.
+    const bool small_change = decision.reason.rfind("rejected: change", 0) == 0;
+    status.reason = kInForceConfirmedReason +
+                    (small_change ? " (" + decision.reason.substr(10) + ")" : std::string(rms));
   }
   if (!decision.accepted || dry_run) {
     if (decision.accepted) status.reason = "dry run: acceptable, not committed";
