@@ -9,7 +9,17 @@
 // the new and the replaced calibration's accuracy for depth against the truth of the window's
 // last frame (core/calibration/stereo_accuracy.h), and whether the commit is worse.
 //   bench_calibrate_moving [--config FILE] [--minutes M] [--period S] [--frames N] [--fps F]
-//                          [--teach-frames K]
+//                          [--teach-frames K] [--min-change X] [--min-improvement R]
+//                          [--combine 0|1] [--align 0|1] [--free-poses 0|1]
+//                          [--truth-background 0|1] [--truth-noise SIGMA]
+// --min-change / --min-improvement: the gate's min_change_in_predicted / min_rms_improvement_rel;
+// what limits the accuracy (docs/figures.md): --combine 1 tracks the mean of the window's frames
+// (one observation per window), --align 0 reports cornerSubPix corners instead of the whole-board
+// alignment's, --free-poses 1 solves with one free pose per virtual board instead of the rigid
+// device model, --truth-background 1 gives the tracker the simulator's scene of each frame as its
+// background (a still-world reference), --truth-noise S replaces tracking by the true corners
+// plus S px of Gaussian noise. Each window also prints the tracked corners' RMS error against
+// the truth and the part of it common to the window's frames.
 // The scene moves with the frame index (time = frame / fps), the noise seeds are the frame
 // index: two runs print the same figures. The prior is taught at t = 0 from light-on frames
 // minus the simulator's scene of the same frame (as the live tracker's teach_from_ground_truth).
@@ -50,6 +60,7 @@ struct Args {
   int align = 1;    // whole-board alignment of the tracker (TrackerOptions::whole_board_alignment)
   double min_improvement = GateOptions().min_rms_improvement_rel;
   double min_change = 0.0;  // GateOptions::min_change_in_predicted
+  int free_poses = 0;       // 1: one free pose per virtual board instead of the rigid device model
   int truth_background = 0;  // 1: the simulator's scene of each frame as its background (a still-world reference)
   double truth_noise = -1;  // >= 0: the simulator's true corners plus this Gaussian noise instead of tracking
 };
@@ -185,6 +196,7 @@ int main(int argc, char** argv) {
     else if (!std::strcmp(argv[i], "--truth-noise")) args.truth_noise = std::atof(value());
     else if (!std::strcmp(argv[i], "--min-improvement")) args.min_improvement = std::atof(value());
     else if (!std::strcmp(argv[i], "--min-change")) args.min_change = std::atof(value());
+    else if (!std::strcmp(argv[i], "--free-poses")) args.free_poses = std::atoi(value());
     else if (!std::strcmp(argv[i], "--truth-background")) args.truth_background = std::atoi(value());
     else {
       std::fprintf(stderr, "usage: bench_calibrate_moving [--config FILE] [--minutes M] [--period S] [--frames N] "
@@ -211,7 +223,9 @@ int main(int argc, char** argv) {
   PatternTracker tracker(prior, tracker_options);
   BundleAdjustmentConfig terms;
   terms.estimate_tangential = true;  // the scenario's lenses have p1, p2
-  const BundleAdjuster adjuster(BundleAdjustmentOptions(), terms);
+  BundleAdjustmentOptions adjustment;
+  if (args.free_poses) adjustment.board_pose_mode = BoardPoseMode::kSharedAcrossFrames;
+  const BundleAdjuster adjuster(adjustment, terms);
   GateOptions gate_options;
   gate_options.min_rms_improvement_rel = args.min_improvement;
   gate_options.min_change_in_predicted = args.min_change;
@@ -270,7 +284,8 @@ int main(int argc, char** argv) {
     ++windows;
     CalibrationInput input;
     input.frames = &frames;
-    input.device = &config.device;
+    input.device = args.free_poses ? nullptr : &config.device;
+    input.boards = &boards;
     input.image_width = config.rig.left.width;
     input.image_height = config.rig.left.height;
     input.in_force = in_force;
@@ -278,7 +293,8 @@ int main(int argc, char** argv) {
     GateDecision decision;
     if (candidate.success) {
       const BundleAdjustmentSummary in_force_fit =
-          evaluateFixedCalibration(in_force, frames, boards, adjuster.options(), &config.device);
+          evaluateFixedCalibration(in_force, frames, boards, adjuster.options(),
+                                   args.free_poses ? nullptr : &config.device);
       decision = gate.evaluate(candidate, &in_force_fit);
     } else {
       decision.reason = "solve failed: " + candidate.message;
