@@ -36,8 +36,9 @@ namespace {
 // tracking reaches, with margin: well inside what the drift caused (a 2.6 px disparity bias).
 constexpr double kTargetMisalignmentPx = 0.05, kTargetBiasPx = 0.05, kTargetDepthError10mPct = 0.7,
                  kTargetFocalRel = 0.0005, kTargetBaselineRel = 0.001;
+// The baseline is the least determined here (0.05-0.5 % over runs; the knock moves it 0.67 %).
 constexpr double kMisalignmentPx = 0.25, kBiasPx = 0.4, kDepthError10mPct = 7.0, kFocalRel = 0.003,
-                 kBaselineRel = 0.003;
+                 kBaselineRel = 0.01;
 // A commit is worse than the calibration it replaced when its combined error against the same
 // truth, hypot(misalignment RMS, bias RMS), is larger by more than this (px).
 constexpr double kWorsePx = 0.01;
