@@ -16,7 +16,8 @@
 //    window gives pairs (the last settled light-off frame before it with the first two settled
 //    light-on frames; the last two settled light-on frames with the first settled light-off frame
 //    after it); after each window the pairs of the current calibration epoch are learned on a
-//    worker thread, and the result replaces the template once it is ready. No covering, no truth.
+//    worker thread, until the result is ready: it becomes the template of that epoch and learning
+//    stops until the next epoch (a run costs seconds of CPU). No covering, no truth.
 //    An epoch change starts a new set of pairs; the old template is not used meanwhile (frames
 //    pass unseparated, see reteach_on_epoch_change).
 //  - teach:
@@ -354,6 +355,7 @@ class SeparatorNodelet : public nodelet::Nodelet {
     collectLearned();
     if (!mode.settled) return;
     const uint32_t epoch = mode.calibration_epoch;
+    if (learned_epoch_ == epoch) return;  // learned: nothing more to collect until the next epoch
     if (epoch != learn_left_.epoch()) {
       if (learn_left_.size() > 0) NODELET_INFO("Separator: calibration epoch %u: learning the device image again", epoch);
       learn_left_.reset(epoch);
@@ -436,6 +438,11 @@ class SeparatorNodelet : public nodelet::Nodelet {
       first = !separator_ || separator_->epoch() != epoch;
       separator_ = learned;
     }
+    learned_epoch_ = epoch;
+    learn_left_.reset(epoch);  // the pairs are no longer needed
+    learn_right_.reset(epoch);
+    recent_on_.clear();
+    last_off_.reset();
     if (first)
       NODELET_INFO("Separator: device image learned for calibration epoch %u (left %s; right %s)", epoch,
                    result.left.summary().c_str(), result.right.summary().c_str());
@@ -488,6 +495,7 @@ class SeparatorNodelet : public nodelet::Nodelet {
   std::deque<KeptFrame> recent_on_;    // the last settled light-on frames of the window
   int settled_on_ = 0;                 // settled light-on frames since the last light-off one
   std::future<LearnResult> learning_;
+  std::optional<uint32_t> learned_epoch_;  // the epoch whose template was learned
 };
 
 }  // namespace embedded_calibration_stereo

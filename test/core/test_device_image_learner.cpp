@@ -129,7 +129,7 @@ class DriverStream {
 constexpr int kFirstOn = kSettleFrames;                           // offset of the first settled on frame
 constexpr int kLastOn = kSettleFrames + kCalibrationFrames - 1;   // and of the last
 const std::vector<int> kPairOffsets = {kFirstOn, kFirstOn + 1, kLastOn - 1, kLastOn};
-const std::vector<int> kScoreOffsets = {kFirstOn, kFirstOn + 4, kLastOn};
+const std::vector<int> kScoreOffsets = {kFirstOn, kFirstOn + 2, kFirstOn + 4, kFirstOn + 6, kLastOn};
 
 void addPairs(const Window& w, LightPairSet* left, LightPairSet* right) {
   for (int offset : kPairOffsets) {
@@ -200,7 +200,7 @@ struct Learned {
 
 // Learns from windows of `stream` until both cameras are ready (at most max_windows).
 Learned learnUntilReady(DriverStream* stream, uint32_t epoch, int max_windows, const char* what) {
-  const DeviceLearnerOptions options;
+  const DeviceLearnerOptions options;  // the Separator nodelet's defaults
   LightPairSet left(options.max_pairs), right(options.max_pairs);
   left.reset(epoch);
   right.reset(epoch);

@@ -22,8 +22,8 @@
 // Confidence: per pixel, the number of inlier samples (`support`) and the standard error of the
 // estimate (the inliers' spread / sqrt(count)). Ready when at least `min_pairs` pairs were used
 // and `min_coverage` of the pixels have `min_inliers` inliers and a standard error at most
-// `max_standard_error` grey levels. A static scene is ready after one light window; a moving one
-// after as many windows as its movers and parallax need.
+// `max_standard_error` grey levels. The pair count matters most under motion: each window adds
+// independent scene errors that the per-pixel combination averages out (docs/figures.md).
 //
 // Zoom, focus and knocks move the device image: pairs are only combined within one calibration
 // epoch. The caller (the Separator nodelet) starts a new set of pairs at each epoch change.
@@ -45,12 +45,12 @@ namespace ecs {
 
 struct DeviceLearnerOptions {
   int max_pairs = 24;               // pairs kept (the oldest are dropped), >= min_pairs
-  int min_pairs = 4;                // readiness: pairs used, >= 2
+  int min_pairs = 12;               // readiness: pairs used, >= 2 (the Separator: 4 per window)
   int min_inliers = 3;              // readiness: inlier samples a pixel needs, >= 1
   double min_coverage = 0.99;       // readiness: fraction of pixels meeting both, (0, 1]
   double max_standard_error = 3.0;  // readiness: per pixel, grey levels, > 0
   int iterations = 2;               // alignment passes after the unaligned first pass, 0..5
-  double inlier_threshold = 10.0;   // grey levels from the per-pixel median, > 0
+  double inlier_threshold = 6.0;    // grey levels from the per-pixel median, > 0
   // Empty when usable; otherwise one message per problem, joined by "; ".
   std::string Check() const;
 };
