@@ -310,13 +310,15 @@ TEST(SeparatorLearn, LearnsTheDeviceImageFromLightWindowsWithAMovingScene) {
   ASSERT_TRUE(ros::service::call("/learn/teach", teach));
   EXPECT_FALSE(teach.response.success) << "learn mode has no teach: " << teach.response.message;
 
-  const cv::Size size(128, 96);
+  const cv::Size size(256, 192);
   cv::Mat device(size, CV_8UC1), canvas(size.height + 200, size.width + 400, CV_8UC1);
   for (int v = 0; v < device.rows; ++v)
     for (int u = 0; u < device.cols; ++u) device.at<uint8_t>(v, u) = ((u / 8 + v / 8) % 2) * 90;
   cv::RNG rng(5);
   rng.fill(canvas, cv::RNG::UNIFORM, 20, 151);
-  cv::GaussianBlur(canvas, canvas, cv::Size(0, 0), 1.5);  // a lens-blurred texture the flow can follow
+  // A lens-blurred texture the flow can follow, stretched back to full contrast (grey 20..150).
+  cv::GaussianBlur(canvas, canvas, cv::Size(0, 0), 2.5);
+  cv::normalize(canvas, canvas, 20, 150, cv::NORM_MINMAX);
   int frame = 0;
   const auto sceneAt = [&](int f) { return canvas(cv::Rect(2 * f, f % 200, size.width, size.height)).clone(); };
   // Publishes frame `frame` (the device at `light` level) and waits for its image_scene.
@@ -362,11 +364,16 @@ TEST(SeparatorLearn, LearnsTheDeviceImageFromLightWindowsWithAMovingScene) {
     publish(false, true, 0.0);
   };
   for (int w = 0; w < 3; ++w) window(nullptr);
+  {
+    cv::Scalar mean, sd;
+    cv::meanStdDev(sceneAt(0), mean, sd);
+    std::printf("learn: scene texture sd %.1f grey levels, moving 2 px right and 1 px up per frame\n", sd[0]);
+  }
   std::string found;
   // The learning runs after the third window; a few light-off frames give it time to finish.
   const bool learned = [&] {
     for (int i = 0; i < 100; ++i) {
-      if (ecs_test::waitForLog(log, {"Separator", "device image learned"}, 0.05, &found)) return true;
+      if (ecs_test::waitForLog(log, {"Separator", "device image learned for calibration epoch"}, 0.05, &found)) return true;
       publish(false, true, 0.0);
     }
     return false;
