@@ -323,7 +323,7 @@ TEST(SeparatorLearn, LearnsTheDeviceImageFromLightWindowsWithAMovingScene) {
   cv::normalize(canvas, canvas, 20, 150, cv::NORM_MINMAX);
   int frame = 0;
   uint32_t epoch = 0;
-  const auto sceneAt = [&](int f) { return canvas(cv::Rect(2 * f, f % 200, size.width, size.height)).clone(); };
+  const auto sceneAt = [&](int f) { return canvas(cv::Rect((2 * f) % 400, f % 200, size.width, size.height)).clone(); };
   // Publishes frame `frame` (the device at `light` level) and waits for its image_scene.
   const auto publish = [&](bool on, bool settled, double light, cv::Mat* scene_out = nullptr) {
     const cv::Mat scene_image = sceneAt(frame);
