@@ -134,7 +134,8 @@ struct LearnResult {
 // reports on a wall timer of the same queue and guards its own counters. With device_template
 // learn, the pair sets, kept frames and learning_ belong to the callback thread; a learning run
 // works on std::async's thread on a snapshot of the pairs (images never written after being
-// kept) and hands its result back through the future, which only the callback thread reads.
+// kept) and hands its result back through the future, which only the callback thread reads
+// (unloading waits for a run in progress: the future of std::async joins its thread).
 class SeparatorNodelet : public nodelet::Nodelet {
  private:
   using FrameInput = LazySyncedInput<Image, Image, CalibrationMode>;
