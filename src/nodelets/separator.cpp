@@ -20,16 +20,17 @@
 //    stops until the next epoch (a run costs seconds of CPU). No covering, no truth.
 //    An epoch change starts a new set of pairs; the old template is not used meanwhile (frames
 //    pass unseparated, see reteach_on_epoch_change).
-//  - teach:
-//  - hardware: the `teach` service averages the next teach_frames light-on settled frames; the
-//    scene must be covered (or dark) meanwhile;
-//  - simulator (teach_from_ground_truth): the scene cannot be covered, so I_C is the mean over
-//    teach_frames light-on settled frames of I_E - ground_truth image_scene of the same stamp,
-//    which is the device-only image. It is taught automatically at the first light-on frames and,
-//    with reteach_on_epoch_change, again whenever calibration_epoch differs from the template's
-//    (the device image moves with zoom); on hardware an epoch change is only warned about.
+//  - teach (default), on hardware: the `teach` service averages the next teach_frames light-on
+//    settled frames; the scene must be covered (or dark) meanwhile;
+//  - teach, simulator (teach_from_ground_truth): the scene cannot be covered, so I_C is the mean
+//    over teach_frames light-on settled frames of I_E - ground_truth image_scene of the same
+//    stamp, which is the device-only image. It is taught automatically at the first light-on
+//    frames and, with reteach_on_epoch_change, again whenever calibration_epoch differs from the
+//    template's (the device image moves with zoom); on hardware an epoch change is only warned
+//    about.
 // Diagnostics (StageDiagnostics): rates, latency, mode (passthrough and why, or separating),
-// method, template epoch and input copies (must stay 0).
+// method, template source and epoch, the last learning result (learn) and input copies (must
+// stay 0).
 #include <cv_bridge/cv_bridge.h>
 #include <image_transport/image_transport.h>
 #include <nodelet/nodelet.h>
