@@ -9,6 +9,8 @@
 #include <opencv2/imgproc.hpp>
 #include <opencv2/video/tracking.hpp>
 #include <sstream>
+#include <cstdio>
+#include <cstdlib>
 #include <stdexcept>
 
 #include "embedded_calibration_stereo/core/calibration/stereo_accuracy.h"
@@ -112,6 +114,7 @@ std::string CalibrationMonitorOptions::Check() const {
   if (!positive(board_residual_degraded_px) || !(board_residual_bad_px > board_residual_degraded_px))
     return "board_residual_degraded_px must be > 0 and board_residual_bad_px above it";
   if (!(hysteresis >= 0.0 && hysteresis < 1.0)) return "hysteresis must be in [0, 1)";
+  if (depth_frame_stride < 1) return "depth_frame_stride must be >= 1";
   if (!positive(smoothing_time_s)) return "smoothing_time_s must be > 0";
   if (!positive(band_half_height_px)) return "band_half_height_px must be > 0";
   if (max_features < 10) return "max_features must be >= 10";
@@ -151,7 +154,11 @@ struct CalibrationMonitor::Impl {
   double depth_time = 0.0;
   Eigen::Vector2d tilt_roll = Eigen::Vector2d::Zero();  // smoothed right rotation about x, z (deg)
   Eigen::Matrix2d tilt_roll_cov = Eigen::Matrix2d::Zero();
+  Eigen::Matrix2d frame_cov = Eigen::Matrix2d::Zero();  // observed spread of one frame's estimate
+  double first_depth_time = 0.0;
+  long depth_count = 0;
   int matches = 0;
+  long depth_calls = 0;
   std::string depth_note;  // why the last depth frame gave no measurement
 
   // Verification.
@@ -171,7 +178,12 @@ struct CalibrationMonitor::Impl {
   std::vector<cv::Mat> pyramid_left, pyramid_right;
 
   void advance(double t) { now = std::max(now, t); }
-  bool depthFresh() const { return has_depth && now - depth_time <= options.max_depth_age_s; }
+  // The depth mode counts once its smoothing has seen one time constant of frames (its first
+  // frames alone are noisy) and while its last measurement is recent.
+  bool depthFresh() const {
+    return has_depth && depth_time - first_depth_time >= options.smoothing_time_s &&
+           now - depth_time <= options.max_depth_age_s;
+  }
   bool verificationFresh() const {
     return has_verification && now - verification_time <= options.max_verification_age_s;
   }
@@ -254,8 +266,11 @@ void CalibrationMonitor::Impl::setCalibration(const StereoRig& r, int e, const s
   has_depth = has_verification = false;
   tilt_roll.setZero();
   tilt_roll_cov.setZero();
+  frame_cov.setZero();
+  depth_count = 0;
   verified_change.setZero();
   matches = 0;
+  depth_calls = 0;
   rms_left = rms_right = stereo_consistency = residual = 0.0;
   depth_note.clear();
   verification_note.clear();
@@ -270,6 +285,10 @@ bool CalibrationMonitor::Impl::addDepthFrame(double t, const cv::Mat& left_raw, 
                                 std::to_string(left_raw.rows) + " for a calibration of " +
                                 std::to_string(size.width) + "x" + std::to_string(size.height));
   advance(t);
+  if (depth_calls++ % options.depth_frame_stride != 0) {
+    updateLevels();
+    return false;
+  }
   const cv::Mat left = toGray(left_raw, "left"), right = toGray(right_raw, "right");
 
   // Features: FAST corners, the strongest per grid cell so that they cover the image (a roll is
@@ -287,7 +306,7 @@ bool CalibrationMonitor::Impl::addDepthFrame(double t, const cv::Mat& left_raw, 
     const int cy = std::min(options.grid_rows - 1, static_cast<int>(k.pt.y * options.grid_rows / size.height));
     grid[cy * options.grid_cols + cx].push_back(k);
   }
-  std::vector<cv::Point2f> left_points, right_points;
+  std::vector<cv::Point2f> left_points, right_points, guesses;
   for (auto& cell : grid) {
     if (cell.size() > per_cell) {
       std::nth_element(cell.begin(), cell.begin() + per_cell, cell.end(),
@@ -303,6 +322,7 @@ bool CalibrationMonitor::Impl::addDepthFrame(double t, const cv::Mat& left_raw, 
       if (!rig.right.project(rig.right_from_left.linear() * ray.homogeneous(), &guess) || !rig.right.inImage(guess))
         guess = Eigen::Vector2d(k.pt.x, k.pt.y);
       right_points.emplace_back(static_cast<float>(guess.x()), static_cast<float>(guess.y()));
+      guesses.push_back(right_points.back());
     }
   }
   if (static_cast<int>(left_points.size()) < options.min_matches) {
@@ -316,12 +336,15 @@ bool CalibrationMonitor::Impl::addDepthFrame(double t, const cv::Mat& left_raw, 
   const cv::Size window(options.lk_window_px, options.lk_window_px);
   cv::buildOpticalFlowPyramid(left, pyramid_left, window, options.lk_levels);
   cv::buildOpticalFlowPyramid(right, pyramid_right, window, options.lk_levels);
-  const cv::TermCriteria criteria(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, 30, 0.005);
+  const cv::TermCriteria criteria(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, 10, 0.01);
   std::vector<uchar> status, status_back;
   std::vector<float> error;
   cv::calcOpticalFlowPyrLK(pyramid_left, pyramid_right, left_points, right_points, status, error, window,
                            options.lk_levels, criteria, cv::OPTFLOW_USE_INITIAL_FLOW);
-  std::vector<cv::Point2f> back = left_points;
+  // The way back starts from the left pixel the right one would have without the disparity
+  // found, so that it has to find the disparity again.
+  std::vector<cv::Point2f> back(left_points.size());
+  for (size_t i = 0; i < left_points.size(); ++i) back[i] = left_points[i] + (right_points[i] - guesses[i]);
   cv::calcOpticalFlowPyrLK(pyramid_right, pyramid_left, right_points, back, status_back, error, window,
                            options.lk_levels, criteria, cv::OPTFLOW_USE_INITIAL_FLOW);
 
@@ -351,6 +374,11 @@ bool CalibrationMonitor::Impl::addDepthFrame(double t, const cv::Mat& left_raw, 
       j(k) = (dh.y() * hr.z() - hr.y() * dh.z()) / (hr.z() * hr.z());
     }
     jacobians.push_back(j);
+  }
+  if (std::getenv("ECS_MONITOR_DEBUG")) {
+    int st = 0, fb = 0;
+    for (size_t i = 0; i < left_points.size(); ++i) { st += status[i] && status_back[i]; const cv::Point2f d = back[i] - left_points[i]; fb += status[i] && status_back[i] && d.dot(d) <= options.lk_max_backward_error_px * options.lk_max_backward_error_px; }
+    std::fprintf(stderr, "DBG fast %zu kept %zu status %d fb %d offsets %zu\n", keypoints.size(), left_points.size(), st, fb, offsets.size());
   }
   if (static_cast<int>(offsets.size()) < options.min_matches) {
     depth_note = "too few left-right matches (" + std::to_string(offsets.size()) + ")";
@@ -412,12 +440,26 @@ bool CalibrationMonitor::Impl::addDepthFrame(double t, const cv::Mat& left_raw, 
   scale = 1.4826 * abs_residuals[mid];
   const Eigen::Matrix2d covariance = scale * scale * normal.inverse();
 
-  // Exponential smoothing over time (the covariance of the smoothed estimate treats frames as
-  // independent).
+  // Exponential smoothing over time; the first measurements are averaged (weight 1/n) until the
+  // exponential weight is the larger. The spread of a frame's estimate is taken as the larger of
+  // the fit's and the one observed from frame to frame (the scene's texture and slanted surfaces
+  // make frames disagree by more than their residuals say), and the smoothed estimate's
+  // variance is that of the weighted mean.
   const double alpha =
-      has_depth ? 1.0 - std::exp(-std::max(t - depth_time, 1e-3) / options.smoothing_time_s) : 1.0;
+      has_depth ? std::max(1.0 / (depth_count + 1),
+                           1.0 - std::exp(-std::max(t - depth_time, 1e-3) / options.smoothing_time_s))
+                : 1.0;
+  if (has_depth) {
+    const Eigen::Vector2d innovation = w - tilt_roll;
+    frame_cov += alpha * (innovation * innovation.transpose() - frame_cov);
+  } else {
+    frame_cov = covariance;
+    first_depth_time = t;
+  }
   tilt_roll += alpha * (w - tilt_roll);
-  tilt_roll_cov = (1.0 - alpha) * (1.0 - alpha) * tilt_roll_cov + alpha * alpha * covariance;
+  const Eigen::Matrix2d per_frame = frame_cov.trace() > covariance.trace() ? frame_cov : covariance;
+  tilt_roll_cov = alpha / (2.0 - alpha) * per_frame;
+  ++depth_count;
   has_depth = true;
   depth_time = std::max(depth_time, t);
   matches = used;
@@ -653,7 +695,8 @@ HealthReport CalibrationMonitor::Impl::report() const {
                                              fixed(options.board_residual_degraded_px, 2) + " px)");
   }
   if (reasons.empty()) {
-    std::string why = "no recent measurement";
+    std::string why = has_depth && now - depth_time <= options.max_depth_age_s ? "depth mode settling"
+                                                                               : "no recent measurement";
     if (!depth_note.empty()) why += "; depth: " + depth_note;
     if (!verification_note.empty()) why += "; boards: " + verification_note;
     out.reason = why;
@@ -667,7 +710,10 @@ HealthReport CalibrationMonitor::Impl::report() const {
     if (out.state != CalibrationHealth::kGood && reason.first == CalibrationHealth::kGood) break;
     why += (why.empty() ? "" : "; ") + reason.second;
   }
-  if (!depth) why += "; no recent depth-mode measurement" + (depth_note.empty() ? "" : " (" + depth_note + ")");
+  if (!depth && has_depth && now - depth_time <= options.max_depth_age_s)
+    why += "; depth mode settling";
+  else if (!depth)
+    why += "; no recent depth-mode measurement" + (depth_note.empty() ? "" : " (" + depth_note + ")");
   if (!verification)
     why += "; no recent board verification" + (verification_note.empty() ? "" : " (" + verification_note + ")");
   out.reason = why;
