@@ -9,8 +9,6 @@
 #include <opencv2/imgproc.hpp>
 #include <opencv2/video/tracking.hpp>
 #include <sstream>
-#include <cstdio>
-#include <cstdlib>
 #include <stdexcept>
 
 #include "embedded_calibration_stereo/core/calibration/stereo_accuracy.h"
@@ -374,11 +372,6 @@ bool CalibrationMonitor::Impl::addDepthFrame(double t, const cv::Mat& left_raw, 
       j(k) = (dh.y() * hr.z() - hr.y() * dh.z()) / (hr.z() * hr.z());
     }
     jacobians.push_back(j);
-  }
-  if (std::getenv("ECS_MONITOR_DEBUG")) {
-    int st = 0, fb = 0;
-    for (size_t i = 0; i < left_points.size(); ++i) { st += status[i] && status_back[i]; const cv::Point2f d = back[i] - left_points[i]; fb += status[i] && status_back[i] && d.dot(d) <= options.lk_max_backward_error_px * options.lk_max_backward_error_px; }
-    std::fprintf(stderr, "DBG fast %zu kept %zu status %d fb %d offsets %zu\n", keypoints.size(), left_points.size(), st, fb, offsets.size());
   }
   if (static_cast<int>(offsets.size()) < options.min_matches) {
     depth_note = "too few left-right matches (" + std::to_string(offsets.size()) + ")";
