@@ -312,3 +312,70 @@ TEST(CalibrationMonitor, ThermalRampAboutZCaughtBeforeThreeHundredthsOfADegree) 
 
 }  // namespace
 }  // namespace ecs
+
+namespace ecs {
+namespace {
+
+// A wrong calibration put in force (the right camera's focal length 0.5 % too long, as a bad
+// commit would) is caught by the first verification, with and without the boards' poses; the
+// fitted change names it.
+TEST(CalibrationMonitor, WrongCalibrationCaughtByFirstVerification) {
+  SimRig sim(loadSimRigConfig(kConfigDir + "drive_photo.yaml"));
+  PatternTracker tracker(teach(sim, 0.0), TrackerOptions());
+  const SimFrame on = sim.render(0.5, 1.0, 11);
+  const StereoObservation obs = tracker.trackStereo(on.left, on.right, 0.5);
+  StereoRig wrong = sim.config().rig;
+  wrong.right.fx *= 1.005;
+  wrong.right.fy *= 1.005;
+  for (bool posed : {true, false}) {
+    CalibrationMonitor monitor{CalibrationMonitorOptions()};
+    monitor.setCalibration(sim.config().rig, 1, sim.virtualBoards(), posed);
+    ASSERT_TRUE(monitor.addVerification(0.5, obs));
+    const HealthReport right = monitor.report();
+    EXPECT_EQ(right.state, CalibrationHealth::kGood) << right.reason;  // the control
+    monitor.setCalibration(wrong, 2, sim.virtualBoards(), posed);
+    EXPECT_EQ(monitor.report().state, CalibrationHealth::kUnknown);
+    ASSERT_TRUE(monitor.addVerification(0.5, obs));
+    const HealthReport r = monitor.report();
+    print(posed ? "right focal length 0.5 % long, boards posed" : "right focal length 0.5 % long, no board poses",
+          r, 0.5);
+    EXPECT_EQ(r.epoch, 2);
+    EXPECT_TRUE(leftGood(r)) << r.reason;
+    EXPECT_NEAR(r.right_focal_scale, 1.0 / 1.005, 0.001);
+  }
+}
+
+// Unusable options and inputs are refused with a message naming the problem; a refused
+// calibration leaves the one in force.
+TEST(CalibrationMonitor, RefusesBadOptionsAndInputs) {
+  CalibrationMonitorOptions o;
+  o.misalignment_bad_px = o.misalignment_degraded_px;
+  EXPECT_NE(o.Check().find("misalignment_bad_px"), std::string::npos) << o.Check();
+  EXPECT_THROW(CalibrationMonitor{o}, std::invalid_argument);
+  o = CalibrationMonitorOptions();
+  o.lk_window_px = 12;
+  EXPECT_NE(o.Check().find("lk_window_px"), std::string::npos) << o.Check();
+  EXPECT_EQ(CalibrationMonitorOptions().Check(), "");
+
+  const SimRigConfig config = loadSimRigConfig(kConfigDir + "drive_photo.yaml");
+  CalibrationMonitor monitor{Head::options(2.0)};  // measures on every depth frame
+  EXPECT_EQ(monitor.report().state, CalibrationHealth::kUnknown);
+  EXPECT_THROW(monitor.addDepthFrame(0.0, cv::Mat(480, 752, CV_8UC1), cv::Mat(480, 752, CV_8UC1)), std::logic_error);
+  monitor.setCalibration(config.rig, 3, {}, false);
+  StereoRig broken = config.rig;
+  broken.right.fx = -1.0;
+  EXPECT_THROW(monitor.setCalibration(broken, 4, {}, false), std::invalid_argument);
+  EXPECT_EQ(monitor.report().epoch, 3);
+  EXPECT_THROW(monitor.addDepthFrame(0.0, cv::Mat(240, 376, CV_8UC1), cv::Mat(240, 376, CV_8UC1)),
+               std::invalid_argument);
+  EXPECT_THROW(monitor.addDepthFrame(0.0, cv::Mat(480, 752, CV_16UC1), cv::Mat(480, 752, CV_16UC1)),
+               std::invalid_argument);
+  // A black pair has no features: no measurement, and the report says why.
+  EXPECT_FALSE(monitor.addDepthFrame(0.0, cv::Mat::zeros(480, 752, CV_8UC1), cv::Mat::zeros(480, 752, CV_8UC1)));
+  const HealthReport r = monitor.report();
+  EXPECT_EQ(r.state, CalibrationHealth::kUnknown);
+  EXPECT_NE(r.reason.find("too few scene features"), std::string::npos) << r.reason;
+}
+
+}  // namespace
+}  // namespace ecs

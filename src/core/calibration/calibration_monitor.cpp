@@ -282,6 +282,10 @@ bool CalibrationMonitor::Impl::addDepthFrame(double t, const cv::Mat& left_raw, 
     throw std::invalid_argument("CalibrationMonitor: depth frame of " + std::to_string(left_raw.cols) + "x" +
                                 std::to_string(left_raw.rows) + " for a calibration of " +
                                 std::to_string(size.width) + "x" + std::to_string(size.height));
+  for (const cv::Mat* image : {&left_raw, &right_raw})
+    if (image->type() != CV_8UC1 && image->type() != CV_8UC3)
+      throw std::invalid_argument("CalibrationMonitor: depth frame images must be 8-bit grey or colour "
+                                  "(CV_8UC1 / CV_8UC3)");
   advance(t);
   if (depth_calls++ % options.depth_frame_stride != 0) {
     updateLevels();
