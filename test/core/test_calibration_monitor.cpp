@@ -379,3 +379,21 @@ TEST(CalibrationMonitor, RefusesBadOptionsAndInputs) {
 
 }  // namespace
 }  // namespace ecs
+
+namespace ecs {
+namespace {
+
+// A knock far beyond the band (0.5 deg about x: rows 5.7 px apart, the band is +-3 px) is still
+// measured (the fit restarts from the median offset) and goes BAD within 2 s.
+TEST(CalibrationMonitor, LargeTiltKnockBadWithinTwoSeconds) {
+  HealthReport r;
+  Eigen::Vector3d truth;
+  const double delay = knockDelay(Eigen::Vector3d(0.5, 0, 0), 10.0, 100.0, 2.0, &r, &truth);
+  print("knock 0.5 deg about x", r, delay);
+  EXPECT_GE(delay, 0.0) << r.reason;
+  EXPECT_EQ(r.state, CalibrationHealth::kBad) << r.reason;
+  EXPECT_NEAR(r.right_rotation_deg.x(), truth.x(), 0.05);
+}
+
+}  // namespace
+}  // namespace ecs

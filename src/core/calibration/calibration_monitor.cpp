@@ -384,43 +384,44 @@ bool CalibrationMonitor::Impl::addDepthFrame(double t, const cv::Mat& left_raw, 
   }
 
   // Robust fit offset = J w (w: tilt, roll in deg): Huber weights inside the band around the
-  // model's row. It starts from the smoothed estimate, or from the median offset as a tilt, so
-  // that a knock larger than the band is still found.
-  Eigen::Vector2d w = Eigen::Vector2d::Zero();
-  if (has_depth) {
-    w = tilt_roll;
-  } else {
+  // model's row. It starts from the smoothed estimate and, when too few matches lie near the
+  // rows that predicts (a knock larger than the band since the last frame), again from the median
+  // offset taken as a tilt.
+  auto fitFrom = [&](Eigen::Vector2d start, Eigen::Vector2d* w, Eigen::Matrix2d* normal) {
+    *w = start;
+    int used = 0;
+    for (int iteration = 0; iteration < 8; ++iteration) {
+      normal->setZero();
+      Eigen::Vector2d rhs = Eigen::Vector2d::Zero();
+      used = 0;
+      for (size_t i = 0; i < offsets.size(); ++i) {
+        const double r = offsets[i] - jacobians[i].dot(*w);
+        if (std::abs(r) > options.band_half_height_px) continue;
+        const double weight = std::abs(r) <= options.huber_px ? 1.0 : options.huber_px / std::abs(r);
+        *normal += weight * jacobians[i] * jacobians[i].transpose();
+        rhs += weight * jacobians[i] * r;
+        ++used;
+      }
+      if (used < options.min_matches) return used;
+      const Eigen::Vector2d step = normal->ldlt().solve(rhs);
+      if (!step.allFinite()) return 0;
+      *w += step;
+      if (step.norm() < 1e-6) break;
+    }
+    return used;
+  };
+  auto medianStart = [&]() {
     std::vector<double> sorted = offsets, jx;
     for (const auto& j : jacobians) jx.push_back(j(0));
     const size_t mid = sorted.size() / 2;
     std::nth_element(sorted.begin(), sorted.begin() + mid, sorted.end());
     std::nth_element(jx.begin(), jx.begin() + mid, jx.end());
-    if (std::abs(jx[mid]) > 1e-9) w(0) = sorted[mid] / jx[mid];
-  }
-  Eigen::Matrix2d normal = Eigen::Matrix2d::Zero();
-  int used = 0;
-  double scale = 0.0;
-  for (int iteration = 0; iteration < 8; ++iteration) {
-    normal.setZero();
-    Eigen::Vector2d rhs = Eigen::Vector2d::Zero();
-    used = 0;
-    for (size_t i = 0; i < offsets.size(); ++i) {
-      const double r = offsets[i] - jacobians[i].dot(w);
-      if (std::abs(r) > options.band_half_height_px) continue;
-      const double weight = std::abs(r) <= options.huber_px ? 1.0 : options.huber_px / std::abs(r);
-      normal += weight * jacobians[i] * jacobians[i].transpose();
-      rhs += weight * jacobians[i] * r;
-      ++used;
-    }
-    if (used < options.min_matches) break;
-    const Eigen::Vector2d step = normal.ldlt().solve(rhs);
-    if (!step.allFinite()) {
-      used = 0;
-      break;
-    }
-    w += step;
-    if (step.norm() < 1e-6) break;
-  }
+    return Eigen::Vector2d(std::abs(jx[mid]) > 1e-9 ? sorted[mid] / jx[mid] : 0.0, 0.0);
+  };
+  Eigen::Vector2d w;
+  Eigen::Matrix2d normal;
+  int used = fitFrom(has_depth ? tilt_roll : medianStart(), &w, &normal);
+  if (used < options.min_matches && has_depth) used = fitFrom(medianStart(), &w, &normal);
   if (used < options.min_matches) {
     depth_note = "too few matches near their rows (" + std::to_string(used) + ")";
     updateLevels();
@@ -434,7 +435,7 @@ bool CalibrationMonitor::Impl::addDepthFrame(double t, const cv::Mat& left_raw, 
   }
   const size_t mid = abs_residuals.size() / 2;
   std::nth_element(abs_residuals.begin(), abs_residuals.begin() + mid, abs_residuals.end());
-  scale = 1.4826 * abs_residuals[mid];
+  const double scale = 1.4826 * abs_residuals[mid];
   const Eigen::Matrix2d covariance = scale * scale * normal.inverse();
 
   // Exponential smoothing over time; the first measurements are averaged (weight 1/n) until the
