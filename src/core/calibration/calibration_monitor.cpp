@@ -112,6 +112,7 @@ std::string CalibrationMonitorOptions::Check() const {
   if (!positive(board_residual_degraded_px) || !(board_residual_bad_px > board_residual_degraded_px))
     return "board_residual_degraded_px must be > 0 and board_residual_bad_px above it";
   if (!(hysteresis >= 0.0 && hysteresis < 1.0)) return "hysteresis must be in [0, 1)";
+  if (depth_frame_stride < 1) return "depth_frame_stride must be >= 1";
   if (!positive(smoothing_time_s)) return "smoothing_time_s must be > 0";
   if (!positive(band_half_height_px)) return "band_half_height_px must be > 0";
   if (max_features < 10) return "max_features must be >= 10";
@@ -151,7 +152,11 @@ struct CalibrationMonitor::Impl {
   double depth_time = 0.0;
   Eigen::Vector2d tilt_roll = Eigen::Vector2d::Zero();  // smoothed right rotation about x, z (deg)
   Eigen::Matrix2d tilt_roll_cov = Eigen::Matrix2d::Zero();
+  Eigen::Matrix2d frame_cov = Eigen::Matrix2d::Zero();  // observed spread of one frame's estimate
+  double first_depth_time = 0.0;
+  long depth_count = 0;
   int matches = 0;
+  long depth_calls = 0;
   std::string depth_note;  // why the last depth frame gave no measurement
 
   // Verification.
@@ -171,7 +176,12 @@ struct CalibrationMonitor::Impl {
   std::vector<cv::Mat> pyramid_left, pyramid_right;
 
   void advance(double t) { now = std::max(now, t); }
-  bool depthFresh() const { return has_depth && now - depth_time <= options.max_depth_age_s; }
+  // The depth mode counts once its smoothing has seen one time constant of frames (its first
+  // frames alone are noisy) and while its last measurement is recent.
+  bool depthFresh() const {
+    return has_depth && depth_time - first_depth_time >= options.smoothing_time_s &&
+           now - depth_time <= options.max_depth_age_s;
+  }
   bool verificationFresh() const {
     return has_verification && now - verification_time <= options.max_verification_age_s;
   }
@@ -254,8 +264,11 @@ void CalibrationMonitor::Impl::setCalibration(const StereoRig& r, int e, const s
   has_depth = has_verification = false;
   tilt_roll.setZero();
   tilt_roll_cov.setZero();
+  frame_cov.setZero();
+  depth_count = 0;
   verified_change.setZero();
   matches = 0;
+  depth_calls = 0;
   rms_left = rms_right = stereo_consistency = residual = 0.0;
   depth_note.clear();
   verification_note.clear();
@@ -269,7 +282,15 @@ bool CalibrationMonitor::Impl::addDepthFrame(double t, const cv::Mat& left_raw, 
     throw std::invalid_argument("CalibrationMonitor: depth frame of " + std::to_string(left_raw.cols) + "x" +
                                 std::to_string(left_raw.rows) + " for a calibration of " +
                                 std::to_string(size.width) + "x" + std::to_string(size.height));
+  for (const cv::Mat* image : {&left_raw, &right_raw})
+    if (image->type() != CV_8UC1 && image->type() != CV_8UC3)
+      throw std::invalid_argument("CalibrationMonitor: depth frame images must be 8-bit grey or colour "
+                                  "(CV_8UC1 / CV_8UC3)");
   advance(t);
+  if (depth_calls++ % options.depth_frame_stride != 0) {
+    updateLevels();
+    return false;
+  }
   const cv::Mat left = toGray(left_raw, "left"), right = toGray(right_raw, "right");
 
   // Features: FAST corners, the strongest per grid cell so that they cover the image (a roll is
@@ -287,7 +308,7 @@ bool CalibrationMonitor::Impl::addDepthFrame(double t, const cv::Mat& left_raw, 
     const int cy = std::min(options.grid_rows - 1, static_cast<int>(k.pt.y * options.grid_rows / size.height));
     grid[cy * options.grid_cols + cx].push_back(k);
   }
-  std::vector<cv::Point2f> left_points, right_points;
+  std::vector<cv::Point2f> left_points, right_points, guesses;
   for (auto& cell : grid) {
     if (cell.size() > per_cell) {
       std::nth_element(cell.begin(), cell.begin() + per_cell, cell.end(),
@@ -303,6 +324,7 @@ bool CalibrationMonitor::Impl::addDepthFrame(double t, const cv::Mat& left_raw, 
       if (!rig.right.project(rig.right_from_left.linear() * ray.homogeneous(), &guess) || !rig.right.inImage(guess))
         guess = Eigen::Vector2d(k.pt.x, k.pt.y);
       right_points.emplace_back(static_cast<float>(guess.x()), static_cast<float>(guess.y()));
+      guesses.push_back(right_points.back());
     }
   }
   if (static_cast<int>(left_points.size()) < options.min_matches) {
@@ -316,12 +338,15 @@ bool CalibrationMonitor::Impl::addDepthFrame(double t, const cv::Mat& left_raw, 
   const cv::Size window(options.lk_window_px, options.lk_window_px);
   cv::buildOpticalFlowPyramid(left, pyramid_left, window, options.lk_levels);
   cv::buildOpticalFlowPyramid(right, pyramid_right, window, options.lk_levels);
-  const cv::TermCriteria criteria(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, 30, 0.005);
+  const cv::TermCriteria criteria(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, 10, 0.01);
   std::vector<uchar> status, status_back;
   std::vector<float> error;
   cv::calcOpticalFlowPyrLK(pyramid_left, pyramid_right, left_points, right_points, status, error, window,
                            options.lk_levels, criteria, cv::OPTFLOW_USE_INITIAL_FLOW);
-  std::vector<cv::Point2f> back = left_points;
+  // The way back starts from the left pixel the right one would have without the disparity
+  // found, so that it has to find the disparity again.
+  std::vector<cv::Point2f> back(left_points.size());
+  for (size_t i = 0; i < left_points.size(); ++i) back[i] = left_points[i] + (right_points[i] - guesses[i]);
   cv::calcOpticalFlowPyrLK(pyramid_right, pyramid_left, right_points, back, status_back, error, window,
                            options.lk_levels, criteria, cv::OPTFLOW_USE_INITIAL_FLOW);
 
@@ -359,43 +384,44 @@ bool CalibrationMonitor::Impl::addDepthFrame(double t, const cv::Mat& left_raw, 
   }
 
   // Robust fit offset = J w (w: tilt, roll in deg): Huber weights inside the band around the
-  // model's row. It starts from the smoothed estimate, or from the median offset as a tilt, so
-  // that a knock larger than the band is still found.
-  Eigen::Vector2d w = Eigen::Vector2d::Zero();
-  if (has_depth) {
-    w = tilt_roll;
-  } else {
+  // model's row. It starts from the smoothed estimate and, when too few matches lie near the
+  // rows that predicts (a knock larger than the band since the last frame), again from the median
+  // offset taken as a tilt.
+  auto fitFrom = [&](Eigen::Vector2d start, Eigen::Vector2d* w, Eigen::Matrix2d* normal) {
+    *w = start;
+    int used = 0;
+    for (int iteration = 0; iteration < 8; ++iteration) {
+      normal->setZero();
+      Eigen::Vector2d rhs = Eigen::Vector2d::Zero();
+      used = 0;
+      for (size_t i = 0; i < offsets.size(); ++i) {
+        const double r = offsets[i] - jacobians[i].dot(*w);
+        if (std::abs(r) > options.band_half_height_px) continue;
+        const double weight = std::abs(r) <= options.huber_px ? 1.0 : options.huber_px / std::abs(r);
+        *normal += weight * jacobians[i] * jacobians[i].transpose();
+        rhs += weight * jacobians[i] * r;
+        ++used;
+      }
+      if (used < options.min_matches) return used;
+      const Eigen::Vector2d step = normal->ldlt().solve(rhs);
+      if (!step.allFinite()) return 0;
+      *w += step;
+      if (step.norm() < 1e-6) break;
+    }
+    return used;
+  };
+  auto medianStart = [&]() {
     std::vector<double> sorted = offsets, jx;
     for (const auto& j : jacobians) jx.push_back(j(0));
     const size_t mid = sorted.size() / 2;
     std::nth_element(sorted.begin(), sorted.begin() + mid, sorted.end());
     std::nth_element(jx.begin(), jx.begin() + mid, jx.end());
-    if (std::abs(jx[mid]) > 1e-9) w(0) = sorted[mid] / jx[mid];
-  }
-  Eigen::Matrix2d normal = Eigen::Matrix2d::Zero();
-  int used = 0;
-  double scale = 0.0;
-  for (int iteration = 0; iteration < 8; ++iteration) {
-    normal.setZero();
-    Eigen::Vector2d rhs = Eigen::Vector2d::Zero();
-    used = 0;
-    for (size_t i = 0; i < offsets.size(); ++i) {
-      const double r = offsets[i] - jacobians[i].dot(w);
-      if (std::abs(r) > options.band_half_height_px) continue;
-      const double weight = std::abs(r) <= options.huber_px ? 1.0 : options.huber_px / std::abs(r);
-      normal += weight * jacobians[i] * jacobians[i].transpose();
-      rhs += weight * jacobians[i] * r;
-      ++used;
-    }
-    if (used < options.min_matches) break;
-    const Eigen::Vector2d step = normal.ldlt().solve(rhs);
-    if (!step.allFinite()) {
-      used = 0;
-      break;
-    }
-    w += step;
-    if (step.norm() < 1e-6) break;
-  }
+    return Eigen::Vector2d(std::abs(jx[mid]) > 1e-9 ? sorted[mid] / jx[mid] : 0.0, 0.0);
+  };
+  Eigen::Vector2d w;
+  Eigen::Matrix2d normal;
+  int used = fitFrom(has_depth ? tilt_roll : medianStart(), &w, &normal);
+  if (used < options.min_matches && has_depth) used = fitFrom(medianStart(), &w, &normal);
   if (used < options.min_matches) {
     depth_note = "too few matches near their rows (" + std::to_string(used) + ")";
     updateLevels();
@@ -409,15 +435,29 @@ bool CalibrationMonitor::Impl::addDepthFrame(double t, const cv::Mat& left_raw, 
   }
   const size_t mid = abs_residuals.size() / 2;
   std::nth_element(abs_residuals.begin(), abs_residuals.begin() + mid, abs_residuals.end());
-  scale = 1.4826 * abs_residuals[mid];
+  const double scale = 1.4826 * abs_residuals[mid];
   const Eigen::Matrix2d covariance = scale * scale * normal.inverse();
 
-  // Exponential smoothing over time (the covariance of the smoothed estimate treats frames as
-  // independent).
+  // Exponential smoothing over time; the first measurements are averaged (weight 1/n) until the
+  // exponential weight is the larger. The spread of a frame's estimate is taken as the larger of
+  // the fit's and the one observed from frame to frame (the scene's texture and slanted surfaces
+  // make frames disagree by more than their residuals say), and the smoothed estimate's
+  // variance is that of the weighted mean.
   const double alpha =
-      has_depth ? 1.0 - std::exp(-std::max(t - depth_time, 1e-3) / options.smoothing_time_s) : 1.0;
+      has_depth ? std::max(1.0 / (depth_count + 1),
+                           1.0 - std::exp(-std::max(t - depth_time, 1e-3) / options.smoothing_time_s))
+                : 1.0;
+  if (has_depth) {
+    const Eigen::Vector2d innovation = w - tilt_roll;
+    frame_cov += alpha * (innovation * innovation.transpose() - frame_cov);
+  } else {
+    frame_cov = covariance;
+    first_depth_time = t;
+  }
   tilt_roll += alpha * (w - tilt_roll);
-  tilt_roll_cov = (1.0 - alpha) * (1.0 - alpha) * tilt_roll_cov + alpha * alpha * covariance;
+  const Eigen::Matrix2d per_frame = frame_cov.trace() > covariance.trace() ? frame_cov : covariance;
+  tilt_roll_cov = alpha / (2.0 - alpha) * per_frame;
+  ++depth_count;
   has_depth = true;
   depth_time = std::max(depth_time, t);
   matches = used;
@@ -653,7 +693,8 @@ HealthReport CalibrationMonitor::Impl::report() const {
                                              fixed(options.board_residual_degraded_px, 2) + " px)");
   }
   if (reasons.empty()) {
-    std::string why = "no recent measurement";
+    std::string why = has_depth && now - depth_time <= options.max_depth_age_s ? "depth mode settling"
+                                                                               : "no recent measurement";
     if (!depth_note.empty()) why += "; depth: " + depth_note;
     if (!verification_note.empty()) why += "; boards: " + verification_note;
     out.reason = why;
@@ -667,7 +708,10 @@ HealthReport CalibrationMonitor::Impl::report() const {
     if (out.state != CalibrationHealth::kGood && reason.first == CalibrationHealth::kGood) break;
     why += (why.empty() ? "" : "; ") + reason.second;
   }
-  if (!depth) why += "; no recent depth-mode measurement" + (depth_note.empty() ? "" : " (" + depth_note + ")");
+  if (!depth && has_depth && now - depth_time <= options.max_depth_age_s)
+    why += "; depth mode settling";
+  else if (!depth)
+    why += "; no recent depth-mode measurement" + (depth_note.empty() ? "" : " (" + depth_note + ")");
   if (!verification)
     why += "; no recent board verification" + (verification_note.empty() ? "" : " (" + verification_note + ")");
   out.reason = why;
