@@ -65,7 +65,7 @@ struct HealthParams {
   // true: the device's boards sit where device_config puts them (verification against their
   // poses: a common zoom is seen); false: each board's pose is fitted in each frame.
   bool boards_posed = true;
-  int depth_every_n_frames = 1;
+  int depth_every_n_frames = 2;  // measured here; the monitor's own stride is 1
   int queue_size = 5;
   bool rollback = true;
   double service_timeout_s = 2.0;
@@ -98,6 +98,7 @@ HealthParams loadParams(const ros::NodeHandle& pnh, const std::string& default_d
   m.smoothing_time_s = read.atLeast("smoothing_time_s", m.smoothing_time_s, 0.0);
   m.max_depth_age_s = read.atLeast("max_depth_age_s", m.max_depth_age_s, 0.0);
   m.max_verification_age_s = read.atLeast("max_verification_age_s", m.max_verification_age_s, 0.0);
+  m.depth_frame_stride = 1;  // depth_every_n_frames strides before the images are converted
   const std::string problem = m.Check();
   if (!problem.empty()) throw ecs::ConfigError(problem.substr(0, problem.find(' ')), problem);
   return p;
