@@ -11,9 +11,9 @@
 // own subscriptions, so that a frame the image synchroniser drops hides neither.
 // It publishes calibration/health (CalibrationHealth) at every new calibration and after every
 // measurement, and the state on diagnostics (GOOD OK, DEGRADED WARN, BAD ERROR, no verdict yet
-// WARN). calibration_wanted tells an on-demand driver to calibrate: DEGRADED or BAD, until the
+// WARN). calibration_wanted tells an on-demand driver to calibrate: BAD, or DEGRADED until the
 // calibrator confirms the calibration in force as the best it can do (calibration/status) and
-// neither the state worsens nor a signal doubles.
+// again once a signal doubles since.
 // A new calibration (a new calibration_epoch) resets the monitor. The first verification of it
 // must find it GOOD; when it does not and the previous calibration was doing better (GOOD, or
 // a better state), the previous pair is sent back to the driver's left|right/set_camera_info
@@ -285,15 +285,13 @@ class CalibrationHealthNodelet : public nodelet::Nodelet {
     publish(msg->header.stamp);
   }
 
-  // The calibrator found nothing better than the calibration in force: no more windows are
-  // wanted for it unless its state worsens or a signal doubles.
+  // The calibrator found nothing better than the calibration in force: while DEGRADED, no more
+  // windows are wanted for it until a signal doubles.
   void onStatus(const CalibrationStatusConstPtr& status) {
     if (status->accepted || status->reason.rfind(kInForceConfirmedReason, 0) != 0) return;
     if (!epoch_ || status->epoch != *epoch_ || !monitor_->hasCalibration()) return;
     const ecs::HealthReport report = monitor_->report();
-    const int level = rank(report.state);
-    if (level <= 0) return;
-    confirmed_level_ = level;
+    if (rank(report.state) <= 0) return;
     confirmed_severity_ = severity(report);
   }
 
@@ -326,7 +324,7 @@ class CalibrationHealthNodelet : public nodelet::Nodelet {
     }
     epoch_ = epoch;
     in_force_ = std::make_pair(left, right);
-    confirmed_level_.reset();
+    confirmed_severity_.reset();
     ecs::StereoRig rig;
     std::string error;
     if (!fromStereoCameraInfo(left, right, &rig, &error)) {
@@ -431,12 +429,13 @@ class CalibrationHealthNodelet : public nodelet::Nodelet {
     msg->verification_age_s = report.board_age_s;
     msg->reason = reasonOf(report);
     const int level = rank(report.state);
-    if (level == 0) confirmed_level_.reset();  // GOOD again: a later change wants a window again
-    // Wanted again once the state worsens or a signal doubles since the calibrator's confirmation.
-    msg->calibration_wanted = level > 0 && !(confirmed_level_ && level <= *confirmed_level_ &&
-                                             severity(report) < kRearmFactor * confirmed_severity_);
-    if (level > 0 && !msg->calibration_wanted)
-      msg->reason += "; the calibrator found nothing better: no calibration window until it doubles or worsens";
+    if (level == 0) confirmed_severity_.reset();  // GOOD again: a later change wants a window again
+    // BAD: always (depth cannot be trusted). DEGRADED: until the calibrator confirms the
+    // calibration in force as its best, and again once a signal doubles since.
+    msg->calibration_wanted =
+        level == 2 || (level == 1 && !(confirmed_severity_ && severity(report) < kRearmFactor * *confirmed_severity_));
+    if (level == 1 && !msg->calibration_wanted)
+      msg->reason += "; the calibrator found nothing better: no calibration window until a signal doubles";
     health_pub_.publish(msg);
   }
 
@@ -521,8 +520,7 @@ class CalibrationHealthNodelet : public nodelet::Nodelet {
   std::optional<std::pair<CameraInfo, CameraInfo>> restored_;  // sent back to the driver, not seen yet
   std::future<std::string> restore_;                           // the running restore: "" or why it failed
   std::optional<uint32_t> restored_epoch_;
-  std::optional<int> confirmed_level_;  // rank of the state the calibrator confirmed as its best
-  double confirmed_severity_ = 0.0;     // severity() then                     // the epoch of the restored calibration
+  std::optional<double> confirmed_severity_;  // severity() when the calibrator confirmed the calibration                     // the epoch of the restored calibration
   std::string calibration_problem_, last_restore_;
   uint64_t light_off_frames_ = 0, depth_frames_ = 0, verifications_ = 0, restores_ = 0;
   double depth_ms_ = 0.0;
