@@ -10,8 +10,8 @@
 // homography A (zoom, thermal drift and knocks move a board by a map that is a homography to
 // well below the accuracy asked of the tracker over one board), seen as
 //   I(A(y)) = a_cell(y) + b * T(y) + scene,
-// where T is the checker pattern with its white margin, blurred like a lens blurs it, in the
-// taught image; b is the contrast and a_cell one brightness per cell (a third of a square on a
+// where T is the checker pattern of the inner corners' lattice, blurred like a lens blurs it, in
+// the taught image; b is the contrast and a_cell one brightness per cell (a third of a square on a
 // side): the scene's mean there, exposure and vignetting. A scene brighter on one side of an
 // edge than on the other would move that edge; the cell levels take that step out of the fit.
 // The taught corners' offsets are smoothed by a cubic over the board first (the distortion is
@@ -38,20 +38,27 @@ struct AlignmentTemplate {
   std::vector<int> cell;             // brightness cell of each sample (a third of a square on a side)
   int cells = 0;
   std::vector<cv::Point2f> corners;  // corner id -> normalised taught coordinates
+  std::vector<int> corner;           // the corner id nearest to each sample
+  std::vector<float> gnorm;          // |dT / d(taught pixel)| at each sample
   bool empty() const { return ref.empty(); }
 };
 
-// Samples taught pixels within 2.5 blur widths of an edge of the pattern (squares and the inner
-// half of the margin), every other pixel. blur_px: standard deviation of the expected edge blur.
-AlignmentTemplate buildAlignmentTemplate(const BoardPrior& board, double blur_px);
+// Samples taught pixels within 2.5 blur widths of an edge of the inner corners' lattice (up to
+// half a square beyond its outer corners), every other pixel (stride 2, a quincunx) or every
+// stride-th pixel of every stride-th row. blur_px: standard deviation of the expected edge blur.
+AlignmentTemplate buildAlignmentTemplate(const BoardPrior& board, double blur_px, int stride = 2);
 
 struct AlignmentResult {
   bool ok = false;
   cv::Matx33d a;            // normalised taught coordinates -> pixel
   double contrast = 0.0;    // b: half the bright-dark difference, grey levels
   double huber = 0.0;       // robust residual scale of the last pass, grey levels
+  double growth = 0.0;      // px the dark squares grow by (ink spread, blooming); both ways
   int samples = 0;
   int passes = 0;
+  // Per corner id: the pattern's contrast fitted on the samples nearest that corner alone, as a
+  // fraction of `contrast` (what an occluder hides); NaN for corners without samples.
+  std::vector<float> corner_contrast;
 };
 
 // gray: CV_8UC1 image. start.a: the starting map (within a pixel or so). With warm (the last
