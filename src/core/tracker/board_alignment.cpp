@@ -49,13 +49,10 @@ inline bool bilinear(const cv::Mat& img, float x, float y, float* out) {
 
 namespace {
 
-// The taught offsets smoothed by a cubic polynomial of the grid coordinates when the board's
-// geometry is smooth: the lens distortion left after removing the board's homography is smooth
-// over one board, while each taught corner carries its own refinement error, which the fit
-// averages down. A printed board is not always smooth (uneven printing, paper not quite flat):
-// when the cubic leaves more than kSmoothResidualPx RMS, the taught corners are kept as they are.
-constexpr double kSmoothResidualPx = 0.06;
-
+// The taught offsets smoothed by a cubic polynomial of the grid coordinates: the lens distortion
+// left after removing the board's homography is smooth over one board, while each taught corner
+// carries its own refinement error, which the fit averages down. Only for the device's boards: a
+// printed board's corners carry its printing and mounting errors, which the fit would smooth away.
 std::vector<cv::Point2f> smoothOffsets(const BoardPrior& board) {
   const int n = board.cornerCount();
   if (n < 20) return board.offsets;
@@ -70,9 +67,7 @@ std::vector<cv::Point2f> smoothOffsets(const BoardPrior& board) {
   }
   const Eigen::MatrixXd coef = a.colPivHouseholderQr().solve(rhs);
   const Eigen::MatrixXd fit = a * coef;
-  const double residual = std::sqrt((fit - rhs).squaredNorm() / n);
-  if (std::getenv("ECS_DEV_PRINT")) std::fprintf(stderr, "smooth residual %.4f\n", residual);
-  if (residual > kSmoothResidualPx) return board.offsets;
+
   std::vector<cv::Point2f> out(n);
   for (int id = 0; id < n; ++id) out[id] = cv::Point2f(static_cast<float>(fit(id, 0)), static_cast<float>(fit(id, 1)));
   return out;
@@ -83,7 +78,7 @@ std::vector<cv::Point2f> smoothOffsets(const BoardPrior& board) {
 AlignmentTemplate buildAlignmentTemplate(const BoardPrior& taught_board, double blur_px, int stride) {
   AlignmentTemplate t;
   BoardPrior board = taught_board;
-  board.offsets = smoothOffsets(taught_board);
+  if (board.device_pattern) board.offsets = smoothOffsets(taught_board);
   const cv::Matx33d h0 = homographyFromOuter(board, board.meanOuterCorners());
   const cv::Matx33d h0_inv = h0.inv();
   std::vector<cv::Point2f> taught(board.cornerCount());
@@ -101,10 +96,13 @@ AlignmentTemplate buildAlignmentTemplate(const BoardPrior& taught_board, double 
   for (const cv::Point2f& p : taught)
     t.corners.emplace_back(static_cast<float>((p.x - mean.x) / t.scale), static_cast<float>((p.y - mean.y) / t.scale));
 
-  // The pattern region used: the inner corners' lattice and half a square beyond it. The outer
-  // squares' outer edges are left out: where they lie depends on the board (printed boards often
-  // have truncated outer squares and a thin margin), the inner lattice does not.
-  const double g_lo = -0.5, gx_hi = board.cols - 0.5, gy_hi = board.rows - 0.5;
+  // The pattern region used: for the device's boards the squares and the inner half of the white
+  // margin (its outer edge against the housing depends on the device); for a printed board the
+  // inner corners' lattice and half a square beyond it (printed boards often have cut outer
+  // squares and a thin margin).
+  const bool margin = board.device_pattern;
+  const double beyond = margin ? 1.5 : 0.5;
+  const double g_lo = -beyond, gx_hi = board.cols - 1 + beyond, gy_hi = board.rows - 1 + beyond;
   float umin = 1e9f, vmin = 1e9f, umax = -1e9f, vmax = -1e9f;
   for (double gx : {g_lo, gx_hi})
     for (double gy : {g_lo, gy_hi}) {
@@ -145,16 +143,20 @@ AlignmentTemplate buildAlignmentTemplate(const BoardPrior& taught_board, double 
     const int kx = std::min(std::max(static_cast<int>(std::lround(g.x)), 0), board.cols - 1);
     const int ky = std::min(std::max(static_cast<int>(std::lround(g.y)), 0), board.rows - 1);
     const double dx = (g.x - kx) * sx, dy = (g.y - ky) * sy;  // to the nearest inner edges
-    if (near_edge && std::min(std::abs(dx), std::abs(dy)) > reach) return false;
+    const double bx = std::min(g.x + 1.0, board.cols - static_cast<double>(g.x)) * sx;  // inside: > 0
+    const double by = std::min(g.y + 1.0, board.rows - static_cast<double>(g.y)) * sy;
+    const double to_outer = margin ? std::min(std::abs(bx), std::abs(by)) : 1e9;
+    if (near_edge && std::min({std::abs(dx), std::abs(dy), to_outer}) > reach) return false;
     nearest_corner = ky * board.cols + kx;
     const double cx = ((kx & 1) ? -1.0 : 1.0) * (2.0 * phi(dx, blur_px) - 1.0);
     const double cy = ((ky & 1) ? -1.0 : 1.0) * (2.0 * phi(dy, blur_px) - 1.0);
-    *value = board.sign * cx * cy;
+    const double inside = margin ? phi(bx, blur_px) * phi(by, blur_px) : 1.0;
+    *value = inside * board.sign * cx * cy + (1.0 - inside);
     return true;
   };
   for (int v = static_cast<int>(std::floor(vmin)) - 2; v <= static_cast<int>(std::ceil(vmax)) + 2; ++v) {
     for (int u = static_cast<int>(std::floor(umin)) - 2; u <= static_cast<int>(std::ceil(umax)) + 2; ++u) {
-      if (stride <= 2 ? ((u + v) & 1) != 0 : (u % stride != 0 || v % stride != 0)) continue;
+      if (stride > 1 && (stride == 2 ? ((u + v) & 1) != 0 : (u % stride != 0 || v % stride != 0))) continue;
       double value = 0.0;
       if (!valueAt(u, v, true, &value)) continue;
       t.corner.push_back(nearest_corner);
@@ -162,7 +164,6 @@ AlignmentTemplate buildAlignmentTemplate(const BoardPrior& taught_board, double 
       valueAt(u - 0.5, v, false, &vx0), valueAt(u + 0.5, v, false, &vx1);
       valueAt(u, v - 0.5, false, &vy0), valueAt(u, v + 0.5, false, &vy1);
       t.grad.emplace_back(static_cast<float>((vx1 - vx0) * t.scale), static_cast<float>((vy1 - vy0) * t.scale));
-      t.gnorm.push_back(static_cast<float>(std::hypot(vx1 - vx0, vy1 - vy0)));
       t.ref.emplace_back(static_cast<float>((u - mean.x) / t.scale), static_cast<float>((v - mean.y) / t.scale));
       t.value.push_back(static_cast<float>(value));
       t.cell.push_back(cellOf(u, v));
@@ -180,10 +181,9 @@ bool fitAlignmentStart(const AlignmentTemplate& t, const std::vector<int>& ids,
 
 AlignmentResult alignBoard(const AlignmentTemplate& t, const cv::Mat& gray, const AlignmentResult& start,
                            bool warm, int max_steps) {
-  // Parameters: the 8 of the homography, the dark squares' growth g and the contrast b; each
-  // cell's own brightness a_c is eliminated (Schur complement), which is cheap since a sample
-  // belongs to one cell.
-  constexpr int kP = 10;
+  // Parameters: the 8 of the homography and the contrast b; each cell's own brightness a_c is
+  // eliminated (Schur complement), which is cheap since a sample belongs to one cell.
+  constexpr int kP = 9;
   using Vec = Eigen::Matrix<double, kP, 1>;
   using Mat = Eigen::Matrix<double, kP, kP>;
   AlignmentResult result;
@@ -191,7 +191,6 @@ AlignmentResult alignBoard(const AlignmentTemplate& t, const cv::Mat& gray, cons
   double h[8] = {a_norm(0, 0), a_norm(0, 1), a_norm(0, 2), a_norm(1, 0),
                  a_norm(1, 1), a_norm(1, 2), a_norm(2, 0), a_norm(2, 1)};
   double b = warm ? start.contrast : 0.0;
-  double grow = warm ? start.growth : 0.0;
   std::vector<double> level(t.cells, 0.0);  // a_c (solved with the first step whatever they start at)
   struct CellSums {
     double w, wr, wj[kP];
@@ -217,8 +216,7 @@ AlignmentResult alignBoard(const AlignmentTemplate& t, const cv::Mat& gray, cons
       const double px = (h[0] * u + h[1] * v + h[2]) * iw, py = (h[3] * u + h[4] * v + h[5]) * iw;
       float val;
       if (!bilinear(gray, static_cast<float>(px), static_cast<float>(py), &val)) continue;
-      const double gn = t.gnorm[k];
-      const double tv = t.value[k] - grow * gn;
+      const double tv = t.value[k];
       const int c = t.cell[k];
       const double r = val - (level[c] + b * tv);
       const double ar = std::abs(r);
@@ -236,9 +234,8 @@ AlignmentResult alignBoard(const AlignmentTemplate& t, const cv::Mat& gray, cons
         j[0] = gx * u * iw, j[1] = gx * v * iw, j[2] = gx * iw;
         j[3] = gy * u * iw, j[4] = gy * v * iw, j[5] = gy * iw;
         j[6] = gp * u, j[7] = gp * v;
-        j[8] = b * gn;
       }
-      j[9] = -tv;
+      j[8] = -tv;
       CellSums& cs = sums[c];
       cs.w += wr;
       cs.wr += wr * r;
@@ -271,8 +268,7 @@ AlignmentResult alignBoard(const AlignmentTemplate& t, const cv::Mat& gray, cons
     const Vec delta = full.ldlt().solve(-g);
     if (!delta.allFinite()) return result;
     for (int p = first; p < 8; ++p) h[p] += delta[p];
-    if (geometric) grow += delta[8];
-    b += delta[9];
+    b += delta[8];
     ++result.passes;
     // Back-substitute each level: w da = wr - wj . delta (its Jacobian is -1).
     for (int c = 0; c < t.cells; ++c) {
@@ -301,7 +297,6 @@ AlignmentResult alignBoard(const AlignmentTemplate& t, const cv::Mat& gray, cons
   result.huber = huber;
   result.a = cv::Matx33d(h[0], h[1], h[2], h[3], h[4], h[5], h[6], h[7], 1.0);
   result.contrast = b;
-  result.growth = grow;
   // Each corner's own contrast: sum T r / sum T^2 over its samples, r the image minus its cell's level.
   std::vector<double> tr(t.corners.size(), 0.0), tt(t.corners.size(), 0.0);
   for (size_t k = 0; k < n; ++k) {
@@ -311,7 +306,7 @@ AlignmentResult alignBoard(const AlignmentTemplate& t, const cv::Mat& gray, cons
     if (!bilinear(gray, static_cast<float>((h[0] * u + h[1] * v + h[2]) * iw),
                   static_cast<float>((h[3] * u + h[4] * v + h[5]) * iw), &val))
       continue;
-    const double tv = t.value[k] - grow * t.gnorm[k];
+    const double tv = t.value[k];
     tr[t.corner[k]] += tv * (val - level[t.cell[k]]);
     tt[t.corner[k]] += tv * tv;
   }

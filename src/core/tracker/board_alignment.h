@@ -10,12 +10,12 @@
 // homography A (zoom, thermal drift and knocks move a board by a map that is a homography to
 // well below the accuracy asked of the tracker over one board), seen as
 //   I(A(y)) = a_cell(y) + b * T(y) + scene,
-// where T is the checker pattern of the inner corners' lattice, blurred like a lens blurs it, in
-// the taught image; b is the contrast and a_cell one brightness per cell (a third of a square on a
+// where T is the checker pattern (with its white margin for the device's boards), blurred like a
+// lens blurs it, in the taught image; b is the contrast and a_cell one brightness per cell (a third of a square on a
 // side): the scene's mean there, exposure and vignetting. A scene brighter on one side of an
 // edge than on the other would move that edge; the cell levels take that step out of the fit.
-// The taught corners' offsets are smoothed by a cubic over the board first (the distortion is
-// smooth, each taught corner's own refinement error is not). A is
+// The device's taught corners' offsets are smoothed by a cubic over the board first (the
+// distortion is smooth, each taught corner's own refinement error is not). A is
 // found by Gauss-Newton (forward additive, with the fitted pattern's gradient in place of the
 // image's, so the scene's texture cannot steer the steps) with Huber weights, so a scene
 // edge or a moving object counts as little as a few pixels of noise.
@@ -39,12 +39,12 @@ struct AlignmentTemplate {
   int cells = 0;
   std::vector<cv::Point2f> corners;  // corner id -> normalised taught coordinates
   std::vector<int> corner;           // the corner id nearest to each sample
-  std::vector<float> gnorm;          // |dT / d(taught pixel)| at each sample
   bool empty() const { return ref.empty(); }
 };
 
-// Samples taught pixels within 2.5 blur widths of an edge of the inner corners' lattice (up to
-// half a square beyond its outer corners), every other pixel (stride 2, a quincunx) or every
+// Samples taught pixels within 2.5 blur widths of an edge of the pattern: the squares and the
+// inner half of the margin for the device's boards, the inner corners' lattice and half a square
+// beyond it for a printed board (BoardPrior::device_pattern), every other pixel (stride 2, a quincunx) or every
 // stride-th pixel of every stride-th row. blur_px: standard deviation of the expected edge blur.
 AlignmentTemplate buildAlignmentTemplate(const BoardPrior& board, double blur_px, int stride = 2);
 
@@ -53,7 +53,6 @@ struct AlignmentResult {
   cv::Matx33d a;            // normalised taught coordinates -> pixel
   double contrast = 0.0;    // b: half the bright-dark difference, grey levels
   double huber = 0.0;       // robust residual scale of the last pass, grey levels
-  double growth = 0.0;      // px the dark squares grow by (ink spread, blooming); both ways
   int samples = 0;
   int passes = 0;
   // Per corner id: the pattern's contrast fitted on the samples nearest that corner alone, as a

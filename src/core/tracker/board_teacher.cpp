@@ -373,6 +373,7 @@ TeachResult teachCamera(const std::vector<TeachFrame>& frames, const BoardLayout
     }
     BoardPrior prior;
     learnBoard(layout.boards[i], per_board[i], on_frames[i], &prior);
+    prior.device_pattern = layout.has_camera;
     result.prior.boards.push_back(prior);
   }
   if (result.prior.boards.empty()) {

@@ -2,6 +2,8 @@
 // pattern_tracker.h for the algorithm and the threading contract).
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
+#include <cstdlib>
 #include <opencv2/calib3d.hpp>
 #include <opencv2/imgproc.hpp>
 #include <stdexcept>
@@ -525,7 +527,6 @@ BoardCorners CameraTracker::trackBoardOnce(const cv::Mat& gray, int index, bool 
         start.a = state.align_a;
         start.contrast = state.align_contrast;
         start.huber = state.align_huber;
-        start.growth = state.align_growth;
       }
       bool started = warm || tracker::fitAlignmentStart(tmpl, ref_ids, ref_pos, &start.a);
       if (started && !from_refined) {
@@ -554,6 +555,15 @@ BoardCorners CameraTracker::trackBoardOnce(const cv::Mat& gray, int index, bool 
         const cv::Point2f c = tmpl.corners[id];
         const cv::Point2f p = applyHomography(fit.a, c.x, c.y);
         if (!insideImage(p) || !(fit.corner_contrast[id] >= kCornerContrast)) continue;
+        if (std::getenv("ECS_DEV_SADDLE") && from_refined) {
+          const cv::Point2f g = gridPoint(id, board.cols);
+          cv::Point2f ac, ar;
+          tracker::gridAxes(h, g.x, g.y, &ac, &ar);
+          const int bright =
+              ((static_cast<int>(g.x) + static_cast<int>(g.y)) & 1) == 0 ? board.sign : -board.sign;
+          if (tracker::saddleContrast(saddle_sampler, p, ac, ar, bright) < min_contrast) continue;
+        }
+        if (std::getenv("ECS_DEV_PRINT")) std::fprintf(stderr, "corner %d.%d %s %.3f\n", board.board_id, id, from_refined ? "R" : "P", fit.corner_contrast[id]);
         pos[id] = p;
         kept.push_back(id);
       }
@@ -571,7 +581,6 @@ BoardCorners CameraTracker::trackBoardOnce(const cv::Mat& gray, int index, bool 
       state.align_a = fit.a;
       state.align_contrast = fit.contrast;
       state.align_huber = fit.huber;
-      state.align_growth = fit.growth;
     }
     stats.aligned = aligned;
     // Refined corners alone are not trusted on a raw image: the scene can pull one by more than

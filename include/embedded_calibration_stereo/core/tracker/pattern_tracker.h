@@ -162,7 +162,7 @@ class CameraTracker {
     // robust residual scale; valid while the board is aligned frame after frame.
     bool align_valid = false;
     cv::Matx33d align_a;
-    double align_contrast = 0.0, align_huber = 0.0, align_growth = 0.0;
+    double align_contrast = 0.0, align_huber = 0.0;
   };
   std::vector<BoardCorners> trackAll(const cv::Mat& gray, bool on_difference, bool align);
   // wide: skip the quick steady-state check, search the whole re-centring window.
