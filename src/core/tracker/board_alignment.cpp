@@ -51,8 +51,11 @@ namespace {
 
 // The taught offsets smoothed by a cubic polynomial of the grid coordinates: the lens distortion
 // left after removing the board's homography is smooth over one board, while each taught corner
-// carries its own refinement error, which the fit averages down. Only for the device's boards: a
-// printed board's corners carry its printing and mounting errors, which the fit would smooth away.
+// carries its own refinement error, which the fit averages down. A printed board is not always
+// smooth (printing, mounting, a lens beyond the cubic over a large board): when the cubic leaves
+// more than kSmoothResidualPx RMS there, its taught corners are kept as they are.
+constexpr double kSmoothResidualPx = 0.1;
+
 std::vector<cv::Point2f> smoothOffsets(const BoardPrior& board) {
   const int n = board.cornerCount();
   if (n < 20) return board.offsets;
@@ -67,6 +70,7 @@ std::vector<cv::Point2f> smoothOffsets(const BoardPrior& board) {
   }
   const Eigen::MatrixXd coef = a.colPivHouseholderQr().solve(rhs);
   const Eigen::MatrixXd fit = a * coef;
+  if (!board.device_pattern && std::sqrt((fit - rhs).squaredNorm() / n) > kSmoothResidualPx) return board.offsets;
 
   std::vector<cv::Point2f> out(n);
   for (int id = 0; id < n; ++id) out[id] = cv::Point2f(static_cast<float>(fit(id, 0)), static_cast<float>(fit(id, 1)));
@@ -78,7 +82,7 @@ std::vector<cv::Point2f> smoothOffsets(const BoardPrior& board) {
 AlignmentTemplate buildAlignmentTemplate(const BoardPrior& taught_board, double blur_px, int stride) {
   AlignmentTemplate t;
   BoardPrior board = taught_board;
-  if (board.device_pattern) board.offsets = smoothOffsets(taught_board);
+  board.offsets = smoothOffsets(taught_board);
   const cv::Matx33d h0 = homographyFromOuter(board, board.meanOuterCorners());
   const cv::Matx33d h0_inv = h0.inv();
   std::vector<cv::Point2f> taught(board.cornerCount());
@@ -113,9 +117,12 @@ AlignmentTemplate buildAlignmentTemplate(const BoardPrior& taught_board, double 
   // quincunx): the scene's pull is spatially correlated over a few pixels, so the skipped pixels
   // would add little but time.
   const double reach = 2.5 * blur_px;
-  // Cells: a third of a square on a side. One level per square leaves the scene's variation
-  // inside a square to pull the edges; finer cells would start to take the edges' own profile.
-  const int split = 3;
+  // Cells: an eighth of a square on a side, inside one square each (their borders lie on the
+  // squares' edges). One level per square leaves the scene's variation inside a square to pull
+  // the edges; a cell's level takes out the scene's mean there, so fine cells leave less of the
+  // scene's texture to correlate with the edges (finer still, they start to take the edges' own
+  // profile and the per-corner contrast drops).
+  const int split = 8;
   const int ncx = (board.cols + 3) * split, ncy = (board.rows + 3) * split;
   t.cells = ncx * ncy;
   const auto gridOf = [&](double u, double v) {

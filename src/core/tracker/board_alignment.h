@@ -11,10 +11,10 @@
 // well below the accuracy asked of the tracker over one board), seen as
 //   I(A(y)) = a_cell(y) + b * T(y) + scene,
 // where T is the checker pattern (with its white margin for the device's boards), blurred like a
-// lens blurs it, in the taught image; b is the contrast and a_cell one brightness per cell (a third of a square on a
+// lens blurs it, in the taught image; b is the contrast and a_cell one brightness per cell (an eighth of a square on a
 // side): the scene's mean there, exposure and vignetting. A scene brighter on one side of an
 // edge than on the other would move that edge; the cell levels take that step out of the fit.
-// The device's taught corners' offsets are smoothed by a cubic over the board first (the
+// The taught corners' offsets are smoothed by a cubic over the board first when it fits them (the
 // distortion is smooth, each taught corner's own refinement error is not). A is
 // found by Gauss-Newton (forward additive, with the fitted pattern's gradient in place of the
 // image's, so the scene's texture cannot steer the steps) with Huber weights, so a scene
@@ -35,7 +35,7 @@ struct AlignmentTemplate {
   std::vector<cv::Point2f> ref;      // samples, normalised taught coordinates
   std::vector<float> value;          // T at each sample, in [-1, 1] (+1 bright)
   std::vector<cv::Point2f> grad;     // dT / d(normalised taught coordinates)
-  std::vector<int> cell;             // brightness cell of each sample (a third of a square on a side)
+  std::vector<int> cell;             // brightness cell of each sample (an eighth of a square on a side)
   int cells = 0;
   std::vector<cv::Point2f> corners;  // corner id -> normalised taught coordinates
   std::vector<int> corner;           // the corner id nearest to each sample

@@ -2,8 +2,6 @@
 // pattern_tracker.h for the algorithm and the threading contract).
 #include <algorithm>
 #include <cmath>
-#include <cstdio>
-#include <cstdlib>
 #include <opencv2/calib3d.hpp>
 #include <opencv2/imgproc.hpp>
 #include <stdexcept>
@@ -223,7 +221,10 @@ CameraTracker::CameraTracker(CameraPrior prior, TrackerOptions options)
   for (const BoardPrior& board : prior_.boards) {
     // Fine template (2i) and a coarse one (2i+1, a wide blur on a sparse lattice) that widens the
     // alignment's reach when it starts from a prediction rather than from refined corners.
-    templates->push_back(tracker::buildAlignmentTemplate(board, options_.alignment_blur_px));
+    const double blur = !board.device_pattern && board.edge_blur_px > 0
+                            ? std::min(std::max(board.edge_blur_px, 0.5), 3.0)
+                            : options_.alignment_blur_px;
+    templates->push_back(tracker::buildAlignmentTemplate(board, blur));
     templates->push_back(tracker::buildAlignmentTemplate(board, kCoarseBlurPx, 3));
     const cv::Matx33d h = tracker::homographyFromOuter(board, board.meanOuterCorners());
     std::vector<cv::Point> hull;
@@ -534,7 +535,7 @@ BoardCorners CameraTracker::trackBoardOnce(const cv::Mat& gray, int index, bool 
         // template, whose edges reach that far.
         const tracker::AlignmentTemplate& coarse = (*templates_)[2 * index + 1];
         cv::Mat blurred;
-        const double blur = options_.alignment_blur_px;
+        const double blur = std::min(kCoarseBlurPx - 0.5, options_.alignment_blur_px);
         cv::GaussianBlur(gray, blurred, cv::Size(), std::sqrt(kCoarseBlurPx * kCoarseBlurPx - blur * blur));
         const tracker::AlignmentResult c = tracker::alignBoard(coarse, blurred, start, false, 6);
         started = c.ok;
@@ -555,15 +556,6 @@ BoardCorners CameraTracker::trackBoardOnce(const cv::Mat& gray, int index, bool 
         const cv::Point2f c = tmpl.corners[id];
         const cv::Point2f p = applyHomography(fit.a, c.x, c.y);
         if (!insideImage(p) || !(fit.corner_contrast[id] >= kCornerContrast)) continue;
-        if (std::getenv("ECS_DEV_SADDLE") && from_refined) {
-          const cv::Point2f g = gridPoint(id, board.cols);
-          cv::Point2f ac, ar;
-          tracker::gridAxes(h, g.x, g.y, &ac, &ar);
-          const int bright =
-              ((static_cast<int>(g.x) + static_cast<int>(g.y)) & 1) == 0 ? board.sign : -board.sign;
-          if (tracker::saddleContrast(saddle_sampler, p, ac, ar, bright) < min_contrast) continue;
-        }
-        if (std::getenv("ECS_DEV_PRINT")) std::fprintf(stderr, "corner %d.%d %s %.3f\n", board.board_id, id, from_refined ? "R" : "P", fit.corner_contrast[id]);
         pos[id] = p;
         kept.push_back(id);
       }

@@ -23,6 +23,7 @@
 //           device_pattern: 1      optional (default 1): 1 for the device's boards (exact,
 //                    smooth geometry, full outer squares and a white margin), 0 for a printed
 //                    chessboard (outer squares may be cut, printing and mounting not exact)
+//           edge_blur_px: 0.9      optional (default 0, unknown): edge blur measured when taught
 #include <opencv2/core.hpp>
 #include <string>
 #include <vector>
@@ -43,6 +44,10 @@ struct BoardPrior {
   // white margin, so the whole-board alignment smooths the taught corners and uses the outer
   // squares' edges. A printed chessboard (taught with --board) gets neither.
   bool device_pattern = true;
+  // Edge blur measured when taught (standard deviation of the edge profile, px; 0 = unknown). A
+  // printed board's alignment uses it (the device's boards use TrackerOptions::alignment_blur_px,
+  // set for the device's optics).
+  double edge_blur_px = 0.0;
 
   int cornerCount() const { return cols * rows; }
   std::vector<cv::Point2f> meanOuterCorners() const;
