@@ -55,6 +55,8 @@ namespace {
 // smooth (printing, mounting, a lens beyond the cubic over a large board): when the cubic leaves
 // more than kSmoothResidualPx RMS there, its taught corners are kept as they are.
 constexpr double kSmoothResidualPx = 0.1;
+// Side (px) of the alignment's brightness cells.
+constexpr double kCellPx = 3.5;
 
 std::vector<cv::Point2f> smoothOffsets(const BoardPrior& board) {
   const int n = board.cornerCount();
@@ -117,12 +119,12 @@ AlignmentTemplate buildAlignmentTemplate(const BoardPrior& taught_board, double 
   // quincunx): the scene's pull is spatially correlated over a few pixels, so the skipped pixels
   // would add little but time.
   const double reach = 2.5 * blur_px;
-  // Cells: an eighth of a square on a side, inside one square each (their borders lie on the
+  // Cells: squares of about kCellPx on a side, inside one square each (their borders lie on the
   // squares' edges). One level per square leaves the scene's variation inside a square to pull
-  // the edges; a cell's level takes out the scene's mean there, so fine cells leave less of the
-  // scene's texture to correlate with the edges (finer still, they start to take the edges' own
-  // profile and the per-corner contrast drops).
-  const int split = 8;
+  // the edges; a cell's level takes out the scene's mean there, so small cells leave less of the
+  // scene's texture to correlate with the edges. Much smaller, a cell would hold only the samples
+  // of one edge's profile, and its level would take that profile (and the position) out.
+  const int split = std::min(8, std::max(1, static_cast<int>(std::lround(board.square_px / kCellPx))));
   const int ncx = (board.cols + 3) * split, ncy = (board.rows + 3) * split;
   t.cells = ncx * ncy;
   const auto gridOf = [&](double u, double v) {
@@ -176,6 +178,12 @@ AlignmentTemplate buildAlignmentTemplate(const BoardPrior& taught_board, double 
       t.cell.push_back(cellOf(u, v));
     }
   }
+  // Number the cells that hold samples 0..cells-1 (the solver's work and memory follow them).
+  std::vector<int> used = t.cell;
+  std::sort(used.begin(), used.end());
+  used.erase(std::unique(used.begin(), used.end()), used.end());
+  for (int& c : t.cell) c = static_cast<int>(std::lower_bound(used.begin(), used.end(), c) - used.begin());
+  t.cells = static_cast<int>(used.size());
   return t;
 }
 
@@ -298,7 +306,10 @@ AlignmentResult alignBoard(const AlignmentTemplate& t, const cv::Mat& gray, cons
       }
       // Near-linear within the edge blur: after a step this small the next one would be ~100
       // times smaller.
-      if (shift < 0.03) break;
+      if (shift < 0.03) {
+        result.converged = true;
+        break;
+      }
     }
   }
   result.huber = huber;

@@ -55,6 +55,7 @@ struct AlignmentResult {
   double huber = 0.0;       // robust residual scale of the last pass, grey levels
   int samples = 0;
   int passes = 0;
+  bool converged = false;  // the last step moved the board's corners by less than 0.03 px
   // Per corner id: the pattern's contrast fitted on the samples nearest that corner alone, as a
   // fraction of `contrast` (what an occluder hides); NaN for corners without samples.
   std::vector<float> corner_contrast;

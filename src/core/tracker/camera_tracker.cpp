@@ -433,54 +433,64 @@ BoardCorners CameraTracker::trackBoardOnce(const cv::Mat& gray, int index, bool 
   std::vector<char> candidate(n, 0);
   std::vector<int> accepted;
   bool fitted = false;
-  for (int iteration = 0; iteration < options_.max_iterations && !todo.empty(); ++iteration) {
-    // 2. Predict and refine.
-    std::vector<cv::Point2f> points;
-    for (int id : todo) {
-      const cv::Point2f g = gridPoint(id, board.cols);
-      points.push_back(applyHomography(h, g.x, g.y) + offsets[id]);
+  bool refine_done = false;
+  // Steps 2-5 (refinement, saddle test, re-fit).
+  const auto refine = [&]() {
+    refine_done = true;
+    for (int iteration = 0; iteration < options_.max_iterations && !todo.empty(); ++iteration) {
+      // 2. Predict and refine.
+      std::vector<cv::Point2f> points;
+      for (int id : todo) {
+        const cv::Point2f g = gridPoint(id, board.cols);
+        points.push_back(applyHomography(h, g.x, g.y) + offsets[id]);
+      }
+      const std::vector<cv::Point2f> predicted = points;
+      cv::cornerSubPix(gray, points, cv::Size(window, window), cv::Size(-1, -1), criteria);
+      // 3. Saddle test: the expected polarity with enough contrast.
+      int fresh = 0;
+      for (size_t k = 0; k < todo.size(); ++k) {
+        const int id = todo[k];
+        if (!insideImage(points[k]) || cv::norm(points[k] - predicted[k]) > max_shift) continue;
+        const cv::Point2f g = gridPoint(id, board.cols);
+        cv::Point2f ac, ar;
+        tracker::gridAxes(h, g.x, g.y, &ac, &ar);
+        const int bright =
+            ((static_cast<int>(g.x) + static_cast<int>(g.y)) & 1) == 0 ? board.sign : -board.sign;
+        if (tracker::saddleContrast(saddle_sampler, points[k], ac, ar, bright) < min_contrast) continue;
+        pos[id] = points[k];
+        candidate[id] = 1;
+        ++fresh;
+      }
+      if (fresh == 0 && fitted) break;
+      // 4. Re-fit the board model to every candidate; keep the consistent ones.
+      std::vector<int> ids;
+      for (int id = 0; id < n; ++id)
+        if (candidate[id]) ids.push_back(id);
+      cv::Matx33d refit;
+      std::vector<int> inliers;
+      if (!fitBoardModel(board, ids, pos, offsets, max_residual, &refit, &inliers)) break;
+      h = refit;
+      fitted = true;
+      accepted = inliers;
+      std::fill(candidate.begin(), candidate.end(), 0);
+      for (int id : accepted) candidate[id] = 1;
+      // 5. Retry the rest from the re-fitted model.
+      todo.clear();
+      for (int id = 0; id < n; ++id) {
+        if (candidate[id]) continue;
+        const cv::Point2f g = gridPoint(id, board.cols);
+        if (insideImage(applyHomography(h, g.x, g.y) + offsets[id])) todo.push_back(id);
+      }
     }
-    const std::vector<cv::Point2f> predicted = points;
-    cv::cornerSubPix(gray, points, cv::Size(window, window), cv::Size(-1, -1), criteria);
-    // 3. Saddle test: the expected polarity with enough contrast.
-    int fresh = 0;
-    for (size_t k = 0; k < todo.size(); ++k) {
-      const int id = todo[k];
-      if (!insideImage(points[k]) || cv::norm(points[k] - predicted[k]) > max_shift) continue;
-      const cv::Point2f g = gridPoint(id, board.cols);
-      cv::Point2f ac, ar;
-      tracker::gridAxes(h, g.x, g.y, &ac, &ar);
-      const int bright =
-          ((static_cast<int>(g.x) + static_cast<int>(g.y)) & 1) == 0 ? board.sign : -board.sign;
-      if (tracker::saddleContrast(saddle_sampler, points[k], ac, ar, bright) < min_contrast) continue;
-      pos[id] = points[k];
-      candidate[id] = 1;
-      ++fresh;
-    }
-    if (fresh == 0 && fitted) break;
-    // 4. Re-fit the board model to every candidate; keep the consistent ones.
-    std::vector<int> ids;
-    for (int id = 0; id < n; ++id)
-      if (candidate[id]) ids.push_back(id);
-    cv::Matx33d refit;
-    std::vector<int> inliers;
-    if (!fitBoardModel(board, ids, pos, offsets, max_residual, &refit, &inliers)) break;
-    h = refit;
-    fitted = true;
-    accepted = inliers;
-    std::fill(candidate.begin(), candidate.end(), 0);
-    for (int id : accepted) candidate[id] = 1;
-    // 5. Retry the rest from the re-fitted model.
-    todo.clear();
-    for (int id = 0; id < n; ++id) {
-      if (candidate[id]) continue;
-      const cv::Point2f g = gridPoint(id, board.cols);
-      if (insideImage(applyHomography(h, g.x, g.y) + offsets[id])) todo.push_back(id);
-    }
-  }
+  };
   const bool align_board = align && !on_difference && options_.whole_board_alignment &&
                            !(*templates_)[2 * index].empty();
-  const bool refined = fitted && static_cast<int>(accepted.size()) >= needed;
+  // Steady state on a raw image: the board was aligned last frame and the pattern is still there
+  // at its last position, so the alignment starts from last frame's (the refinement, there only
+  // to find a start and to verify it, is skipped unless that fails).
+  const bool steady = align_board && settled && state.align_valid;
+  if (!steady) refine();
+  bool refined = fitted && static_cast<int>(accepted.size()) >= needed;
   if (!refined && !align_board) return out;
 
   // Without a background: align the whole board; its corners replace the refined ones. Its
@@ -493,13 +503,26 @@ BoardCorners CameraTracker::trackBoardOnce(const cv::Mat& gray, int index, bool 
     const bool was_aligned = state.align_valid;
     state.align_valid = false;
     bool aligned = false;
-    // First from the refined corners when there are enough, else (or when that fails) from the
-    // re-centred prediction.
-    for (int attempt = refined ? 0 : 1; attempt < 2 && !aligned; ++attempt) {
-      const bool from_refined = attempt == 0;
+    // In steady state from last frame's alignment; then from the refined corners when there are
+    // enough, else (or when that fails) from the re-centred prediction.
+    for (int attempt = steady ? -1 : refined ? 0 : 1; attempt < 2 && !aligned; ++attempt) {
+      if (attempt == 0) {
+        if (!refine_done) refine();
+        refined = fitted && static_cast<int>(accepted.size()) >= needed;
+        if (!refined) continue;
+      }
+      const bool from_last = attempt == -1, from_refined = attempt == 0;
       std::vector<int> ref_ids;
       std::vector<cv::Point2f> ref_pos;
-      if (from_refined) {
+      if (from_last) {
+        for (int id = 0; id < n; ++id) {
+          const cv::Point2f c = tmpl.corners[id];
+          const cv::Point2f p = applyHomography(state.align_a, c.x, c.y);
+          if (!insideImage(p)) continue;
+          ref_ids.push_back(id);
+          ref_pos.push_back(p);
+        }
+      } else if (from_refined) {
         ref_ids = accepted;
         for (int id : accepted) ref_pos.push_back(pos[id]);
       } else {
@@ -511,7 +534,10 @@ BoardCorners CameraTracker::trackBoardOnce(const cv::Mat& gray, int index, bool 
           ref_pos.push_back(p);
         }
       }
-      const double agree_px = from_refined ? max_residual : 0.35 * square;
+      // How far the aligned corners may be from where the attempt started: the refined corners
+      // agree to within the residual gate; a board re-centred (or still in place) is within a
+      // fraction of a square, so no square can slip.
+      const double agree_px = from_refined ? max_residual : from_last ? 0.25 * square : 0.35 * square;
       const auto rmsTo = [&](const cv::Matx33d& a) {
         double sq = 0;
         for (size_t k = 0; k < ref_ids.size(); ++k) {
@@ -523,14 +549,14 @@ BoardCorners CameraTracker::trackBoardOnce(const cv::Mat& gray, int index, bool 
       tracker::AlignmentResult start;
       // Start from the last frame's alignment while the board stays where it was (its corners
       // agree with this frame's refined ones): one step then usually suffices.
-      const bool warm = from_refined && was_aligned && rmsTo(state.align_a) <= max_residual;
+      const bool warm = from_last || (from_refined && was_aligned && rmsTo(state.align_a) <= max_residual);
       if (warm) {
         start.a = state.align_a;
         start.contrast = state.align_contrast;
         start.huber = state.align_huber;
       }
       bool started = warm || tracker::fitAlignmentStart(tmpl, ref_ids, ref_pos, &start.a);
-      if (started && !from_refined) {
+      if (started && !warm && !from_refined) {
         // From a prediction (within a few pixels): first on the blurred image with the coarse
         // template, whose edges reach that far.
         const tracker::AlignmentTemplate& coarse = (*templates_)[2 * index + 1];
@@ -542,11 +568,15 @@ BoardCorners CameraTracker::trackBoardOnce(const cv::Mat& gray, int index, bool 
         if (c.ok) start.a = c.a;
       }
       if (!started) continue;
-      const tracker::AlignmentResult fit = tracker::alignBoard(tmpl, gray, start, warm, from_refined ? 3 : 6);
+      const tracker::AlignmentResult fit = tracker::alignBoard(tmpl, gray, start, warm, warm ? 3 : 6);
       // The board's contrast in this frame (bright minus dark, as teaching measured it): present,
       // and not far below the taught one (a light-off frame has none).
       if (!fit.ok || 2.0 * fit.contrast < std::max(options_.min_contrast, 0.1 * board.contrast)) continue;
       if (rmsTo(fit.a) > agree_px) continue;
+      // From last frame's position only when the fit settled there: a board that moved by more
+      // than the fine template's reach is found again from its refined corners.
+      // A template off the edges also sees much less of the pattern's contrast than last frame.
+      if (from_last && (!fit.converged || fit.contrast < 0.7 * state.align_contrast)) continue;
       // Every corner inside the image where the pattern is there around its aligned position:
       // the contrast fitted on its own samples is at least half the board's (what an occluder or
       // a light-off region lacks; an averaged measure, unlike a saddle test, which a scene brighter
