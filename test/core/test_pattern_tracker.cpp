@@ -395,7 +395,8 @@ TEST(PatternTracker, AcceptsBgrAndRgbAndRejectsOtherTypes) {
 
 TEST(PatternTracker, PriorRoundTripsThroughYaml) {
   const SimRig sim(loadConfig());
-  const PatternPrior prior = teachFromSim(sim, 0.0).prior;
+  PatternPrior prior = teachFromSim(sim, 0.0).prior;
+  prior.cameras[0].boards[0].device_pattern = false;  // not the default: must be written
   const std::string path = ::testing::TempDir() + "/ecs_pattern_prior.yaml";
   writePatternPrior(path, prior);
   const PatternPrior read = readPatternPrior(path);
@@ -406,6 +407,8 @@ TEST(PatternTracker, PriorRoundTripsThroughYaml) {
       const BoardPrior &x = prior.cameras[c].boards[b], &y = read.cameras[c].boards[b];
       EXPECT_EQ(x.board_id, y.board_id);
       EXPECT_EQ(x.sign, y.sign);
+      EXPECT_EQ(x.device_pattern, y.device_pattern);
+      EXPECT_DOUBLE_EQ(x.edge_blur_px, y.edge_blur_px);
       EXPECT_LT(cv::norm(x.outer_mean, y.outer_mean, cv::NORM_INF), 1e-9);
       ASSERT_EQ(x.offsets.size(), y.offsets.size());
       for (size_t i = 0; i < x.offsets.size(); ++i) EXPECT_LT(cv::norm(x.offsets[i] - y.offsets[i]), 1e-6);
