@@ -184,6 +184,20 @@ AlignmentTemplate buildAlignmentTemplate(const BoardPrior& taught_board, double 
   used.erase(std::unique(used.begin(), used.end()), used.end());
   for (int& c : t.cell) c = static_cast<int>(std::lower_bound(used.begin(), used.end(), c) - used.begin());
   t.cells = static_cast<int>(used.size());
+  // Samples in cell order: the solver's per-cell sums are then written in sequence (the cells
+  // are small and numbered along the grid, so the image is still read locally).
+  std::vector<size_t> order(t.ref.size());
+  for (size_t k = 0; k < order.size(); ++k) order[k] = k;
+  std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) { return t.cell[a] < t.cell[b]; });
+  AlignmentTemplate sorted = t;
+  for (size_t k = 0; k < order.size(); ++k) {
+    sorted.ref[k] = t.ref[order[k]];
+    sorted.value[k] = t.value[order[k]];
+    sorted.grad[k] = t.grad[order[k]];
+    sorted.cell[k] = t.cell[order[k]];
+    sorted.corner[k] = t.corner[order[k]];
+  }
+  t = std::move(sorted);
   return t;
 }
 
@@ -214,15 +228,21 @@ AlignmentResult alignBoard(const AlignmentTemplate& t, const cv::Mat& gray, cons
   const size_t n = t.ref.size();
   std::vector<float> absres;
   absres.reserve(n);
+  Eigen::Matrix<double, Eigen::Dynamic, kP> rows;
+  Eigen::VectorXd rhs;
+  // The image at each sample in the last pass (NaN outside it).
+  std::vector<float> vals(n);
   double huber = warm ? start.huber : 1e30;
   for (int it = warm ? 1 : 0; it <= max_steps; ++it) {
     // Pass 0 fits only the photometric terms (the start map is close): parameters first..8.
     const bool geometric = it > 0;
     const int first = geometric ? 0 : kP - 1;
-    double hs[kP][kP] = {};  // upper triangle used
-    double gs[kP] = {};
+    // Weighted Jacobian rows (sqrt(w) j) and residuals, multiplied out below in one product.
+    rows.resize(static_cast<Eigen::Index>(n), kP);
+    rhs.resize(static_cast<Eigen::Index>(n));
     std::memset(sums.data(), 0, sums.size() * sizeof(CellSums));
     absres.clear();
+    std::fill(vals.begin(), vals.end(), std::numeric_limits<float>::quiet_NaN());
     int used = 0;
     double j[kP] = {};
     for (size_t k = 0; k < n; ++k) {
@@ -234,6 +254,7 @@ AlignmentResult alignBoard(const AlignmentTemplate& t, const cv::Mat& gray, cons
       const double tv = t.value[k];
       const int c = t.cell[k];
       const double r = val - (level[c] + b * tv);
+      vals[k] = val;
       const double ar = std::abs(r);
       absres.push_back(static_cast<float>(ar));
       const double wr = ar <= huber ? 1.0 : huber / ar;
@@ -254,12 +275,12 @@ AlignmentResult alignBoard(const AlignmentTemplate& t, const cv::Mat& gray, cons
       CellSums& cs = sums[c];
       cs.w += wr;
       cs.wr += wr * r;
-      for (int p = first; p < kP; ++p) {
-        const double wj = wr * j[p];
-        for (int q = p; q < kP; ++q) hs[p][q] += wj * j[q];
-        gs[p] += wj * r;
-        cs.wj[p] += wj;
+      const double sw = std::sqrt(wr);
+      for (int p = 0; p < kP; ++p) {
+        rows(used, p) = sw * j[p];
+        cs.wj[p] += wr * j[p];
       }
+      rhs(used) = sw * r;
       ++used;
     }
     if (used < 50) return result;
@@ -268,9 +289,12 @@ AlignmentResult alignBoard(const AlignmentTemplate& t, const cv::Mat& gray, cons
     huber = std::max(1.0, 1.345 * 1.4826 * absres[absres.size() / 2]);
     Mat full = Mat::Identity();
     Vec g = Vec::Zero();
+    const auto top = rows.topRows(used);
+    const Mat hs = top.transpose() * top;
+    const Vec gs = top.transpose() * rhs.head(used);
     for (int p = first; p < kP; ++p) {
       g[p] = gs[p];
-      for (int q = p; q < kP; ++q) full(p, q) = full(q, p) = hs[p][q];
+      for (int q = first; q < kP; ++q) full(p, q) = hs(p, q);
     }
     // Eliminate the cell levels (their Jacobian is -1): H -= wj wj^T / w, g -= wj wr / w.
     for (const CellSums& cs : sums) {
@@ -315,17 +339,13 @@ AlignmentResult alignBoard(const AlignmentTemplate& t, const cv::Mat& gray, cons
   result.huber = huber;
   result.a = cv::Matx33d(h[0], h[1], h[2], h[3], h[4], h[5], h[6], h[7], 1.0);
   result.contrast = b;
-  // Each corner's own contrast: sum T r / sum T^2 over its samples, r the image minus its cell's level.
+  // Each corner's own contrast: sum T r / sum T^2 over its samples, r the image minus its cell's
+  // level (the image as the last pass sampled it: one step from the result, too small to matter).
   std::vector<double> tr(t.corners.size(), 0.0), tt(t.corners.size(), 0.0);
   for (size_t k = 0; k < n; ++k) {
-    const double u = t.ref[k].x, v = t.ref[k].y;
-    const double iw = 1.0 / (h[6] * u + h[7] * v + 1.0);
-    float val;
-    if (!bilinear(gray, static_cast<float>((h[0] * u + h[1] * v + h[2]) * iw),
-                  static_cast<float>((h[3] * u + h[4] * v + h[5]) * iw), &val))
-      continue;
+    if (std::isnan(vals[k])) continue;
     const double tv = t.value[k];
-    tr[t.corner[k]] += tv * (val - level[t.cell[k]]);
+    tr[t.corner[k]] += tv * (vals[k] - level[t.cell[k]]);
     tt[t.corner[k]] += tv * tv;
   }
   result.corner_contrast.assign(t.corners.size(), std::numeric_limits<float>::quiet_NaN());
