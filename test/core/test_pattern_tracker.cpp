@@ -471,7 +471,7 @@ TEST(PatternTracker, PlainChessboardTeachAndTrack) {
     sq += std::pow(cv::norm(cv::Point2f(found[0].u[i], found[0].v[i]) - truth[found[0].corner_ids[i]]), 2);
   const double rms = std::sqrt(sq / std::max<size_t>(1, found[0].size()));
   std::printf("  plain 7x5 board: %zu corners, RMS %.4f px\n", found[0].size(), rms);
-  // Refined on the raw image (no background, no smoothing): the bound leaves room for
+  // Aligned on the raw image (no background): the bound leaves room for
   // cv::cornerSubPix's own error floor on sharp anti-aliased edges (see test_sim_rig).
   EXPECT_LE(rms, 0.1);
 }
