@@ -4,16 +4,24 @@ script (a 5 % zoom step, a slow thermal rotation of the right camera, a knock), 
 line every two seconds and writes the results folder at the end: calibration YAMLs, status,
 calibration-error timeline (CSV and PNG plot with the drift events), image and disparity
 snapshots, an overview picture (a light-on frame, its separated scene and its disparity side by
-side), and a final report saying whether the calibration after the drift meets the calibrator's accuracy
-targets against ground truth.
+side), and a final report saying whether the calibration after the drift meets the accuracy
+targets for depth against ground truth.
 
-Usage: demo_monitor.py --duration S --out DIR [--ns stereo] [--zoom-at S]
+The accuracy is given in the terms a depth user feels (docs/core.md, "Stereo accuracy"): after
+rectifying with the published calibration, the vertical misalignment of true correspondences and
+their disparity bias (px RMS over the field of view), and the depth error at 1, 2, 5 and 10 m
+(%), true (against the simulator's truth, computed by the stereo_accuracy tool) and predicted
+(by the calibrator from its solve's covariance, calibration/status).
+
+Usage: demo_monitor.py --duration S --out DIR [--ns stereo] [--zoom-at S] [--accuracy-tool PATH]
 Times count from the first camera frame.
 """
 import argparse
 import math
 import os
+import shutil
 import struct
+import subprocess
 import sys
 import threading
 import time
@@ -32,6 +40,76 @@ BOUNDS = {
     "k1": (0.005, ""), "baseline_pct": (0.1, "%"), "rotation_deg": (0.01, "deg"),
 }
 ERROR_KEYS = list(BOUNDS)
+
+# The accuracy targets for depth of the published calibration after the drift.
+ACCURACY_BOUNDS = {
+    "misalignment_px": (0.05, "px"), "bias_px": (0.05, "px"), "depth_10m_pct": (0.7, "%"),
+    "fx_pct": (0.05, "%"), "baseline_pct": (0.1, "%"),
+}
+DEPTHS_M = (1, 2, 5, 10)
+
+
+class AccuracyTool:
+    """The stereo_accuracy tool as a child process: one request line per evaluation."""
+
+    def __init__(self, path):
+        self.process = None
+        self.problem = None
+        if not path or not os.access(path, os.X_OK):
+            self.problem = "stereo_accuracy tool not found (%s)" % (path or "not given")
+            return
+        self.process = subprocess.Popen([path], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                                        universal_newlines=True, bufsize=1)
+
+    def evaluate(self, estimate, truth):
+        """estimate, truth: (left, right) CameraInfo. Returns a dict of true figures or None."""
+        if self.process is None or None in estimate or None in truth:
+            return None
+        numbers = [estimate[0].width, estimate[0].height]
+        for info in tuple(estimate) + tuple(truth):
+            d = list(info.D[:5]) + [0.0] * (5 - len(info.D[:5]))
+            numbers += list(info.K) + d + list(info.R) + list(info.P)
+        try:
+            self.process.stdin.write(" ".join("%.17g" % v for v in numbers) + "\n")
+            answer = self.process.stdout.readline().split()
+        except (BrokenPipeError, OSError) as e:
+            self.problem, self.process = "stereo_accuracy stopped: %s" % e, None
+            return None
+        if not answer or answer[0] != "ok":
+            self.problem = "stereo_accuracy: %s" % " ".join(answer)
+            return None
+        v = [float(x) for x in answer[1:]]
+        figures = {"misalignment_px": v[0], "misalignment_max_px": v[1], "bias_px": v[2], "bias_max_px": v[3]}
+        for depth, value in zip(DEPTHS_M, v[4:8]):
+            figures["depth_%dm_pct" % depth] = value
+        return figures
+
+    def close(self):
+        if self.process is not None:
+            self.process.stdin.close()
+            self.process.wait()
+
+
+def predicted_figures(status):
+    """The calibrator's predicted figures of a CalibrationStatus (None without a prediction)."""
+    if status is None or not status.accepted or status.predicted_misalignment_rms_px <= 0:
+        return None
+    figures = {"misalignment_px": status.predicted_misalignment_rms_px,
+               "bias_px": status.predicted_disparity_bias_rms_px}
+    for depth, value in zip(status.predicted_depths_m, status.predicted_depth_error_pct):
+        figures["depth_%dm_pct" % int(round(depth))] = value
+    return figures
+
+
+def format_accuracy(true, predicted):
+    def part(key, unit):
+        text = "%.3f" % true[key]
+        if predicted and key in predicted:
+            text += " (pred %.3f)" % predicted[key]
+        return text + unit
+    return "misalign %s  bias %s  depth err 1/2/5/10 m %s %%" % (
+        part("misalignment_px", " px"), part("bias_px", " px"),
+        "/".join("%.2f" % true["depth_%dm_pct" % d] for d in DEPTHS_M))
 
 
 def write_png(path, width, height, channels, data):
@@ -353,6 +431,11 @@ class Monitor:
         get = self.latest.get
         return calibration_errors((get("left"), get("right")), (get("gt_left"), get("gt_right")))
 
+    def infos(self):
+        """Called with self.lock held: (published, truth) CameraInfo pairs."""
+        get = self.latest.get
+        return (get("left"), get("right")), (get("gt_left"), get("gt_right"))
+
 
 def plot_errors(path, timeline, events, epochs):
     """PNG plot of each error against time (log scale), its accuracy target dashed, drift events as
@@ -364,19 +447,31 @@ def plot_errors(path, timeline, events, epochs):
         import matplotlib.pyplot as plt
     except ImportError:
         return False
-    t = np.array([row[0] for row in timeline])
-    panels = [("focal length error (%)", ["fx_pct", "fy_pct"]),
-              ("principal point error (px)", ["cx_px", "cy_px"]),
-              ("baseline error (%)", ["baseline_pct"]),
-              ("stereo rotation error (deg)", ["rotation_deg"])]
+    rows = [row for row in timeline if row[3] is not None]
+    if not rows:
+        return False
+    t = np.array([row[0] for row in rows])
+    # (title, [(key, source, label, colour, style)], target)
+    depth_colours = ("tab:blue", "tab:orange", "tab:green", "tab:red")
+    panels = [("vertical misalignment (px RMS)",
+               [("misalignment_px", 3, "true", "tab:blue", "-"), ("misalignment_px", 4, "predicted", "tab:blue", ":")],
+               ACCURACY_BOUNDS["misalignment_px"][0]),
+              ("disparity bias (px RMS)",
+               [("bias_px", 3, "true", "tab:purple", "-"), ("bias_px", 4, "predicted", "tab:purple", ":")],
+               ACCURACY_BOUNDS["bias_px"][0]),
+              ("depth error (% RMS)",
+               [("depth_%dm_pct" % d, 3, "true at %d m" % d, c, "-") for d, c in zip(DEPTHS_M, depth_colours)] +
+               [("depth_10m_pct", 4, "predicted at 10 m", "tab:red", ":")],
+               ACCURACY_BOUNDS["depth_10m_pct"][0]),
+              ("fx and baseline error (%)",
+               [("fx_pct", 1, "fx (worse camera)", "tab:blue", "-"), ("baseline_pct", 1, "baseline", "tab:purple", "-")],
+               ACCURACY_BOUNDS["fx_pct"][0])]
     fig, axes = plt.subplots(len(panels), 1, figsize=(12, 10), sharex=True)
-    for ax, (title, keys) in zip(axes, panels):
-        for key, colour in zip(keys, ("tab:blue", "tab:purple")):
-            values = np.array([row[1][key] for row in timeline])
-            per_camera = key not in ("baseline_pct", "rotation_deg")
-            ax.semilogy(t, np.maximum(values, 1e-6), color=colour, linewidth=1.5,
-                        label=key.rsplit("_", 1)[0] + (" (worse camera)" if per_camera else ""))
-        ax.axhline(BOUNDS[keys[0]][0], color="red", linestyle="--", linewidth=1, label="accuracy target")
+    for ax, (title, curves, target) in zip(axes, panels):
+        for key, source, label, colour, style in curves:
+            values = np.array([row[source][key] if row[source] and key in row[source] else np.nan for row in rows])
+            ax.semilogy(t, np.maximum(values, 1e-3), color=colour, linestyle=style, linewidth=1.5, label=label)
+        ax.axhline(target, color="red", linestyle="--", linewidth=1, label="accuracy target")
         for i, (te, name) in enumerate(events):
             ax.axvline(te, color="black", linestyle="-.", linewidth=1.2, label="drift event" if i == 0 else None)
             if ax is axes[0]:
@@ -389,15 +484,15 @@ def plot_errors(path, timeline, events, epochs):
         ax.grid(True, which="major", alpha=0.3)
         ax.legend(loc="center left", bbox_to_anchor=(1.01, 0.5), fontsize=8)
     axes[-1].set_xlabel("time since the first frame (s)")
-    fig.suptitle("Calibration error of the published CameraInfo against ground truth "
-                 "(log scale, errors below 1e-6 drawn at 1e-6)", y=0.995)
+    fig.suptitle("Accuracy for depth of the published calibration: true (against the simulator's truth) "
+                 "and predicted by the calibrator (log scale, below 1e-3 drawn at 1e-3)", y=0.995)
     fig.tight_layout()
     fig.savefig(path, dpi=90)
     plt.close(fig)
     return True
 
 
-def verdict(timeline, script, epochs):
+def verdict(timeline, script, epochs, tool_problem=None):
     """Final errors against the accuracy targets; the calibration counts as 'after the drift' only if a
     commit came after the last drift event. Returns (lines, bounds_met)."""
     lines = []
@@ -408,19 +503,30 @@ def verdict(timeline, script, epochs):
     if last_event is None or not timeline:
         return lines + ["no drift or no calibration error measured: nothing to judge"], False
     commits_after = [t for t in epochs if t > last_event]
-    final = timeline[-1][1]
+    final_t, final, _, accuracy, predicted = timeline[-1]
     met = bool(commits_after) and not script.pending
     lines.append("calibration committed after the last drift event (%s at %.1f s): %s" % (
         script.fired[-1][1], last_event,
         ", ".join("%.1f s" % t for t in commits_after) if commits_after else "NONE"))
-    lines.append("final calibration error vs ground truth (worst of both cameras) and the calibrator's accuracy targets:")
-    for key in ERROR_KEYS:
-        bound, unit = BOUNDS[key]
-        ok = final[key] <= bound
+    if accuracy is None:
+        return lines + ["no accuracy for depth measured (%s)" % (tool_problem or "no calibration")], False
+    lines.append("final accuracy for depth of the published calibration (true vs ground truth; predicted by the "
+                 "calibrator) and the targets:")
+    values = dict(accuracy, fx_pct=final["fx_pct"], baseline_pct=final["baseline_pct"])
+    for key, (bound, unit) in ACCURACY_BOUNDS.items():
+        ok = values[key] <= bound
         met = met and ok
-        lines.append("  %-13s %10.5f %-3s  target %-6g %s" % (key, final[key], unit, bound, "ok" if ok else "EXCEEDED"))
+        pred = predicted.get(key) if predicted else None
+        lines.append("  %-16s %9.4f %-3s %-18s target %-5g %s" % (
+            key, values[key], unit, "(predicted %.4f)" % pred if pred is not None else "", bound,
+            "ok" if ok else "EXCEEDED"))
+    lines.append("  depth error at 1 / 2 / 5 / 10 m: %s %% true, %s %% predicted; misalignment max %.4f px, "
+                 "bias max %.4f px" % (
+                     " / ".join("%.3f" % accuracy["depth_%dm_pct" % d] for d in DEPTHS_M),
+                     " / ".join("%.3f" % predicted["depth_%dm_pct" % d] for d in DEPTHS_M) if predicted else "-",
+                     accuracy["misalignment_max_px"], accuracy["bias_max_px"]))
     lines.append("RESULT: calibration after the drift is %s" % (
-        "WITHIN the calibrator's accuracy targets" if met else "NOT within the calibrator's accuracy targets"))
+        "WITHIN the accuracy targets for depth" if met else "NOT within the accuracy targets for depth"))
     return lines, met
 
 
@@ -461,10 +567,17 @@ def write_results(out, mon, timeline, script, epochs, duration, report_lines, bo
                            separated[2] if separated[2] is not None else disparity,
                            separated[2] is not None):
         overview = "python3-matplotlib is not installed"
+    accuracy_keys = ["misalignment_px", "misalignment_max_px", "bias_px", "bias_max_px"] + [
+        "depth_%dm_pct" % d for d in DEPTHS_M]
+    predicted_keys = ["misalignment_px", "bias_px"] + ["depth_%dm_pct" % d for d in DEPTHS_M]
     with open(os.path.join(out, "calibration_error.csv"), "w") as f:
-        f.write("time_s,epoch,%s\n" % ",".join(ERROR_KEYS))
-        for t, errors, epoch in timeline:
-            f.write("%.2f,%d,%s\n" % (t, epoch, ",".join("%.6g" % errors[k] for k in ERROR_KEYS)))
+        f.write("time_s,epoch,%s,%s,%s\n" % (",".join(ERROR_KEYS), ",".join(accuracy_keys),
+                                            ",".join("predicted_" + k for k in predicted_keys)))
+        for t, errors, epoch, accuracy, predicted in timeline:
+            f.write("%.2f,%d,%s,%s,%s\n" % (
+                t, epoch, ",".join("%.6g" % errors[k] for k in ERROR_KEYS),
+                ",".join("%.6g" % accuracy[k] if accuracy else "" for k in accuracy_keys),
+                ",".join("%.6g" % predicted[k] if predicted and k in predicted else "" for k in predicted_keys)))
     with open(os.path.join(out, "drift_events.csv"), "w") as f:
         f.write("time_s,event\n" + "".join("%.2f,%s\n" % e for e in script.fired))
     plotted = timeline and plot_errors(os.path.join(out, "calibration_error.png"), timeline,
@@ -473,6 +586,7 @@ def write_results(out, mon, timeline, script, epochs, duration, report_lines, bo
     mean_fps = (frames - 1) / span if frames > 1 and span > 0 else 0.0
     status = latest.get("status")
     final = timeline[-1][1] if timeline else None
+    final_accuracy = timeline[-1][3] if timeline else None
     with open(os.path.join(out, "status.yaml"), "w") as f:
         f.write("duration_s: %.1f\nframes: %d\nmean_fps: %.2f\nlight_on_frames: %d\n"
                 "disparity_images: %d\nmean_disparity_hz: %.2f\ncalibration_epoch: %s\n" % (
@@ -482,7 +596,9 @@ def write_results(out, mon, timeline, script, epochs, duration, report_lines, bo
         f.write("calibration_commits_s: [%s]\n" % ", ".join("%.1f" % t for t in epochs))
         if final:
             f.write("final_error:\n" + "".join("  %s: %.6g\n" % (k, final[k]) for k in ERROR_KEYS))
-        f.write("bounds:\n" + "".join("  %s: %g\n" % (k, BOUNDS[k][0]) for k in ERROR_KEYS))
+        if final_accuracy:
+            f.write("final_accuracy:\n" + "".join("  %s: %.6g\n" % kv for kv in sorted(final_accuracy.items())))
+        f.write("accuracy_targets:\n" + "".join("  %s: %g\n" % (k, v[0]) for k, v in ACCURACY_BOUNDS.items()))
         f.write("bounds_met_after_drift: %s\n" % str(bounds_met).lower())
         if status is not None:
             f.write("last_calibration_status:\n  epoch: %d\n  accepted: %s\n  reason: \"%s\"\n"
@@ -515,11 +631,16 @@ def main():
                         help="seconds of the zoom step (default: a third of the run); the thermal "
                              "rotation and the knock follow at fixed fractions of the run")
     parser.add_argument("--startup-timeout", type=float, default=120.0)
+    parser.add_argument("--accuracy-tool", default=shutil.which("stereo_accuracy"),
+                        help="the stereo_accuracy executable (scripts/demo passes the built one)")
     args = parser.parse_args(rospy.myargv()[1:])
     rospy.init_node("demo_monitor", anonymous=True)
     os.makedirs(args.out, exist_ok=True)
     ns = "/" + args.ns.strip("/")
     mon = Monitor(ns)
+    tool = AccuracyTool(args.accuracy_tool)
+    if tool.problem:
+        print("demo: %s: no accuracy for depth against the truth" % tool.problem, flush=True)
 
     wait_start = time.time()
     while not rospy.is_shutdown() and time.time() - wait_start < args.startup_timeout:
@@ -533,9 +654,9 @@ def main():
         return 1
     script = DriftScript(ns, args.duration,
                          args.zoom_at if args.zoom_at is not None else args.duration / 3.0)
-    timeline = []  # (t, errors dict, epoch)
+    timeline = []  # (t, errors dict, epoch, true accuracy dict or None, predicted accuracy dict or None)
     epochs = []  # times at which the calibration in force changed
-    last_epoch, last_status = None, None
+    last_epoch, last_status, predicted = None, None, None
     last_frames, last_disp, last_print = 0, 0, 0.0
     t = 0.0
     while not rospy.is_shutdown() and t < args.duration:
@@ -544,6 +665,7 @@ def main():
         with mon.lock:
             frames, disparities, mode = mon.frames, mon.disparities, mon.mode
             errors, status = mon.errors(), mon.latest.get("status")
+            published, truth = mon.infos()
         epoch = mode.calibration_epoch if mode else -1
         if last_epoch is not None and epoch != last_epoch and (not epochs or t - epochs[-1] > 1.0):
             epochs.append(t)  # a commit changes the epoch twice (left, right): one mark
@@ -557,18 +679,26 @@ def main():
         line = script.step(t, mode is None or mode.light_on)
         if line:
             print(line, flush=True)
+        if status is not None and status.accepted:
+            predicted = predicted_figures(status)  # of the calibration committed last
+        elif status is None:
+            predicted = None
+        accuracy = tool.evaluate(published, truth) if errors else None
         if errors:
-            timeline.append((t, errors, epoch))
+            timeline.append((t, errors, epoch, accuracy, predicted))
         if t - last_print < 2.0:
             continue
         span = t - last_print
         fps, dps = (frames - last_frames) / span, (disparities - last_disp) / span
         last_frames, last_disp, last_print = frames, disparities, t
-        print("[%5.1f s] %5.1f fps  disparity %5.1f Hz  light %s  epoch %s  error vs truth: %s" % (
+        print("[%5.1f s] %5.1f fps  disparity %5.1f Hz  light %s  epoch %s  vs truth: %s" % (
             t, fps, dps, "on " if mode and mode.light_on else "off", epoch if mode else "-",
-            format_errors(errors) if errors else "-"), flush=True)
+            format_accuracy(accuracy, predicted) + "  fx %.3f%%  baseline %.3f%%" % (
+                errors["fx_pct"], errors["baseline_pct"]) if accuracy else
+            (format_errors(errors) if errors else "-")), flush=True)
 
-    report_lines, bounds_met = verdict(timeline, script, epochs)
+    tool.close()
+    report_lines, bounds_met = verdict(timeline, script, epochs, tool.problem)
     summary, frames = write_results(args.out, mon, timeline, script, epochs, t, report_lines, bounds_met)
     for line in summary + report_lines:
         print("demo: " + line, flush=True)

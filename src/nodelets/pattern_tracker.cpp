@@ -10,6 +10,10 @@
 // atomically (temp file + rename) and starts tracking. A corrupt prior file leaves the nodelet
 // idle with an error naming the file until teaching runs. A prior taught but not written (a
 // full disk) is tracked with from memory and written again every kPriorRetryS until it is.
+// On the simulator, teach_from_ground_truth teaches on a light-on frame minus the simulator's
+// ground_truth/left|right/image_scene of the same stamp (the scene exactly as the sensor saw it):
+// the sim's stand-in for teaching with the scene covered or still, which a moving robot's
+// light-off frame (taken frames before, the head and the scene moving) is not.
 #include <cv_bridge/cv_bridge.h>
 #include <diagnostic_updater/diagnostic_updater.h>
 #include <nodelet/nodelet.h>
@@ -19,6 +23,7 @@
 #include <std_srvs/Trigger.h>
 
 #include <chrono>
+#include <deque>
 #include <fstream>
 #include <future>
 #include <memory>
@@ -60,7 +65,8 @@ const char* toString(PriorState s) {
 //  - the nodelet's single-threaded callback queue runs frameCb, the ~teach service, the connect
 //    callbacks, the diagnostics timer and the prior write retry timer: all state below is
 //    touched there only.
-//    Tracking runs in frameCb (both cameras in parallel through cv::parallel_for_): it takes a
+//    The ground-truth scene subscribers (teach_from_ground_truth, while teaching waits) run there
+//    too. Tracking runs in frameCb (both cameras in parallel through cv::parallel_for_): it takes a
 //    fraction of a frame period, so it needs no thread of its own;
 //  - teaching (cv::findChessboardCornersSB: many frame periods long) runs on a std::async worker that receives
 //    copies of the frames and the device model and returns a TeachOutcome through teach_result_;
@@ -92,7 +98,9 @@ class PatternTrackerNodelet : public nodelet::Nodelet {
     prior_file_ = read.get("prior_file", defaultPatternPriorFile());
     device_config_ = read.get("device_config", package_path + "/config/sim_rig.yaml");
     const bool teach_on_start = read.get("teach_on_start", true);
+    teach_from_truth_ = read.get("teach_from_ground_truth", false);
     const int queue_size = read.atLeast("queue_size", 10, 1);
+    stale_background_level_ = read.atLeast("stale_background_level", ecs::TrackerOptions().stale_background_level, 0.0);
     try {
       device_ = ecs::loadSimRigConfig(device_config_);
     } catch (const std::exception& e) {
@@ -140,9 +148,7 @@ class PatternTrackerNodelet : public nodelet::Nodelet {
     if (prior.cameras.size() != 2)
       throw std::invalid_argument("expected 2 cameras (left, right), found " + std::to_string(prior.cameras.size()));
     ecs::TrackerOptions options;
-    // The live graph keeps tracking on light-on minus its light-off frame: switching to the raw
-    // images when that frame is found stale is not yet verified end to end (full_graph).
-    options.stale_background_level = 1e6;
+    options.stale_background_level = stale_background_level_;
     tracker_ = std::make_unique<ecs::PatternTracker>(prior, options);
     background_stamp_ = ros::Time();  // the tracker has no background yet
     state_ = PriorState::kLoaded;
@@ -159,8 +165,60 @@ class PatternTrackerNodelet : public nodelet::Nodelet {
            teachServiceName() + ")";
   }
 
-  // Inputs are needed, whoever listens, while teaching waits for a frame or runs.
-  void updateNeed() { input_->need(teach_requested_ || state_ == PriorState::kTeaching); }
+  // Inputs are needed, whoever listens, while teaching waits for a frame or runs; the simulator's
+  // scene only while teaching waits for a frame (the driver renders it only for subscribers).
+  void updateNeed() {
+    input_->need(teach_requested_ || state_ == PriorState::kTeaching);
+    if (!teach_from_truth_) return;
+    if (teach_requested_ && !truth_scene_sub_[0]) {
+      ros::NodeHandle& nh = getNodeHandle();
+      for (int c = 0; c < 2; ++c)
+        truth_scene_sub_[c] = nh.subscribe<Image>(c == 0 ? "ground_truth/left/image_scene" : "ground_truth/right/image_scene", 5,
+                                                  [this, c](const ImageConstPtr& msg) { truthSceneCb(c, msg); });
+    } else if (!teach_requested_ && truth_scene_sub_[0]) {
+      for (ros::Subscriber& sub : truth_scene_sub_) sub.shutdown();
+      for (auto& q : truth_scenes_) q.clear();
+      pending_light_on_.clear();
+    }
+  }
+
+  void truthSceneCb(int camera, const ImageConstPtr& msg) {
+    auto& q = truth_scenes_[camera];
+    q.push_back(msg);
+    while (q.size() > kTruthQueue) q.pop_front();
+    teachFromTruthIfMatched();
+  }
+
+  static ImageConstPtr byStamp(const std::deque<ImageConstPtr>& q, const ros::Time& stamp) {
+    for (const ImageConstPtr& m : q)
+      if (m->header.stamp == stamp) return m;
+    return nullptr;
+  }
+
+  // Teaches on the newest pending light-on pair whose ground-truth scenes have arrived.
+  void teachFromTruthIfMatched() {
+    if (!teach_requested_) return;
+    for (auto it = pending_light_on_.rbegin(); it != pending_light_on_.rend(); ++it) {
+      const ImageConstPtr scene_left = byStamp(truth_scenes_[0], it->first->header.stamp);
+      const ImageConstPtr scene_right = byStamp(truth_scenes_[1], it->first->header.stamp);
+      if (!scene_left || !scene_right) continue;
+      if (scene_left->encoding != it->first->encoding || scene_left->width != it->first->width ||
+          scene_left->height != it->first->height) {
+        NODELET_ERROR_THROTTLE(5.0, "PatternTracker: ground_truth/left/image_scene (%s %ux%u) does not match %s; "
+                               "cannot teach from it", scene_left->encoding.c_str(), scene_left->width,
+                               scene_left->height, input_->topic(0).c_str());
+        return;
+      }
+      const auto light_on = *it;
+      cv_bridge::CvImageConstPtr left_cv, right_cv;
+      ecs::ColorOrder order;
+      if (!toImages(light_on.first, light_on.second, &left_cv, &right_cv, &order)) return;
+      NODELET_INFO("PatternTracker: teaching on a light-on frame minus the simulator's scene of the same stamp");
+      startTeaching(left_cv->image, right_cv->image, cv_bridge::toCvShare(scene_left)->image,
+                    cv_bridge::toCvShare(scene_right)->image, order);
+      return;
+    }
+  }
 
   bool teachCb(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& res) {
     if (state_ == PriorState::kTeaching) {
@@ -186,10 +244,18 @@ class PatternTrackerNodelet : public nodelet::Nodelet {
     cv_bridge::CvImageConstPtr left_cv, right_cv;
     ecs::ColorOrder order;
     if (!toImages(left, right, &left_cv, &right_cv, &order)) return;
-    if (teach_requested_) {
+    if (teach_requested_ && teach_from_truth_) {
+      pending_light_on_.emplace_back(left, right);
+      while (pending_light_on_.size() > kTruthQueue) pending_light_on_.pop_front();
+      teachFromTruthIfMatched();
+      if (!teach_requested_) return;
+      NODELET_WARN_THROTTLE(5.0, "PatternTracker: teaching waits for ground_truth/left|right/image_scene of a "
+                            "settled light-on frame (teach_from_ground_truth is set)");
+    } else if (teach_requested_) {
       // Teaching needs the scene to cancel: without a light-off frame most boards are missed.
       if (lightOffMatches(*left)) {
-        startTeaching(left_cv->image, right_cv->image, order);
+        startTeaching(left_cv->image, right_cv->image, cv_bridge::toCvShare(light_off_left_)->image,
+                      cv_bridge::toCvShare(light_off_right_)->image, order);
         return;
       }
       NODELET_WARN_THROTTLE(5.0, "PatternTracker: teaching waits for a settled light-off frame on %s",
@@ -233,14 +299,17 @@ class PatternTrackerNodelet : public nodelet::Nodelet {
            light_off_left_->encoding == light_on.encoding;
   }
 
-  // Caller checked lightOffMatches().
-  void startTeaching(const cv::Mat& left, const cv::Mat& right, ecs::ColorOrder order) {
+  // `left_off`/`right_off`: the scene without the device (light-off frame, or the sim's truth),
+  // same format as the light-on frames.
+  void startTeaching(const cv::Mat& left, const cv::Mat& right, const cv::Mat& left_off, const cv::Mat& right_off,
+                     ecs::ColorOrder order) {
     teach_requested_ = false;
+    updateNeed();  // the ground-truth scene is no longer needed
     ecs::TeachFrame left_frame, right_frame;
     left_frame.light_on = left.clone();  // the worker outlives this callback's messages
     right_frame.light_on = right.clone();
-    left_frame.light_off = cv_bridge::toCvShare(light_off_left_)->image.clone();
-    right_frame.light_off = cv_bridge::toCvShare(light_off_right_)->image.clone();
+    left_frame.light_off = left_off.clone();
+    right_frame.light_off = right_off.clone();
     state_ = PriorState::kTeaching;
     tracker_.reset();
     unwritten_prior_.reset();  // the new teaching's prior replaces it
@@ -375,6 +444,12 @@ class PatternTrackerNodelet : public nodelet::Nodelet {
     status.add("mean frame (ms)", tracked_frames_ > 0 ? total_ms_ / tracked_frames_ : 0.0);
   }
 
+  double stale_background_level_ = 0.0;  // parameter, see TrackerOptions
+  bool teach_from_truth_ = false;         // parameter teach_from_ground_truth
+  static constexpr size_t kTruthQueue = 5;  // frames kept while matching light-on frames to the truth
+  ros::Subscriber truth_scene_sub_[2];
+  std::deque<ImageConstPtr> truth_scenes_[2];
+  std::deque<std::pair<ImageConstPtr, ImageConstPtr>> pending_light_on_;
   std::string background_use_ = "none yet";  // what the last tracked frame did with the background
   std::string prior_file_, device_config_;
   ecs::SimRigConfig device_;

@@ -93,6 +93,7 @@ CalibratorParams loadCalibratorParams(const ros::NodeHandle& pnh, const std::str
   non_negative("max_baseline_stddev_rel", &p.gate.max_baseline_stddev_rel);
   non_negative("max_rotation_stddev_deg", &p.gate.max_rotation_stddev_deg);
   non_negative("min_rms_improvement_rel", &p.gate.min_rms_improvement_rel);
+  non_negative("min_change_in_predicted", &p.gate.min_change_in_predicted);
   non_negative("in_force_max_rms_px", &p.gate.in_force_max_rms_px);
   if (const std::string e = p.adjustment.Check(); !e.empty()) throw ecs::ConfigError("loss_scale_px", e);
   if (const std::string e = p.gate.Check(); !e.empty()) throw ecs::ConfigError("quality gate", e);
@@ -221,7 +222,10 @@ CalibrationStatus CalibrationSession::solve(const std::vector<ecs::StereoObserva
     char rms[96];
     std::snprintf(rms, sizeof(rms), " (RMS %.3f px; the new solve %.3f px, no better)", ecs::combinedRms(in_force_fit),
                   ecs::combinedRms(candidate));
-    status.reason = kInForceConfirmedReason + std::string(rms);
+    // The gate's words when the new solve fits better but changes too little to trust.
+    const bool small_change = decision.reason.rfind("rejected: change", 0) == 0;
+    status.reason = kInForceConfirmedReason +
+                    (small_change ? " (" + decision.reason.substr(10) + ")" : std::string(rms));
   }
   if (!decision.accepted || dry_run) {
     if (decision.accepted) status.reason = "dry run: acceptable, not committed";

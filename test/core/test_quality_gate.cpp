@@ -246,6 +246,42 @@ TEST(QualityGateRules, ABetterFitReplacesACalibrationThatStillFits) {
   EXPECT_TRUE(contains(d.reason, "accepted: RMS 0.5 px vs 0.8 px")) << d.reason;
 }
 
+// min_change_in_predicted: a candidate that fits clearly better (the RMS rule accepts it) is kept
+// out when it differs from the calibration in force by less than that many times its own
+// predicted error for depth, and let in when the change is larger (a knock).
+TEST(QualityGateRules, AChangeWithinTheCandidatesUncertaintyIsRejectedWhenAsked) {
+  const StereoRig in_force_rig = makeSimLikeStereoRig();
+  BundleAdjustmentSummary in_force = inForceFit(0.8);  // the RMS rule alone accepts 0.5 px
+  in_force.rig = in_force_rig;
+  BundleAdjustmentSummary candidate = passingCandidate();
+  // The reported covariance (diagonal, the passing candidate's sd): rotation 0.02 deg, cx 1 px...
+  RigParameters sd = RigParameters::Zero();
+  for (int c = 0; c < 2; ++c) {
+    for (int k = 0; k < 4; ++k) sd[9 * c + k] = 1.0;
+    sd[9 * c + 4] = sd[9 * c + 5] = 0.002;
+  }
+  for (int k = 18; k < 21; ++k) sd[k] = 0.02 * M_PI / 180.0;
+  for (int k = 21; k < 24; ++k) sd[k] = 0.0002;
+  candidate.rig_covariance = sd.cwiseProduct(sd).asDiagonal();
+  GateOptions o;
+  o.min_change_in_predicted = 3.0;
+  for (const double pan_deg : {0.01, 2.0}) {  // within the uncertainty / a hard knock
+    candidate.rig = driftedRig(in_force_rig, 1.0, Eigen::Vector3d(0.0, pan_deg, 0.0));
+    const GateDecision d = QualityGate(o).evaluate(candidate, &in_force);
+    EXPECT_EQ(d.accepted, pan_deg > 1.0) << pan_deg << ": " << d.reason;
+    if (d.accepted) {
+      EXPECT_TRUE(contains(d.reason, "for the calibration in force; change for depth")) << d.reason;
+    } else {
+      EXPECT_TRUE(contains(d.reason, "within the new solve's uncertainty")) << d.reason;
+      EXPECT_TRUE(d.in_force_confirmed) << d.reason;
+    }
+    // Not asked (the default): the RMS rule decides.
+    EXPECT_TRUE(QualityGate(GateOptions{}).evaluate(candidate, &in_force).accepted);
+  }
+  o.min_change_in_predicted = -1.0;
+  EXPECT_TRUE(contains(QualityGate(o).evaluate(candidate, &in_force).reason, "min_change_in_predicted must be >= 0"));
+}
+
 TEST(QualityGateRules, NoSignificantImprovementIsRejected) {
   const BundleAdjustmentSummary candidate = passingCandidate();
   for (double in_force_rms : {0.4, 0.5, 0.51}) {  // worse, equal, 2 % better than in force

@@ -20,6 +20,7 @@
 #include <vector>
 
 #include "driver_test_utils.h"
+#include "process_test_utils.h"
 #include "embedded_calibration_stereo/ros/calibration_file.h"
 #include "embedded_calibration_stereo/ros/conversions.h"
 
@@ -120,83 +121,24 @@ inline bool waitForDriverStatus(Collector<diagnostic_msgs::DiagnosticArray>& dia
 // private parameters given as `_name:=value` arguments and extra environment variables; its
 // output goes to a log file. The child is the nodelet process itself (no roslaunch between),
 // so the test sees how it ended (e.g. SIGKILL from the calibration store's test hook).
-class DriverProcess {
+class DriverProcess : public ChildProcess {
  public:
   DriverProcess(const std::string& ns, const std::vector<std::string>& params, const std::vector<std::string>& env,
                 std::string log_path)
-      : log_path_(std::move(log_path)) {
-    std::vector<std::string> argv_strings{nodeletExecutable(), "standalone", "embedded_calibration_stereo/CameraDriver",
-                                          "__name:=camera_driver", "__ns:=" + ns};
-    argv_strings.insert(argv_strings.end(), params.begin(), params.end());
-    std::vector<std::string> env_strings;
-    for (char** e = environ; *e; ++e)
-      if (std::string(*e).rfind("ROS_NAMESPACE=", 0) != 0) env_strings.emplace_back(*e);
-    env_strings.insert(env_strings.end(), env.begin(), env.end());
-    std::vector<char*> argv, envp;
-    for (std::string& s : argv_strings) argv.push_back(s.data());
-    argv.push_back(nullptr);
-    for (std::string& s : env_strings) envp.push_back(s.data());
-    envp.push_back(nullptr);
-    // Prepared before fork: the child only calls async-signal-safe functions before exec.
-    const int log_fd = ::open(log_path_.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
-    pid_ = ::fork();
-    if (pid_ == 0) {
-      if (log_fd >= 0) {
-        ::dup2(log_fd, STDOUT_FILENO);
-        ::dup2(log_fd, STDERR_FILENO);
-      }
-      ::execve(argv[0], argv.data(), envp.data());
-      ::_exit(127);
-    }
-    if (log_fd >= 0) ::close(log_fd);
-    if (pid_ > 0) {
-      const pid_t pid = pid_;
-      exit_ = std::async(std::launch::async, [pid] {
-        int status = 0;
-        return ::waitpid(pid, &status, 0) == pid ? status : -1;
-      });
-    }
-  }
-  ~DriverProcess() {
-    if (running()) ::kill(pid_, SIGINT);
-    if (exit_.valid() && exit_.wait_for(std::chrono::seconds(10)) != std::future_status::ready) ::kill(pid_, SIGKILL);
-    if (exit_.valid()) exit_.wait();
-  }
-  DriverProcess(const DriverProcess&) = delete;
-  DriverProcess& operator=(const DriverProcess&) = delete;
-
-  bool running() const { return exit_.valid() && exit_.wait_for(std::chrono::seconds(0)) != std::future_status::ready; }
-  void kill(int signal) const {
-    if (running()) ::kill(pid_, signal);
-  }
-  // The wait status once it ended within `timeout_s`, else -1.
-  int waitForExit(double timeout_s) {
-    if (!exit_.valid()) return exit_status_;
-    if (exit_.wait_for(std::chrono::duration<double>(timeout_s)) != std::future_status::ready) return -1;
-    exit_status_ = exit_.get();
-    return exit_status_;
-  }
-  std::string logTail(size_t lines = 20) const {
-    std::ifstream in(log_path_);
-    std::vector<std::string> all;
-    for (std::string line; std::getline(in, line);) all.push_back(line);
-    std::ostringstream out;
-    out << "---- " << log_path_ << " ----\n";
-    for (size_t i = all.size() > lines ? all.size() - lines : 0; i < all.size(); ++i) out << all[i] << "\n";
-    return out.str();
-  }
+      : ChildProcess(argv(ns, params), env, std::move(log_path), 10.0) {}
 
  private:
+  static std::vector<std::string> argv(const std::string& ns, const std::vector<std::string>& params) {
+    std::vector<std::string> all{nodeletExecutable(), "standalone", "embedded_calibration_stereo/CameraDriver",
+                                 "__name:=camera_driver", "__ns:=" + ns};
+    all.insert(all.end(), params.begin(), params.end());
+    return all;
+  }
   static std::string nodeletExecutable() {
     for (const std::string candidate : {"/usr/lib/nodelet/nodelet", "/opt/ros/noetic/lib/nodelet/nodelet"})
       if (::access(candidate.c_str(), X_OK) == 0) return candidate;
     return "/usr/lib/nodelet/nodelet";
   }
-
-  std::string log_path_;
-  pid_t pid_ = -1;
-  std::future<int> exit_;
-  int exit_status_ = -1;
 };
 
 }  // namespace ecs_test

@@ -11,6 +11,7 @@
 
 #include <cmath>
 #include <opencv2/core.hpp>
+#include <opencv2/imgproc.hpp>
 
 #include "depth_test_utils.h"
 #include "driver_test_utils.h"
@@ -288,6 +289,135 @@ TEST(SeparatorTeachService, TeachesFromCoveredSceneFrames) {
   loader->unload("/hw/separator");
 }
 
+// device_template learn on crafted frames: a static device pattern (a checkerboard) over a scene
+// that slides 2 px right and 1 px down per frame (a moving head), light windows as the driver
+// sends them (settled light-off frames, two unsettled, four settled light-on, two unsettled,
+// light off again), 30 fps stamps. Nothing but the frames goes in: after three windows (12 pairs)
+// the Separator adopts a learned template and separates the next window's light-on frames. Then
+// a new calibration epoch with the device image moved: raw frames until three windows of the new
+// epoch are learned, then separated again.
+TEST(SeparatorLearn, LearnsTheDeviceImageFromLightWindowsWithAMovingScene) {
+  ros::NodeHandle nh("/learn");
+  Collector<Image> scene(nh, "left/image_scene", 50);
+  Collector<rosgraph_msgs::Log> log(nh, "/rosout", 1000);
+  ros::Publisher left_pub = nh.advertise<Image>("left/image_raw", 5);
+  ros::Publisher right_pub = nh.advertise<Image>("right/image_raw", 5);
+  ros::Publisher mode_pub = nh.advertise<CalibrationMode>("calibration_mode", 5);
+  ros::param::set("/learn/separator/device_template", std::string("learn"));
+  ASSERT_TRUE(loader->load("/learn/separator", "embedded_calibration_stereo/Separator", ros::M_string(), {}));
+  ASSERT_TRUE(waitUntil(
+      [&] { return left_pub.getNumSubscribers() && right_pub.getNumSubscribers() && mode_pub.getNumSubscribers(); },
+      10.0));
+  std_srvs::Trigger teach;
+  ASSERT_TRUE(ros::service::call("/learn/teach", teach));
+  EXPECT_FALSE(teach.response.success) << "learn mode has no teach: " << teach.response.message;
+
+  const cv::Size size(256, 192);
+  cv::Mat device(size, CV_8UC1), canvas(size.height + 200, size.width + 400, CV_8UC1);
+  for (int v = 0; v < device.rows; ++v)
+    for (int u = 0; u < device.cols; ++u) device.at<uint8_t>(v, u) = ((u / 8 + v / 8) % 2) * 90;
+  cv::RNG rng(5);
+  rng.fill(canvas, cv::RNG::UNIFORM, 20, 151);
+  // A lens-blurred texture the flow can follow, stretched back to full contrast (grey 20..150).
+  cv::GaussianBlur(canvas, canvas, cv::Size(0, 0), 2.5);
+  cv::normalize(canvas, canvas, 20, 150, cv::NORM_MINMAX);
+  int frame = 0;
+  uint32_t epoch = 0;
+  const auto sceneAt = [&](int f) { return canvas(cv::Rect((2 * f) % 400, f % 200, size.width, size.height)).clone(); };
+  // Publishes frame `frame` (the device at `light` level) and waits for its image_scene.
+  const auto publish = [&](bool on, bool settled, double light, cv::Mat* scene_out = nullptr) {
+    const cv::Mat scene_image = sceneAt(frame);
+    cv::Mat image;
+    cv::addWeighted(scene_image, 1.0, device, light, 0.0, image);
+    const ros::Time stamp = ros::Time(300, 0) + ros::Duration(frame / 30.0);
+    ++frame;
+    for (auto* pub : {&left_pub, &right_pub}) {
+      auto msg = boost::make_shared<Image>();
+      msg->header.stamp = stamp;
+      msg->encoding = "mono8";
+      msg->width = image.cols;
+      msg->height = image.rows;
+      msg->step = image.cols;
+      msg->data.assign(image.datastart, image.dataend);
+      pub->publish(msg);
+    }
+    auto mode = boost::make_shared<CalibrationMode>();
+    mode->header.stamp = stamp;
+    mode->light_on = on;
+    mode->settled = settled;
+    mode->calibration_epoch = epoch;
+    mode_pub.publish(mode);
+    if (scene_out) *scene_out = scene_image;
+    EXPECT_TRUE(scene.waitFor(
+        [&](const std::vector<Image::ConstPtr>& m) { return ecs_test::findByStamp(m, stamp) != nullptr; }, 10.0))
+        << "frame " << frame - 1 << " not republished";
+    return stamp;
+  };
+  // One light window; returns the stamps and true scenes of its settled light-on frames.
+  const auto window = [&](std::vector<std::pair<ros::Time, cv::Mat>>* lit) {
+    for (int i = 0; i < 3; ++i) publish(false, true, 0.0);
+    publish(true, false, 0.33);
+    publish(true, false, 0.67);
+    for (int i = 0; i < 4; ++i) {
+      cv::Mat truth;
+      const ros::Time stamp = publish(true, true, 1.0, &truth);
+      if (lit) lit->emplace_back(stamp, truth);
+    }
+    publish(false, false, 0.67);
+    publish(false, false, 0.33);
+    publish(false, true, 0.0);
+  };
+  {
+    cv::Scalar mean, sd;
+    cv::meanStdDev(sceneAt(0), mean, sd);
+    std::printf("learn: scene texture sd %.1f grey levels, moving 2 px right and 1 px up per frame\n", sd[0]);
+  }
+  // Learns the windows of the current epoch until the Separator says it learned them, then
+  // scores the next window's separated light-on frames; returns the worst PSNR.
+  const auto learnAndScore = [&](const char* what) {
+    for (int w = 0; w < 3; ++w) window(nullptr);
+    std::string found;
+    // The learning runs after the third window; a few light-off frames give it time to finish.
+    const std::string needle = "device image learned for calibration epoch " + std::to_string(epoch);
+    bool learned = false;
+    for (int i = 0; i < 100 && !learned; ++i) {
+      learned = ecs_test::waitForLog(log, {"Separator", needle}, 0.05, &found);
+      if (!learned) publish(false, true, 0.0);
+    }
+    EXPECT_TRUE(learned) << what << ": no learned device image after three light windows";
+    std::vector<std::pair<ros::Time, cv::Mat>> lit;
+    window(&lit);
+    double worst = 1e9;
+    for (const auto& [stamp, truth] : lit) {
+      const auto out = ecs_test::findByStamp(scene.snapshot(), stamp);
+      if (!out) continue;
+      worst = std::min(worst, psnr(view(*out), truth));
+    }
+    std::printf("learn, %s: '%s'; separated PSNR worst %.1f dB vs the true scene (raw %.1f dB)\n", what,
+                found.c_str(), worst, psnr(device, cv::Mat::zeros(size, CV_8UC1)));
+    return worst;
+  };
+  EXPECT_GE(learnAndScore("epoch 0"), 35.0);
+
+  // A new calibration epoch with the device image moved (a zoom or a knock): the old template is
+  // not used (raw frames meanwhile), and the next three windows teach the new one.
+  ++epoch;
+  cv::Mat moved;
+  cv::warpAffine(device, moved, cv::Matx23f(1.03f, 0, -2, 0, 1.03f, -1), size, cv::INTER_NEAREST);
+  device = moved;
+  std::vector<std::pair<ros::Time, cv::Mat>> lit;
+  window(&lit);
+  for (const auto& [stamp, truth] : lit) {
+    const auto out = ecs_test::findByStamp(scene.snapshot(), stamp);
+    ASSERT_TRUE(out);
+    cv::Mat raw;
+    cv::add(truth, device, raw);
+    EXPECT_EQ(cv::norm(view(*out), raw, cv::NORM_INF), 0.0) << "epoch 1 before learning: the raw frame";
+  }
+  EXPECT_GE(learnAndScore("after an epoch change"), 35.0);
+  loader->unload("/learn/separator");
+}
+
 // Crafted frames on a Separator without driver: mismatched sizes and encodings, and an
 // unsupported encoding, are refused with an error naming the topic and produce no output; a
 // valid frame afterwards still goes through (no crash, no stuck state).
@@ -356,6 +486,13 @@ TEST(SeparatorBadInput, BadParametersRefuseToLoad) {
   ros::param::set("/badparam/separator/teach_frames", 0);
   EXPECT_FALSE(loader->load("/badparam/separator", "embedded_calibration_stereo/Separator", ros::M_string(), {}));
   ros::param::del("/badparam/separator/teach_frames");
+  ros::param::set("/badparam/separator/device_template", std::string("learn"));
+  ros::param::set("/badparam/separator/teach_from_ground_truth", true);  // contradicts learn
+  EXPECT_FALSE(loader->load("/badparam/separator", "embedded_calibration_stereo/Separator", ros::M_string(), {}));
+  ros::param::del("/badparam/separator/teach_from_ground_truth");
+  ros::param::set("/badparam/separator/device_template", std::string("covered"));
+  EXPECT_FALSE(loader->load("/badparam/separator", "embedded_calibration_stereo/Separator", ros::M_string(), {}));
+  ros::param::del("/badparam/separator/device_template");
   EXPECT_TRUE(loader->load("/badparam/separator", "embedded_calibration_stereo/Separator", ros::M_string(), {}))
       << "control: the defaults load";
   loader->unload("/badparam/separator");

@@ -469,10 +469,15 @@ class AdjustmentRun {
   // the robust cost): RMS per camera, outliers (the median test's rejections plus residuals
   // over the threshold), epipolar RMS; then the residual variance: the robust cost of the track
   // means plus the within-track scatter, over the degrees of freedom of the per-observation
-  // problem.
+  // problem. Weighting a track mean by its length assumes its frames' errors independent; when
+  // the track means scatter about the solution clearly more than that predicts (errors common
+  // to a window's frames: on a moving scene the tracker's corners of fixed boards share most of
+  // their error), the variance is raised to what the track means show, as if each track were one
+  // observation, so the covariance (and the predicted accuracy) stays honest.
   void residualStatistics() {
     double sum_sq[2] = {0, 0};
     int count[2] = {0, 0};
+    double weighted_mean_sq = 0.0;  // sum over tracks of length * |mean - model|^2
     out_.outliers = tracks_.rejected;
     const double outlier_sq = options_.outlier_threshold_px * options_.outlier_threshold_px;
     for (const CornerResidual& r : residuals_) {
@@ -480,6 +485,7 @@ class AdjustmentRun {
       Eigen::Vector2d e;
       if (!r.cost->Evaluate(r.blocks.data(), e.data(), nullptr)) continue;
       const Eigen::Vector2d predicted = r.track->mean + e;
+      weighted_mean_sq += static_cast<double>(r.track->observations.size()) * e.squaredNorm();
       for (const Eigen::Vector2d& o : r.track->observations) {
         const double sq = (predicted - o).squaredNorm();
         sum_sq[side] += sq;
@@ -509,6 +515,17 @@ class AdjustmentRun {
     const double data_cost = std::max(0.0, ceres_summary_.final_cost - prior_cost);
     sigma2_ = dof_ > 0 ? (2.0 * data_cost + scatter_sq_) / dof_ : 0.0;
     out_.residual_sigma_px = std::sqrt(sigma2_);
+    const int tracks = static_cast<int>(residuals_.size());
+    const int mean_dof = 2 * tracks - free_parameters_;
+    if (shared_ && mean_dof > 0 && dof_ > 0 && sigma2_ > 0.0) {
+      // A track mean's variance is sigma2 / length if the frames' errors are independent, so
+      // length * |mean - model|^2 estimates sigma2 per track (plain squares on both sides: the
+      // robust loss would pass outliers off as over-dispersion).
+      const double plain_sigma2 = (weighted_mean_sq + scatter_sq_) / dof_;
+      const double ratio = (weighted_mean_sq / mean_dof) / plain_sigma2;
+      // Chi-square over mean_dof: beyond 3 of its standard deviations, not chance.
+      if (ratio > 1.0 + 3.0 * std::sqrt(2.0 / mean_dof)) sigma2_ *= ratio;
+    }
   }
 
   // Covariance of the camera blocks (7), scaled by the residual variance estimate.

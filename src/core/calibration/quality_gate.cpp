@@ -1,5 +1,7 @@
 #include "embedded_calibration_stereo/core/calibration/quality_gate.h"
 
+#include "embedded_calibration_stereo/core/calibration/stereo_accuracy.h"
+
 #include <cmath>
 #include <iomanip>
 #include <sstream>
@@ -48,6 +50,7 @@ std::string GateOptions::Check() const {
     return "standard deviation limits must be > 0";
   if (!(min_rms_improvement_rel >= 0)) return "min_rms_improvement_rel must be >= 0";
   if (!(in_force_max_rms_px > 0)) return "in_force_max_rms_px must be > 0";
+  if (!(min_change_in_predicted >= 0)) return "min_change_in_predicted must be >= 0";
   return "";
 }
 
@@ -102,13 +105,43 @@ GateDecision QualityGate::evaluate(const BundleAdjustmentSummary& c,
     return {true, "accepted: calibration in force cannot explain the observations (" +
                       in_force_fit->message + ")"};
   const double in_force_rms = combinedRms(*in_force_fit);
-  if (in_force_rms > o.in_force_max_rms_px)
+  // The significance of the change, when asked: "" when significant (or not asked), otherwise
+  // the rejection; *note describes the change for the acceptance.
+  std::string note;
+  const auto insignificant = [&]() -> std::string {
+    if (!(o.min_change_in_predicted > 0)) return "";
+    try {
+      const StereoAccuracy change = evaluateStereoAccuracy(in_force_fit->rig, c.rig);
+      const StereoAccuracy predicted = predictStereoAccuracy(c.rig, c.rig_covariance);
+      const double d = std::hypot(change.misalignment_px.rms, change.disparity_bias_px.rms);
+      const double p = std::hypot(predicted.misalignment_px.rms, predicted.disparity_bias_px.rms);
+      note = "; change for depth " + fmt(d) + " px, predicted error " + fmt(p) + " px";
+      if (d > o.min_change_in_predicted * p) return "";
+      return "change from the calibration in force within the new solve's uncertainty: " + fmt(d) +
+             " px (misalignment and disparity bias) vs " + fmt(o.min_change_in_predicted) + " x " + fmt(p) +
+             " px predicted";
+    } catch (const std::exception& e) {
+      return std::string("accuracy for depth not evaluated: ") + e.what();
+    }
+  };
+  if (in_force_rms > o.in_force_max_rms_px) {
+    const std::string why = insignificant();
+    if (!why.empty()) return reject(why);
     return {true, "accepted: calibration in force no longer fits (RMS " + fmt(in_force_rms) +
                       " px > " + fmt(o.in_force_max_rms_px) + " px), new RMS " +
-                      fmt(candidate_rms) + " px"};
-  if (candidate_rms * (1.0 + o.min_rms_improvement_rel) <= in_force_rms)
+                      fmt(candidate_rms) + " px" + note};
+  }
+  if (candidate_rms * (1.0 + o.min_rms_improvement_rel) <= in_force_rms) {
+    const std::string why = insignificant();
+    if (!why.empty()) {
+      GateDecision kept = reject(why);
+      // The observations do not tell the two apart: the calibration in force stands.
+      kept.in_force_confirmed = why.rfind("change", 0) == 0;
+      return kept;
+    }
     return {true, "accepted: RMS " + fmt(candidate_rms) + " px vs " + fmt(in_force_rms) +
-                      " px for the calibration in force"};
+                      " px for the calibration in force" + note};
+  }
   GateDecision kept = reject("no significant improvement: RMS " + fmt(candidate_rms) + " px vs " +
                              fmt(in_force_rms) + " px for the calibration in force (needs " +
                              fmt(100 * o.min_rms_improvement_rel) + "% lower)");

@@ -228,9 +228,22 @@ CameraTracker::CameraTracker(CameraPrior prior, TrackerOptions options)
 }
 
 double CameraTracker::backgroundResidual(const cv::Mat& difference) const {
+  // Also away from where the boards are tracked now: after a zoom step or a knock their lit
+  // margins lie outside the taught places, and would count as scene left in the difference.
+  cv::Mat away = away_from_boards_.clone();
+  for (size_t i = 0; i < states_.size(); ++i) {
+    if (!states_[i].valid) continue;
+    const BoardPrior& board = prior_.boards[i];
+    std::vector<cv::Point> hull;
+    for (const cv::Point2f& g : {cv::Point2f(-2.5f, -2.5f), cv::Point2f(board.cols + 1.5f, -2.5f),
+                                 cv::Point2f(board.cols + 1.5f, board.rows + 1.5f),
+                                 cv::Point2f(-2.5f, board.rows + 1.5f)})
+      hull.push_back(applyHomography(states_[i].homography, g.x, g.y));
+    cv::fillConvexPoly(away, hull, cv::Scalar(0));
+  }
   std::vector<uchar> values;
   for (int y = 0; y < difference.rows; y += 4) {
-    const uchar* m = away_from_boards_.ptr<uchar>(y);
+    const uchar* m = away.ptr<uchar>(y);
     const uchar* d = difference.ptr<uchar>(y);
     for (int x = 0; x < difference.cols; x += 4)
       if (m[x]) values.push_back(d[x]);

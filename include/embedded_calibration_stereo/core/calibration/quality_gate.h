@@ -2,8 +2,10 @@
 // Decides whether a new calibration replaces the one in force. A candidate is accepted only
 // when it converged, fits its observations (RMS, epipolar RMS, outliers), is well determined
 // (standard deviations), saw enough boards in both cameras, and explains the observations
-// better than the calibration in force - or the calibration in force no longer fits them.
-// Otherwise it is rejected with a human-readable reason and nothing changes.
+// better than the calibration in force - or the calibration in force no longer fits them - and,
+// when asked (min_change_in_predicted), differs from the calibration in force by more than its
+// own predicted error, in the terms a depth user feels (stereo_accuracy.h). Otherwise it is
+// rejected with a human-readable reason and nothing changes.
 //
 // Threading: immutable after construction; evaluate() is a pure function.
 #include <string>
@@ -34,6 +36,14 @@ struct GateOptions {
   double min_rms_improvement_rel = 0.05;
   // ... unless the calibration in force no longer fits them at all.
   double in_force_max_rms_px = 1.0;
+  // The change from the calibration in force, hypot(vertical misalignment RMS, disparity bias
+  // RMS) of one rectified with the other over the field of view (stereo_accuracy.h), must exceed
+  // this many times the same figure predicted from the candidate's covariance; 0 = not checked.
+  // A change within the candidate's own uncertainty is no evidence against the calibration in
+  // force: committing it would trade a calibration for one no better known. On a moving scene
+  // the tracker's corners share errors a slightly wrong calibration fits better than the true
+  // one, so a better RMS alone can be a worse calibration.
+  double min_change_in_predicted = 0.0;
 
   std::string Check() const;  // empty when usable
 };

@@ -1,0 +1,328 @@
+// Calibration while the world moves, core only (no ROS), deterministic: the simulated head of a
+// scenario (default config/drive_photo.yaml: driving through a photographed corridor, movers)
+// runs for a given time; every `period` seconds a light window of `frames` light-on frames is
+// tracked by the pattern tracker (no background: the world moves) and solved by the bundle
+// adjuster, the quality gate decides against the calibration in force (as the OnlineCalibrator
+// does), and an accepted calibration is committed. A drift script changes the rig: a 5 % zoom
+// step, a thermal rotation of the right camera (ramp, then held), a knock, then the same again
+// around the first state, cycling. Every window prints its gate decision and, for every commit,
+// the new and the replaced calibration's accuracy for depth against the truth of the window's
+// last frame (core/calibration/stereo_accuracy.h), and whether the commit is worse.
+//   bench_calibrate_moving [--config FILE] [--minutes M] [--period S] [--frames N] [--fps F]
+//                          [--teach-frames K] [--min-change X] [--min-improvement R]
+//                          [--combine 0|1] [--align 0|1] [--free-poses 0|1]
+//                          [--truth-background 0|1] [--truth-noise SIGMA]
+// --min-change / --min-improvement: the gate's min_change_in_predicted / min_rms_improvement_rel;
+// what limits the accuracy (docs/figures.md): --combine 1 tracks the mean of the window's frames
+// (one observation per window), --align 0 reports cornerSubPix corners instead of the whole-board
+// alignment's, --free-poses 1 solves with one free pose per virtual board instead of the rigid
+// device model, --truth-background 1 gives the tracker the simulator's scene of each frame as its
+// background (a still-world reference), --truth-noise S replaces tracking by the true corners
+// plus S px of Gaussian noise. Each window also prints the tracked corners' RMS error against
+// the truth and the part of it common to the window's frames.
+// The scene moves with the frame index (time = frame / fps), the noise seeds are the frame
+// index: two runs print the same figures. The prior is taught at t = 0 from light-on frames
+// minus the simulator's scene of the same frame (as the live tracker's teach_from_ground_truth).
+// Exit code: 0, or 1 when a commit was worse than the calibration it replaced.
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <map>
+#include <string>
+#include <tuple>
+#include <vector>
+
+#include <opencv2/imgproc.hpp>
+
+#include "embedded_calibration_stereo/core/calibration/bundle_adjuster.h"
+#include "embedded_calibration_stereo/core/calibration/quality_gate.h"
+#include "embedded_calibration_stereo/core/calibration/stereo_accuracy.h"
+#include "embedded_calibration_stereo/core/sim/sim_rig.h"
+#include "embedded_calibration_stereo/core/tracker/board_teacher.h"
+#include "embedded_calibration_stereo/core/tracker/pattern_tracker.h"
+
+using namespace ecs;
+
+namespace {
+
+// A commit is worse when its combined error, hypot(misalignment RMS, bias RMS), is larger than
+// the replaced one's by more than this (px), as in drive_photo_live.test.
+constexpr double kWorsePx = 0.01;
+double combined(const StereoAccuracy& a) { return std::hypot(a.misalignment_px.rms, a.disparity_bias_px.rms); }
+
+struct Args {
+  std::string config;
+  double minutes = 10.0, period_s = 10.0, fps = 10.0;
+  int frames = 10, teach_frames = 5;
+  int combine = 0;  // 1: track the mean of the window's light-on frames (the scene moves, the boards do not)
+  int align = 1;    // whole-board alignment of the tracker (TrackerOptions::whole_board_alignment)
+  double min_improvement = GateOptions().min_rms_improvement_rel;
+  double min_change = 0.0;  // GateOptions::min_change_in_predicted
+  int free_poses = 0;       // 1: one free pose per virtual board instead of the rigid device model
+  int truth_background = 0;  // 1: the simulator's scene of each frame as its background (a still-world reference)
+  double truth_noise = -1;  // >= 0: the simulator's true corners plus this Gaussian noise instead of tracking
+};
+
+// The drift script: one event per `every` windows, cycling.
+struct DriftScript {
+  int step = 0;
+  double thermal_rate = 0.0, held_deg = 0.0, thermal_start = 0.0;
+  bool zoomed = false;
+  Eigen::Vector3d knock_rot = Eigen::Vector3d::Zero(), knock_trans = Eigen::Vector3d::Zero();
+
+  // Applies the next event at time t; returns its name.
+  std::string next(SimRig* sim, double t) {
+    DriftRequest r;
+    std::string what;
+    switch (step % 5) {
+      case 0:
+        zoomed = !zoomed;
+        what = zoomed ? "5 % zoom in" : "5 % zoom out";
+        break;
+      case 1:
+        thermal_rate = (step / 5) % 2 == 0 ? 0.01 : -0.01;
+        thermal_start = t;
+        what = "thermal rotation starts";
+        break;
+      case 2:
+        held_deg += thermal_rate * (t - thermal_start);
+        thermal_rate = 0.0;
+        what = "thermal rotation stops";
+        break;
+      case 3: {
+        const double s = (step / 5) % 2 == 0 ? 1.0 : -1.0;
+        knock_rot = Eigen::Vector3d(0.04, -0.03, 0.05) * s;
+        knock_trans = Eigen::Vector3d(0.0008, 0.0003, -0.0005) * s;
+        what = "knock";
+        break;
+      }
+      default:
+        what = "nothing";
+    }
+    r.focal_scale = zoomed ? 1.05 : 1.0;
+    r.thermal_rate_deg_per_s = thermal_rate;
+    // Held rotation (y, as the thermal rotation) of the ramps so far.
+    r.right_rotation_deg = Eigen::Vector3d(0.0, held_deg, 0.0);
+    if (step % 5 == 3) {
+      r.knock_rotation_deg = knock_rot;
+      r.knock_translation_m = knock_trans;
+    }
+    ++step;
+    const std::string refusal = sim->setDrift(r, t);
+    if (!refusal.empty()) std::fprintf(stderr, "drift refused: %s\n", refusal.c_str());
+    return what;
+  }
+};
+
+// Corner errors of a window against the truth: RMS over every tracked corner, and RMS over the
+// corners of their mean error in the window (the part common to the window's frames, which
+// more frames do not average out).
+struct WindowErrors {
+  std::map<std::tuple<int, int, int>, std::pair<cv::Point2d, int>> sums;
+  double sq = 0;
+  int n = 0;
+  void add(int camera, const std::vector<BoardCorners>& tracked, const std::vector<BoardCorners>& truth) {
+    for (const BoardCorners& b : tracked)
+      for (const BoardCorners& t : truth) {
+        if (t.board_id != b.board_id) continue;
+        for (size_t i = 0; i < b.size(); ++i)
+          for (size_t j = 0; j < t.size(); ++j)
+            if (t.corner_ids[j] == b.corner_ids[i]) {
+              const cv::Point2d e(b.u[i] - t.u[j], b.v[i] - t.v[j]);
+              sq += e.dot(e);
+              ++n;
+              auto& s = sums[{camera, b.board_id, b.corner_ids[i]}];
+              s.first += e;
+              ++s.second;
+            }
+      }
+  }
+  double rms() const { return n ? std::sqrt(sq / n) : 0.0; }
+  double commonRms() const {
+    double q = 0;
+    for (const auto& kv : sums) {
+      const cv::Point2d m = kv.second.first / kv.second.second;
+      q += m.dot(m);
+    }
+    return sums.empty() ? 0.0 : std::sqrt(q / sums.size());
+  }
+};
+
+void print(const char* what, const StereoAccuracy& a) {
+  std::printf("    %s misalignment %.4f px, bias %.4f px, depth error %.3f / %.3f / %.3f / %.3f %% at 1/2/5/10 m\n",
+              what, a.misalignment_px.rms, a.disparity_bias_px.rms, a.at_depth[0].depth_error_pct.rms,
+              a.at_depth[1].depth_error_pct.rms, a.at_depth[2].depth_error_pct.rms, a.at_depth[3].depth_error_pct.rms);
+}
+
+PatternPrior teach(const SimRig& sim, double fps, int frames) {
+  std::vector<TeachFrame> left, right;
+  for (int k = 0; k < frames; ++k) {
+    const SimFrame f = sim.render(k / fps, 1.0, 900000 + k);
+    left.push_back({f.left, f.left_scene});
+    right.push_back({f.right, f.right_scene});
+  }
+  const StereoRig& rig = sim.config().rig;
+  PatternPrior prior;
+  prior.cameras.push_back(
+      teachCamera(left, BoardLayout::device(sim.virtualBoards(), rig.left, Eigen::Isometry3d::Identity()), "left").prior);
+  prior.cameras.push_back(
+      teachCamera(right, BoardLayout::device(sim.virtualBoards(), rig.right, rig.right_from_left), "right").prior);
+  return prior;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  Args args;
+  if (const char* dir = std::getenv("ECS_SOURCE_DIR")) args.config = std::string(dir) + "/config/drive_photo.yaml";
+  for (int i = 1; i < argc; ++i) {
+    const auto value = [&]() -> const char* {
+      if (i + 1 >= argc) {
+        std::fprintf(stderr, "%s needs a value\n", argv[i]);
+        std::exit(2);
+      }
+      return argv[++i];
+    };
+    if (!std::strcmp(argv[i], "--config")) args.config = value();
+    else if (!std::strcmp(argv[i], "--minutes")) args.minutes = std::atof(value());
+    else if (!std::strcmp(argv[i], "--period")) args.period_s = std::atof(value());
+    else if (!std::strcmp(argv[i], "--frames")) args.frames = std::atoi(value());
+    else if (!std::strcmp(argv[i], "--fps")) args.fps = std::atof(value());
+    else if (!std::strcmp(argv[i], "--teach-frames")) args.teach_frames = std::atoi(value());
+    else if (!std::strcmp(argv[i], "--combine")) args.combine = std::atoi(value());
+    else if (!std::strcmp(argv[i], "--align")) args.align = std::atoi(value());
+    else if (!std::strcmp(argv[i], "--truth-noise")) args.truth_noise = std::atof(value());
+    else if (!std::strcmp(argv[i], "--min-improvement")) args.min_improvement = std::atof(value());
+    else if (!std::strcmp(argv[i], "--min-change")) args.min_change = std::atof(value());
+    else if (!std::strcmp(argv[i], "--free-poses")) args.free_poses = std::atoi(value());
+    else if (!std::strcmp(argv[i], "--truth-background")) args.truth_background = std::atoi(value());
+    else {
+      std::fprintf(stderr, "usage: bench_calibrate_moving [--config FILE] [--minutes M] [--period S] [--frames N] "
+                           "[--fps F] [--teach-frames K]   (default config: $ECS_SOURCE_DIR/config/drive_photo.yaml)\n");
+      return 2;
+    }
+  }
+  if (args.config.empty() || args.frames < 1 || !(args.period_s > args.frames / args.fps)) {
+    std::fprintf(stderr, "bench_calibrate_moving: need --config (or ECS_SOURCE_DIR), frames >= 1 and a period longer "
+                         "than a window\n");
+    return 2;
+  }
+  const SimRigConfig config = loadSimRigConfig(args.config);
+  SimRig sim(config);
+  const auto t0 = std::chrono::steady_clock::now();
+  const PatternPrior prior = teach(sim, args.fps, args.teach_frames);
+  std::printf("%s: %zu movers; taught %zu + %zu boards from %d frames; window of %d frames at %.0f fps every %.0f s "
+              "for %.1f min\n",
+              args.config.c_str(), config.scene.movers.size(), prior.cameras[0].boards.size(),
+              prior.cameras[1].boards.size(), args.teach_frames, args.frames, args.fps, args.period_s, args.minutes);
+
+  TrackerOptions tracker_options;
+  tracker_options.whole_board_alignment = args.align != 0;
+  PatternTracker tracker(prior, tracker_options);
+  BundleAdjustmentConfig terms;
+  terms.estimate_tangential = true;  // the scenario's lenses have p1, p2
+  BundleAdjustmentOptions adjustment;
+  if (args.free_poses) adjustment.board_pose_mode = BoardPoseMode::kSharedAcrossFrames;
+  const BundleAdjuster adjuster(adjustment, terms);
+  GateOptions gate_options;
+  gate_options.min_rms_improvement_rel = args.min_improvement;
+  gate_options.min_change_in_predicted = args.min_change;
+  const QualityGate gate{gate_options};
+  const std::vector<VirtualBoard> boards = config.device.virtualBoards();
+  StereoRig in_force = config.rig;  // the head starts calibrated
+  DriftScript drift;
+  int windows = 0, commits = 0, worse = 0, rejected = 0;
+  double worst_after_mis = 0, worst_after_bias = 0;
+  const int window_count = static_cast<int>(args.minutes * 60.0 / args.period_s);
+  for (int w = 1; w <= window_count; ++w) {
+    const double t_start = w * args.period_s;
+    // One drift event every other window, half a period before the window (the light is off).
+    std::string event = "";
+    if (w % 2 == 0) event = drift.next(&sim, t_start - 0.5 * args.period_s);
+    std::vector<StereoObservation> frames;
+    SimFrame last;
+    cv::Mat sum[2];
+    int corners = 0, truth_corners = 0;
+    WindowErrors errors;
+    for (int k = 0; k < args.frames; ++k) {
+      const double t = t_start + k / args.fps;
+      const uint64_t frame_index = static_cast<uint64_t>(std::llround(t * args.fps));
+      last = sim.render(t, 1.0, frame_index);
+      if (args.combine) {
+        for (int c = 0; c < 2; ++c) {
+          if (sum[c].empty()) sum[c] = cv::Mat::zeros(last.left.size(), CV_32FC1);
+          cv::accumulate(c == 0 ? last.left : last.right, sum[c]);
+        }
+        if (k + 1 < args.frames) continue;
+        cv::Mat mean[2];
+        for (int c = 0; c < 2; ++c) sum[c].convertTo(mean[c], CV_8U, 1.0 / args.frames);
+        last.left = mean[0];
+        last.right = mean[1];
+      }
+      if (args.truth_background) tracker.setBackground(last.left_scene, last.right_scene);
+      StereoObservation obs = tracker.trackStereo(last.left, last.right, t);
+      if (args.truth_noise >= 0) {
+        obs = last.observations;
+        cv::RNG rng(frame_index);
+        for (auto* side : {&obs.left, &obs.right})
+          for (BoardCorners& b : *side)
+            for (size_t i = 0; i < b.size(); ++i) {
+              b.u[i] += static_cast<float>(rng.gaussian(args.truth_noise));
+              b.v[i] += static_cast<float>(rng.gaussian(args.truth_noise));
+            }
+      }
+      for (const auto& b : obs.left) corners += b.size();
+      for (const auto& b : obs.right) corners += b.size();
+      for (const auto& b : last.observations.left) truth_corners += b.size();
+      for (const auto& b : last.observations.right) truth_corners += b.size();
+      errors.add(0, obs.left, last.observations.left);
+      errors.add(1, obs.right, last.observations.right);
+      frames.push_back(std::move(obs));
+    }
+    ++windows;
+    CalibrationInput input;
+    input.frames = &frames;
+    input.device = args.free_poses ? nullptr : &config.device;
+    input.boards = &boards;
+    input.image_width = config.rig.left.width;
+    input.image_height = config.rig.left.height;
+    input.in_force = in_force;
+    const BundleAdjustmentSummary candidate = adjuster.Solve(input);
+    GateDecision decision;
+    if (candidate.success) {
+      const BundleAdjustmentSummary in_force_fit =
+          evaluateFixedCalibration(in_force, frames, boards, adjuster.options(),
+                                   args.free_poses ? nullptr : &config.device);
+      decision = gate.evaluate(candidate, &in_force_fit);
+    } else {
+      decision.reason = "solve failed: " + candidate.message;
+    }
+    const StereoAccuracy old_a = evaluateStereoAccuracy(in_force, last.truth);
+    std::printf("t %6.1f s%s%s: %d of %d corners tracked (%.3f px RMS, %.3f px common to the window); %s\n", t_start,
+                event.empty() ? "" : ", after ", event.c_str(), corners, truth_corners, errors.rms(),
+                errors.commonRms(), decision.reason.c_str());
+    if (!decision.accepted) {
+      ++rejected;
+      print("in force:", old_a);
+      continue;
+    }
+    ++commits;
+    const StereoAccuracy new_a = evaluateStereoAccuracy(candidate.rig, last.truth);
+    const bool is_worse = combined(new_a) > combined(old_a) + kWorsePx;
+    worse += is_worse;
+    print("replaced:", old_a);
+    print(is_worse ? "new (WORSE):" : "new:", new_a);
+    if (candidate.covariance_ok) print("predicted:", predictStereoAccuracy(candidate.rig, candidate.rig_covariance));
+    worst_after_mis = std::max(worst_after_mis, new_a.misalignment_px.rms);
+    worst_after_bias = std::max(worst_after_bias, new_a.disparity_bias_px.rms);
+    in_force = candidate.rig;
+  }
+  const double minutes =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count() / 60.0;
+  std::printf("%d windows, %d commits, %d rejected, %d commits worse than the calibration they replaced; worst "
+              "committed misalignment %.4f px, bias %.4f px (%.1f min wall)\n",
+              windows, commits, rejected, worse, worst_after_mis, worst_after_bias, minutes);
+  return worse > 0 ? 1 : 0;
+}
