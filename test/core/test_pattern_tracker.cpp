@@ -395,7 +395,8 @@ TEST(PatternTracker, AcceptsBgrAndRgbAndRejectsOtherTypes) {
 
 TEST(PatternTracker, PriorRoundTripsThroughYaml) {
   const SimRig sim(loadConfig());
-  const PatternPrior prior = teachFromSim(sim, 0.0).prior;
+  PatternPrior prior = teachFromSim(sim, 0.0).prior;
+  prior.cameras[0].boards[0].device_pattern = false;  // not the default: must be written
   const std::string path = ::testing::TempDir() + "/ecs_pattern_prior.yaml";
   writePatternPrior(path, prior);
   const PatternPrior read = readPatternPrior(path);
@@ -406,6 +407,8 @@ TEST(PatternTracker, PriorRoundTripsThroughYaml) {
       const BoardPrior &x = prior.cameras[c].boards[b], &y = read.cameras[c].boards[b];
       EXPECT_EQ(x.board_id, y.board_id);
       EXPECT_EQ(x.sign, y.sign);
+      EXPECT_EQ(x.device_pattern, y.device_pattern);
+      EXPECT_DOUBLE_EQ(x.edge_blur_px, y.edge_blur_px);
       EXPECT_LT(cv::norm(x.outer_mean, y.outer_mean, cv::NORM_INF), 1e-9);
       ASSERT_EQ(x.offsets.size(), y.offsets.size());
       for (size_t i = 0; i < x.offsets.size(); ++i) EXPECT_LT(cv::norm(x.offsets[i] - y.offsets[i]), 1e-6);
@@ -468,7 +471,7 @@ TEST(PatternTracker, PlainChessboardTeachAndTrack) {
     sq += std::pow(cv::norm(cv::Point2f(found[0].u[i], found[0].v[i]) - truth[found[0].corner_ids[i]]), 2);
   const double rms = std::sqrt(sq / std::max<size_t>(1, found[0].size()));
   std::printf("  plain 7x5 board: %zu corners, RMS %.4f px\n", found[0].size(), rms);
-  // Refined on the raw image (no background, no smoothing): the bound leaves room for
+  // Aligned on the raw image (no background): the bound leaves room for
   // cv::cornerSubPix's own error floor on sharp anti-aliased edges (see test_sim_rig).
   EXPECT_LE(rms, 0.1);
 }

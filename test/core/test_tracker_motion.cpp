@@ -84,10 +84,9 @@ MotionRun runWindows(SimRig* sim, Background mode, int first_frame) {
   return run;
 }
 
-// RMS bound against the truth. The target is 0.05 px; in the hand-held room (walls 1.5-4 m away,
-// brick photographs with mortar lines along the boards' edges) with the real-head optics the
-// tracker reaches 0.055 px (docs/figures.md), so that scenario is held to 0.06 px.
-double rmsBoundPx(const std::string& scenario) { return scenario == "handheld_photo" ? 0.06 : 0.05; }
+// RMS bound against the truth: the target, 0.05 px, in both scenarios (the hand-held room's
+// brick walls, with mortar lines along the boards' edges, are the harder one).
+constexpr double kRmsBoundPx = 0.05;
 
 void expectAccurate(const std::string& scenario, Background mode, int first_frame) {
   SimRig sim(loadSimRigConfig(kConfigDir + scenario + ".yaml"));
@@ -97,7 +96,7 @@ void expectAccurate(const std::string& scenario, Background mode, int first_fram
               mode == Background::kStale ? "stale (3-10 frames old)" : "no", run.score.str().c_str(),
               run.stale_frames, run.tracked_frames);
   EXPECT_GE(run.score.foundFraction(), 0.99) << run.score.str();
-  EXPECT_LE(run.score.rms(), rmsBoundPx(scenario)) << run.score.str();
+  EXPECT_LE(run.score.rms(), kRmsBoundPx) << run.score.str();
   EXPECT_EQ(run.score.wrong, 0u) << run.score.str();
   if (mode == Background::kStale) {
     EXPECT_EQ(run.stale_frames, run.tracked_frames);

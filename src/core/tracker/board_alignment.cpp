@@ -5,7 +5,9 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <cstdio>
 #include <cstdlib>
+#include <limits>
 #include <opencv2/imgproc.hpp>
 
 #include "board_geometry.h"
@@ -49,7 +51,13 @@ namespace {
 
 // The taught offsets smoothed by a cubic polynomial of the grid coordinates: the lens distortion
 // left after removing the board's homography is smooth over one board, while each taught corner
-// carries its own refinement error, which the fit averages down.
+// carries its own refinement error, which the fit averages down. A printed board is not always
+// smooth (printing, mounting, a lens beyond the cubic over a large board): when the cubic leaves
+// more than kSmoothResidualPx RMS there, its taught corners are kept as they are.
+constexpr double kSmoothResidualPx = 0.1;
+// Side (px) of the alignment's brightness cells.
+constexpr double kCellPx = 3.5;
+
 std::vector<cv::Point2f> smoothOffsets(const BoardPrior& board) {
   const int n = board.cornerCount();
   if (n < 20) return board.offsets;
@@ -64,6 +72,8 @@ std::vector<cv::Point2f> smoothOffsets(const BoardPrior& board) {
   }
   const Eigen::MatrixXd coef = a.colPivHouseholderQr().solve(rhs);
   const Eigen::MatrixXd fit = a * coef;
+  if (!board.device_pattern && std::sqrt((fit - rhs).squaredNorm() / n) > kSmoothResidualPx) return board.offsets;
+
   std::vector<cv::Point2f> out(n);
   for (int id = 0; id < n; ++id) out[id] = cv::Point2f(static_cast<float>(fit(id, 0)), static_cast<float>(fit(id, 1)));
   return out;
@@ -71,7 +81,7 @@ std::vector<cv::Point2f> smoothOffsets(const BoardPrior& board) {
 
 }  // namespace
 
-AlignmentTemplate buildAlignmentTemplate(const BoardPrior& taught_board, double blur_px) {
+AlignmentTemplate buildAlignmentTemplate(const BoardPrior& taught_board, double blur_px, int stride) {
   AlignmentTemplate t;
   BoardPrior board = taught_board;
   board.offsets = smoothOffsets(taught_board);
@@ -92,22 +102,29 @@ AlignmentTemplate buildAlignmentTemplate(const BoardPrior& taught_board, double 
   for (const cv::Point2f& p : taught)
     t.corners.emplace_back(static_cast<float>((p.x - mean.x) / t.scale), static_cast<float>((p.y - mean.y) / t.scale));
 
-  // The pattern region used: the squares and the inner half of the white margin (its outer edge
-  // against the housing depends on the device).
-  const double g_lo = -1.5, gx_hi = board.cols + 0.5, gy_hi = board.rows + 0.5;
+  // The pattern region used: for the device's boards the squares and the inner half of the white
+  // margin (its outer edge against the housing depends on the device); for a printed board the
+  // inner corners' lattice and half a square beyond it (printed boards often have cut outer
+  // squares and a thin margin).
+  const bool margin = board.device_pattern;
+  const double beyond = margin ? 1.5 : 0.5;
+  const double g_lo = -beyond, gx_hi = board.cols - 1 + beyond, gy_hi = board.rows - 1 + beyond;
   float umin = 1e9f, vmin = 1e9f, umax = -1e9f, vmax = -1e9f;
   for (double gx : {g_lo, gx_hi})
     for (double gy : {g_lo, gy_hi}) {
       const cv::Point2f p = applyHomography(h0, gx, gy) + offsetAt(board, gx, gy);
       umin = std::min(umin, p.x), vmin = std::min(vmin, p.y), umax = std::max(umax, p.x), vmax = std::max(vmax, p.y);
     }
-  // Samples within 2.5 blur widths of an edge, on every other pixel (a quincunx): the scene's pull
-  // is spatially correlated over a few pixels, so the skipped pixels would add little but time.
+  // Samples within 2.5 blur widths of an edge, on a sparse lattice (every other pixel: a
+  // quincunx): the scene's pull is spatially correlated over a few pixels, so the skipped pixels
+  // would add little but time.
   const double reach = 2.5 * blur_px;
-  // Cells: a third of a square (and of the margin) on a side. One level per square leaves the
-  // scene's variation inside a square to pull the edges; finer cells would start to take the
-  // edges' own profile.
-  const int split = 3;
+  // Cells: squares of about kCellPx on a side, inside one square each (their borders lie on the
+  // squares' edges). One level per square leaves the scene's variation inside a square to pull
+  // the edges; a cell's level takes out the scene's mean there, so small cells leave less of the
+  // scene's texture to correlate with the edges. Much smaller, a cell would hold only the samples
+  // of one edge's profile, and its level would take that profile (and the position) out.
+  const int split = std::min(8, std::max(1, static_cast<int>(std::lround(board.square_px / kCellPx))));
   const int ncx = (board.cols + 3) * split, ncy = (board.rows + 3) * split;
   t.cells = ncx * ncy;
   const auto gridOf = [&](double u, double v) {
@@ -125,13 +142,10 @@ AlignmentTemplate buildAlignmentTemplate(const BoardPrior& taught_board, double 
     return cy * ncx + cx;
   };
   // T at taught pixel (u, v); false outside the pattern region or (near_edge) too far from an edge.
+  int nearest_corner = 0;
   const auto valueAt = [&](double u, double v, bool near_edge, double* value) {
-    cv::Point2f g = applyHomography(h0_inv, u, v);
-    for (int k = 0; k < 3; ++k) {
-      const cv::Point2f o = offsetAt(board, g.x, g.y);
-      g = applyHomography(h0_inv, u - o.x, v - o.y);
-    }
-    if (g.x < g_lo || g.y < g_lo || g.x > gx_hi || g.y > gy_hi) return false;
+    const cv::Point2f g = gridOf(u, v);
+    if (near_edge && (g.x < g_lo || g.y < g_lo || g.x > gx_hi || g.y > gy_hi)) return false;
     // Pixels per square along each grid axis here.
     const double sx = cv::norm(applyHomography(h0, g.x + 0.5, g.y) - applyHomography(h0, g.x - 0.5, g.y));
     const double sy = cv::norm(applyHomography(h0, g.x, g.y + 0.5) - applyHomography(h0, g.x, g.y - 0.5));
@@ -140,18 +154,21 @@ AlignmentTemplate buildAlignmentTemplate(const BoardPrior& taught_board, double 
     const double dx = (g.x - kx) * sx, dy = (g.y - ky) * sy;  // to the nearest inner edges
     const double bx = std::min(g.x + 1.0, board.cols - static_cast<double>(g.x)) * sx;  // inside: > 0
     const double by = std::min(g.y + 1.0, board.rows - static_cast<double>(g.y)) * sy;
-    if (near_edge && std::min({std::abs(dx), std::abs(dy), std::abs(bx), std::abs(by)}) > reach) return false;
+    const double to_outer = margin ? std::min(std::abs(bx), std::abs(by)) : 1e9;
+    if (near_edge && std::min({std::abs(dx), std::abs(dy), to_outer}) > reach) return false;
+    nearest_corner = ky * board.cols + kx;
     const double cx = ((kx & 1) ? -1.0 : 1.0) * (2.0 * phi(dx, blur_px) - 1.0);
     const double cy = ((ky & 1) ? -1.0 : 1.0) * (2.0 * phi(dy, blur_px) - 1.0);
-    const double inside = phi(bx, blur_px) * phi(by, blur_px);
+    const double inside = margin ? phi(bx, blur_px) * phi(by, blur_px) : 1.0;
     *value = inside * board.sign * cx * cy + (1.0 - inside);
     return true;
   };
   for (int v = static_cast<int>(std::floor(vmin)) - 2; v <= static_cast<int>(std::ceil(vmax)) + 2; ++v) {
     for (int u = static_cast<int>(std::floor(umin)) - 2; u <= static_cast<int>(std::ceil(umax)) + 2; ++u) {
-      if ((u + v) & 1) continue;
+      if (stride > 1 && (stride == 2 ? ((u + v) & 1) != 0 : (u % stride != 0 || v % stride != 0))) continue;
       double value = 0.0;
       if (!valueAt(u, v, true, &value)) continue;
+      t.corner.push_back(nearest_corner);
       double vx0, vx1, vy0, vy1;  // template gradient by central differences (half a pixel)
       valueAt(u - 0.5, v, false, &vx0), valueAt(u + 0.5, v, false, &vx1);
       valueAt(u, v - 0.5, false, &vy0), valueAt(u, v + 0.5, false, &vy1);
@@ -161,6 +178,26 @@ AlignmentTemplate buildAlignmentTemplate(const BoardPrior& taught_board, double 
       t.cell.push_back(cellOf(u, v));
     }
   }
+  // Number the cells that hold samples 0..cells-1 (the solver's work and memory follow them).
+  std::vector<int> used = t.cell;
+  std::sort(used.begin(), used.end());
+  used.erase(std::unique(used.begin(), used.end()), used.end());
+  for (int& c : t.cell) c = static_cast<int>(std::lower_bound(used.begin(), used.end(), c) - used.begin());
+  t.cells = static_cast<int>(used.size());
+  // Samples in cell order: the solver's per-cell sums are then written in sequence (the cells
+  // are small and numbered along the grid, so the image is still read locally).
+  std::vector<size_t> order(t.ref.size());
+  for (size_t k = 0; k < order.size(); ++k) order[k] = k;
+  std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) { return t.cell[a] < t.cell[b]; });
+  AlignmentTemplate sorted = t;
+  for (size_t k = 0; k < order.size(); ++k) {
+    sorted.ref[k] = t.ref[order[k]];
+    sorted.value[k] = t.value[order[k]];
+    sorted.grad[k] = t.grad[order[k]];
+    sorted.cell[k] = t.cell[order[k]];
+    sorted.corner[k] = t.corner[order[k]];
+  }
+  t = std::move(sorted);
   return t;
 }
 
@@ -191,15 +228,21 @@ AlignmentResult alignBoard(const AlignmentTemplate& t, const cv::Mat& gray, cons
   const size_t n = t.ref.size();
   std::vector<float> absres;
   absres.reserve(n);
+  Eigen::Matrix<double, Eigen::Dynamic, kP> rows;
+  Eigen::VectorXd rhs;
+  // The image at each sample in the last pass (NaN outside it).
+  std::vector<float> vals(n);
   double huber = warm ? start.huber : 1e30;
   for (int it = warm ? 1 : 0; it <= max_steps; ++it) {
     // Pass 0 fits only the photometric terms (the start map is close): parameters first..8.
     const bool geometric = it > 0;
     const int first = geometric ? 0 : kP - 1;
-    double hs[kP][kP] = {};  // upper triangle used
-    double gs[kP] = {};
+    // Weighted Jacobian rows (sqrt(w) j) and residuals, multiplied out below in one product.
+    rows.resize(static_cast<Eigen::Index>(n), kP);
+    rhs.resize(static_cast<Eigen::Index>(n));
     std::memset(sums.data(), 0, sums.size() * sizeof(CellSums));
     absres.clear();
+    std::fill(vals.begin(), vals.end(), std::numeric_limits<float>::quiet_NaN());
     int used = 0;
     double j[kP] = {};
     for (size_t k = 0; k < n; ++k) {
@@ -211,6 +254,7 @@ AlignmentResult alignBoard(const AlignmentTemplate& t, const cv::Mat& gray, cons
       const double tv = t.value[k];
       const int c = t.cell[k];
       const double r = val - (level[c] + b * tv);
+      vals[k] = val;
       const double ar = std::abs(r);
       absres.push_back(static_cast<float>(ar));
       const double wr = ar <= huber ? 1.0 : huber / ar;
@@ -231,12 +275,12 @@ AlignmentResult alignBoard(const AlignmentTemplate& t, const cv::Mat& gray, cons
       CellSums& cs = sums[c];
       cs.w += wr;
       cs.wr += wr * r;
-      for (int p = first; p < kP; ++p) {
-        const double wj = wr * j[p];
-        for (int q = p; q < kP; ++q) hs[p][q] += wj * j[q];
-        gs[p] += wj * r;
-        cs.wj[p] += wj;
+      const double sw = std::sqrt(wr);
+      for (int p = 0; p < kP; ++p) {
+        rows(used, p) = sw * j[p];
+        cs.wj[p] += wr * j[p];
       }
+      rhs(used) = sw * r;
       ++used;
     }
     if (used < 50) return result;
@@ -245,9 +289,12 @@ AlignmentResult alignBoard(const AlignmentTemplate& t, const cv::Mat& gray, cons
     huber = std::max(1.0, 1.345 * 1.4826 * absres[absres.size() / 2]);
     Mat full = Mat::Identity();
     Vec g = Vec::Zero();
+    const auto top = rows.topRows(used);
+    const Mat hs = top.transpose() * top;
+    const Vec gs = top.transpose() * rhs.head(used);
     for (int p = first; p < kP; ++p) {
       g[p] = gs[p];
-      for (int q = p; q < kP; ++q) full(p, q) = full(q, p) = hs[p][q];
+      for (int q = first; q < kP; ++q) full(p, q) = hs(p, q);
     }
     // Eliminate the cell levels (their Jacobian is -1): H -= wj wj^T / w, g -= wj wr / w.
     for (const CellSums& cs : sums) {
@@ -283,12 +330,27 @@ AlignmentResult alignBoard(const AlignmentTemplate& t, const cv::Mat& gray, cons
       }
       // Near-linear within the edge blur: after a step this small the next one would be ~100
       // times smaller.
-      if (shift < 0.03) break;
+      if (shift < 0.03) {
+        result.converged = true;
+        break;
+      }
     }
   }
   result.huber = huber;
   result.a = cv::Matx33d(h[0], h[1], h[2], h[3], h[4], h[5], h[6], h[7], 1.0);
   result.contrast = b;
+  // Each corner's own contrast: sum T r / sum T^2 over its samples, r the image minus its cell's
+  // level (the image as the last pass sampled it: one step from the result, too small to matter).
+  std::vector<double> tr(t.corners.size(), 0.0), tt(t.corners.size(), 0.0);
+  for (size_t k = 0; k < n; ++k) {
+    if (std::isnan(vals[k])) continue;
+    const double tv = t.value[k];
+    tr[t.corner[k]] += tv * (vals[k] - level[t.cell[k]]);
+    tt[t.corner[k]] += tv * tv;
+  }
+  result.corner_contrast.assign(t.corners.size(), std::numeric_limits<float>::quiet_NaN());
+  for (size_t id = 0; id < t.corners.size(); ++id)
+    if (tt[id] > 0 && b > 0) result.corner_contrast[id] = static_cast<float>(tr[id] / tt[id] / b);
   result.ok = std::isfinite(b) && b > 0;
   return result;
 }

@@ -10,12 +10,12 @@
 // homography A (zoom, thermal drift and knocks move a board by a map that is a homography to
 // well below the accuracy asked of the tracker over one board), seen as
 //   I(A(y)) = a_cell(y) + b * T(y) + scene,
-// where T is the checker pattern with its white margin, blurred like a lens blurs it, in the
-// taught image; b is the contrast and a_cell one brightness per cell (a third of a square on a
+// where T is the checker pattern (with its white margin for the device's boards), blurred like a
+// lens blurs it, in the taught image; b is the contrast and a_cell one brightness per cell (an eighth of a square on a
 // side): the scene's mean there, exposure and vignetting. A scene brighter on one side of an
 // edge than on the other would move that edge; the cell levels take that step out of the fit.
-// The taught corners' offsets are smoothed by a cubic over the board first (the distortion is
-// smooth, each taught corner's own refinement error is not). A is
+// The taught corners' offsets are smoothed by a cubic over the board first when it fits them (the
+// distortion is smooth, each taught corner's own refinement error is not). A is
 // found by Gauss-Newton (forward additive, with the fitted pattern's gradient in place of the
 // image's, so the scene's texture cannot steer the steps) with Huber weights, so a scene
 // edge or a moving object counts as little as a few pixels of noise.
@@ -35,15 +35,18 @@ struct AlignmentTemplate {
   std::vector<cv::Point2f> ref;      // samples, normalised taught coordinates
   std::vector<float> value;          // T at each sample, in [-1, 1] (+1 bright)
   std::vector<cv::Point2f> grad;     // dT / d(normalised taught coordinates)
-  std::vector<int> cell;             // brightness cell of each sample (a third of a square on a side)
+  std::vector<int> cell;             // brightness cell of each sample (an eighth of a square on a side)
   int cells = 0;
   std::vector<cv::Point2f> corners;  // corner id -> normalised taught coordinates
+  std::vector<int> corner;           // the corner id nearest to each sample
   bool empty() const { return ref.empty(); }
 };
 
-// Samples taught pixels within 2.5 blur widths of an edge of the pattern (squares and the inner
-// half of the margin), every other pixel. blur_px: standard deviation of the expected edge blur.
-AlignmentTemplate buildAlignmentTemplate(const BoardPrior& board, double blur_px);
+// Samples taught pixels within 2.5 blur widths of an edge of the pattern: the squares and the
+// inner half of the margin for the device's boards, the inner corners' lattice and half a square
+// beyond it for a printed board (BoardPrior::device_pattern), every other pixel (stride 2, a quincunx) or every
+// stride-th pixel of every stride-th row. blur_px: standard deviation of the expected edge blur.
+AlignmentTemplate buildAlignmentTemplate(const BoardPrior& board, double blur_px, int stride = 2);
 
 struct AlignmentResult {
   bool ok = false;
@@ -52,6 +55,10 @@ struct AlignmentResult {
   double huber = 0.0;       // robust residual scale of the last pass, grey levels
   int samples = 0;
   int passes = 0;
+  bool converged = false;  // the last step moved the board's corners by less than 0.03 px
+  // Per corner id: the pattern's contrast fitted on the samples nearest that corner alone, as a
+  // fraction of `contrast` (what an occluder hides); NaN for corners without samples.
+  std::vector<float> corner_contrast;
 };
 
 // gray: CV_8UC1 image. start.a: the starting map (within a pixel or so). With warm (the last

@@ -84,7 +84,7 @@ void writePatternPrior(const std::string& path, const PatternPrior& prior) {
          << "board_id" << b.board_id << "cols" << b.cols << "rows" << b.rows << "outer_mean" << mean
          << "outer_modes" << (b.outer_modes.empty() ? cv::Mat(0, 8, CV_64F) : b.outer_modes) << "outer_sigma"
          << sigma << "offsets" << offsets << "sign" << b.sign << "contrast" << b.contrast << "square_px"
-         << b.square_px << "}";
+         << b.square_px << "device_pattern" << static_cast<int>(b.device_pattern) << "edge_blur_px" << b.edge_blur_px << "}";
     }
     fs << "]"
        << "}";
@@ -137,6 +137,20 @@ BoardPrior readBoard(const cv::FileNode& node, const std::string& path) {
   b.sign = readInt(node, "sign", path);
   b.contrast = readPositive(node, "contrast", path);
   b.square_px = readPositive(node, "square_px", path);
+  // Optional (priors written before it are the device's): 1 for the device's boards, 0 for a
+  // printed chessboard.
+  const cv::FileNode device = node["device_pattern"];
+  if (!device.empty() && !device.isNone()) {
+    if (!device.isInt() || (static_cast<int>(device) != 0 && static_cast<int>(device) != 1))
+      throw ConfigError(path + ".device_pattern", "must be 0 or 1");
+    b.device_pattern = static_cast<int>(device) == 1;
+  }
+  const cv::FileNode blur = node["edge_blur_px"];
+  if (!blur.empty() && !blur.isNone()) {
+    if (!(blur.isReal() || blur.isInt()) || !(static_cast<double>(blur) >= 0))
+      throw ConfigError(path + ".edge_blur_px", "must be a number >= 0");
+    b.edge_blur_px = static_cast<double>(blur);
+  }
   const std::string problem = b.validate();
   if (!problem.empty()) throw ConfigError(path, problem);
   return b;

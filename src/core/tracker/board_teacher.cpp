@@ -228,6 +228,56 @@ std::vector<std::vector<cv::Point2f>> identify(const std::vector<Detection>& det
   return out;
 }
 
+// Edge blur (px, standard deviation of a Gaussian edge profile, pixel area included) of a taught
+// board: across the middle of every edge between two neighbouring corners, the profile's
+// derivative is measured along the edge's normal and its spread taken (second moment, within
+// +-3 px); the median over the edges. 0 when nothing could be measured.
+double measureEdgeBlur(const cv::Mat& gray, const std::vector<cv::Point2f>& corners, int cols, int rows) {
+  std::vector<double> sigmas;
+  const int half = 12;            // samples each side, a quarter pixel apart
+  const float step = 0.25f;
+  for (int r = 0; r < rows; ++r) {
+    for (int c = 0; c < cols; ++c) {
+      for (int dir = 0; dir < 2; ++dir) {
+        const int nc = c + (dir == 0), nr = r + (dir == 1);
+        if (nc >= cols || nr >= rows) continue;
+        const cv::Point2f a = corners[r * cols + c], b = corners[nr * cols + nc];
+        const cv::Point2f m = 0.5f * (a + b), e = b - a;
+        const float len = static_cast<float>(cv::norm(e));
+        if (len < 8) continue;
+        const cv::Point2f n(-e.y / len, e.x / len);
+        std::vector<double> profile;
+        bool inside = true;
+        for (int k = -half; k <= half && inside; ++k) {
+          const cv::Point2f p = m + n * (k * step);
+          if (p.x < 1 || p.y < 1 || p.x > gray.cols - 2 || p.y > gray.rows - 2) inside = false;
+          else {
+            cv::Mat patch;
+            cv::getRectSubPix(gray, cv::Size(1, 1), p, patch, CV_32F);
+            profile.push_back(patch.at<float>(0, 0));
+          }
+        }
+        if (!inside) continue;
+        const double sign = profile.back() > profile.front() ? 1.0 : -1.0;
+        double w = 0, w1 = 0, w2 = 0;
+        for (size_t k = 1; k < profile.size(); ++k) {
+          const double d = std::max(0.0, sign * (profile[k] - profile[k - 1]));
+          const double t = (static_cast<double>(k) - 0.5 - half) * step;
+          w += d, w1 += d * t, w2 += d * t * t;
+        }
+        if (w <= 10) continue;
+        const double mean = w1 / w;
+        // Bilinear sampling along a line adds about a third of a pixel of spread; take it out.
+        const double var = w2 / w - mean * mean - 0.1;
+        if (var > 0) sigmas.push_back(std::sqrt(var));
+      }
+    }
+  }
+  if (sigmas.size() < 4) return 0.0;
+  std::nth_element(sigmas.begin(), sigmas.begin() + sigmas.size() / 2, sigmas.end());
+  return sigmas[sigmas.size() / 2];
+}
+
 void learnBoard(const VirtualBoard& vb, const std::vector<std::vector<cv::Point2f>>& per_frame,
                 const std::vector<cv::Mat>& light_on, BoardPrior* prior) {
   prior->board_id = vb.virtual_id;
@@ -267,6 +317,15 @@ void learnBoard(const VirtualBoard& vb, const std::vector<std::vector<cv::Point2
   }
   prior->offsets = offsets;
   prior->square_px = spacing;
+  std::vector<double> blurs;
+  for (int f = 0; f < frames; ++f) {
+    const double blur = measureEdgeBlur(light_on[f], per_frame[f], vb.cols, vb.rows);
+    if (blur > 0) blurs.push_back(blur);
+  }
+  if (!blurs.empty()) {
+    std::nth_element(blurs.begin(), blurs.begin() + blurs.size() / 2, blurs.end());
+    prior->edge_blur_px = blurs[blurs.size() / 2];
+  }
 
   // Polarity and contrast of the saddles in the light-on frames (scene included).
   const int box = std::max(1, static_cast<int>(std::lround(0.12 * spacing)));
@@ -373,6 +432,7 @@ TeachResult teachCamera(const std::vector<TeachFrame>& frames, const BoardLayout
     }
     BoardPrior prior;
     learnBoard(layout.boards[i], per_board[i], on_frames[i], &prior);
+    prior.device_pattern = layout.has_camera;
     result.prior.boards.push_back(prior);
   }
   if (result.prior.boards.empty()) {

@@ -19,6 +19,11 @@ using tracker::gridPoint;
 
 namespace {
 
+// Edge blur (px) of the coarse alignment template; the image is blurred to match it.
+constexpr double kCoarseBlurPx = 3.0;
+// Fraction of the board's fitted contrast a corner's own samples must show to be reported.
+constexpr double kCornerContrast = 0.5;
+
 struct RecentreResult {
   cv::Point2f shift;
   double score = -1.0;
@@ -214,7 +219,13 @@ CameraTracker::CameraTracker(CameraPrior prior, TrackerOptions options)
   for (int y = 0; y < prior_.height; y += 4)
     for (int x = 0; x < prior_.width; x += 4) away_from_boards_.at<uchar>(y, x) = 1;
   for (const BoardPrior& board : prior_.boards) {
-    templates->push_back(tracker::buildAlignmentTemplate(board, options_.alignment_blur_px));
+    // Fine template (2i) and a coarse one (2i+1, a wide blur on a sparse lattice) that widens the
+    // alignment's reach when it starts from a prediction rather than from refined corners.
+    const double blur = !board.device_pattern && board.edge_blur_px > 0
+                            ? std::min(std::max(board.edge_blur_px, 0.5), 3.0)
+                            : options_.alignment_blur_px;
+    templates->push_back(tracker::buildAlignmentTemplate(board, blur));
+    templates->push_back(tracker::buildAlignmentTemplate(board, kCoarseBlurPx, 3));
     const cv::Matx33d h = tracker::homographyFromOuter(board, board.meanOuterCorners());
     std::vector<cv::Point> hull;
     for (const cv::Point2f& g : {cv::Point2f(-2.5f, -2.5f), cv::Point2f(board.cols + 1.5f, -2.5f),
@@ -394,6 +405,7 @@ BoardCorners CameraTracker::trackBoardOnce(const cv::Mat& gray, int index, bool 
   stats.recentre_shift = centre.shift;
   if (centre.score < options_.min_pattern_score) return out;
   h = cv::Matx33d(1, 0, centre.shift.x, 0, 1, centre.shift.y, 0, 0, 1) * h;
+  const cv::Matx33d recentred = h;
 
   // Corners whose refinement window (and saddle samples) stay inside the image.
   const float margin = static_cast<float>(window + 2);
@@ -434,118 +446,176 @@ BoardCorners CameraTracker::trackBoardOnce(const cv::Mat& gray, int index, bool 
   std::vector<char> candidate(n, 0);
   std::vector<int> accepted;
   bool fitted = false;
-  for (int iteration = 0; iteration < options_.max_iterations && !todo.empty(); ++iteration) {
-    // 2. Predict and refine.
-    std::vector<cv::Point2f> points;
-    for (int id : todo) {
-      const cv::Point2f g = gridPoint(id, board.cols);
-      points.push_back(applyHomography(h, g.x, g.y) + offsets[id]);
+  bool refine_done = false;
+  // Steps 2-5 (refinement, saddle test, re-fit).
+  const auto refine = [&]() {
+    refine_done = true;
+    for (int iteration = 0; iteration < options_.max_iterations && !todo.empty(); ++iteration) {
+      // 2. Predict and refine.
+      std::vector<cv::Point2f> points;
+      for (int id : todo) {
+        const cv::Point2f g = gridPoint(id, board.cols);
+        points.push_back(applyHomography(h, g.x, g.y) + offsets[id]);
+      }
+      const std::vector<cv::Point2f> predicted = points;
+      cv::cornerSubPix(gray, points, cv::Size(window, window), cv::Size(-1, -1), criteria);
+      // 3. Saddle test: the expected polarity with enough contrast.
+      int fresh = 0;
+      for (size_t k = 0; k < todo.size(); ++k) {
+        const int id = todo[k];
+        if (!insideImage(points[k]) || cv::norm(points[k] - predicted[k]) > max_shift) continue;
+        const cv::Point2f g = gridPoint(id, board.cols);
+        cv::Point2f ac, ar;
+        tracker::gridAxes(h, g.x, g.y, &ac, &ar);
+        const int bright =
+            ((static_cast<int>(g.x) + static_cast<int>(g.y)) & 1) == 0 ? board.sign : -board.sign;
+        if (tracker::saddleContrast(saddle_sampler, points[k], ac, ar, bright) < min_contrast) continue;
+        pos[id] = points[k];
+        candidate[id] = 1;
+        ++fresh;
+      }
+      if (fresh == 0 && fitted) break;
+      // 4. Re-fit the board model to every candidate; keep the consistent ones.
+      std::vector<int> ids;
+      for (int id = 0; id < n; ++id)
+        if (candidate[id]) ids.push_back(id);
+      cv::Matx33d refit;
+      std::vector<int> inliers;
+      if (!fitBoardModel(board, ids, pos, offsets, max_residual, &refit, &inliers)) break;
+      h = refit;
+      fitted = true;
+      accepted = inliers;
+      std::fill(candidate.begin(), candidate.end(), 0);
+      for (int id : accepted) candidate[id] = 1;
+      // 5. Retry the rest from the re-fitted model.
+      todo.clear();
+      for (int id = 0; id < n; ++id) {
+        if (candidate[id]) continue;
+        const cv::Point2f g = gridPoint(id, board.cols);
+        if (insideImage(applyHomography(h, g.x, g.y) + offsets[id])) todo.push_back(id);
+      }
     }
-    const std::vector<cv::Point2f> predicted = points;
-    cv::cornerSubPix(gray, points, cv::Size(window, window), cv::Size(-1, -1), criteria);
-    // 3. Saddle test: the expected polarity with enough contrast.
-    int fresh = 0;
-    for (size_t k = 0; k < todo.size(); ++k) {
-      const int id = todo[k];
-      if (!insideImage(points[k]) || cv::norm(points[k] - predicted[k]) > max_shift) continue;
-      const cv::Point2f g = gridPoint(id, board.cols);
-      cv::Point2f ac, ar;
-      tracker::gridAxes(h, g.x, g.y, &ac, &ar);
-      const int bright =
-          ((static_cast<int>(g.x) + static_cast<int>(g.y)) & 1) == 0 ? board.sign : -board.sign;
-      if (tracker::saddleContrast(saddle_sampler, points[k], ac, ar, bright) < min_contrast) continue;
-      pos[id] = points[k];
-      candidate[id] = 1;
-      ++fresh;
-    }
-    if (fresh == 0 && fitted) break;
-    // 4. Re-fit the board model to every candidate; keep the consistent ones.
-    std::vector<int> ids;
-    for (int id = 0; id < n; ++id)
-      if (candidate[id]) ids.push_back(id);
-    cv::Matx33d refit;
-    std::vector<int> inliers;
-    if (!fitBoardModel(board, ids, pos, offsets, max_residual, &refit, &inliers)) break;
-    h = refit;
-    fitted = true;
-    accepted = inliers;
-    std::fill(candidate.begin(), candidate.end(), 0);
-    for (int id : accepted) candidate[id] = 1;
-    // 5. Retry the rest from the re-fitted model.
-    todo.clear();
-    for (int id = 0; id < n; ++id) {
-      if (candidate[id]) continue;
-      const cv::Point2f g = gridPoint(id, board.cols);
-      if (insideImage(applyHomography(h, g.x, g.y) + offsets[id])) todo.push_back(id);
-    }
-  }
-  if (!fitted || static_cast<int>(accepted.size()) < needed) return out;
+  };
+  const bool align_board = align && !on_difference && options_.whole_board_alignment &&
+                           !(*templates_)[2 * index].empty();
+  // Steady state on a raw image: the board was aligned last frame and the pattern is still there
+  // at its last position, so the alignment starts from last frame's (the refinement, there only
+  // to find a start and to verify it, is skipped unless that fails).
+  const bool steady = align_board && settled && state.align_valid;
+  if (!steady) refine();
+  bool refined = fitted && static_cast<int>(accepted.size()) >= needed;
+  if (!refined && !align_board) return out;
 
-  // Without a background: align the whole board; its corners replace the refined ones when the
-  // two agree (the refined ones verify the alignment's geometry and ids).
-  if (align && !on_difference && options_.whole_board_alignment && !(*templates_)[index].empty()) {
-    const tracker::AlignmentTemplate& tmpl = (*templates_)[index];
-    std::vector<cv::Point2f> refined;
-    for (int id : accepted) refined.push_back(pos[id]);
-    bool aligned = false;
-    tracker::AlignmentResult start;
-    // Start from the last frame's alignment while the board stays where it was (its corners
-    // agree with this frame's refined ones): one step then usually suffices.
-    bool warm = false;
-    if (state.align_valid) {
-      double sq = 0;
-      for (size_t k = 0; k < accepted.size(); ++k) {
-        const cv::Point2f c = tmpl.corners[accepted[k]];
-        sq += std::pow(cv::norm(applyHomography(state.align_a, c.x, c.y) - refined[k]), 2);
-      }
-      warm = std::sqrt(sq / accepted.size()) <= max_residual;
-    }
+  // Without a background: align the whole board; its corners replace the refined ones. Its
+  // geometry is verified either by the refined corners (when enough passed the saddle test, they
+  // must agree with it) or, when the scene hides too many saddles for that (a dim board over a
+  // textured scene), by the re-centring: the alignment starts from the re-centred prediction and
+  // must stay within a fraction of a square of it, so no square can slip.
+  if (align_board) {
+    const tracker::AlignmentTemplate& tmpl = (*templates_)[2 * index];
+    const bool was_aligned = state.align_valid;
     state.align_valid = false;
-    if (warm) {
-      start.a = state.align_a;
-      start.contrast = state.align_contrast;
-      start.huber = state.align_huber;
-    }
-    if (warm || tracker::fitAlignmentStart(tmpl, accepted, refined, &start.a)) {
-      const tracker::AlignmentResult fit = tracker::alignBoard(tmpl, gray, start, warm, 3);
-      if (fit.ok && fit.contrast >= 0.5 * min_contrast) {
-        double sq = 0;
-        for (size_t k = 0; k < accepted.size(); ++k) {
-          const cv::Point2f c = tmpl.corners[accepted[k]];
-          sq += std::pow(cv::norm(applyHomography(fit.a, c.x, c.y) - refined[k]), 2);
+    bool aligned = false;
+    // In steady state from last frame's alignment; then from the refined corners when there are
+    // enough, else (or when that fails) from the re-centred prediction.
+    for (int attempt = steady ? -1 : refined ? 0 : 1; attempt < 2 && !aligned; ++attempt) {
+      if (attempt == 0) {
+        if (!refine_done) refine();
+        refined = fitted && static_cast<int>(accepted.size()) >= needed;
+        if (!refined) continue;
+      }
+      const bool from_last = attempt == -1, from_refined = attempt == 0;
+      std::vector<int> ref_ids;
+      std::vector<cv::Point2f> ref_pos;
+      if (from_last) {
+        for (int id = 0; id < n; ++id) {
+          const cv::Point2f c = tmpl.corners[id];
+          const cv::Point2f p = applyHomography(state.align_a, c.x, c.y);
+          if (!insideImage(p)) continue;
+          ref_ids.push_back(id);
+          ref_pos.push_back(p);
         }
-        aligned = std::sqrt(sq / accepted.size()) <= max_residual;
-        if (aligned) {
-          // Every corner inside the image whose saddle is there at its aligned position.
-          std::vector<int> kept;
-          for (int id = 0; id < n; ++id) {
-            const cv::Point2f c = tmpl.corners[id];
-            const cv::Point2f p = applyHomography(fit.a, c.x, c.y);
-            if (!insideImage(p)) continue;
-            const cv::Point2f g = gridPoint(id, board.cols);
-            cv::Point2f ac, ar;
-            tracker::gridAxes(h, g.x, g.y, &ac, &ar);
-            const int bright =
-                ((static_cast<int>(g.x) + static_cast<int>(g.y)) & 1) == 0 ? board.sign : -board.sign;
-            if (tracker::saddleContrast(saddle_sampler, p, ac, ar, bright) < min_contrast) continue;
-            pos[id] = p;
-            kept.push_back(id);
-          }
-          if (static_cast<int>(kept.size()) < needed) return out;
-          accepted = kept;
-          std::vector<cv::Point2f> grid, image;
-          for (int id : accepted) {
-            grid.push_back(gridPoint(id, board.cols));
-            image.push_back(pos[id] - offsets[id]);
-          }
-          cv::Matx33d refit;
-          if (tracker::fitHomographyLeastSquares(grid, image, &refit)) h = refit;
-          state.align_valid = true;
-          state.align_a = fit.a;
-          state.align_contrast = fit.contrast;
-          state.align_huber = fit.huber;
+      } else if (from_refined) {
+        ref_ids = accepted;
+        for (int id : accepted) ref_pos.push_back(pos[id]);
+      } else {
+        for (int id = 0; id < n; ++id) {
+          const cv::Point2f g = gridPoint(id, board.cols);
+          const cv::Point2f p = applyHomography(recentred, g.x, g.y) + offsets[id];
+          if (!insideImage(p)) continue;
+          ref_ids.push_back(id);
+          ref_pos.push_back(p);
         }
       }
+      // How far the aligned corners may be from where the attempt started: the refined corners
+      // agree to within the residual gate; a board re-centred (or still in place) is within a
+      // fraction of a square, so no square can slip.
+      const double agree_px = from_refined ? max_residual : from_last ? 0.25 * square : 0.35 * square;
+      const auto rmsTo = [&](const cv::Matx33d& a) {
+        double sq = 0;
+        for (size_t k = 0; k < ref_ids.size(); ++k) {
+          const cv::Point2f c = tmpl.corners[ref_ids[k]];
+          sq += std::pow(cv::norm(applyHomography(a, c.x, c.y) - ref_pos[k]), 2);
+        }
+        return std::sqrt(sq / std::max<size_t>(1, ref_ids.size()));
+      };
+      tracker::AlignmentResult start;
+      // Start from the last frame's alignment while the board stays where it was (its corners
+      // agree with this frame's refined ones): one step then usually suffices.
+      const bool warm = from_last || (from_refined && was_aligned && rmsTo(state.align_a) <= max_residual);
+      if (warm) {
+        start.a = state.align_a;
+        start.contrast = state.align_contrast;
+        start.huber = state.align_huber;
+      }
+      bool started = warm || tracker::fitAlignmentStart(tmpl, ref_ids, ref_pos, &start.a);
+      if (started && !warm && !from_refined) {
+        // From a prediction (within a few pixels): first on the blurred image with the coarse
+        // template, whose edges reach that far.
+        const tracker::AlignmentTemplate& coarse = (*templates_)[2 * index + 1];
+        cv::Mat blurred;
+        const double blur = std::min(kCoarseBlurPx - 0.5, options_.alignment_blur_px);
+        cv::GaussianBlur(gray, blurred, cv::Size(), std::sqrt(kCoarseBlurPx * kCoarseBlurPx - blur * blur));
+        const tracker::AlignmentResult c = tracker::alignBoard(coarse, blurred, start, false, 6);
+        started = c.ok;
+        if (c.ok) start.a = c.a;
+      }
+      if (!started) continue;
+      const tracker::AlignmentResult fit = tracker::alignBoard(tmpl, gray, start, warm, warm ? 3 : 6);
+      // The board's contrast in this frame (bright minus dark, as teaching measured it): present,
+      // and not far below the taught one (a light-off frame has none).
+      if (!fit.ok || 2.0 * fit.contrast < std::max(options_.min_contrast, 0.1 * board.contrast)) continue;
+      if (rmsTo(fit.a) > agree_px) continue;
+      // From last frame's position only when the fit settled there: a board that moved by more
+      // than the fine template's reach is found again from its refined corners.
+      // A template off the edges also sees much less of the pattern's contrast than last frame.
+      if (from_last && (!fit.converged || fit.contrast < 0.7 * state.align_contrast)) continue;
+      // Every corner inside the image where the pattern is there around its aligned position:
+      // the contrast fitted on its own samples is at least half the board's (what an occluder or
+      // a light-off region lacks; an averaged measure, unlike a saddle test, which a scene brighter
+      // than the pattern defeats).
+      std::vector<int> kept;
+      for (int id = 0; id < n; ++id) {
+        const cv::Point2f c = tmpl.corners[id];
+        const cv::Point2f p = applyHomography(fit.a, c.x, c.y);
+        if (!insideImage(p) || !(fit.corner_contrast[id] >= kCornerContrast)) continue;
+        pos[id] = p;
+        kept.push_back(id);
+      }
+      if (static_cast<int>(kept.size()) < needed) continue;
+      aligned = true;
+      accepted = kept;
+      std::vector<cv::Point2f> grid, image;
+      for (int id : accepted) {
+        grid.push_back(gridPoint(id, board.cols));
+        image.push_back(pos[id] - offsets[id]);
+      }
+      cv::Matx33d refit;
+      if (tracker::fitHomographyLeastSquares(grid, image, &refit)) h = refit;
+      state.align_valid = true;
+      state.align_a = fit.a;
+      state.align_contrast = fit.contrast;
+      state.align_huber = fit.huber;
     }
     stats.aligned = aligned;
     // Refined corners alone are not trusted on a raw image: the scene can pull one by more than

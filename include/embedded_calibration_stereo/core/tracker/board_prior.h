@@ -20,6 +20,10 @@
 //           sign: -1 or 1          +1 when the square at (+col, +row) of corner 0 is bright
 //           contrast: 110.5        median saddle contrast when taught, grey levels
 //           square_px: 14.2        mean side of one square in the image, px
+//           device_pattern: 1      optional (default 1): 1 for the device's boards (exact,
+//                    smooth geometry, full outer squares and a white margin), 0 for a printed
+//                    chessboard (outer squares may be cut, printing and mounting not exact)
+//           edge_blur_px: 0.9      optional (default 0, unknown): edge blur measured when taught
 #include <opencv2/core.hpp>
 #include <string>
 #include <vector>
@@ -36,6 +40,14 @@ struct BoardPrior {
   int sign = 1;
   double contrast = 0.0;
   double square_px = 0.0;
+  // The device's boards: their geometry is smooth and their outer squares are whole, inside a
+  // white margin, so the whole-board alignment smooths the taught corners and uses the outer
+  // squares' edges. A printed chessboard (taught with --board) gets neither.
+  bool device_pattern = true;
+  // Edge blur measured when taught (standard deviation of the edge profile, px; 0 = unknown). A
+  // printed board's alignment uses it (the device's boards use TrackerOptions::alignment_blur_px,
+  // set for the device's optics).
+  double edge_blur_px = 0.0;
 
   int cornerCount() const { return cols * rows; }
   std::vector<cv::Point2f> meanOuterCorners() const;

@@ -23,11 +23,14 @@
 // Without a still scene (no background, or one taken before the head or the scene moved, which
 // track() detects from what remains of the scene in the difference away from the boards):
 // steps 1-5 run on the raw image, where the scene's texture pulls each refined corner by a few
-// tenths of a pixel. Each board found that way is then aligned as a whole (board_alignment.h):
-// the taught board, moved by one homography, is fitted photometrically to every pixel near an
-// edge of its pattern, so the scene, uncorrelated with the pattern, averages out. The aligned
-// corners replace the refined ones when the alignment agrees with them (a verified board); a
-// corner is reported only where the saddle test passes at its aligned position.
+// tenths of a pixel. Each board is then aligned as a whole (board_alignment.h): the taught board,
+// moved by one homography, is fitted photometrically to every pixel near an edge of its pattern,
+// so the scene, uncorrelated with the pattern, averages out. The alignment starts from last
+// frame's (steady state: steps 3-5 are skipped while it converges there), from the refined
+// corners (which it must agree with), or, when the scene hides too many saddles, from the
+// re-centred prediction (coarse to fine; it must stay within a fraction of a square of it): this
+// verifies the board's geometry, so no square can slip. A corner is reported where the contrast
+// fitted on its own samples is at least half the board's.
 // Corner ids come from the grid, so partial boards (occlusion, a board leaving the image) keep
 // correct ids; a board with fewer than the minimum number of accepted corners gives nothing and
 // keeps its previous state.
