@@ -260,39 +260,41 @@ class DriftScript:
     THERMAL_RATE_DEG_PER_S = 0.01
     ZOOM = 1.05
 
-    def __init__(self, ns, duration, zoom_at):
+    def __init__(self, ns, duration, zoom_at, fps):
         self.service = ns + "/sim/set_drift"
+        # The simulator turns the camera by its own clock (frame count / fps), which falls behind
+        # the wall clock when frames are rendered slower than fps: the rotation held at the end of
+        # the ramp is the one the simulator reached, counted in its frames.
+        self.fps = fps
         thermal_start = zoom_at + 0.2 * duration
         thermal_stop = zoom_at + 0.35 * duration
-        self.thermal_deg = self.THERMAL_RATE_DEG_PER_S * (thermal_stop - thermal_start)
         self.pending = [
             (zoom_at, "zoom", "5 % zoom step (both cameras)", self._zoom),
             (thermal_start, "thermal start", "thermal rotation of the right camera starts, %.3f deg/s"
              % self.THERMAL_RATE_DEG_PER_S, self._thermal_start),
-            (thermal_stop, "thermal stop", "thermal rotation stops (about %.2f deg reached)" % self.thermal_deg,
-             self._thermal_stop),
+            (thermal_stop, "thermal stop", "", self._thermal_stop),
             (zoom_at + 0.45 * duration, "knock", "knock: 0.07 deg and 1 mm extrinsic change", self._knock),
         ]
         self.fired = []  # (t, short name)
-        self.thermal_started_at = None
+        self.thermal_started_at_frame = None
         self.held_rotation_deg = 0.0  # right-camera rotation (y) reached when the ramp stopped
 
-    def _zoom(self, t):
+    def _zoom(self, frame):
         return SetRigDriftRequest(focal_scale=self.ZOOM)
 
-    def _thermal_start(self, t):
-        self.thermal_started_at = t
+    def _thermal_start(self, frame):
+        self.thermal_started_at_frame = frame
         return SetRigDriftRequest(focal_scale=self.ZOOM, thermal_rate_deg_per_s=self.THERMAL_RATE_DEG_PER_S)
 
-    def _thermal_stop(self, t):
+    def _thermal_stop(self, frame):
         # Holds the rotation reached (y axis, as the thermal drift turns), rate back to zero.
-        self.held_rotation_deg = self.THERMAL_RATE_DEG_PER_S * (t - self.thermal_started_at)
+        self.held_rotation_deg = self.THERMAL_RATE_DEG_PER_S * (frame - self.thermal_started_at_frame) / self.fps
         return self._held()
 
     def _held(self):
         return SetRigDriftRequest(focal_scale=self.ZOOM, right_rotation_deg=[0.0, self.held_rotation_deg, 0.0])
 
-    def _knock(self, t):
+    def _knock(self, frame):
         request = self._held()
         request.knock_rotation_deg = [0.04, -0.03, 0.05]
         request.knock_translation_m = [0.0008, 0.0003, -0.0005]
@@ -301,12 +303,13 @@ class DriftScript:
     def last_event_time(self):
         return self.fired[-1][0] if self.fired else None
 
-    def step(self, t, light_on):
-        """Fires the next due event; returns its progress line or None."""
+    def step(self, t, light_on, frame):
+        """Fires the next due event (due by the wall clock t; `frame`: the driver's frames so
+        far); returns its progress line or None."""
         if not self.pending or t < self.pending[0][0] or light_on:
             return None
         _, name, description, make = self.pending.pop(0)
-        request = make(t)
+        request = make(frame)
         try:
             rospy.wait_for_service(self.service, 5.0)
             answer = rospy.ServiceProxy(self.service, SetRigDrift)(request)
@@ -314,6 +317,8 @@ class DriftScript:
         except (rospy.ROSException, rospy.ServiceException) as e:
             outcome = "failed: %s" % e
         self.fired.append((t, name))
+        if name == "thermal stop":
+            description = "thermal rotation stops (%.3f deg reached)" % self.held_rotation_deg
         return "[%5.1f s] DRIFT: %s (%s)" % (t, description, outcome)
 
 
@@ -323,6 +328,7 @@ class Monitor:
     def __init__(self, ns):
         self.lock = threading.Lock()
         self.frames = 0
+        self.modes = 0  # calibration_mode messages: one per driver frame
         self.light_on_frames = 0
         self.mode = None
         self.latest = {}
@@ -414,6 +420,7 @@ class Monitor:
     def on_mode(self, msg):
         with self.lock:
             self.mode = msg
+            self.modes += 1
             if msg.light_on:
                 self.light_on_frames += 1
             counts = self.frames_by_health.setdefault(health_name(self.health), [0, 0])
@@ -725,7 +732,8 @@ def main():
         print("demo: no camera frame within %.0f s; see roslaunch.log" % args.startup_timeout, flush=True)
         return 1
     script = DriftScript(ns, args.duration,
-                         args.zoom_at if args.zoom_at is not None else args.duration / 3.0)
+                         args.zoom_at if args.zoom_at is not None else args.duration / 3.0,
+                         float(rospy.get_param(ns + "/camera_driver/fps", 30.0)))
     timeline = []  # (t, errors dict, epoch, true accuracy dict or None, predicted accuracy dict or None)
     epochs = []  # times at which the calibration in force changed
     last_epoch, last_status, predicted = None, None, None
@@ -737,7 +745,7 @@ def main():
         time.sleep(0.25)  # sampling cadence only; nothing waits on this for correctness
         t = time.time() - t0
         with mon.lock:
-            frames, disparities, mode = mon.frames, mon.disparities, mon.mode
+            frames, disparities, mode, modes = mon.frames, mon.disparities, mon.mode, mon.modes
             errors, status = mon.errors(), mon.latest.get("status")
             published, truth = mon.infos()
             health, changes = mon.health, mon.health_changes[health_seen:]
@@ -757,7 +765,7 @@ def main():
                 t, status.epoch, "accepted" if status.accepted else "rejected", status.rms_left_px,
                 status.rms_right_px, status.frames_used, status.solve_ms,
                 "" if status.accepted else ": " + status.reason), flush=True)
-        line = script.step(t, mode is None or mode.light_on)
+        line = script.step(t, mode is None or mode.light_on, modes)
         if line:
             print(line, flush=True)
         if status is not None and status.accepted:

@@ -35,6 +35,7 @@
 #include <mutex>
 #include <optional>
 #include <thread>
+#include <vector>
 
 #include "embedded_calibration_stereo/CalibrationMode.h"
 #include "embedded_calibration_stereo/Recalibrate.h"
@@ -162,8 +163,10 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
   // Keeps the latest valid CameraInfo pair: a side that fails the consumers' checks, or that
   // does not form a rectified pair with the other side of its stamp, is dropped with an error
   // (the pair in force stays); when the other side of its stamp has not arrived yet it waits.
-  // The first pair's geometry goes on /tf_static at once, so that tf (rviz, points2 users) has
-  // the right camera before the first commit; every commit replaces it.
+  // The pair's geometry goes on /tf_static at once, so that tf (rviz, points2 users) has the
+  // right camera before the first commit, and again whenever the pair in force changes (a commit,
+  // or a calibration set from outside, such as the health monitor's rollback). A replay
+  // (commit:=none) never sees its camera_info change, so its solves stay on /tf_static.
   void storeInfo(bool left, const sensor_msgs::CameraInfoConstPtr& info) {
     if (!guard_->admit(left ? kLeftInfoInput : kRightInfoInput, info->header.stamp)) return;
     const std::string topic = (left ? left_info_sub_ : right_info_sub_).getTopic();
@@ -184,8 +187,11 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
         if (mismatch.empty()) {
           left_info_ = left ? info : other;
           right_info_ = left ? other : info;
-          if (!in_force_tf_sent_) {
-            in_force_tf_sent_ = true;
+          std::vector<double> key(left_info_->R.begin(), left_info_->R.end());
+          key.insert(key.end(), right_info_->R.begin(), right_info_->R.end());
+          key.insert(key.end(), right_info_->P.begin(), right_info_->P.end());
+          if (key != in_force_tf_key_) {
+            in_force_tf_key_ = std::move(key);
             left_info = left_info_;
             right_info = right_info_;
           }
@@ -739,7 +745,9 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
   size_t request_frames_ = 0;
   sensor_msgs::CameraInfoConstPtr left_info_, right_info_;  // the latest valid pair (storeInfo)
   sensor_msgs::CameraInfoConstPtr latest_left_info_, latest_right_info_;  // the latest valid side
-  bool in_force_tf_sent_ = false;  // the calibration in force went on /tf_static (storeInfo)
+  // The rectification (left R, right R and P) of the pair in force last put on /tf_static by
+  // storeInfo: a pair set from outside the calibrator (a rollback, rosservice) goes there too.
+  std::vector<double> in_force_tf_key_;
   std::atomic<uint32_t> epoch_{0};  // also read without mutex_ (statuses)
   std::deque<Job> jobs_;
   bool stopping_ = false;

@@ -255,6 +255,40 @@ TEST(CalibratorSim, RecoversADriftedRigAndCommitsIt) {
   ASSERT_TRUE(fixture->status.waitFor([](const auto& m) { return !m.empty() && m.back()->accepted; }, 2.0));
 }
 
+// A pair set from outside the calibrator (the health monitor's rollback, a rosservice call)
+// becomes the calibration in force: /tf_static must follow it, not keep the last commit's.
+TEST(CalibratorSim, PutsACalibrationSetFromOutsideOnTfStatic) {
+  ASSERT_TRUE(fixture->left.waitForCount(1, 5.0) && fixture->right.waitForCount(1, 5.0));
+  ecs::StereoRig rig;
+  std::string error;
+  ASSERT_TRUE(embedded_calibration_stereo::fromStereoCameraInfo(*fixture->left.snapshot().back(),
+                                                                *fixture->right.snapshot().back(), &rig, &error))
+      << error;
+  // Another rig: the right camera turned 0.2 deg about y and the baseline 1 % longer.
+  rig.right_from_left.linear() = Eigen::AngleAxisd(0.2 * M_PI / 180.0, Eigen::Vector3d::UnitY()).toRotationMatrix() *
+                                 rig.right_from_left.linear();
+  rig.right_from_left.translation() *= 1.01;
+  auto pair = embedded_calibration_stereo::toStereoCameraInfo(rig);
+  pair.first.header.frame_id = fixture->left.snapshot().back()->header.frame_id;
+  pair.second.header.frame_id = fixture->right.snapshot().back()->header.frame_id;
+  const size_t tf_before = fixture->tf_static.snapshot().size();
+  for (const std::string side : {"left", "right"}) {
+    sensor_msgs::SetCameraInfo set;
+    set.request.camera_info = side == "left" ? pair.first : pair.second;
+    ASSERT_TRUE(ros::service::call(side + "/set_camera_info", set));
+    ASSERT_TRUE(set.response.success) << set.response.status_message;
+  }
+  ASSERT_TRUE(fixture->tf_static.waitFor(
+      [&](const auto& all) {
+        if (all.size() <= tf_before || all.back()->transforms.size() != 1) return false;
+        const Eigen::Isometry3d left_from_right = tf2::transformToEigen(all.back()->transforms[0]);
+        return ecs::rotationAngleDeg(left_from_right.linear(), rig.leftFromRight().linear()) < 1e-3 &&
+               (left_from_right.translation() - rig.leftFromRight().translation()).norm() < 1e-6;
+      },
+      5.0))
+      << "/tf_static does not carry the calibration set through set_camera_info";
+}
+
 int main(int argc, char** argv) {
   testing::InitGoogleTest(&argc, argv);
   ros::init(argc, argv, "calibrator_sim_test");
