@@ -23,8 +23,8 @@
 
 #include "embedded_calibration_stereo/core/calibration/calibration_monitor.h"
 #include "embedded_calibration_stereo/core/sim/sim_rig.h"
-#include "embedded_calibration_stereo/core/tracker/board_teacher.h"
 #include "embedded_calibration_stereo/core/tracker/pattern_tracker.h"
+#include "embedded_calibration_stereo/test_support/sim_prior.h"
 
 using namespace ecs;
 using Clock = std::chrono::steady_clock;
@@ -42,21 +42,6 @@ double cpuMs() { return 1000.0 * static_cast<double>(std::clock()) / CLOCKS_PER_
 double percentile(std::vector<double> v, double p) {
   std::sort(v.begin(), v.end());
   return v[std::min(v.size() - 1, static_cast<size_t>(p * (v.size() - 1) + 0.5))];
-}
-
-PatternPrior teach(const SimRig& sim, double time_s) {
-  const SimFrame on = sim.render(time_s, 1.0, 1), off = sim.render(time_s, 0.0, 2);
-  const StereoRig& rig = sim.config().rig;
-  PatternPrior prior;
-  prior.cameras.push_back(
-      teachCamera({{on.left, off.left}},
-                  BoardLayout::device(sim.virtualBoards(), rig.left, Eigen::Isometry3d::Identity()), "left")
-          .prior);
-  prior.cameras.push_back(
-      teachCamera({{on.right, off.right}},
-                  BoardLayout::device(sim.virtualBoards(), rig.right, rig.right_from_left), "right")
-          .prior);
-  return prior;
 }
 
 bool leftGood(const HealthReport& r) {
@@ -87,7 +72,7 @@ void costs() {
               "(all threads)\n",
               monitor.report().matches, percentile(wall, 0.5), percentile(wall, 0.9), cpu);
   std::printf("per frame at 30 fps with depth_frame_stride %d (the default): CPU %.2f ms\n", stride, cpu / stride);
-  PatternTracker tracker(teach(sim, 0.0), TrackerOptions());
+  PatternTracker tracker(teachSimPrior(sim, 0.0), TrackerOptions());
   const SimFrame on = sim.render(2.0, 1.0, 7);
   const StereoObservation obs = tracker.trackStereo(on.left, on.right, 2.0);
   wall.clear();
@@ -110,7 +95,7 @@ struct Run {
   explicit Run(double verification_period)
       : sim(loadSimRigConfig(configDir() + "drive_photo.yaml")),
         monitor(CalibrationMonitorOptions()),
-        tracker(teach(sim, 0.0), TrackerOptions()),
+        tracker(teachSimPrior(sim, 0.0), TrackerOptions()),
         period(verification_period) {
     monitor.setCalibration(sim.config().rig, 1, sim.virtualBoards(), true);
   }

@@ -18,11 +18,11 @@
 #include <string>
 #include <vector>
 
-#include "embedded_calibration_stereo/core/tracker/board_teacher.h"
 #include "embedded_calibration_stereo/core/tracker/pattern_tracker.h"
 #include "embedded_calibration_stereo/core/sim/sim_rig.h"
 #include "embedded_calibration_stereo/core/sim/trajectory.h"
 #include "embedded_calibration_stereo/test_support/corner_score.h"
+#include "embedded_calibration_stereo/test_support/sim_prior.h"
 
 using namespace ecs;
 using Clock = std::chrono::steady_clock;
@@ -45,20 +45,6 @@ struct Stats {
                 s.size());
   }
 };
-
-PatternPrior teach(const SimRig& sim, const SimFrame& on, const SimFrame& off) {
-  const StereoRig& rig = sim.config().rig;
-  PatternPrior prior;
-  prior.cameras.push_back(
-      teachCamera({{on.left, off.left}},
-                  BoardLayout::device(sim.virtualBoards(), rig.left, Eigen::Isometry3d::Identity()), "left")
-          .prior);
-  prior.cameras.push_back(
-      teachCamera({{on.right, off.right}},
-                  BoardLayout::device(sim.virtualBoards(), rig.right, rig.right_from_left), "right")
-          .prior);
-  return prior;
-}
 
 // backgrounds[k]: the light-off frame set before tracking frame k (nullptr: keep the one set).
 void trackRun(const char* name, const PatternPrior& prior, const std::vector<const SimFrame*>& backgrounds,
@@ -113,7 +99,7 @@ int main(int argc, char** argv) {
   PatternPrior prior;
   for (int k = 0; k < 3; ++k) {
     const Clock::time_point t0 = Clock::now();
-    prior = teach(sim, on, off);
+    prior = teachSimPrior(sim, on, off);
     teach_time.ms.push_back(msSince(t0));
   }
   teach_time.print("teach (on/off pair, both cameras)");

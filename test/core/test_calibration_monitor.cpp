@@ -17,28 +17,13 @@
 #include "embedded_calibration_stereo/core/calibration/calibration_monitor.h"
 #include "embedded_calibration_stereo/core/calibration/stereo_accuracy.h"
 #include "embedded_calibration_stereo/core/sim/sim_rig.h"
-#include "embedded_calibration_stereo/core/tracker/board_teacher.h"
 #include "embedded_calibration_stereo/core/tracker/pattern_tracker.h"
+#include "embedded_calibration_stereo/test_support/sim_prior.h"
 
 namespace ecs {
 namespace {
 
 const std::string kConfigDir = std::string(ECS_SOURCE_DIR) + "/config/";
-
-PatternPrior teach(const SimRig& sim, double time_s) {
-  const SimFrame on = sim.render(time_s, 1.0, 1), off = sim.render(time_s, 0.0, 2);
-  const StereoRig& rig = sim.config().rig;
-  PatternPrior prior;
-  prior.cameras.push_back(
-      teachCamera({{on.left, off.left}},
-                  BoardLayout::device(sim.virtualBoards(), rig.left, Eigen::Isometry3d::Identity()), "left")
-          .prior);
-  prior.cameras.push_back(
-      teachCamera({{on.right, off.right}},
-                  BoardLayout::device(sim.virtualBoards(), rig.right, rig.right_from_left), "right")
-          .prior);
-  return prior;
-}
 
 // The rotation of the right camera away from its nominal calibration (deg).
 double rotationErrorDeg(const SimRig& sim, double t) {
@@ -81,7 +66,7 @@ class Head {
         depth_dt_(1.0 / depth_hz),
         period_(verification_period_s),
         monitor_(options(verification_period_s)),
-        tracker_(teach(sim_, 0.0), TrackerOptions()) {
+        tracker_(teachSimPrior(sim_, 0.0), TrackerOptions()) {
     monitor_.setCalibration(sim_.config().rig, 1, sim_.virtualBoards(), true);
   }
   static CalibrationMonitorOptions options(double period) {
@@ -321,7 +306,7 @@ namespace {
 // fitted change names it.
 TEST(CalibrationMonitor, WrongCalibrationCaughtByFirstVerification) {
   SimRig sim(loadSimRigConfig(kConfigDir + "drive_photo.yaml"));
-  PatternTracker tracker(teach(sim, 0.0), TrackerOptions());
+  PatternTracker tracker(teachSimPrior(sim, 0.0), TrackerOptions());
   const SimFrame on = sim.render(0.5, 1.0, 11);
   const StereoObservation obs = tracker.trackStereo(on.left, on.right, 0.5);
   StereoRig wrong = sim.config().rig;

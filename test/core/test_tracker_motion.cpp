@@ -14,10 +14,10 @@
 #include <map>
 #include <string>
 
-#include "embedded_calibration_stereo/core/tracker/board_teacher.h"
 #include "embedded_calibration_stereo/core/tracker/pattern_tracker.h"
 #include "embedded_calibration_stereo/core/sim/sim_rig.h"
 #include "embedded_calibration_stereo/test_support/corner_score.h"
+#include "embedded_calibration_stereo/test_support/sim_prior.h"
 
 namespace ecs {
 namespace {
@@ -26,21 +26,6 @@ const std::string kConfigDir = std::string(ECS_SOURCE_DIR) + "/config/";
 constexpr double kFps = 30.0;
 
 using Score = CornerScore;
-
-PatternPrior teach(const SimRig& sim, double time_s) {
-  const SimFrame on = sim.render(time_s, 1.0, 1), off = sim.render(time_s, 0.0, 2);
-  const StereoRig& rig = sim.config().rig;
-  PatternPrior prior;
-  prior.cameras.push_back(
-      teachCamera({{on.left, off.left}},
-                  BoardLayout::device(sim.virtualBoards(), rig.left, Eigen::Isometry3d::Identity()), "left")
-          .prior);
-  prior.cameras.push_back(
-      teachCamera({{on.right, off.right}},
-                  BoardLayout::device(sim.virtualBoards(), rig.right, rig.right_from_left), "right")
-          .prior);
-  return prior;
-}
 
 enum class Background { kStale, kNone };
 
@@ -54,7 +39,7 @@ struct MotionRun {
 // tracker keeps the light-off frame as its background in kStale mode). Between windows the rig
 // drifts: a zoom step, then a knock of the right camera.
 MotionRun runWindows(SimRig* sim, Background mode, int first_frame) {
-  PatternTracker tracker(teach(*sim, first_frame / kFps), TrackerOptions());
+  PatternTracker tracker(teachSimPrior(*sim, first_frame / kFps), TrackerOptions());
   MotionRun run;
   const int kWindows = 3;
   const int kOnFrames[] = {3, 6, 10};
