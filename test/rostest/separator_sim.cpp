@@ -69,6 +69,23 @@ cv::Mat view(const Image& m) {
                  m.step);
 }
 
+// One stereo frame as a driver sends it: the same mono8 image left and right, then its
+// calibration_mode (with the images' stamp).
+void publishMonoFrame(ros::Publisher& left_pub, ros::Publisher& right_pub, ros::Publisher& mode_pub,
+                      const cv::Mat& image, const CalibrationMode::Ptr& mode) {
+  for (auto* pub : {&left_pub, &right_pub}) {
+    auto msg = boost::make_shared<Image>();
+    msg->header.stamp = mode->header.stamp;
+    msg->encoding = "mono8";
+    msg->width = image.cols;
+    msg->height = image.rows;
+    msg->step = image.cols;
+    msg->data.assign(image.datastart, image.dataend);
+    pub->publish(msg);
+  }
+  mode_pub.publish(mode);
+}
+
 }  // namespace
 
 // Light off: image_scene is the very message published on image_raw (same object address).
@@ -258,20 +275,10 @@ TEST(SeparatorTeachService, TeachesFromCoveredSceneFrames) {
   uint32_t sec = 200;
   const auto publish = [&](const cv::Mat& image) {
     const ros::Time stamp(++sec, 0);
-    for (auto* pub : {&left_pub, &right_pub}) {
-      auto msg = boost::make_shared<Image>();
-      msg->header.stamp = stamp;
-      msg->encoding = "mono8";
-      msg->width = image.cols;
-      msg->height = image.rows;
-      msg->step = image.cols;
-      msg->data.assign(image.datastart, image.dataend);
-      pub->publish(msg);
-    }
     auto mode = boost::make_shared<CalibrationMode>();
     mode->header.stamp = stamp;
     mode->light_on = mode->settled = true;
-    mode_pub.publish(mode);
+    publishMonoFrame(left_pub, right_pub, mode_pub, image, mode);
     return stamp;
   };
   const auto published = [&](const ros::Time& stamp) {
@@ -331,22 +338,12 @@ TEST(SeparatorLearn, LearnsTheDeviceImageFromLightWindowsWithAMovingScene) {
     cv::addWeighted(scene_image, 1.0, device, light, 0.0, image);
     const ros::Time stamp = ros::Time(300, 0) + ros::Duration(frame / 30.0);
     ++frame;
-    for (auto* pub : {&left_pub, &right_pub}) {
-      auto msg = boost::make_shared<Image>();
-      msg->header.stamp = stamp;
-      msg->encoding = "mono8";
-      msg->width = image.cols;
-      msg->height = image.rows;
-      msg->step = image.cols;
-      msg->data.assign(image.datastart, image.dataend);
-      pub->publish(msg);
-    }
     auto mode = boost::make_shared<CalibrationMode>();
     mode->header.stamp = stamp;
     mode->light_on = on;
     mode->settled = settled;
     mode->calibration_epoch = epoch;
-    mode_pub.publish(mode);
+    publishMonoFrame(left_pub, right_pub, mode_pub, image, mode);
     if (scene_out) *scene_out = scene_image;
     EXPECT_TRUE(scene.waitFor(
         [&](const std::vector<Image::ConstPtr>& m) { return ecs_test::findByStamp(m, stamp) != nullptr; }, 10.0))
