@@ -39,9 +39,11 @@
 #include "embedded_calibration_stereo/core/calibration/bundle_adjuster.h"
 #include "embedded_calibration_stereo/core/calibration/quality_gate.h"
 #include "embedded_calibration_stereo/core/calibration/stereo_accuracy.h"
+#include "embedded_calibration_stereo/core/depth/device_image_learner.h"
 #include "embedded_calibration_stereo/core/sim/sim_rig.h"
 #include "embedded_calibration_stereo/core/tracker/board_teacher.h"
 #include "embedded_calibration_stereo/core/tracker/pattern_tracker.h"
+#include "embedded_calibration_stereo/core/tracker/saddle_refinement.h"
 
 using namespace ecs;
 
@@ -62,6 +64,8 @@ struct Args {
   double min_change = 0.0;  // GateOptions::min_change_in_predicted
   int free_poses = 0;       // 1: one free pose per virtual board instead of the rigid device model
   int truth_background = 0;  // 1: the simulator's scene of each frame as its background (a still-world reference)
+  int learn_window = 0;      // 1: learn the device image from the window's light pairs and track it
+  int saddle = 0;            // 1: refine the tracked corners by the saddle-model fit
   double truth_noise = -1;  // >= 0: the simulator's true corners plus this Gaussian noise instead of tracking
 };
 
@@ -115,6 +119,51 @@ struct DriftScript {
     return what;
   }
 };
+
+// Refines every corner by the saddle fit, the board's lines from its tracked neighbours; drops
+// a corner whose fit fails.
+void refineBySaddle(const cv::Mat& image, const CameraPrior& prior, std::vector<BoardCorners>* boards,
+                    const cv::Mat& background = cv::Mat()) {
+  cv::Mat diff;
+  if (background.empty()) diff = image;
+  else {
+    cv::Mat a, b;
+    image.convertTo(a, CV_32F);
+    background.convertTo(b, CV_32F);
+    diff = a - b;
+  }
+  for (BoardCorners& b : *boards) {
+    const BoardPrior* bp = nullptr;
+    for (const BoardPrior& x : prior.boards)
+      if (x.board_id == b.board_id) bp = &x;
+    if (!bp) continue;
+    std::map<int, cv::Point2f> at;
+    for (size_t i = 0; i < b.size(); ++i) at[b.corner_ids[i]] = cv::Point2f(b.u[i], b.v[i]);
+    const auto axis = [&](int id, int step, bool along_col) -> cv::Point2f {
+      const int c = id % bp->cols;
+      const bool has_next = at.count(id + step) && (!along_col || c + 1 < bp->cols);
+      const bool has_prev = at.count(id - step) && (!along_col || c > 0);
+      if (has_next && has_prev) return 0.5f * (at[id + step] - at[id - step]);
+      if (has_next) return at[id + step] - at[id];
+      if (has_prev) return at[id] - at[id - step];
+      return cv::Point2f(0, 0);
+    };
+    BoardCorners out;
+    out.board_id = b.board_id;
+    SaddleFitOptions options;
+    for (size_t i = 0; i < b.size(); ++i) {
+      const int id = b.corner_ids[i];
+      const cv::Point2f ac = axis(id, 1, true), ar = axis(id, bp->cols, false);
+      options.radius_px = std::max(2, std::min(8, static_cast<int>(0.45 * std::min(cv::norm(ac), cv::norm(ar)))));
+      SaddleFit fit;
+      if (!fitSaddle(diff, at[id], ac, ar, options, &fit)) continue;
+      out.corner_ids.push_back(id);
+      out.u.push_back(static_cast<float>(fit.corner.x));
+      out.v.push_back(static_cast<float>(fit.corner.y));
+    }
+    b = out;
+  }
+}
 
 // Corner errors of a window against the truth: RMS over every tracked corner, and RMS over the
 // corners of their mean error in the window (the part common to the window's frames, which
@@ -198,6 +247,8 @@ int main(int argc, char** argv) {
     else if (!std::strcmp(argv[i], "--min-change")) args.min_change = std::atof(value());
     else if (!std::strcmp(argv[i], "--free-poses")) args.free_poses = std::atoi(value());
     else if (!std::strcmp(argv[i], "--truth-background")) args.truth_background = std::atoi(value());
+    else if (!std::strcmp(argv[i], "--learn-window")) args.learn_window = std::atoi(value());
+    else if (!std::strcmp(argv[i], "--saddle")) args.saddle = std::atoi(value());
     else {
       std::fprintf(stderr, "usage: bench_calibrate_moving [--config FILE] [--minutes M] [--period S] [--frames N] "
                            "[--fps F] [--teach-frames K]   (default config: $ECS_SOURCE_DIR/config/drive_photo.yaml)\n");
@@ -244,12 +295,38 @@ int main(int argc, char** argv) {
     std::vector<StereoObservation> frames;
     SimFrame last;
     cv::Mat sum[2];
+    std::vector<LightPair> pairs[2];
+    SimFrame off_before, off_after;
     int corners = 0, truth_corners = 0;
     WindowErrors errors;
     for (int k = 0; k < args.frames; ++k) {
       const double t = t_start + k / args.fps;
       const uint64_t frame_index = static_cast<uint64_t>(std::llround(t * args.fps));
       last = sim.render(t, 1.0, frame_index);
+      if (args.learn_window) {
+        if (k == 0) {
+          for (int c = 0; c < 2; ++c) pairs[c].clear();
+          const double tb = t_start - 1.0 / args.fps, ta = t_start + args.frames / args.fps;
+          off_before = sim.render(tb, 0.0, static_cast<uint64_t>(std::llround(tb * args.fps)));
+          off_after = sim.render(ta, 0.0, static_cast<uint64_t>(std::llround(ta * args.fps)));
+        }
+        pairs[0].push_back({off_before.left, last.left});
+        pairs[0].push_back({off_after.left, last.left});
+        pairs[1].push_back({off_before.right, last.right});
+        pairs[1].push_back({off_after.right, last.right});
+        if (k + 1 < args.frames) continue;
+        DeviceLearnerOptions lo;
+        lo.min_pairs = 2;
+        cv::Mat learned[2];
+        for (int c = 0; c < 2; ++c) {
+          const LearnedDevice d = learnDeviceImage(pairs[c], lo, 0);
+          d.device_template.device.convertTo(learned[c], CV_8U);
+        }
+        const cv::Mat zero = cv::Mat::zeros(learned[0].size(), CV_8UC1);
+        tracker.setBackground(zero, zero);
+        last.left = learned[0];
+        last.right = learned[1];
+      }
       if (args.combine) {
         for (int c = 0; c < 2; ++c) {
           if (sum[c].empty()) sum[c] = cv::Mat::zeros(last.left.size(), CV_32FC1);
@@ -263,6 +340,10 @@ int main(int argc, char** argv) {
       }
       if (args.truth_background) tracker.setBackground(last.left_scene, last.right_scene);
       StereoObservation obs = tracker.trackStereo(last.left, last.right, t);
+      if (args.saddle) {
+        refineBySaddle(last.left, prior.cameras[0], &obs.left, args.truth_background ? last.left_scene : cv::Mat());
+        refineBySaddle(last.right, prior.cameras[1], &obs.right, args.truth_background ? last.right_scene : cv::Mat());
+      }
       if (args.truth_noise >= 0) {
         obs = last.observations;
         cv::RNG rng(frame_index);
