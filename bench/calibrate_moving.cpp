@@ -39,11 +39,11 @@
 #include "embedded_calibration_stereo/core/calibration/bundle_adjuster.h"
 #include "embedded_calibration_stereo/core/calibration/quality_gate.h"
 #include "embedded_calibration_stereo/core/calibration/stereo_accuracy.h"
-#include "embedded_calibration_stereo/core/depth/device_image_learner.h"
 #include "embedded_calibration_stereo/core/sim/sim_rig.h"
 #include "embedded_calibration_stereo/core/tracker/board_teacher.h"
 #include "embedded_calibration_stereo/core/tracker/pattern_tracker.h"
 #include "embedded_calibration_stereo/core/tracker/saddle_refinement.h"
+#include "embedded_calibration_stereo/core/tracker/window_tracker.h"
 
 using namespace ecs;
 
@@ -272,6 +272,7 @@ int main(int argc, char** argv) {
   TrackerOptions tracker_options;
   tracker_options.whole_board_alignment = args.align != 0;
   PatternTracker tracker(prior, tracker_options);
+  WindowTracker window_tracker(prior, tracker_options, WindowTrackerOptions());
   BundleAdjustmentConfig terms;
   terms.estimate_tangential = true;  // the scenario's lenses have p1, p2
   BundleAdjustmentOptions adjustment;
@@ -295,8 +296,7 @@ int main(int argc, char** argv) {
     std::vector<StereoObservation> frames;
     SimFrame last;
     cv::Mat sum[2];
-    std::vector<LightPair> pairs[2];
-    SimFrame off_before, off_after;
+    WindowFrames window[2];
     int corners = 0, truth_corners = 0;
     WindowErrors errors;
     for (int k = 0; k < args.frames; ++k) {
@@ -305,38 +305,30 @@ int main(int argc, char** argv) {
       last = sim.render(t, 1.0, frame_index);
       if (args.learn_window) {
         if (k == 0) {
-          for (int c = 0; c < 2; ++c) pairs[c].clear();
+          for (int c = 0; c < 2; ++c) window[c] = WindowFrames();
           const double tb = t_start - 1.0 / args.fps, ta = t_start + args.frames / args.fps;
-          off_before = sim.render(tb, 0.0, static_cast<uint64_t>(std::llround(tb * args.fps)));
-          off_after = sim.render(ta, 0.0, static_cast<uint64_t>(std::llround(ta * args.fps)));
+          const SimFrame before = sim.render(tb, 0.0, static_cast<uint64_t>(std::llround(tb * args.fps)));
+          window[0].light_off.push_back(before.left);
+          window[1].light_off.push_back(before.right);
+          if (args.learn_window == 2) {
+            const SimFrame after = sim.render(ta, 0.0, static_cast<uint64_t>(std::llround(ta * args.fps)));
+            window[0].light_off.push_back(after.left);
+            window[1].light_off.push_back(after.right);
+          }
         }
-        pairs[0].push_back({off_before.left, last.left});
-        pairs[0].push_back({off_after.left, last.left});
-        pairs[1].push_back({off_before.right, last.right});
-        pairs[1].push_back({off_after.right, last.right});
+        window[0].light_on.push_back(last.left);
+        window[1].light_on.push_back(last.right);
         if (k + 1 < args.frames) continue;
-        DeviceLearnerOptions lo;
-        lo.min_pairs = 2;
-        cv::Mat learned[2];
-        for (int c = 0; c < 2; ++c) {
-          const LearnedDevice d = learnDeviceImage(pairs[c], lo, 0);
-          d.device_template.device.convertTo(learned[c], CV_8U);
-        }
-        const cv::Mat zero = cv::Mat::zeros(learned[0].size(), CV_8UC1);
-        tracker.setBackground(zero, zero);
-        last.left = learned[0];
-        last.right = learned[1];
-      }
-      if (args.combine) {
-        for (int c = 0; c < 2; ++c) {
-          if (sum[c].empty()) sum[c] = cv::Mat::zeros(last.left.size(), CV_32FC1);
-          cv::accumulate(c == 0 ? last.left : last.right, sum[c]);
-        }
-        if (k + 1 < args.frames) continue;
-        cv::Mat mean[2];
-        for (int c = 0; c < 2; ++c) sum[c].convertTo(mean[c], CV_8U, 1.0 / args.frames);
-        last.left = mean[0];
-        last.right = mean[1];
+        const WindowTrack tracked = window_tracker.track(window[0], window[1], t);
+        StereoObservation obs = tracked.observation;
+        for (const auto& b : obs.left) corners += b.size();
+        for (const auto& b : obs.right) corners += b.size();
+        for (const auto& b : last.observations.left) truth_corners += b.size();
+        for (const auto& b : last.observations.right) truth_corners += b.size();
+        errors.add(0, obs.left, last.observations.left);
+        errors.add(1, obs.right, last.observations.right);
+        frames.push_back(std::move(obs));
+        continue;
       }
       if (args.truth_background) tracker.setBackground(last.left_scene, last.right_scene);
       StereoObservation obs = tracker.trackStereo(last.left, last.right, t);

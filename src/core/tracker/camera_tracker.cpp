@@ -338,6 +338,24 @@ std::vector<BoardCorners> CameraTracker::track(const cv::Mat& image, ColorOrder 
   return found;
 }
 
+std::vector<BoardCorners> CameraTracker::trackSceneFree(const cv::Mat& device_image) {
+  CV_Assert(device_image.type() == CV_32FC1 || device_image.type() == CV_8UC1);
+  if (device_image.size() != cv::Size(prior_.width, prior_.height))
+    throw std::invalid_argument("image size differs from the prior's image size");
+  // As SceneBackground::difference: offset so that noise on dark squares is not clipped, smoothed.
+  cv::Mat diff;
+  device_image.convertTo(diff, CV_8U, 1.0, SceneBackground::kDifferenceOffset);
+  if (options_.difference_smoothing_px > 0) {
+    const int k = 2 * static_cast<int>(std::ceil(2.0 * options_.difference_smoothing_px)) + 1;
+    cv::GaussianBlur(diff, diff, cv::Size(k, k), options_.difference_smoothing_px);
+  }
+  background_stale_ = false;
+  background_residual_ = 0.0;
+  std::vector<BoardCorners> found = trackAll(diff, true, false);
+  last_found_ = cornerCount(found);
+  return found;
+}
+
 std::vector<BoardCorners> CameraTracker::trackAll(const cv::Mat& gray, bool on_difference, bool align) {
   std::vector<BoardCorners> out(prior_.boards.size());
   auto body = [&](const cv::Range& range) {

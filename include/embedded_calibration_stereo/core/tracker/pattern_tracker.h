@@ -145,6 +145,12 @@ class CameraTracker {
   double lastBackgroundResidual() const { return background_residual_; }
   bool lastBackgroundStale() const { return background_stale_; }
 
+  // Tracks every board in an image that shows the device alone, no scene (e.g. a device image
+  // learned from a window's light pairs, device_image_learner.h): grey levels of I_C, CV_32FC1
+  // (negative values allowed) or CV_8UC1. Refines as on a background difference; the
+  // background is neither used nor changed.
+  std::vector<BoardCorners> trackSceneFree(const cv::Mat& device_image);
+
   const CameraPrior& prior() const { return prior_; }
   const std::vector<BoardTrackStats>& lastStats() const { return stats_; }
   int boardCount() const { return static_cast<int>(prior_.boards.size()); }

@@ -1,0 +1,80 @@
+#pragma once
+// Tracking a whole calibration window at once, with no still scene (ROS-free).
+//
+// The device's boards do not move during a window; the scene does (the head drives, people
+// walk). Tracking each light-on frame on its own leaves the scene's pull on every corner, and
+// that pull is nearly the same in all frames of a window (the scene moves little in a fraction
+// of a second), so more frames do not average it out and the calibrator turns it into
+// calibration error. Instead, per camera:
+//  1. the device image I_C of this window is learned from every (light-off, light-on) pair of
+//     the window (device_image_learner.h: each light-off frame aligned to each light-on frame by
+//     optical flow, combined per pixel robustly): what stays put while the scene moves;
+//  2. the boards are tracked on I_C, which shows no scene (CameraTracker::trackSceneFree; the
+//     board geometry is verified there, so no id can slip);
+//  3. every corner is refined by a blurred-saddle model fit on I_C (saddle_refinement.h), free of
+//     the sub-pixel bias of cv::cornerSubPix that would otherwise be the same in every window.
+// The result is one observation per window, whose corner errors are independent from corner to
+// corner (docs/figures.md measures them on drive_photo).
+//
+// Threading: not thread-safe (one owner thread, e.g. the tracker nodelet's worker); the two
+// cameras are processed in parallel inside track().
+#include <opencv2/core.hpp>
+#include <string>
+#include <vector>
+
+#include "embedded_calibration_stereo/core/depth/device_image_learner.h"
+#include "embedded_calibration_stereo/core/tracker/pattern_tracker.h"
+#include "embedded_calibration_stereo/core/tracker/saddle_refinement.h"
+
+namespace ecs {
+
+struct WindowTrackerOptions {
+  DeviceLearnerOptions learner;  // its readiness fields are not used: a window is what it is
+  SaddleFitOptions saddle;       // radius_px is set per corner from the board's square size
+  // Saddle window half-size as a fraction of the local square side, clamped to [2, max] px.
+  double saddle_radius_squares = 0.45;
+  int max_saddle_radius_px = 8;
+  int min_light_on_frames = 3;   // fewer: no observation (a verification flash is one frame)
+  // Empty when usable; otherwise one message per problem, joined by "; ".
+  std::string Check() const;
+};
+
+// One camera's frames of one window: the settled light-on frames, and the settled light-off
+// frames taken around them (the last one before the window, and/or the first one after).
+// CV_8UC1 or CV_8UC3 (BGR), all of one size and type.
+struct WindowFrames {
+  std::vector<cv::Mat> light_off, light_on;
+};
+
+struct WindowTrack {
+  StereoObservation observation;  // corners of both cameras, stamped by the caller
+  cv::Mat device[2];              // the learned I_C per camera (CV_32F, grey levels)
+  int corners_tracked = 0;        // on I_C before the saddle fit
+  int saddle_failures = 0;        // corners dropped because their saddle fit failed
+};
+
+class WindowTracker {
+ public:
+  // Throws ConfigError on an invalid prior or options.
+  WindowTracker(const PatternPrior& prior, const TrackerOptions& tracker_options,
+                const WindowTrackerOptions& options);
+
+  // Tracks one window. Throws std::invalid_argument when a camera has no light-off frame, fewer
+  // than min_light_on_frames light-on frames, or frames of different sizes or types.
+  WindowTrack track(const WindowFrames& left, const WindowFrames& right, double stamp);
+  // Forget the boards' tracked state (the next window starts from the prior).
+  void reset() { tracker_.reset(); }
+  const WindowTrackerOptions& options() const { return options_; }
+
+ private:
+  PatternTracker tracker_;  // its own board states, followed from window to window
+  WindowTrackerOptions options_;
+};
+
+// Refines tracked corners by the saddle fit on `image` (CV_32FC1 or CV_8UC1, scene-free); the
+// lines through each corner come from its tracked neighbours. A corner whose fit fails, or
+// that has no neighbour along a line, is dropped. Returns how many were dropped.
+int refineCornersBySaddleFit(const cv::Mat& image, const CameraPrior& prior, const WindowTrackerOptions& options,
+                             std::vector<BoardCorners>* boards);
+
+}  // namespace ecs

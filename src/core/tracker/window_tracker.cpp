@@ -1,0 +1,129 @@
+#include "embedded_calibration_stereo/core/tracker/window_tracker.h"
+
+#include <algorithm>
+#include <map>
+#include <opencv2/imgproc.hpp>
+#include <stdexcept>
+
+#include "embedded_calibration_stereo/core/geometry/config_error.h"
+
+namespace ecs {
+
+std::string WindowTrackerOptions::Check() const {
+  std::vector<std::string> problems;
+  const std::string learner_problems = learner.Check();
+  if (!learner_problems.empty()) problems.push_back("learner: " + learner_problems);
+  if (!(saddle_radius_squares > 0.1 && saddle_radius_squares < 0.5))
+    problems.push_back("saddle_radius_squares must be in (0.1, 0.5)");
+  if (max_saddle_radius_px < 2) problems.push_back("max_saddle_radius_px must be >= 2");
+  if (min_light_on_frames < 1) problems.push_back("min_light_on_frames must be >= 1");
+  std::string joined;
+  for (const std::string& p : problems) joined += (joined.empty() ? "" : "; ") + p;
+  return joined;
+}
+
+int refineCornersBySaddleFit(const cv::Mat& image, const CameraPrior& prior, const WindowTrackerOptions& options,
+                             std::vector<BoardCorners>* boards) {
+  int dropped = 0;
+  for (BoardCorners& b : *boards) {
+    const BoardPrior* board = nullptr;
+    for (const BoardPrior& candidate : prior.boards)
+      if (candidate.board_id == b.board_id) board = &candidate;
+    if (!board) continue;
+    std::map<int, cv::Point2f> at;
+    for (size_t i = 0; i < b.size(); ++i) at[b.corner_ids[i]] = cv::Point2f(b.u[i], b.v[i]);
+    // Direction of the board line through corner `id` towards the next corner (`step` ids on).
+    const auto line = [&](int id, int step, bool along_row_of_ids) -> cv::Point2f {
+      const int col = id % board->cols;
+      const bool next = at.count(id + step) && (!along_row_of_ids || col + 1 < board->cols);
+      const bool prev = at.count(id - step) && (!along_row_of_ids || col > 0);
+      if (next && prev) return 0.5f * (at[id + step] - at[id - step]);
+      if (next) return at[id + step] - at[id];
+      if (prev) return at[id] - at[id - step];
+      return cv::Point2f(0, 0);
+    };
+    std::vector<SaddleFit> fits(b.size());
+    std::vector<char> ok(b.size(), 0);
+    cv::parallel_for_(cv::Range(0, static_cast<int>(b.size())), [&](const cv::Range& range) {
+      for (int i = range.start; i < range.end; ++i) {
+        const int id = b.corner_ids[i];
+        const cv::Point2f along_col = line(id, 1, true), along_row = line(id, board->cols, false);
+        const double square = std::min(cv::norm(along_col), cv::norm(along_row));
+        if (!(square > 0)) continue;
+        SaddleFitOptions saddle = options.saddle;
+        saddle.radius_px = std::max(
+            2, std::min(options.max_saddle_radius_px, static_cast<int>(options.saddle_radius_squares * square)));
+        ok[i] = fitSaddle(image, cv::Point2f(b.u[i], b.v[i]), along_col, along_row, saddle, &fits[i]);
+      }
+    });
+    BoardCorners out;
+    out.board_id = b.board_id;
+    for (size_t i = 0; i < b.size(); ++i) {
+      if (!ok[i]) {
+        ++dropped;
+        continue;
+      }
+      out.corner_ids.push_back(b.corner_ids[i]);
+      out.u.push_back(static_cast<float>(fits[i].corner.x));
+      out.v.push_back(static_cast<float>(fits[i].corner.y));
+    }
+    b = std::move(out);
+  }
+  boards->erase(std::remove_if(boards->begin(), boards->end(), [](const BoardCorners& b) { return b.size() == 0; }),
+                boards->end());
+  return dropped;
+}
+
+WindowTracker::WindowTracker(const PatternPrior& prior, const TrackerOptions& tracker_options,
+                             const WindowTrackerOptions& options)
+    : tracker_(prior, tracker_options), options_(options) {
+  const std::string problems = options.Check();
+  if (!problems.empty()) throw ConfigError("window tracker options", problems);
+}
+
+WindowTrack WindowTracker::track(const WindowFrames& left, const WindowFrames& right, double stamp) {
+  const WindowFrames* frames[2] = {&left, &right};
+  for (int c = 0; c < 2; ++c) {
+    if (frames[c]->light_off.empty())
+      throw std::invalid_argument(std::string(c ? "right" : "left") + ": a window needs a light-off frame");
+    if (static_cast<int>(frames[c]->light_on.size()) < options_.min_light_on_frames)
+      throw std::invalid_argument(std::string(c ? "right" : "left") + ": " +
+                                  std::to_string(frames[c]->light_on.size()) + " light-on frames, fewer than " +
+                                  std::to_string(options_.min_light_on_frames));
+  }
+  WindowTrack result;
+  result.observation.stamp = stamp;
+  std::vector<BoardCorners> corners[2];
+  int dropped[2] = {0, 0}, tracked[2] = {0, 0};
+  std::string error[2];
+  cv::parallel_for_(cv::Range(0, 2), [&](const cv::Range& range) {
+    for (int c = range.start; c < range.end; ++c) {
+      try {
+        LightPairSet set(255);
+        for (const cv::Mat& off : frames[c]->light_off)
+          for (const cv::Mat& on : frames[c]->light_on) set.add(off, on);
+        DeviceLearnerOptions learner = options_.learner;
+        learner.min_pairs = 2;
+        learner.max_pairs = std::max(learner.max_pairs, set.size());
+        const LearnedDevice learned = learnDeviceImage(set.snapshot(), learner, 0);
+        cv::Mat device = learned.device_template.device;
+        if (device.channels() == 3) cv::cvtColor(device, device, cv::COLOR_BGR2GRAY);
+        result.device[c] = device;
+        corners[c] = tracker_.camera(c).trackSceneFree(device);
+        for (const BoardCorners& b : corners[c]) tracked[c] += static_cast<int>(b.size());
+        dropped[c] = refineCornersBySaddleFit(device, tracker_.camera(c).prior(), options_, &corners[c]);
+      } catch (const std::exception& e) {
+        error[c] = e.what();
+      }
+    }
+  });
+  for (int c = 0; c < 2; ++c)
+    if (!error[c].empty()) throw std::invalid_argument(std::string(c ? "right: " : "left: ") + error[c]);
+  result.observation.left = std::move(corners[0]);
+  result.observation.right = std::move(corners[1]);
+  result.corners_tracked = tracked[0] + tracked[1];
+  result.saddle_failures = dropped[0] + dropped[1];
+  return result;
+}
+
+}  // namespace ecs
