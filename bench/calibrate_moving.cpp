@@ -272,7 +272,9 @@ int main(int argc, char** argv) {
   TrackerOptions tracker_options;
   tracker_options.whole_board_alignment = args.align != 0;
   PatternTracker tracker(prior, tracker_options);
-  WindowTracker window_tracker(prior, tracker_options, WindowTrackerOptions());
+  WindowTrackerOptions window_options;
+  if (const char* it = std::getenv("LEARN_ITERATIONS")) window_options.learner.iterations = std::atoi(it);
+  WindowTracker window_tracker(prior, tracker_options, window_options);
   BundleAdjustmentConfig terms;
   terms.estimate_tangential = true;  // the scenario's lenses have p1, p2
   BundleAdjustmentOptions adjustment;
@@ -319,7 +321,11 @@ int main(int argc, char** argv) {
         window[0].light_on.push_back(last.left);
         window[1].light_on.push_back(last.right);
         if (k + 1 < args.frames) continue;
+        const auto w0 = std::chrono::steady_clock::now();
         const WindowTrack tracked = window_tracker.track(window[0], window[1], t);
+        std::printf("    window tracked in %.0f ms, %d saddle fits failed\n",
+                    std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - w0).count(),
+                    tracked.saddle_failures);
         StereoObservation obs = tracked.observation;
         for (const auto& b : obs.left) corners += b.size();
         for (const auto& b : obs.right) corners += b.size();
