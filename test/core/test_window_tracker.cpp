@@ -1,0 +1,132 @@
+// WindowTracker on the moving drive_photo scenario (the head drives through a photographed
+// corridor, people cross; real-head optics): windows of 10 light-on frames at 30 fps between a
+// light-off frame before and one after, with a zoom step and a knock of the right camera between
+// windows. Every corner of the window's one observation is compared with the simulator's true
+// corner of the same id; the per-frame tracker (raw images, boards aligned whole) on the same
+// frames is the reference: the part of its error that its window's frames share (their mean
+// error per corner) is what a window of per-frame observations gives the calibrator.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdio>
+#include <map>
+#include <stdexcept>
+#include <string>
+#include <tuple>
+
+#include <opencv2/imgproc.hpp>
+
+#include "embedded_calibration_stereo/core/sim/sim_rig.h"
+#include "embedded_calibration_stereo/core/tracker/window_tracker.h"
+#include "embedded_calibration_stereo/test_support/corner_score.h"
+#include "embedded_calibration_stereo/test_support/sim_prior.h"
+
+namespace ecs {
+namespace {
+
+const std::string kConfig = std::string(ECS_SOURCE_DIR) + "/config/drive_photo.yaml";
+constexpr double kFps = 30.0;
+constexpr int kLitFrames = 10;
+
+// Mean error per (camera, board, corner) over frames: the error the frames share.
+struct SharedError {
+  std::map<std::tuple<int, int, int>, std::pair<cv::Point2d, int>> sums;
+  void add(int camera, const std::vector<BoardCorners>& tracked, const std::vector<BoardCorners>& truth) {
+    for (const BoardCorners& b : tracked)
+      for (const BoardCorners& t : truth) {
+        if (t.board_id != b.board_id) continue;
+        for (size_t i = 0; i < b.size(); ++i)
+          for (size_t j = 0; j < t.size(); ++j)
+            if (t.corner_ids[j] == b.corner_ids[i]) {
+              auto& s = sums[{camera, b.board_id, b.corner_ids[i]}];
+              s.first += cv::Point2d(b.u[i] - t.u[j], b.v[i] - t.v[j]);
+              ++s.second;
+            }
+      }
+  }
+  double rms() const {
+    double q = 0;
+    for (const auto& kv : sums) {
+      const cv::Point2d m = kv.second.first / kv.second.second;
+      q += m.dot(m);
+    }
+    return sums.empty() ? 0.0 : std::sqrt(q / sums.size());
+  }
+};
+
+TEST(WindowTracker, TracksMovingWindowsAgainstTheTruth) {
+  SimRig sim(loadSimRigConfig(kConfig));
+  const PatternPrior prior = teachSimPrior(sim, 1.0);
+  WindowTracker window_tracker(prior, TrackerOptions(), WindowTrackerOptions());
+  PatternTracker frame_tracker(prior, TrackerOptions());
+  CornerScore score;
+  double shared_sq = 0;
+  int windows = 0;
+  for (int w = 0; w < 3; ++w) {
+    const int j = 45 + 60 * w;  // the light-off frame before the window
+    if (w == 1) {
+      DriftRequest zoom;
+      zoom.focal_scale = 1.02;
+      ASSERT_TRUE(sim.setDrift(zoom, (j - 5) / kFps).empty());
+    } else if (w == 2) {
+      DriftRequest knock;
+      knock.knock_rotation_deg = Eigen::Vector3d(0.2, -0.25, 0.1);
+      ASSERT_TRUE(sim.setDrift(knock, (j - 5) / kFps).empty());
+    }
+    WindowFrames left, right;
+    const SimFrame before = sim.render(j / kFps, 0.0, 500 + j);
+    left.light_off.push_back(before.left);
+    right.light_off.push_back(before.right);
+    SharedError shared;
+    SimFrame lit;
+    for (int k = 1; k <= kLitFrames; ++k) {
+      lit = sim.render((j + k) / kFps, 1.0, 1000 + j + k);
+      left.light_on.push_back(lit.left);
+      right.light_on.push_back(lit.right);
+      const StereoObservation per_frame = frame_tracker.trackStereo(lit.left, lit.right, (j + k) / kFps);
+      shared.add(0, per_frame.left, lit.observations.left);
+      shared.add(1, per_frame.right, lit.observations.right);
+    }
+    const SimFrame after = sim.render((j + kLitFrames + 1) / kFps, 0.0, 500 + j + kLitFrames + 1);
+    left.light_off.push_back(after.left);
+    right.light_off.push_back(after.right);
+    const WindowTrack track = window_tracker.track(left, right, (j + kLitFrames) / kFps);
+    CornerScore window_score;
+    window_score.add(track.observation, lit.observations);
+    score.add(track.observation, lit.observations);
+    std::printf("  window %d: %s (%d saddle fits failed); per-frame tracker, error shared by the window's "
+                "frames: %.3f px RMS\n",
+                w, window_score.str().c_str(), track.saddle_failures, shared.rms());
+    shared_sq += shared.rms() * shared.rms();
+    ++windows;
+  }
+  const double shared_rms = std::sqrt(shared_sq / windows);
+  std::printf("  all windows: %s; per-frame tracker's shared error %.3f px\n", score.str().c_str(), shared_rms);
+  EXPECT_GE(score.foundFraction(), 0.99) << score.str();
+  EXPECT_EQ(score.wrong, 0u) << score.str();
+  EXPECT_LE(score.rms(), 0.03) << score.str();
+  // The point of combining the window: less than what its per-frame observations share.
+  EXPECT_LT(score.rms(), 0.8 * shared_rms) << score.str();
+}
+
+TEST(WindowTracker, RefusesAWindowItCannotLearnFrom) {
+  SimRig sim(loadSimRigConfig(kConfig));
+  const PatternPrior prior = teachSimPrior(sim, 1.0);
+  WindowTracker tracker(prior, TrackerOptions(), WindowTrackerOptions());
+  const SimFrame lit = sim.render(2.0, 1.0, 7), off = sim.render(2.1, 0.0, 8);
+  WindowFrames no_off{{}, {lit.left, lit.left, lit.left}};
+  WindowFrames ok_right{{off.right}, {lit.right, lit.right, lit.right}};
+  EXPECT_THROW(tracker.track(no_off, ok_right, 2.0), std::invalid_argument);
+  WindowFrames flash{{off.left}, {lit.left}};  // a verification flash: one light-on frame
+  EXPECT_THROW(tracker.track(flash, ok_right, 2.0), std::invalid_argument);
+  cv::Mat small;
+  cv::resize(off.left, small, cv::Size(), 0.5, 0.5);
+  WindowFrames mixed{{small}, {lit.left, lit.left, lit.left}};
+  EXPECT_THROW(tracker.track(mixed, ok_right, 2.0), std::invalid_argument);
+  WindowTrackerOptions bad;
+  bad.min_light_on_frames = 0;
+  EXPECT_THROW(WindowTracker(prior, TrackerOptions(), bad), std::exception);
+}
+
+}  // namespace
+}  // namespace ecs
