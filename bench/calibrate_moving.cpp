@@ -11,14 +11,19 @@
 //   bench_calibrate_moving [--config FILE] [--minutes M] [--period S] [--frames N] [--fps F]
 //                          [--teach-frames K] [--min-change X] [--min-improvement R]
 //                          [--combine 0|1] [--align 0|1] [--free-poses 0|1]
-//                          [--truth-background 0|1] [--truth-noise SIGMA]
+//                          [--truth-background 0|1] [--truth-noise SIGMA] [--saddle 0|1]
+//                          [--learn-window 0|1|2] [--off-frames K]
 // --min-change / --min-improvement: the gate's min_change_in_predicted / min_rms_improvement_rel;
 // what limits the accuracy (docs/figures.md): --combine 1 tracks the mean of the window's frames
 // (one observation per window), --align 0 reports cornerSubPix corners instead of the whole-board
 // alignment's, --free-poses 1 solves with one free pose per virtual board instead of the rigid
 // device model, --truth-background 1 gives the tracker the simulator's scene of each frame as its
 // background (a still-world reference), --truth-noise S replaces tracking by the true corners
-// plus S px of Gaussian noise. Each window also prints the tracked corners' RMS error against
+// plus S px of Gaussian noise, --saddle 1 refines the tracked corners by the saddle-model fit
+// (on the difference with --truth-background 1). --learn-window 2 tracks each window as a whole
+// (window_tracker.h: the device image learned from the window's light-off frames, K on each side,
+// and its light-on frames; one observation per window), 1 the same with light-off frames before
+// the window only. Each window also prints the tracked corners' RMS error against
 // the truth and the part of it common to the window's frames.
 // The scene moves with the frame index (time = frame / fps), the noise seeds are the frame
 // index: two runs print the same figures. The prior is taught at t = 0 from light-on frames
@@ -64,7 +69,10 @@ struct Args {
   double min_change = 0.0;  // GateOptions::min_change_in_predicted
   int free_poses = 0;       // 1: one free pose per virtual board instead of the rigid device model
   int truth_background = 0;  // 1: the simulator's scene of each frame as its background (a still-world reference)
-  int learn_window = 0;      // 1: learn the device image from the window's light pairs and track it
+  // 1: learn the device image from the window's light pairs (light-off frames before it) and
+  // track it (WindowTracker); 2: light-off frames before and after it
+  int learn_window = 0;
+  int off_frames = 1;        // light-off frames on each side of the window for --learn-window
   int saddle = 0;            // 1: refine the tracked corners by the saddle-model fit
   double truth_noise = -1;  // >= 0: the simulator's true corners plus this Gaussian noise instead of tracking
 };
@@ -248,6 +256,7 @@ int main(int argc, char** argv) {
     else if (!std::strcmp(argv[i], "--free-poses")) args.free_poses = std::atoi(value());
     else if (!std::strcmp(argv[i], "--truth-background")) args.truth_background = std::atoi(value());
     else if (!std::strcmp(argv[i], "--learn-window")) args.learn_window = std::atoi(value());
+    else if (!std::strcmp(argv[i], "--off-frames")) args.off_frames = std::max(1, std::atoi(value()));
     else if (!std::strcmp(argv[i], "--saddle")) args.saddle = std::atoi(value());
     else {
       std::fprintf(stderr, "usage: bench_calibrate_moving [--config FILE] [--minutes M] [--period S] [--frames N] "
@@ -308,18 +317,29 @@ int main(int argc, char** argv) {
       if (args.learn_window) {
         if (k == 0) {
           for (int c = 0; c < 2; ++c) window[c] = WindowFrames();
-          const double tb = t_start - 1.0 / args.fps, ta = t_start + args.frames / args.fps;
-          const SimFrame before = sim.render(tb, 0.0, static_cast<uint64_t>(std::llround(tb * args.fps)));
-          window[0].light_off.push_back(before.left);
-          window[1].light_off.push_back(before.right);
-          if (args.learn_window == 2) {
+          for (int o = args.off_frames; o >= 1; --o) {
+            const double tb = t_start - o / args.fps;
+            const SimFrame before = sim.render(tb, 0.0, static_cast<uint64_t>(std::llround(tb * args.fps)));
+            window[0].light_off.push_back(before.left);
+            window[1].light_off.push_back(before.right);
+          }
+        }
+        if (args.learn_window == 2 && k + 1 == args.frames) {
+          // After the window's last light-on frame (rendered in time order: the simulated
+          // auto-exposure carries state from frame to frame).
+          window[0].light_on.push_back(last.left);
+          window[1].light_on.push_back(last.right);
+          for (int o = 1; o <= args.off_frames; ++o) {
+            const double ta = t_start + (args.frames - 1 + o) / args.fps;
             const SimFrame after = sim.render(ta, 0.0, static_cast<uint64_t>(std::llround(ta * args.fps)));
             window[0].light_off.push_back(after.left);
             window[1].light_off.push_back(after.right);
           }
         }
-        window[0].light_on.push_back(last.left);
-        window[1].light_on.push_back(last.right);
+        if (!(args.learn_window == 2 && k + 1 == args.frames)) {
+          window[0].light_on.push_back(last.left);
+          window[1].light_on.push_back(last.right);
+        }
         if (k + 1 < args.frames) continue;
         const auto w0 = std::chrono::steady_clock::now();
         const WindowTrack tracked = window_tracker.track(window[0], window[1], t);
