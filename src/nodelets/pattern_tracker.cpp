@@ -49,6 +49,7 @@
 #include "embedded_calibration_stereo/core/tracker/window_tracker.h"
 #include "embedded_calibration_stereo/ros/conversions.h"
 #include "embedded_calibration_stereo/ros/lazy_synced_input.h"
+#include "embedded_calibration_stereo/ros/light_burst.h"
 #include "embedded_calibration_stereo/ros/parameter_reader.h"
 #include "embedded_calibration_stereo/ros/tracker_teaching.h"
 
@@ -85,7 +86,7 @@ const char* toString(PriorState s) {
 //    copies of the frames and the device model and returns a TeachOutcome through teach_result_;
 //    frameCb collects it when ready. The destructor waits for it;
 //  - window tracking (window_tracking; seconds per burst) runs on window_worker_ (started in
-//    onInit, joined in the destructor): frameCb collects a burst's message pointers (burst_,
+//    onInit, joined in the destructor): frameCb collects a burst's message pointers (bursts_,
 //    callback queue only) and hands them over with the WindowTracker in force (a shared_ptr:
 //    a new prior makes a new tracker, the worker finishes with the one it got) through
 //    window_job_; the worker alone runs that tracker and publishes on window_observations_pub_.
@@ -100,17 +101,6 @@ class PatternTrackerNodelet : public nodelet::Nodelet {
 
  private:
   using FrameInput = LazySyncedInput<Image, Image, CalibrationMode>;
-  using ImagePair = std::pair<ImageConstPtr, ImageConstPtr>;  // left, right
-
-  // The frames of one light burst being collected (callback queue only).
-  struct Burst {
-    ImagePair light_off_before;       // null: no settled light-off frame since the last burst
-    std::vector<ImagePair> light_on;  // empty: no burst under way
-    int frames = 0;                   // settled light-on frames seen, kept or not
-    uint32_t epoch = 0;               // calibration_epoch of its first light-on frame
-    std::string problem;              // non-empty: dropped at its end, for this reason
-  };
-
   // One burst handed to the worker.
   struct WindowJob {
     std::shared_ptr<ecs::WindowTracker> tracker;
@@ -162,6 +152,7 @@ class PatternTrackerNodelet : public nodelet::Nodelet {
     if (window_tracking_) {
       window_observations_pub_ = nh.advertise<StereoPatternObservation>("calibration/window_observations", 10, cb, cb);
       input_->watch(window_observations_pub_);
+      bursts_.emplace(window_options_.min_light_on_frames);
       window_worker_ = std::thread(&PatternTrackerNodelet::windowWorkerLoop, this);
     }
     updateNeed();
@@ -285,7 +276,9 @@ class PatternTrackerNodelet : public nodelet::Nodelet {
   void frameCb(const ImageConstPtr& left, const ImageConstPtr& right, const CalibrationModeConstPtr& mode) {
     collectTeaching();
     if (!mode->settled) return;  // the light is changing: neither a scene nor a board frame
-    if (window_tracking_) collectBurst(left, right, *mode);
+    if (window_tracking_) {
+      if (auto ended = bursts_->add(left, right, mode->light_on, mode->calibration_epoch)) endBurst(std::move(*ended));
+    }
     if (!mode->light_on) {
       light_off_left_ = left;  // zero-copy: keeps the shared messages alive
       light_off_right_ = right;
@@ -462,72 +455,22 @@ class PatternTrackerNodelet : public nodelet::Nodelet {
 
   // ---- window tracking (window_tracking)
 
-  // "" when the pair can be tracked; otherwise why not.
-  static std::string formatProblem(const ImagePair& pair) {
-    const Image& l = *pair.first;
-    const Image& r = *pair.second;
-    if (l.encoding != r.encoding || l.width != r.width || l.height != r.height)
-      return "left and right differ (" + describe(l) + " vs " + describe(r) + ")";
-    if (l.encoding != "mono8" && l.encoding != "bgr8" && l.encoding != "rgb8")
-      return "encoding '" + l.encoding + "' (expected mono8, bgr8 or rgb8)";
-    return "";
-  }
-  static std::string describe(const Image& m) {
-    return m.encoding + " " + std::to_string(m.width) + "x" + std::to_string(m.height);
-  }
-  static bool sameFormat(const Image& a, const Image& b) {
-    return a.encoding == b.encoding && a.width == b.width && a.height == b.height;
-  }
-
-  // Callback queue, settled frames only. Keeps the pointers of the burst's frames (no copy).
-  void collectBurst(const ImageConstPtr& left, const ImageConstPtr& right, const CalibrationMode& mode) {
-    if (!mode.light_on) {
-      if (burst_.frames > 0) endBurst(ImagePair(left, right));
-      burst_ = Burst();
-      burst_.light_off_before = ImagePair(left, right);  // the next burst's, until a later one
-      return;
-    }
-    if (burst_.frames++ == 0) {
-      burst_.epoch = mode.calibration_epoch;
-      if (!burst_.light_off_before.first) burst_.problem = "no settled light-off frame before it";
-    }
-    if (!burst_.problem.empty()) return;
-    const ImagePair frame(left, right);
-    if (mode.calibration_epoch != burst_.epoch) {
-      burst_.problem = "the calibration epoch changed from " + std::to_string(burst_.epoch) + " to " +
-                       std::to_string(mode.calibration_epoch) + " during it";
-    } else if (const std::string problem = formatProblem(frame); !problem.empty()) {
-      burst_.problem = "a frame's " + problem;
-    } else if (!sameFormat(*left, *burst_.light_off_before.first)) {
-      burst_.problem = "its frames differ in size or encoding (" + describe(*left) + ", light-off frame before it " +
-                       describe(*burst_.light_off_before.first) + ")";
-    } else {
-      burst_.light_on.push_back(frame);
-      return;
-    }
-    burst_.light_on.clear();  // the messages are not needed any more
-  }
-
-  // Callback queue: the first settled light-off frame after a burst.
-  void endBurst(const ImagePair& light_off_after) {
-    if (burst_.frames < window_options_.min_light_on_frames) return;  // a verification flash
-    std::string problem = burst_.problem;
-    if (problem.empty() && !sameFormat(*light_off_after.first, *burst_.light_on.front().first))
-      problem = "its frames differ in size or encoding (" + describe(*burst_.light_on.front().first) +
-                ", light-off frame after it " + describe(*light_off_after.first) + ")";
+  // Callback queue: a burst ended (the first settled light-off frame after it).
+  void endBurst(EndedBurst ended) {
+    std::string problem = ended.problem;
     if (problem.empty() && !window_tracker_) problem = "no prior to track with yet";
-    WindowJob job;
     if (problem.empty()) {
+      WindowJob job;
       job.tracker = window_tracker_;
-      for (const ImagePair& off : {burst_.light_off_before, light_off_after}) {
+      for (const StereoImages& off : {ended.burst.light_off_before, ended.burst.light_off_after}) {
         job.light_off[0].push_back(off.first);
         job.light_off[1].push_back(off.second);
       }
-      for (const ImagePair& on : burst_.light_on) {
+      for (const StereoImages& on : ended.burst.light_on) {
         job.light_on[0].push_back(on.first);
         job.light_on[1].push_back(on.second);
       }
-      job.header = burst_.light_on.back().first->header;
+      job.header = ended.burst.light_on.back().first->header;
       std::lock_guard<std::mutex> lock(window_mutex_);
       if (window_busy_) {
         problem = "the previous burst is still being tracked";
@@ -541,8 +484,9 @@ class PatternTrackerNodelet : public nodelet::Nodelet {
       return;
     }
     char text[600];
-    std::snprintf(text, sizeof(text), "burst of %d light-on frames ending at %.3f s dropped: %s", burst_.frames,
-                  light_off_after.first->header.stamp.toSec(), problem.c_str());
+    std::snprintf(text, sizeof(text), "burst of %d light-on frames ending at %.3f s dropped: %s", ended.light_on_frames,
+                  ended.burst.light_off_after.first->header.stamp.toSec(),
+                  problem.c_str());
     NODELET_WARN_THROTTLE(5.0, "PatternTracker: %s (window tracking, %s)", text,
                           window_observations_pub_.getTopic().c_str());
     std::lock_guard<std::mutex> lock(window_mutex_);
@@ -705,7 +649,7 @@ class PatternTrackerNodelet : public nodelet::Nodelet {
   bool window_tracking_ = false;  // parameter
   const ecs::WindowTrackerOptions window_options_;
   std::shared_ptr<ecs::WindowTracker> window_tracker_;  // null without a prior; callback queue
-  Burst burst_;                                         // callback queue
+  std::optional<LightBurstCollector> bursts_;           // with window_tracking; callback queue
   ros::Publisher window_observations_pub_;
   std::thread window_worker_;
   std::mutex window_mutex_;  // guards everything below
