@@ -19,7 +19,9 @@
 // device model, --truth-background 1 gives the tracker the simulator's scene of each frame as its
 // background (a still-world reference), --truth-noise S replaces tracking by the true corners
 // plus S px of Gaussian noise. Each window also prints the tracked corners' RMS error against
-// the truth and the part of it common to the window's frames.
+// the truth and the part of it common to the window's frames. --light-off-gap G (with
+// --learn-window): the light-off frames lie G frame periods from the window's first and last
+// light-on frames (default 1; the live driver: settle_frames + 1).
 // The scene moves with the frame index (time = frame / fps), the noise seeds are the frame
 // index: two runs print the same figures. The prior is taught at t = 0 from light-on frames
 // minus the simulator's scene of the same frame (as the live tracker's teach_from_ground_truth).
@@ -66,6 +68,7 @@ struct Args {
   int truth_background = 0;  // 1: the simulator's scene of each frame as its background (a still-world reference)
   int learn_window = 0;      // 1: learn the device image from the window's light pairs and track it
   int saddle = 0;            // 1: refine the tracked corners by the saddle-model fit
+  int light_off_gap = 1;     // --learn-window: frame periods from the light-off frames to the window's ends
   double truth_noise = -1;  // >= 0: the simulator's true corners plus this Gaussian noise instead of tracking
 };
 
@@ -249,11 +252,16 @@ int main(int argc, char** argv) {
     else if (!std::strcmp(argv[i], "--truth-background")) args.truth_background = std::atoi(value());
     else if (!std::strcmp(argv[i], "--learn-window")) args.learn_window = std::atoi(value());
     else if (!std::strcmp(argv[i], "--saddle")) args.saddle = std::atoi(value());
+    else if (!std::strcmp(argv[i], "--light-off-gap")) args.light_off_gap = std::atoi(value());
     else {
       std::fprintf(stderr, "usage: bench_calibrate_moving [--config FILE] [--minutes M] [--period S] [--frames N] "
                            "[--fps F] [--teach-frames K]   (default config: $ECS_SOURCE_DIR/config/drive_photo.yaml)\n");
       return 2;
     }
+  }
+  if (args.light_off_gap < 1) {
+    std::fprintf(stderr, "bench_calibrate_moving: --light-off-gap must be >= 1\n");
+    return 2;
   }
   if (args.config.empty() || args.frames < 1 || !(args.period_s > args.frames / args.fps)) {
     std::fprintf(stderr, "bench_calibrate_moving: need --config (or ECS_SOURCE_DIR), frames >= 1 and a period longer "
@@ -308,7 +316,9 @@ int main(int argc, char** argv) {
       if (args.learn_window) {
         if (k == 0) {
           for (int c = 0; c < 2; ++c) window[c] = WindowFrames();
-          const double tb = t_start - 1.0 / args.fps, ta = t_start + args.frames / args.fps;
+          // The live driver's settle_frames unsettled frames lie between: gap = settle_frames + 1.
+          const double tb = t_start - args.light_off_gap / args.fps,
+                       ta = t_start + (args.frames - 1 + args.light_off_gap) / args.fps;
           const SimFrame before = sim.render(tb, 0.0, static_cast<uint64_t>(std::llround(tb * args.fps)));
           window[0].light_off.push_back(before.left);
           window[1].light_off.push_back(before.right);

@@ -42,11 +42,11 @@ using sensor_msgs::CameraInfo;
 namespace {
 
 // The accuracy targets for depth after the drift (px RMS over the field of view, %, relative):
-// printed, met or not. Here the window tracker learns each burst's device image from light-off
-// frames three frame periods (0.3 s) from its first and last light-on frames (two frames settle
-// the light), over which the moving scene changes more than the tracker handles at the targets'
-// level (docs/figures.md), so the test holds the calibration to what it reaches, with margin:
-// well inside what the drift caused (a 2.6 px disparity bias).
+// printed, met or not. The window tracker meets them at 30 fps (bench_calibrate_moving
+// --learn-window 2); here, at 10 fps (the scene moves three times as far between frames) and with
+// the light-off frames three frame periods from the burst (two frames settle the light), it does
+// not (docs/figures.md), so the test holds the calibration to what it reaches, with margin: well
+// inside what the drift caused (a 2.6 px disparity bias).
 constexpr double kTargetMisalignmentPx = 0.05, kTargetBiasPx = 0.05, kTargetDepthError10mPct = 0.7,
                  kTargetFocalRel = 0.0005, kTargetBaselineRel = 0.001;
 // The baseline is the least determined here (the knock moves it 0.67 %).
