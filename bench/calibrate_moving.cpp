@@ -23,8 +23,10 @@
 // (on the difference with --truth-background 1). --learn-window 2 tracks each window as a whole
 // (window_tracker.h: the device image learned from the window's light-off frames, K on each side,
 // and its light-on frames; one observation per window), 1 the same with light-off frames before
-// the window only. Each window also prints the tracked corners' RMS error against
-// the truth and the part of it common to the window's frames.
+// the window only; --light-off-gap G: the nearest light-off frames lie G frame periods from the
+// window's first and last light-on frames (default 1; the live driver: settle_frames + 1). Each
+// window also prints the tracked corners' RMS error against the truth and the part of it common
+// to the window's frames.
 // The scene moves with the frame index (time = frame / fps), the noise seeds are the frame
 // index: two runs print the same figures. The prior is taught at t = 0 from light-on frames
 // minus the simulator's scene of the same frame (as the live tracker's teach_from_ground_truth).
@@ -74,6 +76,7 @@ struct Args {
   int learn_window = 0;
   int off_frames = 1;        // light-off frames on each side of the window for --learn-window
   int saddle = 0;            // 1: refine the tracked corners by the saddle-model fit
+  int light_off_gap = 1;     // --learn-window: frame periods from the light-off frames to the window's ends
   double truth_noise = -1;  // >= 0: the simulator's true corners plus this Gaussian noise instead of tracking
 };
 
@@ -128,49 +131,17 @@ struct DriftScript {
   }
 };
 
-// Refines every corner by the saddle fit, the board's lines from its tracked neighbours; drops
-// a corner whose fit fails.
+// Refines every corner by the saddle fit on the image, or on image minus background.
 void refineBySaddle(const cv::Mat& image, const CameraPrior& prior, std::vector<BoardCorners>* boards,
                     const cv::Mat& background = cv::Mat()) {
   cv::Mat diff;
-  if (background.empty()) diff = image;
-  else {
-    cv::Mat a, b;
-    image.convertTo(a, CV_32F);
+  image.convertTo(diff, CV_32F);
+  if (!background.empty()) {
+    cv::Mat b;
     background.convertTo(b, CV_32F);
-    diff = a - b;
+    diff -= b;
   }
-  for (BoardCorners& b : *boards) {
-    const BoardPrior* bp = nullptr;
-    for (const BoardPrior& x : prior.boards)
-      if (x.board_id == b.board_id) bp = &x;
-    if (!bp) continue;
-    std::map<int, cv::Point2f> at;
-    for (size_t i = 0; i < b.size(); ++i) at[b.corner_ids[i]] = cv::Point2f(b.u[i], b.v[i]);
-    const auto axis = [&](int id, int step, bool along_col) -> cv::Point2f {
-      const int c = id % bp->cols;
-      const bool has_next = at.count(id + step) && (!along_col || c + 1 < bp->cols);
-      const bool has_prev = at.count(id - step) && (!along_col || c > 0);
-      if (has_next && has_prev) return 0.5f * (at[id + step] - at[id - step]);
-      if (has_next) return at[id + step] - at[id];
-      if (has_prev) return at[id] - at[id - step];
-      return cv::Point2f(0, 0);
-    };
-    BoardCorners out;
-    out.board_id = b.board_id;
-    SaddleFitOptions options;
-    for (size_t i = 0; i < b.size(); ++i) {
-      const int id = b.corner_ids[i];
-      const cv::Point2f ac = axis(id, 1, true), ar = axis(id, bp->cols, false);
-      options.radius_px = std::max(2, std::min(8, static_cast<int>(0.45 * std::min(cv::norm(ac), cv::norm(ar)))));
-      SaddleFit fit;
-      if (!fitSaddle(diff, at[id], ac, ar, options, &fit)) continue;
-      out.corner_ids.push_back(id);
-      out.u.push_back(static_cast<float>(fit.corner.x));
-      out.v.push_back(static_cast<float>(fit.corner.y));
-    }
-    b = out;
-  }
+  refineCornersBySaddleFit(diff, prior, WindowTrackerOptions(), boards);
 }
 
 // Corner errors of a window against the truth: RMS over every tracked corner, and RMS over the
@@ -258,11 +229,16 @@ int main(int argc, char** argv) {
     else if (!std::strcmp(argv[i], "--learn-window")) args.learn_window = std::atoi(value());
     else if (!std::strcmp(argv[i], "--off-frames")) args.off_frames = std::max(1, std::atoi(value()));
     else if (!std::strcmp(argv[i], "--saddle")) args.saddle = std::atoi(value());
+    else if (!std::strcmp(argv[i], "--light-off-gap")) args.light_off_gap = std::atoi(value());
     else {
       std::fprintf(stderr, "usage: bench_calibrate_moving [--config FILE] [--minutes M] [--period S] [--frames N] "
                            "[--fps F] [--teach-frames K]   (default config: $ECS_SOURCE_DIR/config/drive_photo.yaml)\n");
       return 2;
     }
+  }
+  if (args.light_off_gap < 1) {
+    std::fprintf(stderr, "bench_calibrate_moving: --light-off-gap must be >= 1\n");
+    return 2;
   }
   if (args.config.empty() || args.frames < 1 || !(args.period_s > args.frames / args.fps)) {
     std::fprintf(stderr, "bench_calibrate_moving: need --config (or ECS_SOURCE_DIR), frames >= 1 and a period longer "
@@ -317,8 +293,9 @@ int main(int argc, char** argv) {
       if (args.learn_window) {
         if (k == 0) {
           for (int c = 0; c < 2; ++c) window[c] = WindowFrames();
+          // The live driver's settle_frames unsettled frames lie between: gap = settle_frames + 1.
           for (int o = args.off_frames; o >= 1; --o) {
-            const double tb = t_start - o / args.fps;
+            const double tb = t_start - (args.light_off_gap + o - 1) / args.fps;
             const SimFrame before = sim.render(tb, 0.0, static_cast<uint64_t>(std::llround(tb * args.fps)));
             window[0].light_off.push_back(before.left);
             window[1].light_off.push_back(before.right);
@@ -330,7 +307,7 @@ int main(int argc, char** argv) {
           window[0].light_on.push_back(last.left);
           window[1].light_on.push_back(last.right);
           for (int o = 1; o <= args.off_frames; ++o) {
-            const double ta = t_start + (args.frames - 1 + o) / args.fps;
+            const double ta = t_start + (args.frames - 1 + args.light_off_gap + o - 1) / args.fps;
             const SimFrame after = sim.render(ta, 0.0, static_cast<uint64_t>(std::llround(ta * args.fps)));
             window[0].light_off.push_back(after.left);
             window[1].light_off.push_back(after.right);

@@ -13,6 +13,10 @@
 // added for window_timeout_s ends (solved when it has min_frames). An accepted calibration the
 // driver could not store is committed again every commit_retry_s while the calibration in force
 // is unchanged and no later solve replaced it.
+// With window_observations, the automatic windows come from the PatternTracker's
+// calibration/window_observations instead (one observation per light burst, tracked as a whole,
+// seconds after the burst): each one is solved as a window of one frame, and the windows of
+// per-frame observations are not; those still serve calibration/recalibrate.
 // For a bag replay (launch/replay.launch: no driver, use_sim_time) the parameter commit:=none
 // solves and gates every window as usual but commits nowhere except /tf_static; only header
 // stamps (sim time) order the frames, and solve durations are wall time.
@@ -52,7 +56,7 @@ namespace embedded_calibration_stereo {
 
 // Threads:
 //  - the manager's single-threaded queue of this nodelet runs the subscribers (observations,
-//    calibration_mode, camera_info), the diagnostics timer, the window age timer and the commit
+//    window observations, calibration_mode, camera_info), the diagnostics timer, the window age timer and the commit
 //    retry timer (which only queues a job for the worker);
 //  - calibration/recalibrate runs on this nodelet's own service queue and its two spinner
 //    threads: a call blocks while the window fills and the worker solves (up to timeout_s), and
@@ -79,6 +83,7 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
     bool dry_run = false;
     std::shared_ptr<std::promise<CalibrationStatus>> result;  // null for automatic windows
     bool commit_again = false;  // no solve: commit uncommitted_ again
+    bool window_observation = false;  // frames: one observation of a whole window
   };
 
   void onInit() override {
@@ -93,7 +98,9 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
       diagnostics_timer_.stop();
       window_timer_.stop();
       commit_retry_timer_.stop();
-      for (ros::Subscriber* sub : {&observations_sub_, &mode_sub_, &left_info_sub_, &right_info_sub_}) sub->shutdown();
+      for (ros::Subscriber* sub :
+           {&observations_sub_, &window_observations_sub_, &mode_sub_, &left_info_sub_, &right_info_sub_})
+        sub->shutdown();
       throw;
     }
   }
@@ -119,6 +126,9 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
 
     status_pub_ = nh.advertise<CalibrationStatus>("calibration/status", 1, /*latch=*/true);
     observations_sub_ = nh.subscribe("calibration/observations", 10, &OnlineCalibratorNodelet::onObservation, this);
+    if (params_.window_observations)
+      window_observations_sub_ = nh.subscribe("calibration/window_observations", 10,
+                                              &OnlineCalibratorNodelet::onWindowObservation, this);
     mode_sub_ = nh.subscribe("calibration_mode", 10, &OnlineCalibratorNodelet::onMode, this);
     left_info_sub_ = nh.subscribe<sensor_msgs::CameraInfo>(
         "left/camera_info", 1, [this](const sensor_msgs::CameraInfoConstPtr& m) { storeInfo(true, m); });
@@ -141,10 +151,13 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
     recalibrate_srv_ = service_nh.advertiseService("calibration/recalibrate", &OnlineCalibratorNodelet::recalibrate, this);
     service_spinner_ = std::make_unique<ros::AsyncSpinner>(2, &service_queue_);  // see the class comment
     service_spinner_->start();
+    const std::string automatic =
+        !params_.auto_calibrate       ? "solving on request only"
+        : params_.window_observations ? "solving every window observation on " + window_observations_sub_.getTopic()
+                                      : std::string("solving every light-on window");
     NODELET_INFO("OnlineCalibrator: device from %s (%zu virtual boards), observations on %s, %s, commit to %s",
                  params_.device_config.c_str(), session_->boards().size(), observations_sub_.getTopic().c_str(),
-                 params_.auto_calibrate ? "solving every light-on window" : "solving on request only",
-                 params_.commit == CommitTarget::kDriver ? "the driver" : "none (tf_static only)");
+                 automatic.c_str(), params_.commit == CommitTarget::kDriver ? "the driver" : "none (tf_static only)");
   }
 
   void stopWorker() {
@@ -253,6 +266,42 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
     if (pending_.size() > kKeptFrames) pending_.pop_front();
   }
 
+  // A whole window's observation (window_observations): solved at once when auto_calibrate. It
+  // arrives seconds after its window, so it is neither matched with calibration_mode nor passed
+  // through the stamp guard (which would hold it against the other inputs' newer stamps).
+  void onWindowObservation(const StereoPatternObservationConstPtr& msg) {
+    ecs::StereoObservation observation = fromMsg(*msg);
+    const std::vector<std::string> defects = observationDefects(observation, session_->boards());
+    if (!defects.empty()) {
+      std::string text;
+      for (const std::string& d : defects) text += (text.empty() ? "" : "; ") + d;
+      NODELET_ERROR_THROTTLE(5.0, "OnlineCalibrator: window observation dropped on %s: %s",
+                             window_observations_sub_.getTopic().c_str(), text.c_str());
+      std::lock_guard<std::mutex> lock(mutex_);
+      ++dropped_messages_;
+      return;
+    }
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      if (!last_window_observation_stamp_.isZero() && msg->header.stamp <= last_window_observation_stamp_) {
+        ++backwards_messages_;
+        NODELET_WARN_THROTTLE(5.0,
+                              "OnlineCalibrator: window observation dropped on %s: its stamp %.3f s is not after "
+                              "the previous one (%.3f s); a replayed or restarted source?",
+                              window_observations_sub_.getTopic().c_str(), msg->header.stamp.toSec(),
+                              last_window_observation_stamp_.toSec());
+        return;
+      }
+      last_window_observation_stamp_ = msg->header.stamp;
+      ++window_observations_;
+    }
+    if (!params_.auto_calibrate || (observation.left.empty() && observation.right.empty())) return;
+    Job job;
+    job.frames.push_back(std::move(observation));
+    job.window_observation = true;
+    submit(std::move(job));
+  }
+
   void onMode(const CalibrationModeConstPtr& mode) {
     if (!guard_->admit(kModeInput, mode->header.stamp)) return;
     const bool calibrating = mode->light_on && mode->settled;
@@ -295,7 +344,7 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
       // The light went off: the window of the driver's schedule is complete.
       if (!late && !mode->light_on && !request_active_ && !window_.empty()) {
         window_closed_at_ = mode->header.stamp;
-        if (params_.auto_calibrate && static_cast<int>(window_.size()) >= params_.min_frames)
+        if (solvesFrameWindows() && static_cast<int>(window_.size()) >= params_.min_frames)
           job = Job{std::move(window_), false, nullptr};
         window_.clear();
       }
@@ -314,14 +363,15 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
       if (request_active_ || window_.empty()) return;
       const double idle_s = (ros::WallTime::now() - last_window_frame_wall_).toSec();
       if (idle_s < params_.window_timeout_s) return;
-      const bool solve = params_.auto_calibrate && static_cast<int>(window_.size()) >= params_.min_frames;
+      const bool solve = solvesFrameWindows() && static_cast<int>(window_.size()) >= params_.min_frames;
       std::snprintf(text, sizeof(text),
                     "calibration window ended: no settled light-on frame added for %.1f s (window_timeout_s); "
                     "%zu frames, %s",
                     idle_s, window_.size(),
-                    solve                     ? "solving them"
-                    : params_.auto_calibrate ? "fewer than min_frames: not solved"
-                                             : "not solved (auto_calibrate is off)");
+                    solve                           ? "solving them"
+                    : params_.window_observations ? "not solved (window observations are solved instead)"
+                    : params_.auto_calibrate       ? "fewer than min_frames: not solved"
+                                                   : "not solved (auto_calibrate is off)");
       last_window_end_ = text;
       if (!modes_.empty()) window_closed_at_ = modes_.back().stamp;
       if (solve) job = Job{std::move(window_), false, nullptr};
@@ -342,7 +392,11 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
     window_.clear();
     window_closed_at_ = ros::Time();
     last_observation_stamp_ = ros::Time();
+    last_window_observation_stamp_ = ros::Time();
   }
+
+  // The automatic windows of per-frame observations are solved (not when window observations are).
+  bool solvesFrameWindows() const { return params_.auto_calibrate && !params_.window_observations; }
 
   // Caller holds mutex_. The epoch of the driver's first frame whose left and right camera_info
   // carry `committed`, among frames of another epoch than `before` (the one in force at the
@@ -415,7 +469,9 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
         std::lock_guard<std::mutex> lock(mutex_);
         uncommitted_ = std::move(uncommitted);
       }
-      NODELET_INFO("OnlineCalibrator: %zu frames, %s%s%s%s (rms %.3f / %.3f px, %.0f ms)", job.frames.size(),
+      const std::string input =
+          job.window_observation ? "a window observation" : std::to_string(job.frames.size()) + " frames";
+      NODELET_INFO("OnlineCalibrator: %s, %s%s%s%s (rms %.3f / %.3f px, %.0f ms)", input.c_str(),
                    job.dry_run ? "dry run, " : "", status.accepted ? "accepted" : "not accepted",
                    status.reason.empty() ? "" : ": ", status.reason.c_str(), status.rms_left_px,
                    status.rms_right_px, status.solve_ms);
@@ -696,6 +752,7 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
     status.add("frames in window", window_.size());
     status.add("dropped observation messages", dropped_messages_);
     status.add("observations dropped for a stamp going back", backwards_messages_);
+    if (params_.window_observations) status.add("window observations received", window_observations_);
     status.add("messages dropped for a stamp far from the others", guard_->dropped());
     status.add("last window ended early", last_window_end_);
     status.add("accepted calibration waiting to be committed again", uncommitted_.has_value());
@@ -716,7 +773,7 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
   CalibratorParams params_;
   std::unique_ptr<CalibrationSession> session_;  // worker thread only (boards(): any thread)
   ros::Publisher status_pub_;
-  ros::Subscriber observations_sub_, mode_sub_, left_info_sub_, right_info_sub_;
+  ros::Subscriber observations_sub_, window_observations_sub_, mode_sub_, left_info_sub_, right_info_sub_;
   ros::ServiceServer recalibrate_srv_;
   ros::CallbackQueue service_queue_;  // calibration/recalibrate only (see the class comment)
   std::unique_ptr<ros::AsyncSpinner> service_spinner_;
@@ -732,6 +789,8 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
   std::deque<sensor_msgs::CameraInfoConstPtr> recent_left_infos_, recent_right_infos_;
   bool awaiting_commit_ = false;  // the worker waits for the driver's frame of a commit
   ros::Time last_observation_stamp_;  // newest observation accepted (zero: none yet)
+  ros::Time last_window_observation_stamp_;  // newest window observation accepted (zero: none yet)
+  uint64_t window_observations_ = 0;         // accepted
   std::deque<std::pair<ros::Time, ecs::StereoObservation>> pending_;
   std::vector<ecs::StereoObservation> window_;
   ros::Time window_closed_at_;  // frames up to this stamp belong to a finished window

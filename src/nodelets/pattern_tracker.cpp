@@ -14,6 +14,13 @@
 // ground_truth/left|right/image_scene of the same stamp (the scene exactly as the sensor saw it):
 // the sim's stand-in for teaching with the scene covered or still, which a moving robot's
 // light-off frame (taken frames before, the head and the scene moving) is not.
+//
+// With window_tracking, it also tracks each light burst as a whole (core WindowTracker: the
+// device image learned from the burst's light pairs, free of the moving scene's pull that every
+// frame of a burst shares): it keeps the message pointers of the burst's settled light-on frames
+// and of the last settled light-off frame before it, and at the first settled light-off frame
+// after it hands them to its worker thread, which publishes one observation for the burst on
+// calibration/window_observations, stamped with the burst's last light-on frame.
 #include <cv_bridge/cv_bridge.h>
 #include <diagnostic_updater/diagnostic_updater.h>
 #include <nodelet/nodelet.h>
@@ -22,20 +29,27 @@
 #include <ros/ros.h>
 #include <std_srvs/Trigger.h>
 
+#include <opencv2/imgproc.hpp>
+
 #include <chrono>
+#include <condition_variable>
 #include <deque>
 #include <fstream>
 #include <future>
 #include <memory>
 #include <mutex>
 #include <optional>
+#include <thread>
+#include <vector>
 
 #include "embedded_calibration_stereo/CalibrationMode.h"
 #include "embedded_calibration_stereo/StereoPatternObservation.h"
 #include "embedded_calibration_stereo/core/geometry/config_error.h"
 #include "embedded_calibration_stereo/core/tracker/pattern_tracker.h"
+#include "embedded_calibration_stereo/core/tracker/window_tracker.h"
 #include "embedded_calibration_stereo/ros/conversions.h"
 #include "embedded_calibration_stereo/ros/lazy_synced_input.h"
+#include "embedded_calibration_stereo/ros/light_burst.h"
 #include "embedded_calibration_stereo/ros/parameter_reader.h"
 #include "embedded_calibration_stereo/ros/tracker_teaching.h"
 
@@ -71,15 +85,28 @@ const char* toString(PriorState s) {
 //  - teaching (cv::findChessboardCornersSB: many frame periods long) runs on a std::async worker that receives
 //    copies of the frames and the device model and returns a TeachOutcome through teach_result_;
 //    frameCb collects it when ready. The destructor waits for it;
+//  - window tracking (window_tracking; seconds per burst) runs on window_worker_ (started in
+//    onInit, joined in the destructor): frameCb collects a burst's message pointers (bursts_,
+//    callback queue only) and hands them over with the WindowTracker in force (a shared_ptr:
+//    a new prior makes a new tracker, the worker finishes with the one it got) through
+//    window_job_; the worker alone runs that tracker and publishes on window_observations_pub_.
+//    window_mutex_ guards window_job_, window_busy_, window_stopping_ and the window figures;
 //  - input_ (un)subscribes the inputs under its own mutex (lazy_synced_input.h).
 class PatternTrackerNodelet : public nodelet::Nodelet {
  public:
   ~PatternTrackerNodelet() override {
+    stopWindowWorker();
     if (teach_result_.valid()) teach_result_.wait();
   }
 
  private:
   using FrameInput = LazySyncedInput<Image, Image, CalibrationMode>;
+  // One burst handed to the worker.
+  struct WindowJob {
+    std::shared_ptr<ecs::WindowTracker> tracker;
+    std::vector<ImageConstPtr> light_off[2], light_on[2];
+    std_msgs::Header header;  // the last light-on frame's
+  };
 
   void onInit() override {
     try {
@@ -101,6 +128,7 @@ class PatternTrackerNodelet : public nodelet::Nodelet {
     teach_from_truth_ = read.get("teach_from_ground_truth", false);
     const int queue_size = read.atLeast("queue_size", 10, 1);
     stale_background_level_ = read.atLeast("stale_background_level", ecs::TrackerOptions().stale_background_level, 0.0);
+    window_tracking_ = read.get("window_tracking", false);
     try {
       device_ = ecs::loadSimRigConfig(device_config_);
     } catch (const std::exception& e) {
@@ -121,10 +149,19 @@ class PatternTrackerNodelet : public nodelet::Nodelet {
     const auto cb = input_->connectCallback();
     observations_pub_ = nh.advertise<StereoPatternObservation>("calibration/observations", 10, cb, cb);
     input_->watch(observations_pub_);
+    if (window_tracking_) {
+      window_observations_pub_ = nh.advertise<StereoPatternObservation>("calibration/window_observations", 10, cb, cb);
+      input_->watch(window_observations_pub_);
+      bursts_.emplace(window_options_.min_light_on_frames);
+      window_worker_ = std::thread(&PatternTrackerNodelet::windowWorkerLoop, this);
+    }
     updateNeed();
     input_->start();  // subscribes the inputs while someone listens or teaching waits
-    NODELET_INFO("PatternTracker: prior %s (%s), device %s", prior_file_.c_str(), toString(state_),
-                 device_config_.c_str());
+    NODELET_INFO("PatternTracker: prior %s (%s), device %s%s", prior_file_.c_str(), toString(state_),
+                 device_config_.c_str(),
+                 window_tracking_ ? ", window tracking on (one observation per light burst on "
+                                    "calibration/window_observations)"
+                                  : "");
   }
 
   void loadPrior(bool teach_on_start) {
@@ -149,7 +186,10 @@ class PatternTrackerNodelet : public nodelet::Nodelet {
       throw std::invalid_argument("expected 2 cameras (left, right), found " + std::to_string(prior.cameras.size()));
     ecs::TrackerOptions options;
     options.stale_background_level = stale_background_level_;
+    auto window_tracker =
+        window_tracking_ ? std::make_shared<ecs::WindowTracker>(prior, options, window_options_) : nullptr;
     tracker_ = std::make_unique<ecs::PatternTracker>(prior, options);
+    window_tracker_ = std::move(window_tracker);  // the worker keeps the previous one until its window is done
     background_stamp_ = ros::Time();  // the tracker has no background yet
     state_ = PriorState::kLoaded;
     prior_error_.clear();
@@ -236,6 +276,9 @@ class PatternTrackerNodelet : public nodelet::Nodelet {
   void frameCb(const ImageConstPtr& left, const ImageConstPtr& right, const CalibrationModeConstPtr& mode) {
     collectTeaching();
     if (!mode->settled) return;  // the light is changing: neither a scene nor a board frame
+    if (window_tracking_) {
+      if (auto ended = bursts_->add(left, right, mode->light_on, mode->calibration_epoch)) endBurst(std::move(*ended));
+    }
     if (!mode->light_on) {
       light_off_left_ = left;  // zero-copy: keeps the shared messages alive
       light_off_right_ = right;
@@ -312,6 +355,7 @@ class PatternTrackerNodelet : public nodelet::Nodelet {
     right_frame.light_off = right_off.clone();
     state_ = PriorState::kTeaching;
     tracker_.reset();
+    window_tracker_.reset();
     unwritten_prior_.reset();  // the new teaching's prior replaces it
     NODELET_INFO("PatternTracker: teaching from a light-on frame and the latest light-off frame (worker thread)");
     teach_result_ = std::async(std::launch::async, teachStereoPrior, left_frame, right_frame, order, device_,
@@ -409,6 +453,124 @@ class PatternTrackerNodelet : public nodelet::Nodelet {
     }
   }
 
+  // ---- window tracking (window_tracking)
+
+  // Callback queue: a burst ended (the first settled light-off frame after it).
+  void endBurst(EndedBurst ended) {
+    std::string problem = ended.problem;
+    if (problem.empty() && !window_tracker_) problem = "no prior to track with yet";
+    if (problem.empty()) {
+      WindowJob job;
+      job.tracker = window_tracker_;
+      for (const StereoImages& off : {ended.burst.light_off_before, ended.burst.light_off_after}) {
+        job.light_off[0].push_back(off.first);
+        job.light_off[1].push_back(off.second);
+      }
+      for (const StereoImages& on : ended.burst.light_on) {
+        job.light_on[0].push_back(on.first);
+        job.light_on[1].push_back(on.second);
+      }
+      job.header = ended.burst.light_on.back().first->header;
+      std::lock_guard<std::mutex> lock(window_mutex_);
+      if (window_busy_) {
+        problem = "the previous burst is still being tracked";
+      } else {
+        window_busy_ = true;
+        window_job_ = std::move(job);
+      }
+    }
+    if (problem.empty()) {
+      window_cv_.notify_all();
+      return;
+    }
+    char text[600];
+    std::snprintf(text, sizeof(text), "burst of %d light-on frames ending at %.3f s dropped: %s", ended.light_on_frames,
+                  ended.burst.light_off_after.first->header.stamp.toSec(),
+                  problem.c_str());
+    NODELET_WARN_THROTTLE(5.0, "PatternTracker: %s (window tracking, %s)", text,
+                          window_observations_pub_.getTopic().c_str());
+    std::lock_guard<std::mutex> lock(window_mutex_);
+    ++windows_dropped_;
+    window_summary_ = text;
+  }
+
+  // Window worker thread: tracks the bursts handed over, one at a time.
+  void windowWorkerLoop() {
+    while (true) {
+      WindowJob job;
+      {
+        std::unique_lock<std::mutex> lock(window_mutex_);
+        window_cv_.wait(lock, [this] { return window_stopping_ || window_job_.has_value(); });
+        if (window_stopping_) return;
+        job = std::move(*window_job_);
+        window_job_.reset();
+      }
+      trackWindow(job);
+      std::lock_guard<std::mutex> lock(window_mutex_);
+      window_busy_ = false;
+    }
+  }
+
+  // Window worker thread.
+  void trackWindow(const WindowJob& job) {
+    const auto t0 = std::chrono::steady_clock::now();
+    StereoPatternObservation msg;
+    int corners = 0, saddle_failures = 0;
+    std::string error;
+    try {
+      ecs::WindowFrames frames[2];
+      // The images stay owned by their messages (job); rgb8 becomes BGR here, off the callback.
+      const auto image = [](const ImageConstPtr& m) {
+        cv::Mat mat = cv_bridge::toCvShare(m)->image;
+        if (m->encoding == "rgb8") cv::cvtColor(mat, mat, cv::COLOR_RGB2BGR);
+        return mat;
+      };
+      for (int c = 0; c < 2; ++c) {
+        for (const ImageConstPtr& m : job.light_off[c]) frames[c].light_off.push_back(image(m));
+        for (const ImageConstPtr& m : job.light_on[c]) frames[c].light_on.push_back(image(m));
+      }
+      const ecs::WindowTrack track = job.tracker->track(frames[0], frames[1], job.header.stamp.toSec());
+      msg = toMsg(track.observation);
+      saddle_failures = track.saddle_failures;
+      for (const auto* side : {&msg.left, &msg.right})
+        for (const BoardObservation& b : *side) corners += static_cast<int>(b.corner_ids.size());
+    } catch (const std::exception& e) {
+      error = e.what();
+    }
+    const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+    char text[600];
+    if (error.empty()) {
+      msg.header = job.header;
+      window_observations_pub_.publish(msg);
+      std::snprintf(text, sizeof(text),
+                    "burst of %zu light-on frames ending at %.3f s: %d corners (%d dropped by the saddle fit) "
+                    "in %.0f ms",
+                    job.light_on[0].size(), job.header.stamp.toSec(), corners, saddle_failures, ms);
+    } else {
+      std::snprintf(text, sizeof(text), "burst of %zu light-on frames ending at %.3f s not tracked: %s",
+                    job.light_on[0].size(), job.header.stamp.toSec(), error.c_str());
+      NODELET_ERROR_THROTTLE(5.0, "PatternTracker: %s (window tracking, %s)", text,
+                             window_observations_pub_.getTopic().c_str());
+    }
+    std::lock_guard<std::mutex> lock(window_mutex_);
+    window_summary_ = text;
+    if (error.empty()) {
+      ++windows_tracked_;
+      window_last_ms_ = ms;
+    } else {
+      ++windows_dropped_;
+    }
+  }
+
+  void stopWindowWorker() {
+    {
+      std::lock_guard<std::mutex> lock(window_mutex_);
+      window_stopping_ = true;
+    }
+    window_cv_.notify_all();
+    if (window_worker_.joinable()) window_worker_.join();
+  }
+
   void diagnose(diagnostic_updater::DiagnosticStatusWrapper& status) {
     using diagnostic_msgs::DiagnosticStatus;
     switch (state_) {
@@ -442,6 +604,15 @@ class PatternTrackerNodelet : public nodelet::Nodelet {
     status.add("scene background", background_use_);
     status.add("last frame (ms)", last_ms_);
     status.add("mean frame (ms)", tracked_frames_ > 0 ? total_ms_ / tracked_frames_ : 0.0);
+    if (!window_tracking_) {
+      status.add("window tracking", "off");
+      return;
+    }
+    std::lock_guard<std::mutex> lock(window_mutex_);
+    status.add("window tracking", window_summary_);
+    status.add("windows tracked", windows_tracked_);
+    status.add("windows dropped", windows_dropped_);
+    status.add("last window (ms)", window_last_ms_);
   }
 
   double stale_background_level_ = 0.0;  // parameter, see TrackerOptions
@@ -473,6 +644,22 @@ class PatternTrackerNodelet : public nodelet::Nodelet {
   uint64_t tracked_frames_ = 0;
   size_t boards_found_[2] = {0, 0}, corners_found_[2] = {0, 0};
   double last_ms_ = 0.0, total_ms_ = 0.0;
+
+  // Window tracking (see the class comment for the threads).
+  bool window_tracking_ = false;  // parameter
+  const ecs::WindowTrackerOptions window_options_;
+  std::shared_ptr<ecs::WindowTracker> window_tracker_;  // null without a prior; callback queue
+  std::optional<LightBurstCollector> bursts_;           // with window_tracking; callback queue
+  ros::Publisher window_observations_pub_;
+  std::thread window_worker_;
+  std::mutex window_mutex_;  // guards everything below
+  std::condition_variable window_cv_;
+  std::optional<WindowJob> window_job_;  // handed over, not taken by the worker yet
+  bool window_busy_ = false;             // a job handed over and not finished
+  bool window_stopping_ = false;
+  std::string window_summary_ = "no burst yet";  // the last burst: tracked (corners, ms) or why not
+  uint64_t windows_tracked_ = 0, windows_dropped_ = 0;
+  double window_last_ms_ = 0.0;
 };
 
 }  // namespace embedded_calibration_stereo

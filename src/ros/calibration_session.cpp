@@ -69,6 +69,7 @@ CalibratorParams loadCalibratorParams(const ros::NodeHandle& pnh, const std::str
   p.left_frame_id = read.get("left_frame_id", p.left_frame_id);
   p.right_frame_id = read.get("right_frame_id", p.right_frame_id);
   p.auto_calibrate = read.get("auto_calibrate", p.auto_calibrate);
+  p.window_observations = read.get("window_observations", p.window_observations);
   p.min_frames = read.atLeast("min_frames", p.min_frames, 1);
   p.max_frames = read.atLeast("max_frames", p.max_frames, p.min_frames);
   non_negative("service_timeout_s", &p.service_timeout_s);

@@ -2,41 +2,54 @@
 // Records every frame's calibration_mode and camera_info (published and the simulator's truth)
 // from the start. Once a first window has been solved: a 5 % zoom and a thermal rotation of the
 // right camera start (sim/set_drift); after the next solved window the rotation stops where it
-// got to and the right camera is knocked. The first window solved after that must commit a
-// calibration that, against the truth of the frame it came into force with, meets the accuracy
-// targets for depth (core/calibration/stereo_accuracy.h: vertical misalignment and disparity
-// bias RMS over the field of view, depth error at 10 m) and fx, baseline. Every commit of the
+// got to and the right camera is knocked. The tracker tracks each light burst as a whole
+// (window_tracking) and publishes its observation seconds after the burst, so "the next window"
+// is the first window observation whose burst, from the light-off frame before it, was taken
+// after the drift was set, and its solve the status that follows it. After that window (which
+// commits, or confirms a correction that a burst lit wholly after the knock committed before it)
+// the calibration in force is judged against the truth of a frame it is in force for: the
+// accuracy targets for depth (core/calibration/stereo_accuracy.h: vertical misalignment and
+// disparity bias RMS over the field of view, depth error at 10 m) and fx, baseline, printed, and
+// the test's bounds below. Every commit of the
 // run (each change of calibration epoch) is compared with the calibration it replaced against
 // the same truth: none may be worse.
+#include <diagnostic_msgs/DiagnosticArray.h>
 #include <gtest/gtest.h>
 #include <sensor_msgs/CameraInfo.h>
 
 #include <cmath>
 #include <cstdio>
+#include <set>
+#include <string>
 
 #include "driver_test_utils.h"
 #include "embedded_calibration_stereo/CalibrationMode.h"
 #include "embedded_calibration_stereo/CalibrationStatus.h"
 #include "embedded_calibration_stereo/SetRigDrift.h"
+#include "embedded_calibration_stereo/StereoPatternObservation.h"
 #include "embedded_calibration_stereo/core/calibration/stereo_accuracy.h"
+#include "embedded_calibration_stereo/ros/calibration_session.h"
 #include "embedded_calibration_stereo/ros/conversions.h"
 
 using embedded_calibration_stereo::CalibrationMode;
 using embedded_calibration_stereo::CalibrationStatus;
+using embedded_calibration_stereo::kInForceConfirmedReason;
 using embedded_calibration_stereo::SetRigDrift;
+using embedded_calibration_stereo::StereoPatternObservation;
 using ecs_test::Collector;
 using sensor_msgs::CameraInfo;
 
 namespace {
 
 // The accuracy targets for depth after the drift (px RMS over the field of view, %, relative):
-// printed, met or not. On a moving world the tracker's corners (raw images, boards aligned whole)
-// carry an error common to a window's frames that the solve turns into several times these
-// (docs/figures.md, bench_calibrate_moving), so the test holds the calibration to what that
-// tracking reaches, with margin: well inside what the drift caused (a 2.6 px disparity bias).
+// printed, met or not. The window tracker meets them at 30 fps (bench_calibrate_moving
+// --learn-window 2); here, at 10 fps (the scene moves three times as far between frames) and with
+// the light-off frames three frame periods from the burst (two frames settle the light), it does
+// not (docs/figures.md), so the test holds the calibration to what it reaches, with margin: well
+// inside what the drift caused (a 2.6 px disparity bias).
 constexpr double kTargetMisalignmentPx = 0.05, kTargetBiasPx = 0.05, kTargetDepthError10mPct = 0.7,
                  kTargetFocalRel = 0.0005, kTargetBaselineRel = 0.001;
-// The baseline is the least determined here (0.05-0.5 % over runs; the knock moves it 0.67 %).
+// The baseline is the least determined here (the knock moves it 0.67 %).
 constexpr double kMisalignmentPx = 0.25, kBiasPx = 0.4, kDepthError10mPct = 7.0, kFocalRel = 0.003,
                  kBaselineRel = 0.01;
 // A commit is worse than the calibration it replaced when its combined error against the same
@@ -44,6 +57,9 @@ constexpr double kMisalignmentPx = 0.25, kBiasPx = 0.4, kDepthError10mPct = 7.0,
 constexpr double kWorsePx = 0.01;
 double combined(const ecs::StereoAccuracy& a) { return std::hypot(a.misalignment_px.rms, a.disparity_bias_px.rms); }
 constexpr double kThermalDegPerS = 0.03;
+// A burst starts within a period of the drift, may be dropped while the tracker's worker is busy
+// with the one before, and is published once tracked.
+constexpr double kWindowTimeoutS = 25.0;
 
 struct Fixture {
   ros::NodeHandle nh;
@@ -52,6 +68,8 @@ struct Fixture {
   Collector<CameraInfo> truth_left{nh, "ground_truth/left/camera_info", 1000};
   Collector<CameraInfo> truth_right{nh, "ground_truth/right/camera_info", 1000};
   Collector<CalibrationStatus> status{nh, "calibration/status"};
+  Collector<StereoPatternObservation> windows{nh, "calibration/window_observations", 1000};
+  Collector<diagnostic_msgs::DiagnosticArray> diagnostics{nh, "/diagnostics", 1000};
 };
 
 Fixture* fixture = nullptr;
@@ -110,6 +128,35 @@ CalibrationStatus::ConstPtr nextStatus(const ros::Time& after, double timeout_s)
   return found;
 }
 
+// The stamp of the last settled light-off frame before the burst whose last light-on frame is
+// `last_light_on` (the frame the window tracker starts from); zero when not recorded.
+ros::Time lightOffBefore(const ros::Time& last_light_on) {
+  const auto modes = fixture->modes.snapshot();
+  bool in_burst = false;
+  for (auto it = modes.rbegin(); it != modes.rend(); ++it) {
+    if ((*it)->header.stamp == last_light_on) in_burst = true;
+    if (in_burst && !(*it)->light_on && (*it)->settled) return (*it)->header.stamp;
+  }
+  return ros::Time();
+}
+
+// Waits for the first window observation whose whole burst was taken after `after`; returns
+// when it arrived (zero on timeout). The status of its solve is the next one after that.
+ros::Time windowAfter(const ros::Time& after, double timeout_s) {
+  ros::Time arrived;
+  fixture->windows.waitFor(
+      [&](const auto& m) {
+        for (const auto& w : m)
+          if (lightOffBefore(w->header.stamp) > after) {
+            arrived = ros::Time::now();
+            return true;
+          }
+        return false;
+      },
+      timeout_s);
+  return arrived;
+}
+
 bool setDrift(const SetRigDrift::Request& request) {
   SetRigDrift srv;
   srv.request = request;
@@ -135,7 +182,9 @@ TEST(DrivePhotoLive, ZoomThermalAndKnockAreRecalibratedAndNoCommitIsWorse) {
   zoom.thermal_rate_deg_per_s = kThermalDegPerS;
   ASSERT_TRUE(setDrift(zoom));
   const ros::Time zoom_time = ros::Time::now();
-  const CalibrationStatus::ConstPtr during = nextStatus(zoom_time, 15.0);
+  const ros::Time zoom_window = windowAfter(zoom_time, kWindowTimeoutS);
+  ASSERT_FALSE(zoom_window.isZero()) << "no window tracked after the zoom";
+  const CalibrationStatus::ConstPtr during = nextStatus(zoom_window, 5.0);
   ASSERT_TRUE(during) << "no window solved after the zoom";
   std::printf("window during the thermal rotation: accepted %d (%s)\n", during->accepted, during->reason.c_str());
 
@@ -147,25 +196,41 @@ TEST(DrivePhotoLive, ZoomThermalAndKnockAreRecalibratedAndNoCommitIsWorse) {
   knock.knock_translation_m = {0.0008, 0.0003, -0.0005};
   ASSERT_TRUE(setDrift(knock));
   const ros::Time knock_time = ros::Time::now();
-  const CalibrationStatus::ConstPtr after = nextStatus(knock_time, 15.0);
+  const ros::Time knock_window = windowAfter(knock_time, kWindowTimeoutS);
+  ASSERT_FALSE(knock_window.isZero()) << "no window tracked after the knock";
+  const CalibrationStatus::ConstPtr after = nextStatus(knock_window, 5.0);
   ASSERT_TRUE(after) << "no window solved after the knock";
   std::printf("window after the knock: accepted %d (%s), epoch %u, %u frames, %u corners, rms %.4f / %.4f px, "
               "predicted misalignment %.4f px, bias %.4f px, depth error at 10 m %.3f %%\n",
               after->accepted, after->reason.c_str(), after->epoch, after->frames_used, after->corners_used,
               after->rms_left_px, after->rms_right_px, after->predicted_misalignment_rms_px,
               after->predicted_disparity_bias_rms_px, after->predicted_depth_error_pct[3]);
-  ASSERT_TRUE(after->accepted) << after->reason;
+  // That window commits, or confirms the calibration in force: a burst whose light-off frame
+  // before it preceded the knock but whose light-on frames all followed it may have committed
+  // the correction already. Either way the calibration in force after it is judged.
+  const bool confirmed = !after->accepted && after->reason.rfind(kInForceConfirmedReason, 0) == 0;
+  ASSERT_TRUE(after->accepted || confirmed) << after->reason;
 
-  // The calibration of the first frame of the committed epoch against that frame's truth.
+  // The calibration of the first frame of the committed epoch against that frame's truth (when
+  // confirmed: of the newest frame, the epoch in force since an earlier commit).
   ASSERT_TRUE(f.modes.waitFor(
       [&](const auto& m) { return !m.empty() && m.back()->calibration_epoch >= after->epoch; }, 5.0));
   ASSERT_TRUE(f.modes.waitForCount(f.modes.snapshot().size() + 3, 5.0));  // its camera_info arrived
   ros::Time committed_stamp;
-  for (const auto& m : f.modes.snapshot())
-    if (m->calibration_epoch == after->epoch) {
-      committed_stamp = m->header.stamp;
-      break;
-    }
+  const auto seen = f.modes.snapshot();
+  if (confirmed) {
+    for (auto it = seen.rbegin() + 3; it < seen.rend(); ++it)  // the newest frames' camera_info may be on the way
+      if ((*it)->calibration_epoch == after->epoch) {
+        committed_stamp = (*it)->header.stamp;
+        break;
+      }
+  } else {
+    for (const auto& m : seen)
+      if (m->calibration_epoch == after->epoch) {
+        committed_stamp = m->header.stamp;
+        break;
+      }
+  }
   const Frame committed = frameAt(committed_stamp);
   ASSERT_TRUE(committed.ok) << "no camera_info of frame " << committed_stamp;
   // The drift really happened: the calibration before it is far off.
@@ -208,6 +273,23 @@ TEST(DrivePhotoLive, ZoomThermalAndKnockAreRecalibratedAndNoCommitIsWorse) {
     EXPECT_LE(combined(new_a), combined(old_a) + kWorsePx) << "commit at " << modes[i]->header.stamp;
   }
   EXPECT_GE(commits, 2) << "the zoom and the knock should each have been committed";
+
+  // How many bursts the window tracker kept up with (the others were dropped, its worker busy).
+  int bursts = 0, lit = 0;
+  for (const auto& m : modes) {
+    if (m->light_on && m->settled) ++lit;
+    if (!m->light_on && m->settled) {
+      bursts += lit >= 3;
+      lit = 0;
+    }
+  }
+  const auto windows = f.windows.snapshot();
+  std::printf("window observations: %zu for %d bursts of >= 3 settled light-on frames\n", windows.size(), bursts);
+  std::set<std::string> lines;  // the tracker's word on each burst (diagnostics, once a second)
+  for (const auto& array : f.diagnostics.snapshot())
+    for (const auto& status : array->status)
+      for (const auto& kv : status.values)
+        if (kv.key == "window tracking" && lines.insert(kv.value).second) std::printf("  %s\n", kv.value.c_str());
 }
 
 int main(int argc, char** argv) {

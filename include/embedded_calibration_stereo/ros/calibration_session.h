@@ -43,6 +43,9 @@ struct CalibratorParams {
   std::string left_frame_id = "stereo_left_optical_frame";
   std::string right_frame_id = "stereo_right_optical_frame";
   bool auto_calibrate = true;  // solve at the end of every light-on window of the driver
+  // The automatic windows are the tracker's calibration/window_observations (one per light
+  // burst, solved as it comes) instead of the per-frame observations of each light-on window.
+  bool window_observations = false;
   int min_frames = 5;          // a light-on window with fewer frames is not solved
   int max_frames = 30;         // frames kept per window (the first ones)
   double service_timeout_s = 2.0;  // for each set_light / set_camera_info call: to appear, then to answer (wall)

@@ -1,0 +1,59 @@
+#pragma once
+// The frames of one light burst for the window tracker (the PatternTracker's window_tracking,
+// core/tracker/window_tracker.h): the burst's settled light-on frames and the settled light-off
+// frames around it, the last one before it and the first one after it (the learned device image
+// needs both), kept as the shared message pointers: no image is copied.
+//
+// Threads: not thread-safe (one owner: the tracker nodelet's callback queue).
+#include <sensor_msgs/Image.h>
+
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <utility>
+#include <vector>
+
+namespace embedded_calibration_stereo {
+
+using StereoImages = std::pair<sensor_msgs::ImageConstPtr, sensor_msgs::ImageConstPtr>;  // left, right
+
+struct LightBurst {
+  StereoImages light_off_before, light_off_after;
+  std::vector<StereoImages> light_on;  // in arrival order
+};
+
+// A burst that ended. `problem` is empty when it can be tracked; otherwise why it is dropped
+// (its light-on frames are then not kept; light_off_before may be null).
+struct EndedBurst {
+  LightBurst burst;
+  int light_on_frames = 0;  // settled light-on frames it had
+  std::string problem;
+};
+
+class LightBurstCollector {
+ public:
+  // A burst with fewer settled light-on frames (a verification flash) ends without a word.
+  explicit LightBurstCollector(int min_light_on_frames) : min_light_on_frames_(min_light_on_frames) {}
+
+  // One settled frame (calibration_mode settled) with its light state and calibration_epoch.
+  // Returns the burst this frame ends: at the first settled light-off frame after a burst of at
+  // least min_light_on_frames light-on frames. Dropped (a problem): the calibration epoch changed
+  // during the burst, its frames (light-off ones included) differ in size or encoding or have an
+  // encoding other than mono8, bgr8, rgb8, or no settled light-off frame preceded it.
+  std::optional<EndedBurst> add(const sensor_msgs::ImageConstPtr& left, const sensor_msgs::ImageConstPtr& right,
+                                bool light_on, uint32_t epoch);
+
+ private:
+  const int min_light_on_frames_;
+  StereoImages light_off_;  // the latest settled light-off frame since the last burst
+  std::vector<StereoImages> light_on_;
+  int frames_ = 0;  // settled light-on frames of the burst under way, kept or not
+  uint32_t epoch_ = 0;
+  std::string problem_;
+};
+
+// Why a stereo frame cannot be tracked ("" when it can): left and right of different sizes or
+// encodings, or an encoding other than mono8, bgr8, rgb8.
+std::string stereoFormatProblem(const sensor_msgs::Image& left, const sensor_msgs::Image& right);
+
+}  // namespace embedded_calibration_stereo

@@ -1,0 +1,76 @@
+#include "embedded_calibration_stereo/ros/light_burst.h"
+
+namespace embedded_calibration_stereo {
+
+namespace {
+
+std::string describe(const sensor_msgs::Image& m) {
+  return m.encoding + " " + std::to_string(m.width) + "x" + std::to_string(m.height);
+}
+
+bool sameFormat(const sensor_msgs::Image& a, const sensor_msgs::Image& b) {
+  return a.encoding == b.encoding && a.width == b.width && a.height == b.height;
+}
+
+}  // namespace
+
+std::string stereoFormatProblem(const sensor_msgs::Image& left, const sensor_msgs::Image& right) {
+  if (!sameFormat(left, right)) return "left and right differ (" + describe(left) + " vs " + describe(right) + ")";
+  if (left.encoding != "mono8" && left.encoding != "bgr8" && left.encoding != "rgb8")
+    return "encoding '" + left.encoding + "' (expected mono8, bgr8 or rgb8)";
+  return "";
+}
+
+std::optional<EndedBurst> LightBurstCollector::add(const sensor_msgs::ImageConstPtr& left,
+                                                   const sensor_msgs::ImageConstPtr& right, bool light_on,
+                                                   uint32_t epoch) {
+  const StereoImages frame(left, right);
+  if (!light_on) {
+    std::optional<EndedBurst> ended;
+    if (frames_ >= min_light_on_frames_) {
+      ended.emplace();
+      ended->light_on_frames = frames_;
+      ended->problem = problem_;
+      if (ended->problem.empty()) {
+        if (const std::string p = stereoFormatProblem(*left, *right); !p.empty())
+          ended->problem = "the light-off frame after it: " + p;
+        else if (!sameFormat(*left, *light_on_.front().first))
+          ended->problem = "its frames differ in size or encoding (" + describe(*light_on_.front().first) +
+                           ", the light-off frame after it " + describe(*left) + ")";
+      }
+      ended->burst.light_off_before = light_off_;
+      ended->burst.light_off_after = frame;
+      if (ended->problem.empty()) ended->burst.light_on = std::move(light_on_);
+    }
+    light_on_.clear();
+    frames_ = 0;
+    problem_.clear();
+    light_off_ = frame;  // the next burst's, until a later one
+    return ended;
+  }
+  if (frames_++ == 0) {
+    epoch_ = epoch;
+    if (!light_off_.first) {
+      problem_ = "no settled light-off frame before it";
+    } else if (const std::string p = stereoFormatProblem(*light_off_.first, *light_off_.second); !p.empty()) {
+      problem_ = "the light-off frame before it: " + p;
+    }
+  }
+  if (!problem_.empty()) return std::nullopt;
+  if (epoch != epoch_) {
+    problem_ = "the calibration epoch changed from " + std::to_string(epoch_) + " to " + std::to_string(epoch) +
+               " during it";
+  } else if (const std::string p = stereoFormatProblem(*left, *right); !p.empty()) {
+    problem_ = "a light-on frame: " + p;
+  } else if (!sameFormat(*left, *light_off_.first)) {
+    problem_ = "its frames differ in size or encoding (" + describe(*left) + ", the light-off frame before it " +
+               describe(*light_off_.first) + ")";
+  } else {
+    light_on_.push_back(frame);
+    return std::nullopt;
+  }
+  light_on_.clear();  // dropped: the messages need not be kept
+  return std::nullopt;
+}
+
+}  // namespace embedded_calibration_stereo

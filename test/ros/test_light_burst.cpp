@@ -1,0 +1,156 @@
+// LightBurstCollector (the frames of one light burst for the PatternTracker's window tracking):
+// sequences of settled frames written out by hand; what each burst must hold follows from the
+// sequence (which message came where), checked by pointer identity (no copies).
+#include <gtest/gtest.h>
+
+#include <boost/make_shared.hpp>
+
+#include <string>
+#include <vector>
+
+#include "embedded_calibration_stereo/ros/light_burst.h"
+
+namespace ecsr = embedded_calibration_stereo;
+using sensor_msgs::Image;
+using sensor_msgs::ImageConstPtr;
+
+namespace {
+
+ImageConstPtr image(int seq, const std::string& encoding = "mono8", uint32_t width = 8) {
+  auto m = boost::make_shared<Image>();
+  m->header.seq = seq;
+  m->encoding = encoding;
+  m->width = width;
+  m->height = 4;
+  return m;
+}
+
+struct Frame {
+  ImageConstPtr left, right;
+  bool light_on;
+  uint32_t epoch;
+};
+
+Frame frame(int seq, bool light_on, uint32_t epoch = 0, const std::string& encoding = "mono8", uint32_t width = 8) {
+  return {image(seq, encoding, width), image(seq, encoding, width), light_on, epoch};
+}
+
+bool contains(const std::string& text, const std::string& part) { return text.find(part) != std::string::npos; }
+
+// Feeds the frames; the bursts they ended, in order.
+std::vector<ecsr::EndedBurst> feed(ecsr::LightBurstCollector* c, const std::vector<Frame>& frames) {
+  std::vector<ecsr::EndedBurst> ended;
+  for (const Frame& f : frames)
+    if (auto e = c->add(f.left, f.right, f.light_on, f.epoch)) ended.push_back(std::move(*e));
+  return ended;
+}
+
+}  // namespace
+
+TEST(LightBurst, KeepsTheLitFramesAndTheLastLightOffFrameBeforeAndTheFirstAfterWithoutCopies) {
+  ecsr::LightBurstCollector c(3);
+  std::vector<Frame> frames = {frame(0, false), frame(1, false), frame(2, true), frame(3, true), frame(4, true),
+                               frame(5, true), frame(6, false), frame(7, false)};
+  const auto ended = feed(&c, frames);
+  ASSERT_EQ(ended.size(), 1u);
+  const ecsr::EndedBurst& e = ended[0];
+  EXPECT_EQ(e.problem, "");
+  EXPECT_EQ(e.light_on_frames, 4);
+  EXPECT_EQ(e.burst.light_off_before.first, frames[1].left);
+  EXPECT_EQ(e.burst.light_off_before.second, frames[1].right);
+  EXPECT_EQ(e.burst.light_off_after.first, frames[6].left);
+  EXPECT_EQ(e.burst.light_off_after.second, frames[6].right);
+  ASSERT_EQ(e.burst.light_on.size(), 4u);
+  for (int i = 0; i < 4; ++i) {
+    EXPECT_EQ(e.burst.light_on[i].first, frames[2 + i].left) << i;
+    EXPECT_EQ(e.burst.light_on[i].second, frames[2 + i].right) << i;
+  }
+}
+
+TEST(LightBurst, AShortFlashGivesNothingAndItsLightOffFrameStartsTheNextBurst) {
+  ecsr::LightBurstCollector c(3);
+  // A 1-frame flash, a 2-frame one (still under 3), then a burst of 3.
+  std::vector<Frame> frames = {frame(0, false), frame(1, true), frame(2, false), frame(3, true), frame(4, true),
+                               frame(5, false), frame(6, false), frame(7, true), frame(8, true), frame(9, true),
+                               frame(10, false)};
+  const auto ended = feed(&c, frames);
+  ASSERT_EQ(ended.size(), 1u);
+  EXPECT_EQ(ended[0].problem, "");
+  EXPECT_EQ(ended[0].light_on_frames, 3);
+  EXPECT_EQ(ended[0].burst.light_off_before.first, frames[6].left);
+  EXPECT_EQ(ended[0].burst.light_off_after.first, frames[10].left);
+  ASSERT_EQ(ended[0].burst.light_on.size(), 3u);
+  EXPECT_EQ(ended[0].burst.light_on[0].first, frames[7].left);
+}
+
+TEST(LightBurst, ConsecutiveBurstsEachStartFromTheLastLightOffFrameBeforeThem) {
+  ecsr::LightBurstCollector c(3);
+  std::vector<Frame> frames = {frame(0, false), frame(1, true),  frame(2, true),  frame(3, true),
+                               frame(4, false), frame(5, false), frame(6, true),  frame(7, true),
+                               frame(8, true),  frame(9, false), frame(10, true), frame(11, true),
+                               frame(12, true), frame(13, false)};
+  const auto ended = feed(&c, frames);
+  ASSERT_EQ(ended.size(), 3u);
+  const int before[3] = {0, 5, 9}, after[3] = {4, 9, 13}, first_lit[3] = {1, 6, 10};
+  for (int b = 0; b < 3; ++b) {
+    EXPECT_EQ(ended[b].problem, "") << b;
+    EXPECT_EQ(ended[b].burst.light_off_before.first, frames[before[b]].left) << b;
+    EXPECT_EQ(ended[b].burst.light_off_after.first, frames[after[b]].left) << b;
+    ASSERT_EQ(ended[b].burst.light_on.size(), 3u) << b;
+    EXPECT_EQ(ended[b].burst.light_on[0].first, frames[first_lit[b]].left) << b;
+  }
+}
+
+TEST(LightBurst, ABurstWhoseEpochChangesIsDroppedWithTheReason) {
+  ecsr::LightBurstCollector c(3);
+  const std::vector<Frame> frames = {frame(0, false, 4), frame(1, true, 4), frame(2, true, 4),
+                                     frame(3, true, 6),  frame(4, true, 6), frame(5, false, 6)};
+  const auto ended = feed(&c, frames);
+  ASSERT_EQ(ended.size(), 1u);
+  EXPECT_TRUE(contains(ended[0].problem, "epoch changed from 4 to 6")) << ended[0].problem;
+  EXPECT_EQ(ended[0].light_on_frames, 4);
+  EXPECT_TRUE(ended[0].burst.light_on.empty());
+  EXPECT_EQ(ended[0].burst.light_off_after.first, frames[5].left);  // when it ended, for the warning
+  // The next burst, all of one epoch, is kept.
+  const auto next = feed(&c, {frame(6, true, 6), frame(7, true, 6), frame(8, true, 6), frame(9, false, 6)});
+  ASSERT_EQ(next.size(), 1u);
+  EXPECT_EQ(next[0].problem, "");
+}
+
+TEST(LightBurst, FramesOfDifferentSizesOrEncodingsAreDroppedWithTheReason) {
+  struct Case {
+    std::vector<Frame> frames;
+    std::string reason;
+  };
+  Frame mixed = frame(3, true);
+  mixed.right = image(3, "mono8", 16);
+  const std::vector<Case> cases = {
+      {{frame(0, false), frame(1, true), frame(2, true, 0, "mono8", 16), frame(3, true), frame(4, false)},
+       "differ in size or encoding (mono8 16x4, the light-off frame before it mono8 8x4)"},
+      {{frame(0, false), frame(1, true, 0, "bgr8"), frame(2, true, 0, "bgr8"), frame(3, true, 0, "bgr8"),
+        frame(4, false)},
+       "differ in size or encoding (bgr8 8x4, the light-off frame before it mono8 8x4)"},
+      {{frame(0, false), frame(1, true), frame(2, true), frame(3, true), frame(4, false, 0, "mono8", 16)},
+       "the light-off frame after it mono8 16x4"},
+      {{frame(0, false), frame(1, true), frame(2, true), mixed, frame(4, false)}, "left and right differ"},
+      {{frame(0, false, 0, "mono16"), frame(1, true, 0, "mono16"), frame(2, true, 0, "mono16"),
+        frame(3, true, 0, "mono16"), frame(4, false, 0, "mono16")},
+       "encoding 'mono16'"},
+  };
+  for (size_t i = 0; i < cases.size(); ++i) {
+    ecsr::LightBurstCollector c(3);
+    const auto ended = feed(&c, cases[i].frames);
+    ASSERT_EQ(ended.size(), 1u) << i;
+    EXPECT_TRUE(contains(ended[0].problem, cases[i].reason)) << i << ": " << ended[0].problem;
+    EXPECT_TRUE(ended[0].burst.light_on.empty()) << i;
+  }
+}
+
+TEST(LightBurst, ABurstWithNoLightOffFrameBeforeItIsDropped) {
+  ecsr::LightBurstCollector c(3);
+  const auto ended = feed(&c, {frame(0, true), frame(1, true), frame(2, true), frame(3, false), frame(4, true),
+                               frame(5, true), frame(6, true), frame(7, false)});
+  ASSERT_EQ(ended.size(), 2u);
+  EXPECT_TRUE(contains(ended[0].problem, "no settled light-off frame before it")) << ended[0].problem;
+  EXPECT_EQ(ended[1].problem, "");  // the control: the light-off frame after the first one starts the second
+}
