@@ -277,7 +277,7 @@ class PatternTrackerNodelet : public nodelet::Nodelet {
     collectTeaching();
     if (!mode->settled) return;  // the light is changing: neither a scene nor a board frame
     if (window_tracking_) {
-      if (auto ended = bursts_->add(left, right, mode->light_on, mode->calibration_epoch)) endBurst(std::move(*ended));
+      if (auto ended = bursts_->add(left, right, mode->light_on)) endBurst(std::move(*ended));
     }
     if (!mode->light_on) {
       light_off_left_ = left;  // zero-copy: keeps the shared messages alive

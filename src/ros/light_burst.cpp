@@ -22,8 +22,7 @@ std::string stereoFormatProblem(const sensor_msgs::Image& left, const sensor_msg
 }
 
 std::optional<EndedBurst> LightBurstCollector::add(const sensor_msgs::ImageConstPtr& left,
-                                                   const sensor_msgs::ImageConstPtr& right, bool light_on,
-                                                   uint32_t epoch) {
+                                                   const sensor_msgs::ImageConstPtr& right, bool light_on) {
   const StereoImages frame(left, right);
   if (!light_on) {
     std::optional<EndedBurst> ended;
@@ -49,7 +48,6 @@ std::optional<EndedBurst> LightBurstCollector::add(const sensor_msgs::ImageConst
     return ended;
   }
   if (frames_++ == 0) {
-    epoch_ = epoch;
     if (!light_off_.first) {
       problem_ = "no settled light-off frame before it";
     } else if (const std::string p = stereoFormatProblem(*light_off_.first, *light_off_.second); !p.empty()) {
@@ -57,10 +55,7 @@ std::optional<EndedBurst> LightBurstCollector::add(const sensor_msgs::ImageConst
     }
   }
   if (!problem_.empty()) return std::nullopt;
-  if (epoch != epoch_) {
-    problem_ = "the calibration epoch changed from " + std::to_string(epoch_) + " to " + std::to_string(epoch) +
-               " during it";
-  } else if (const std::string p = stereoFormatProblem(*left, *right); !p.empty()) {
+  if (const std::string p = stereoFormatProblem(*left, *right); !p.empty()) {
     problem_ = "a light-on frame: " + p;
   } else if (!sameFormat(*left, *light_off_.first)) {
     problem_ = "its frames differ in size or encoding (" + describe(*left) + ", the light-off frame before it " +

@@ -41,7 +41,7 @@ bool contains(const std::string& text, const std::string& part) { return text.fi
 std::vector<ecsr::EndedBurst> feed(ecsr::LightBurstCollector* c, const std::vector<Frame>& frames) {
   std::vector<ecsr::EndedBurst> ended;
   for (const Frame& f : frames)
-    if (auto e = c->add(f.left, f.right, f.light_on, f.epoch)) ended.push_back(std::move(*e));
+    if (auto e = c->add(f.left, f.right, f.light_on)) ended.push_back(std::move(*e));
   return ended;
 }
 
@@ -101,20 +101,19 @@ TEST(LightBurst, ConsecutiveBurstsEachStartFromTheLastLightOffFrameBeforeThem) {
   }
 }
 
-TEST(LightBurst, ABurstWhoseEpochChangesIsDroppedWithTheReason) {
+// A commit during a burst (the calibration epoch changes) does not touch its images: kept whole.
+TEST(LightBurst, ABurstAcrossACommitIsKept) {
   ecsr::LightBurstCollector c(3);
   const std::vector<Frame> frames = {frame(0, false, 4), frame(1, true, 4), frame(2, true, 4),
                                      frame(3, true, 6),  frame(4, true, 6), frame(5, false, 6)};
   const auto ended = feed(&c, frames);
   ASSERT_EQ(ended.size(), 1u);
-  EXPECT_TRUE(contains(ended[0].problem, "epoch changed from 4 to 6")) << ended[0].problem;
+  EXPECT_EQ(ended[0].problem, "");
   EXPECT_EQ(ended[0].light_on_frames, 4);
-  EXPECT_TRUE(ended[0].burst.light_on.empty());
-  EXPECT_EQ(ended[0].burst.light_off_after.first, frames[5].left);  // when it ended, for the warning
-  // The next burst, all of one epoch, is kept.
-  const auto next = feed(&c, {frame(6, true, 6), frame(7, true, 6), frame(8, true, 6), frame(9, false, 6)});
-  ASSERT_EQ(next.size(), 1u);
-  EXPECT_EQ(next[0].problem, "");
+  ASSERT_EQ(ended[0].burst.light_on.size(), 4u);
+  EXPECT_EQ(ended[0].burst.light_on[3].first, frames[4].left);
+  EXPECT_EQ(ended[0].burst.light_off_before.first, frames[0].left);
+  EXPECT_EQ(ended[0].burst.light_off_after.first, frames[5].left);
 }
 
 TEST(LightBurst, FramesOfDifferentSizesOrEncodingsAreDroppedWithTheReason) {
