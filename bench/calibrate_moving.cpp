@@ -297,8 +297,8 @@ int main(int argc, char** argv) {
           for (int o = args.off_frames; o >= 1; --o) {
             const double tb = t_start - (args.light_off_gap + o - 1) / args.fps;
             const SimFrame before = sim.render(tb, 0.0, static_cast<uint64_t>(std::llround(tb * args.fps)));
-            window[0].light_off.push_back(before.left);
-            window[1].light_off.push_back(before.right);
+            window[0].light_off_before.push_back(before.left);
+            window[1].light_off_before.push_back(before.right);
           }
         }
         if (args.learn_window == 2 && k + 1 == args.frames) {
@@ -309,8 +309,8 @@ int main(int argc, char** argv) {
           for (int o = 1; o <= args.off_frames; ++o) {
             const double ta = t_start + (args.frames - 1 + args.light_off_gap + o - 1) / args.fps;
             const SimFrame after = sim.render(ta, 0.0, static_cast<uint64_t>(std::llround(ta * args.fps)));
-            window[0].light_off.push_back(after.left);
-            window[1].light_off.push_back(after.right);
+            window[0].light_off_after.push_back(after.left);
+            window[1].light_off_after.push_back(after.right);
           }
         }
         if (!(args.learn_window == 2 && k + 1 == args.frames)) {

@@ -104,7 +104,8 @@ class PatternTrackerNodelet : public nodelet::Nodelet {
   // One burst handed to the worker.
   struct WindowJob {
     std::shared_ptr<ecs::WindowTracker> tracker;
-    std::vector<ImageConstPtr> light_off[2], light_on[2];
+    ImageConstPtr light_off_before[2], light_off_after[2];
+    std::vector<ImageConstPtr> light_on[2];
     std_msgs::Header header;  // the last light-on frame's
   };
 
@@ -462,10 +463,10 @@ class PatternTrackerNodelet : public nodelet::Nodelet {
     if (problem.empty()) {
       WindowJob job;
       job.tracker = window_tracker_;
-      for (const StereoImages& off : {ended.burst.light_off_before, ended.burst.light_off_after}) {
-        job.light_off[0].push_back(off.first);
-        job.light_off[1].push_back(off.second);
-      }
+      job.light_off_before[0] = ended.burst.light_off_before.first;
+      job.light_off_before[1] = ended.burst.light_off_before.second;
+      job.light_off_after[0] = ended.burst.light_off_after.first;
+      job.light_off_after[1] = ended.burst.light_off_after.second;
       for (const StereoImages& on : ended.burst.light_on) {
         job.light_on[0].push_back(on.first);
         job.light_on[1].push_back(on.second);
@@ -526,7 +527,8 @@ class PatternTrackerNodelet : public nodelet::Nodelet {
         return mat;
       };
       for (int c = 0; c < 2; ++c) {
-        for (const ImageConstPtr& m : job.light_off[c]) frames[c].light_off.push_back(image(m));
+        frames[c].light_off_before.push_back(image(job.light_off_before[c]));
+        frames[c].light_off_after.push_back(image(job.light_off_after[c]));
         for (const ImageConstPtr& m : job.light_on[c]) frames[c].light_on.push_back(image(m));
       }
       const ecs::WindowTrack track = job.tracker->track(frames[0], frames[1], job.header.stamp.toSec());

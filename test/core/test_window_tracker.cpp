@@ -75,8 +75,8 @@ TEST(WindowTracker, TracksMovingWindowsAgainstTheTruth) {
     }
     WindowFrames left, right;
     const SimFrame before = sim.render(j / kFps, 0.0, 500 + j);
-    left.light_off.push_back(before.left);
-    right.light_off.push_back(before.right);
+    left.light_off_before.push_back(before.left);
+    right.light_off_before.push_back(before.right);
     SharedError shared;
     SimFrame lit;
     for (int k = 1; k <= kLitFrames; ++k) {
@@ -88,8 +88,8 @@ TEST(WindowTracker, TracksMovingWindowsAgainstTheTruth) {
       shared.add(1, per_frame.right, lit.observations.right);
     }
     const SimFrame after = sim.render((j + kLitFrames + 1) / kFps, 0.0, 500 + j + kLitFrames + 1);
-    left.light_off.push_back(after.left);
-    right.light_off.push_back(after.right);
+    left.light_off_after.push_back(after.left);
+    right.light_off_after.push_back(after.right);
     const WindowTrack track = window_tracker.track(left, right, (j + kLitFrames) / kFps);
     CornerScore window_score;
     window_score.add(track.observation, lit.observations);
@@ -114,14 +114,14 @@ TEST(WindowTracker, RefusesAWindowItCannotLearnFrom) {
   const PatternPrior prior = teachSimPrior(sim, 1.0);
   WindowTracker tracker(prior, TrackerOptions(), WindowTrackerOptions());
   const SimFrame lit = sim.render(2.0, 1.0, 7), off = sim.render(2.1, 0.0, 8);
-  WindowFrames no_off{{}, {lit.left, lit.left, lit.left}};
-  WindowFrames ok_right{{off.right}, {lit.right, lit.right, lit.right}};
+  WindowFrames no_off{{}, {}, {lit.left, lit.left, lit.left}};
+  WindowFrames ok_right{{off.right}, {}, {lit.right, lit.right, lit.right}};
   EXPECT_THROW(tracker.track(no_off, ok_right, 2.0), std::invalid_argument);
-  WindowFrames flash{{off.left}, {lit.left}};  // a verification flash: one light-on frame
+  WindowFrames flash{{off.left}, {}, {lit.left}};  // a verification flash: one light-on frame
   EXPECT_THROW(tracker.track(flash, ok_right, 2.0), std::invalid_argument);
   cv::Mat small;
   cv::resize(off.left, small, cv::Size(), 0.5, 0.5);
-  WindowFrames mixed{{small}, {lit.left, lit.left, lit.left}};
+  WindowFrames mixed{{small}, {}, {lit.left, lit.left, lit.left}};
   EXPECT_THROW(tracker.track(mixed, ok_right, 2.0), std::invalid_argument);
   WindowTrackerOptions bad;
   bad.min_light_on_frames = 0;

@@ -84,7 +84,7 @@ WindowTracker::WindowTracker(const PatternPrior& prior, const TrackerOptions& tr
 WindowTrack WindowTracker::track(const WindowFrames& left, const WindowFrames& right, double stamp) {
   const WindowFrames* frames[2] = {&left, &right};
   for (int c = 0; c < 2; ++c) {
-    if (frames[c]->light_off.empty())
+    if (frames[c]->light_off_before.empty() && frames[c]->light_off_after.empty())
       throw std::invalid_argument(std::string(c ? "right" : "left") + ": a window needs a light-off frame");
     if (static_cast<int>(frames[c]->light_on.size()) < options_.min_light_on_frames)
       throw std::invalid_argument(std::string(c ? "right" : "left") + ": " +
@@ -100,8 +100,15 @@ WindowTrack WindowTracker::track(const WindowFrames& left, const WindowFrames& r
     for (int c = range.start; c < range.end; ++c) {
       try {
         LightPairSet set(255);
-        for (const cv::Mat& off : frames[c]->light_off)
-          for (const cv::Mat& on : frames[c]->light_on) set.add(off, on);
+        const WindowFrames& f = *frames[c];
+        const int n = static_cast<int>(f.light_on.size());
+        for (int i = 0; i < n; ++i) {
+          const bool first_half = 2 * i < n;
+          const std::vector<cv::Mat>& side = (first_half && !f.light_off_before.empty()) || f.light_off_after.empty()
+                                                 ? f.light_off_before
+                                                 : f.light_off_after;
+          for (const cv::Mat& off : side) set.add(off, f.light_on[i]);
+        }
         DeviceLearnerOptions learner = options_.learner;
         learner.min_pairs = 2;
         learner.max_pairs = std::max(learner.max_pairs, set.size());

@@ -6,9 +6,13 @@
 // that pull is nearly the same in all frames of a window (the scene moves little in a fraction
 // of a second), so more frames do not average it out and the calibrator turns it into
 // calibration error. Instead, per camera:
-//  1. the device image I_C of this window is learned from every (light-off, light-on) pair of
-//     the window (device_image_learner.h: each light-off frame aligned to each light-on frame by
-//     optical flow, combined per pixel robustly): what stays put while the scene moves;
+//  1. the device image I_C of this window is learned from its (light-off, light-on) pairs
+//     (device_image_learner.h: the light-off frame aligned to the light-on frame by optical
+//     flow, the pairs combined per pixel robustly): what stays put while the scene moves. Each
+//     light-on frame is paired with the light-off frames on its nearer side (the first half of
+//     the window with those before it, the second half with those after): the scene moved less
+//     in between, so the flow is better, and it takes half the time of pairing every frame with
+//     both sides (bench_calibrate_moving, docs/figures.md);
 //  2. the boards are tracked on I_C, which shows no scene (CameraTracker::trackSceneFree; the
 //     board geometry is verified there, so no id can slip);
 //  3. every corner is refined by a blurred-saddle model fit on I_C (saddle_refinement.h), free of
@@ -39,11 +43,12 @@ struct WindowTrackerOptions {
   std::string Check() const;
 };
 
-// One camera's frames of one window: the settled light-on frames, and the settled light-off
-// frames taken around them (the last one before the window, and/or the first one after).
+// One camera's frames of one window: the settled light-on frames in time order, and the settled
+// light-off frames taken before the window (e.g. the last one) and after it (the first one);
+// either side may be empty, not both (both are far better: the scene moves one way only).
 // CV_8UC1 or CV_8UC3 (BGR), all of one size and type.
 struct WindowFrames {
-  std::vector<cv::Mat> light_off, light_on;
+  std::vector<cv::Mat> light_off_before, light_off_after, light_on;
 };
 
 struct WindowTrack {
