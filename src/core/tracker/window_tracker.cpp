@@ -30,16 +30,17 @@ int refineCornersBySaddleFit(const cv::Mat& image, const CameraPrior& prior, con
     for (const BoardPrior& candidate : prior.boards)
       if (candidate.board_id == b.board_id) board = &candidate;
     if (!board) continue;
-    std::map<int, cv::Point2f> at;
-    for (size_t i = 0; i < b.size(); ++i) at[b.corner_ids[i]] = cv::Point2f(b.u[i], b.v[i]);
+    std::map<int, cv::Point2f> tracked;
+    for (size_t i = 0; i < b.size(); ++i) tracked[b.corner_ids[i]] = cv::Point2f(b.u[i], b.v[i]);
+    const std::map<int, cv::Point2f>& at = tracked;  // read by the corner tasks below: const only
     // Direction of the board line through corner `id` towards the next corner (`step` ids on).
     const auto line = [&](int id, int step, bool along_row_of_ids) -> cv::Point2f {
       const int col = id % board->cols;
       const bool next = at.count(id + step) && (!along_row_of_ids || col + 1 < board->cols);
       const bool prev = at.count(id - step) && (!along_row_of_ids || col > 0);
-      if (next && prev) return 0.5f * (at[id + step] - at[id - step]);
-      if (next) return at[id + step] - at[id];
-      if (prev) return at[id] - at[id - step];
+      if (next && prev) return 0.5f * (at.at(id + step) - at.at(id - step));
+      if (next) return at.at(id + step) - at.at(id);
+      if (prev) return at.at(id) - at.at(id - step);
       return cv::Point2f(0, 0);
     };
     std::vector<SaddleFit> fits(b.size());
