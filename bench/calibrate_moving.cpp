@@ -36,9 +36,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
-#include <map>
 #include <string>
-#include <tuple>
 #include <vector>
 
 #include <opencv2/imgproc.hpp>
@@ -51,6 +49,7 @@
 #include "embedded_calibration_stereo/core/tracker/pattern_tracker.h"
 #include "embedded_calibration_stereo/core/tracker/saddle_refinement.h"
 #include "embedded_calibration_stereo/core/tracker/window_tracker.h"
+#include "embedded_calibration_stereo/test_support/corner_score.h"
 
 using namespace ecs;
 
@@ -143,40 +142,6 @@ void refineBySaddle(const cv::Mat& image, const CameraPrior& prior, std::vector<
   }
   refineCornersBySaddleFit(diff, prior, WindowTrackerOptions(), boards);
 }
-
-// Corner errors of a window against the truth: RMS over every tracked corner, and RMS over the
-// corners of their mean error in the window (the part common to the window's frames, which
-// more frames do not average out).
-struct WindowErrors {
-  std::map<std::tuple<int, int, int>, std::pair<cv::Point2d, int>> sums;
-  double sq = 0;
-  int n = 0;
-  void add(int camera, const std::vector<BoardCorners>& tracked, const std::vector<BoardCorners>& truth) {
-    for (const BoardCorners& b : tracked)
-      for (const BoardCorners& t : truth) {
-        if (t.board_id != b.board_id) continue;
-        for (size_t i = 0; i < b.size(); ++i)
-          for (size_t j = 0; j < t.size(); ++j)
-            if (t.corner_ids[j] == b.corner_ids[i]) {
-              const cv::Point2d e(b.u[i] - t.u[j], b.v[i] - t.v[j]);
-              sq += e.dot(e);
-              ++n;
-              auto& s = sums[{camera, b.board_id, b.corner_ids[i]}];
-              s.first += e;
-              ++s.second;
-            }
-      }
-  }
-  double rms() const { return n ? std::sqrt(sq / n) : 0.0; }
-  double commonRms() const {
-    double q = 0;
-    for (const auto& kv : sums) {
-      const cv::Point2d m = kv.second.first / kv.second.second;
-      q += m.dot(m);
-    }
-    return sums.empty() ? 0.0 : std::sqrt(q / sums.size());
-  }
-};
 
 void print(const char* what, const StereoAccuracy& a) {
   std::printf("    %s misalignment %.4f px, bias %.4f px, depth error %.3f / %.3f / %.3f / %.3f %% at 1/2/5/10 m\n",
@@ -285,7 +250,7 @@ int main(int argc, char** argv) {
     cv::Mat sum[2];
     WindowFrames window[2];
     int corners = 0, truth_corners = 0;
-    WindowErrors errors;
+    WindowCornerErrors errors;
     for (int k = 0; k < args.frames; ++k) {
       const double t = t_start + k / args.fps;
       const uint64_t frame_index = static_cast<uint64_t>(std::llround(t * args.fps));
@@ -378,7 +343,7 @@ int main(int argc, char** argv) {
     const StereoAccuracy old_a = evaluateStereoAccuracy(in_force, last.truth);
     std::printf("t %6.1f s%s%s: %d of %d corners tracked (%.3f px RMS, %.3f px common to the window); %s\n", t_start,
                 event.empty() ? "" : ", after ", event.c_str(), corners, truth_corners, errors.rms(),
-                errors.commonRms(), decision.reason.c_str());
+                errors.sharedRms(), decision.reason.c_str());
     if (!decision.accepted) {
       ++rejected;
       print("in force:", old_a);

@@ -9,10 +9,8 @@
 
 #include <cmath>
 #include <cstdio>
-#include <map>
 #include <stdexcept>
 #include <string>
-#include <tuple>
 
 #include <opencv2/imgproc.hpp>
 
@@ -27,32 +25,6 @@ namespace {
 const std::string kConfig = std::string(ECS_SOURCE_DIR) + "/config/drive_photo.yaml";
 constexpr double kFps = 30.0;
 constexpr int kLitFrames = 10;
-
-// Mean error per (camera, board, corner) over frames: the error the frames share.
-struct SharedError {
-  std::map<std::tuple<int, int, int>, std::pair<cv::Point2d, int>> sums;
-  void add(int camera, const std::vector<BoardCorners>& tracked, const std::vector<BoardCorners>& truth) {
-    for (const BoardCorners& b : tracked)
-      for (const BoardCorners& t : truth) {
-        if (t.board_id != b.board_id) continue;
-        for (size_t i = 0; i < b.size(); ++i)
-          for (size_t j = 0; j < t.size(); ++j)
-            if (t.corner_ids[j] == b.corner_ids[i]) {
-              auto& s = sums[{camera, b.board_id, b.corner_ids[i]}];
-              s.first += cv::Point2d(b.u[i] - t.u[j], b.v[i] - t.v[j]);
-              ++s.second;
-            }
-      }
-  }
-  double rms() const {
-    double q = 0;
-    for (const auto& kv : sums) {
-      const cv::Point2d m = kv.second.first / kv.second.second;
-      q += m.dot(m);
-    }
-    return sums.empty() ? 0.0 : std::sqrt(q / sums.size());
-  }
-};
 
 TEST(WindowTracker, TracksMovingWindowsAgainstTheTruth) {
   SimRig sim(loadSimRigConfig(kConfig));
@@ -77,7 +49,7 @@ TEST(WindowTracker, TracksMovingWindowsAgainstTheTruth) {
     const SimFrame before = sim.render(j / kFps, 0.0, 500 + j);
     left.light_off_before.push_back(before.left);
     right.light_off_before.push_back(before.right);
-    SharedError shared;
+    WindowCornerErrors shared;
     SimFrame lit;
     for (int k = 1; k <= kLitFrames; ++k) {
       lit = sim.render((j + k) / kFps, 1.0, 1000 + j + k);
@@ -96,8 +68,8 @@ TEST(WindowTracker, TracksMovingWindowsAgainstTheTruth) {
     score.add(track.observation, lit.observations);
     std::printf("  window %d: %s (%d saddle fits failed); per-frame tracker, error shared by the window's "
                 "frames: %.3f px RMS\n",
-                w, window_score.str().c_str(), track.saddle_failures, shared.rms());
-    shared_sq += shared.rms() * shared.rms();
+                w, window_score.str().c_str(), track.saddle_failures, shared.sharedRms());
+    shared_sq += shared.sharedRms() * shared.sharedRms();
     ++windows;
   }
   const double shared_rms = std::sqrt(shared_sq / windows);

@@ -43,4 +43,33 @@ std::string CornerScore::str() const {
   return buf;
 }
 
+void WindowCornerErrors::add(int camera, const std::vector<BoardCorners>& tracked,
+                             const std::vector<BoardCorners>& truth) {
+  for (const BoardCorners& b : tracked)
+    for (const BoardCorners& t : truth) {
+      if (t.board_id != b.board_id) continue;
+      for (size_t i = 0; i < b.size(); ++i)
+        for (size_t j = 0; j < t.size(); ++j)
+          if (t.corner_ids[j] == b.corner_ids[i]) {
+            const cv::Point2d e(b.u[i] - t.u[j], b.v[i] - t.v[j]);
+            sum_sq_ += e.dot(e);
+            ++count_;
+            auto& s = sums_[{camera, b.board_id, b.corner_ids[i]}];
+            s.first += e;
+            ++s.second;
+          }
+    }
+}
+
+double WindowCornerErrors::rms() const { return count_ ? std::sqrt(sum_sq_ / count_) : 0.0; }
+
+double WindowCornerErrors::sharedRms() const {
+  double q = 0;
+  for (const auto& kv : sums_) {
+    const cv::Point2d m = kv.second.first / kv.second.second;
+    q += m.dot(m);
+  }
+  return sums_.empty() ? 0.0 : std::sqrt(q / sums_.size());
+}
+
 }  // namespace ecs
