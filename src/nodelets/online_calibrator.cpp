@@ -227,34 +227,52 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
       NODELET_WARN("OnlineCalibrator: no tf from the calibration in force yet: %s", error.c_str());
   }
 
+  // Subscriber queue. The observation in `msg`; nothing when it has a defect, then *why says
+  // which and it is counted as dropped. The caller logs (a throttle per input).
+  std::optional<ecs::StereoObservation> validObservation(const StereoPatternObservation& msg, std::string* why) {
+    ecs::StereoObservation observation = fromMsg(msg);
+    const std::vector<std::string> defects = observationDefects(observation, session_->boards());
+    if (defects.empty()) return observation;
+    why->clear();
+    for (const std::string& d : defects) *why += (why->empty() ? "" : "; ") + d;
+    std::lock_guard<std::mutex> lock(mutex_);
+    ++dropped_messages_;
+    return std::nullopt;
+  }
+
+  // Caller holds mutex_. Whether `stamp` is after *last (then it becomes *last); otherwise it is
+  // counted as backwards. A stamp not after the previous one (a replayed or restarted source, or
+  // the same message sent again) would put a frame in a window twice, or a frame of another
+  // timeline. A time jump of the driver's calibration_mode (forgetFramesAfterTimeJump) starts a
+  // new timeline.
+  bool stampAfterPrevious(const ros::Time& stamp, ros::Time* last) {
+    if (!last->isZero() && stamp <= *last) {
+      ++backwards_messages_;
+      return false;
+    }
+    *last = stamp;
+    return true;
+  }
+
   void onObservation(const StereoPatternObservationConstPtr& msg) {
     if (!guard_->admit(kObservationInput, msg->header.stamp)) return;
-    ecs::StereoObservation observation = fromMsg(*msg);
-    const std::vector<std::string> defects = observationDefects(observation, session_->boards());
-    if (!defects.empty()) {
-      std::string text;
-      for (const std::string& d : defects) text += (text.empty() ? "" : "; ") + d;
+    std::string why;
+    std::optional<ecs::StereoObservation> valid = validObservation(*msg, &why);
+    if (!valid) {
       NODELET_ERROR_THROTTLE(5.0, "OnlineCalibrator: observation dropped on %s: %s",
-                             observations_sub_.getTopic().c_str(), text.c_str());
-      std::lock_guard<std::mutex> lock(mutex_);
-      ++dropped_messages_;
+                             observations_sub_.getTopic().c_str(), why.c_str());
       return;
     }
+    ecs::StereoObservation observation = std::move(*valid);
     std::lock_guard<std::mutex> lock(mutex_);
-    // A stamp not after the previous one (a replayed or restarted source, or the same frame
-    // sent again) would put a frame in the window twice, or a frame of another timeline:
-    // dropped, so that a window counts one frame per stamp. A time jump of the driver's
-    // calibration_mode (forgetFramesAfterTimeJump) starts a new timeline for both.
-    if (!last_observation_stamp_.isZero() && msg->header.stamp <= last_observation_stamp_) {
-      ++backwards_messages_;
+    const ros::Time previous = last_observation_stamp_;
+    if (!stampAfterPrevious(msg->header.stamp, &last_observation_stamp_)) {  // one frame per stamp in a window
       NODELET_WARN_THROTTLE(5.0,
                             "OnlineCalibrator: observation dropped on %s: its stamp %.3f s is not after the "
                             "previous one (%.3f s); a replayed or restarted source?",
-                            observations_sub_.getTopic().c_str(), msg->header.stamp.toSec(),
-                            last_observation_stamp_.toSec());
+                            observations_sub_.getTopic().c_str(), msg->header.stamp.toSec(), previous.toSec());
       return;
     }
-    last_observation_stamp_ = msg->header.stamp;
     if (observation.left.empty() && observation.right.empty()) return;  // no board in this frame
     for (const ModeSeen& mode : modes_) {
       if (mode.stamp == msg->header.stamp) {
@@ -270,29 +288,25 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
   // arrives seconds after its window, so it is neither matched with calibration_mode nor passed
   // through the stamp guard (which would hold it against the other inputs' newer stamps).
   void onWindowObservation(const StereoPatternObservationConstPtr& msg) {
-    ecs::StereoObservation observation = fromMsg(*msg);
-    const std::vector<std::string> defects = observationDefects(observation, session_->boards());
-    if (!defects.empty()) {
-      std::string text;
-      for (const std::string& d : defects) text += (text.empty() ? "" : "; ") + d;
+    std::string why;
+    std::optional<ecs::StereoObservation> valid = validObservation(*msg, &why);
+    if (!valid) {
       NODELET_ERROR_THROTTLE(5.0, "OnlineCalibrator: window observation dropped on %s: %s",
-                             window_observations_sub_.getTopic().c_str(), text.c_str());
-      std::lock_guard<std::mutex> lock(mutex_);
-      ++dropped_messages_;
+                             window_observations_sub_.getTopic().c_str(), why.c_str());
       return;
     }
+    ecs::StereoObservation observation = std::move(*valid);
     {
       std::lock_guard<std::mutex> lock(mutex_);
-      if (!last_window_observation_stamp_.isZero() && msg->header.stamp <= last_window_observation_stamp_) {
-        ++backwards_messages_;
+      const ros::Time previous = last_window_observation_stamp_;
+      if (!stampAfterPrevious(msg->header.stamp, &last_window_observation_stamp_)) {
         NODELET_WARN_THROTTLE(5.0,
                               "OnlineCalibrator: window observation dropped on %s: its stamp %.3f s is not after "
                               "the previous one (%.3f s); a replayed or restarted source?",
                               window_observations_sub_.getTopic().c_str(), msg->header.stamp.toSec(),
-                              last_window_observation_stamp_.toSec());
+                              previous.toSec());
         return;
       }
-      last_window_observation_stamp_ = msg->header.stamp;
       ++window_observations_;
     }
     if (!params_.auto_calibrate || (observation.left.empty() && observation.right.empty())) return;
