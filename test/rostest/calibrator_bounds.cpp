@@ -447,13 +447,6 @@ TEST(CalibratorBounds, AnAutomaticWindowThatStopsGrowingEndsWithAReason) {
 }
 
 int main(int argc, char** argv) {
-  testing::InitGoogleTest(&argc, argv);
-  ros::init(argc, argv, "calibrator_bounds_test");
-  ros::AsyncSpinner spinner(6);  // the proxy holds threads while it hangs or forwards
-  spinner.start();
-  Fixture f;
-  fixture = &f;
-  const int result = RUN_ALL_TESTS();
-  fixture = nullptr;
-  return result;
+  // 6 spinner threads: the proxy holds threads while it hangs or forwards
+  return ecs_test::runTestsWithFixture(argc, argv, "calibrator_bounds_test", 6, &fixture);
 }

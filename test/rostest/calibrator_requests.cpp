@@ -371,13 +371,6 @@ TEST(CalibratorRequests, ObservationsWhoseStampsGoBackAreDroppedAndTheWindowStil
 }
 
 int main(int argc, char** argv) {
-  testing::InitGoogleTest(&argc, argv);
-  ros::init(argc, argv, "calibrator_requests_test");
-  ros::AsyncSpinner spinner(3);  // the light proxy calls the driver from inside its callback
-  spinner.start();
-  Fixture f;
-  fixture = &f;
-  const int result = RUN_ALL_TESTS();
-  fixture = nullptr;
-  return result;
+  // 3 spinner threads: the light proxy calls the driver from inside its callback
+  return ecs_test::runTestsWithFixture(argc, argv, "calibrator_requests_test", 3, &fixture);
 }

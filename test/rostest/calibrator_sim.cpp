@@ -290,13 +290,5 @@ TEST(CalibratorSim, PutsACalibrationSetFromOutsideOnTfStatic) {
 }
 
 int main(int argc, char** argv) {
-  testing::InitGoogleTest(&argc, argv);
-  ros::init(argc, argv, "calibrator_sim_test");
-  ros::AsyncSpinner spinner(2);
-  spinner.start();
-  Fixture f;
-  fixture = &f;
-  const int result = RUN_ALL_TESTS();
-  fixture = nullptr;
-  return result;
+  return ecs_test::runTestsWithFixture(argc, argv, "calibrator_sim_test", 2, &fixture);
 }

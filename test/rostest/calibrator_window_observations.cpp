@@ -21,20 +21,11 @@ using embedded_calibration_stereo::CalibrationMode;
 using embedded_calibration_stereo::CalibrationStatus;
 using embedded_calibration_stereo::StereoPatternObservation;
 using ecs_test::Collector;
+using ecs_test::waitUntil;
 using sensor_msgs::CameraInfo;
 
 namespace {
 
-// Polls `done` every 10 ms until it holds; false after timeout_s (for publisher connections,
-// which have no event to wait on).
-bool waitUntil(const std::function<bool()>& done, double timeout_s) {
-  const ros::WallTime deadline = ros::WallTime::now() + ros::WallDuration(timeout_s);
-  while (!done()) {
-    if (ros::WallTime::now() > deadline) return false;
-    ros::WallDuration(0.01).sleep();
-  }
-  return true;
-}
 
 // The settled light-on frames of the first complete burst (a settled light-off frame after at
 // least `min_lit` of them) whose frames are all stamped after `after`; empty while there is none.

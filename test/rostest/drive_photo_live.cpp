@@ -293,13 +293,5 @@ TEST(DrivePhotoLive, ZoomThermalAndKnockAreRecalibratedAndNoCommitIsWorse) {
 }
 
 int main(int argc, char** argv) {
-  testing::InitGoogleTest(&argc, argv);
-  ros::init(argc, argv, "drive_photo_live_test");
-  ros::AsyncSpinner spinner(2);
-  spinner.start();
-  Fixture f;
-  fixture = &f;
-  const int result = RUN_ALL_TESTS();
-  fixture = nullptr;
-  return result;
+  return ecs_test::runTestsWithFixture(argc, argv, "drive_photo_live_test", 2, &fixture);
 }

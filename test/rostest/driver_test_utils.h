@@ -2,6 +2,7 @@
 // Helpers shared by the driver's rostest nodes: collect messages of a topic and wait on a
 // condition over them with a deadline (never a fixed sleep as synchronisation), and load the
 // driver nodelet in-process.
+#include <gtest/gtest.h>
 #include <nodelet/loader.h>
 #include <ros/ros.h>
 #include <rosgraph_msgs/Log.h>
@@ -112,5 +113,32 @@ class InProcessManager {
  private:
   nodelet::Loader loader_{false};
 };
+
+// Polls `done` every 10 ms until it holds; false after timeout_s. For states no message
+// announces: publisher connections, the master's lists.
+inline bool waitUntil(const std::function<bool()>& done, double timeout_s) {
+  const ros::WallTime deadline = ros::WallTime::now() + ros::WallDuration(timeout_s);
+  while (!done()) {
+    if (ros::WallTime::now() > deadline) return false;
+    ros::WallDuration(0.01).sleep();
+  }
+  return true;
+}
+
+// The main() of a rostest node whose tests share one Fixture: its subscriptions and clients are
+// made once, after ros::init, and `*fixture` points to it while the tests run; spinner_threads
+// serve its callbacks.
+template <class Fixture>
+int runTestsWithFixture(int argc, char** argv, const char* node_name, int spinner_threads, Fixture** fixture) {
+  testing::InitGoogleTest(&argc, argv);
+  ros::init(argc, argv, node_name);
+  ros::AsyncSpinner spinner(spinner_threads);
+  spinner.start();
+  Fixture f;
+  *fixture = &f;
+  const int result = RUN_ALL_TESTS();
+  *fixture = nullptr;
+  return result;
+}
 
 }  // namespace ecs_test

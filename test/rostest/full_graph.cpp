@@ -240,13 +240,5 @@ TEST(FullGraph, ZoomAndKnockAreRecalibratedAndDisparityNeverStops) {
 }
 
 int main(int argc, char** argv) {
-  testing::InitGoogleTest(&argc, argv);
-  ros::init(argc, argv, "full_graph_test");
-  ros::AsyncSpinner spinner(2);
-  spinner.start();
-  Fixture f;
-  fixture = &f;
-  const int result = RUN_ALL_TESTS();
-  fixture = nullptr;
-  return result;
+  return ecs_test::runTestsWithFixture(argc, argv, "full_graph_test", 2, &fixture);
 }

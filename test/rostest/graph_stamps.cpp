@@ -155,13 +155,5 @@ TEST(GraphStamps, AStreamStampedFiveSecondsBackDoesNotBlockTheCalibrationWindows
 }
 
 int main(int argc, char** argv) {
-  testing::InitGoogleTest(&argc, argv);
-  ros::init(argc, argv, "graph_stamps_test");
-  ros::AsyncSpinner spinner(3);
-  spinner.start();
-  Fixture f;
-  fixture = &f;
-  const int result = RUN_ALL_TESTS();
-  fixture = nullptr;
-  return result;
+  return ecs_test::runTestsWithFixture(argc, argv, "graph_stamps_test", 3, &fixture);
 }

@@ -43,6 +43,7 @@ using embedded_calibration_stereo::CalibrationMode;
 using embedded_calibration_stereo::CalibrationStatus;
 using ecs_test::ChildLaunch;
 using ecs_test::Collector;
+using ecs_test::waitUntil;
 
 namespace {
 
@@ -72,15 +73,6 @@ bool subscribedBy(const std::string& prefix, const std::vector<std::string>& top
   return found == topics.size();
 }
 
-// Polls the master (no message announces a new subscriber) until `done` or the deadline.
-bool waitUntil(const std::function<bool()>& done, double timeout_s) {
-  const ros::WallTime deadline = ros::WallTime::now() + ros::WallDuration(timeout_s);
-  while (ros::WallTime::now() < deadline) {
-    if (done()) return true;
-    ros::WallDuration(0.05).sleep();
-  }
-  return done();
-}
 
 size_t lightOnFrames(const std::vector<CalibrationMode::ConstPtr>& modes) {
   return static_cast<size_t>(std::count_if(modes.begin(), modes.end(), [](const auto& m) { return m->light_on; }));

@@ -19,6 +19,7 @@
 
 using embedded_calibration_stereo::CalibrationMode;
 using ecs_test::Collector;
+using ecs_test::waitUntil;
 using sensor_msgs::Image;
 
 namespace {
@@ -48,16 +49,6 @@ bool loadSimPipeline() {
   return loaded;
 }
 
-// Polls `done` every 10 ms until it holds; false after timeout_s (for publisher connections,
-// which have no event to wait on).
-bool waitUntil(const std::function<bool()>& done, double timeout_s) {
-  const ros::WallTime deadline = ros::WallTime::now() + ros::WallDuration(timeout_s);
-  while (!done()) {
-    if (ros::WallTime::now() > deadline) return false;
-    ros::WallDuration(0.01).sleep();
-  }
-  return true;
-}
 
 double psnr(const cv::Mat& a, const cv::Mat& b) {
   const double mse = cv::norm(a, b, cv::NORM_L2SQR) / double(a.total() * a.channels());

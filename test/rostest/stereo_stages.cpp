@@ -21,6 +21,7 @@
 
 using embedded_calibration_stereo::CalibrationMode;
 using ecs_test::Collector;
+using ecs_test::waitUntil;
 using sensor_msgs::CameraInfo;
 using sensor_msgs::Image;
 using stereo_msgs::DisparityImage;
@@ -60,16 +61,6 @@ CameraInfo::Ptr makeInfo(const ros::Time& stamp, bool right) {
   return info;
 }
 
-// Polls `done` every 20 ms until it holds; false after timeout_s (for states without an event:
-// connections, the master's lists).
-bool waitUntil(const std::function<bool()>& done, double timeout_s) {
-  const ros::WallTime deadline = ros::WallTime::now() + ros::WallDuration(timeout_s);
-  while (!done()) {
-    if (ros::WallTime::now() > deadline) return false;
-    ros::WallDuration(0.02).sleep();
-  }
-  return true;
-}
 
 enum class Stage { kSeparator, kRectifier, kDisparity };
 

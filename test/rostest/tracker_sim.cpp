@@ -222,13 +222,5 @@ TEST(TrackerSim, CorruptPriorIdlesWithAnErrorUntilTeach) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  testing::InitGoogleTest(&argc, argv);
-  ros::init(argc, argv, "tracker_sim_test");
-  ros::AsyncSpinner spinner(2);
-  spinner.start();
-  Fixture f;
-  fixture = &f;
-  const int result = RUN_ALL_TESTS();
-  fixture = nullptr;
-  return result;
+  return ecs_test::runTestsWithFixture(argc, argv, "tracker_sim_test", 2, &fixture);
 }
