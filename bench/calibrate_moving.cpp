@@ -12,7 +12,7 @@
 //                          [--teach-frames K] [--min-change X] [--min-improvement R]
 //                          [--combine 0|1] [--align 0|1] [--free-poses 0|1]
 //                          [--truth-background 0|1] [--truth-noise SIGMA] [--saddle 0|1]
-//                          [--learn-window 0|1|2] [--off-frames K]
+//                          [--learn-window 0|1|2] [--off-frames K] [--scene 0|1]
 // --min-change / --min-improvement: the gate's min_change_in_predicted / min_rms_improvement_rel;
 // what limits the accuracy (docs/figures.md): --combine 1 tracks the mean of the window's frames
 // (one observation per window), --align 0 reports cornerSubPix corners instead of the whole-board
@@ -31,6 +31,7 @@
 // index: two runs print the same figures. The prior is taught at t = 0 from light-on frames
 // minus the simulator's scene of the same frame (as the live tracker's teach_from_ground_truth).
 // Exit code: 0, or 1 when a commit was worse than the calibration it replaced.
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -43,6 +44,8 @@
 
 #include "embedded_calibration_stereo/core/calibration/bundle_adjuster.h"
 #include "embedded_calibration_stereo/core/calibration/quality_gate.h"
+#include "embedded_calibration_stereo/core/calibration/scene_epipolar_cost.h"
+#include "embedded_calibration_stereo/core/calibration/scene_matches.h"
 #include "embedded_calibration_stereo/core/calibration/stereo_accuracy.h"
 #include "embedded_calibration_stereo/core/sim/sim_rig.h"
 #include "embedded_calibration_stereo/core/tracker/board_teacher.h"
@@ -50,6 +53,7 @@
 #include "embedded_calibration_stereo/core/tracker/saddle_refinement.h"
 #include "embedded_calibration_stereo/core/tracker/window_tracker.h"
 #include "embedded_calibration_stereo/test_support/corner_score.h"
+#include "embedded_calibration_stereo/test_support/synthetic_observations.h"
 
 using namespace ecs;
 
@@ -77,7 +81,32 @@ struct Args {
   int saddle = 0;            // 1: refine the tracked corners by the saddle-model fit
   int light_off_gap = 1;     // --learn-window: frame periods from the light-off frames to the window's ends
   double truth_noise = -1;  // >= 0: the simulator's true corners plus this Gaussian noise instead of tracking
+  int scene = 0;            // 1: the light-off frames' scene correspondences join the window's observation
 };
+
+// The scene correspondences of one light-off stereo frame, and their distance to the true
+// epipolar line (the Sampson distance under the frame's true calibration, px) in *distances.
+void addSceneMatches(const SimFrame& off, const StereoRig& guide, SceneMatchBuffers* buffers,
+                     std::vector<SceneMatch>* out, std::vector<double>* distances) {
+  cv::Mat left = off.left, right = off.right;
+  if (left.channels() == 3) cv::cvtColor(off.left, left, cv::COLOR_BGR2GRAY);
+  if (right.channels() == 3) cv::cvtColor(off.right, right, cv::COLOR_BGR2GRAY);
+  const StereoRig& t = off.truth;
+  const double l[9] = {t.left.fx, t.left.fy, t.left.cx, t.left.cy, t.left.dist[0], t.left.dist[1], t.left.dist[2],
+                       t.left.dist[3], t.left.dist[4]};
+  const double r[9] = {t.right.fx, t.right.fy, t.right.cx, t.right.cy, t.right.dist[0], t.right.dist[1],
+                       t.right.dist[2], t.right.dist[3], t.right.dist[4]};
+  const Eigen::AngleAxisd aa(t.right_from_left.linear());
+  const Eigen::Vector3d rv = aa.angle() * aa.axis(), tv = t.right_from_left.translation();
+  const double e[6] = {rv.x(), rv.y(), rv.z(), tv.x(), tv.y(), tv.z()};
+  const double unit = 1.0;
+  for (const SceneMatch& m : matchStereoScene(left, right, guide, SceneMatchOptions(), buffers)) {
+    out->push_back(m);
+    double d = 0.0;
+    SceneEpipolarCost(m, t.right.fy, &unit)(l, r, e, &d);
+    distances->push_back(std::abs(d));
+  }
+}
 
 // The drift script: one event per `every` windows, cycling.
 struct DriftScript {
@@ -195,6 +224,7 @@ int main(int argc, char** argv) {
     else if (!std::strcmp(argv[i], "--off-frames")) args.off_frames = std::max(1, std::atoi(value()));
     else if (!std::strcmp(argv[i], "--saddle")) args.saddle = std::atoi(value());
     else if (!std::strcmp(argv[i], "--light-off-gap")) args.light_off_gap = std::atoi(value());
+    else if (!std::strcmp(argv[i], "--scene")) args.scene = std::atoi(value());
     else {
       std::fprintf(stderr, "usage: bench_calibrate_moving [--config FILE] [--minutes M] [--period S] [--frames N] "
                            "[--fps F] [--teach-frames K]   (default config: $ECS_SOURCE_DIR/config/drive_photo.yaml)\n");
@@ -236,6 +266,7 @@ int main(int argc, char** argv) {
   const QualityGate gate{gate_options};
   const std::vector<VirtualBoard> boards = config.device.virtualBoards();
   StereoRig in_force = config.rig;  // the head starts calibrated
+  SceneMatchBuffers scene_buffers;
   DriftScript drift;
   int windows = 0, commits = 0, worse = 0, rejected = 0;
   double worst_after_mis = 0, worst_after_bias = 0;
@@ -251,6 +282,8 @@ int main(int argc, char** argv) {
     WindowFrames window[2];
     int corners = 0, truth_corners = 0;
     WindowCornerErrors errors;
+    std::vector<SceneMatch> scene;
+    std::vector<double> scene_distances;
     for (int k = 0; k < args.frames; ++k) {
       const double t = t_start + k / args.fps;
       const uint64_t frame_index = static_cast<uint64_t>(std::llround(t * args.fps));
@@ -262,6 +295,7 @@ int main(int argc, char** argv) {
           for (int o = args.off_frames; o >= 1; --o) {
             const double tb = t_start - (args.light_off_gap + o - 1) / args.fps;
             const SimFrame before = sim.render(tb, 0.0, static_cast<uint64_t>(std::llround(tb * args.fps)));
+            if (args.scene) addSceneMatches(before, in_force, &scene_buffers, &scene, &scene_distances);
             window[0].light_off_before.push_back(before.left);
             window[1].light_off_before.push_back(before.right);
           }
@@ -274,6 +308,7 @@ int main(int argc, char** argv) {
           for (int o = 1; o <= args.off_frames; ++o) {
             const double ta = t_start + (args.frames - 1 + args.light_off_gap + o - 1) / args.fps;
             const SimFrame after = sim.render(ta, 0.0, static_cast<uint64_t>(std::llround(ta * args.fps)));
+            if (args.scene) addSceneMatches(after, in_force, &scene_buffers, &scene, &scene_distances);
             window[0].light_off_after.push_back(after.left);
             window[1].light_off_after.push_back(after.right);
           }
@@ -289,6 +324,14 @@ int main(int argc, char** argv) {
                     std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - w0).count(),
                     tracked.saddle_failures);
         StereoObservation obs = tracked.observation;
+        obs.scene = scene;
+        if (args.scene && !scene_distances.empty()) {
+          std::sort(scene_distances.begin(), scene_distances.end());
+          const size_t n = scene_distances.size();
+          std::printf("    %zu scene matches; distance to the true epipolar line: median %.3f px, 90 %% %.3f px, "
+                      "max %.2f px\n",
+                      n, scene_distances[n / 2], scene_distances[n * 9 / 10], scene_distances.back());
+        }
         for (const auto& b : obs.left) corners += b.size();
         for (const auto& b : obs.right) corners += b.size();
         for (const auto& b : last.observations.left) truth_corners += b.size();
@@ -356,6 +399,14 @@ int main(int argc, char** argv) {
     print("replaced:", old_a);
     print(is_worse ? "new (WORSE):" : "new:", new_a);
     if (candidate.covariance_ok) print("predicted:", predictStereoAccuracy(candidate.rig, candidate.rig_covariance));
+    const RigErrors e = compareRigs(candidate.rig, last.truth);
+    std::printf("    new: fx %.4f / %.4f %%, baseline %.4f %%%s\n", 100 * e.fx_rel[0], 100 * e.fx_rel[1],
+                100 * e.baseline_rel,
+                candidate.scene_matches_used
+                    ? (", " + std::to_string(candidate.scene_matches_used) + " scene matches at " +
+                       std::to_string(candidate.scene_sigma_px).substr(0, 5) + " px")
+                          .c_str()
+                    : "");
     worst_after_mis = std::max(worst_after_mis, new_a.misalignment_px.rms);
     worst_after_bias = std::max(worst_after_bias, new_a.disparity_bias_px.rms);
     in_force = candidate.rig;

@@ -336,7 +336,7 @@ TEST(CalibrationMonitor, RefusesBadOptionsAndInputs) {
   EXPECT_NE(o.Check().find("misalignment_bad_px"), std::string::npos) << o.Check();
   EXPECT_THROW(CalibrationMonitor{o}, std::invalid_argument);
   o = CalibrationMonitorOptions();
-  o.lk_window_px = 12;
+  o.matching.lk_window_px = 12;
   EXPECT_NE(o.Check().find("lk_window_px"), std::string::npos) << o.Check();
   EXPECT_EQ(CalibrationMonitorOptions().Check(), "");
 

@@ -9,6 +9,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <limits>
 #include <memory>
 #include <set>
 
@@ -19,6 +20,7 @@
 #include "embedded_calibration_stereo/core/calibration/epipolar_error.h"
 #include "embedded_calibration_stereo/core/calibration/observation_validator.h"
 #include "embedded_calibration_stereo/core/calibration/reprojection_cost.h"
+#include "embedded_calibration_stereo/core/calibration/scene_epipolar_cost.h"
 
 namespace ecs {
 
@@ -34,6 +36,9 @@ std::string BundleAdjustmentOptions::Check() const {
   if (!(max_track_deviation_px > 0)) return "max_track_deviation_px must be > 0";
   if (!(device_prior_angle_deg > 0) || !(device_prior_position_m > 0))
     return "device prior tolerances must be > 0";
+  if (min_scene_matches < 1) return "min_scene_matches must be >= 1";
+  if (!(max_scene_residual_sigmas > 0) || !(scene_loss_sigmas > 0) || !(min_scene_sigma_px > 0))
+    return "max_scene_residual_sigmas, scene_loss_sigmas and min_scene_sigma_px must be > 0";
   return "";
 }
 
@@ -170,11 +175,15 @@ class AdjustmentRun {
   AdjustmentRun& operator=(const AdjustmentRun&) = delete;
 
   BundleAdjustmentSummary run() {
-    if (!validateInputs() || !initializeCameras() || !buildParameterBlocks()) return out_;
+    if (!validateInputs() || !prepareScene() || !initializeCameras() || !buildParameterBlocks()) return out_;
     addResiduals();
     holdBlocksAndSetManifolds();
     if (!runSolver()) return out_;
     residualStatistics();
+    if (reweightScene()) {
+      if (!runSolver()) return out_;
+      residualStatistics();
+    }
     computeCovariance();
     out_.success = true;
     out_.solve_ms = msSince(start_);
@@ -251,6 +260,51 @@ class AdjustmentRun {
     return true;
   }
 
+  // Scene constraints (1b): solved without them first; at that solution, the matches' robust
+  // spread about their epipolar lines, the wrong matches dropped, and their weight against the
+  // corners (both spreads). Too few matches: boards only.
+  bool prepareScene() {
+    std::vector<SceneMatch> all;
+    if (options_.use_scene_matches)
+      for (const StereoObservation& f : *input_.frames) all.insert(all.end(), f.scene.begin(), f.scene.end());
+    if (static_cast<int>(all.size()) < options_.min_scene_matches) return true;
+    BundleAdjustmentOptions boards_options = options_;
+    boards_options.compute_covariance = false;
+    boards_options.use_scene_matches = false;
+    const BundleAdjustmentSummary boards_only = BundleAdjuster(boards_options, config_).Solve(input_);
+    if (!boards_only.success) return fail(boards_only.message);
+    const Intrinsics left = toBlock(boards_only.rig.left), right = toBlock(boards_only.rig.right);
+    const std::array<double, kExtrinsicsSize> extrinsics = toBlock(boards_only.rig.right_from_left);
+    scene_focal_px_ = boards_only.rig.right.fy;
+    const double unit = 1.0;
+    std::vector<double> distances;
+    for (const SceneMatch& m : all) {
+      double r = std::numeric_limits<double>::infinity();
+      SceneEpipolarCost(m, scene_focal_px_, &unit)(left.data(), right.data(), extrinsics.data(), &r);
+      distances.push_back(std::abs(r));
+    }
+    const double sigma = std::max(options_.min_scene_sigma_px, robustSpread(distances));
+    for (size_t i = 0; i < distances.size(); ++i)
+      if (distances[i] <= options_.max_scene_residual_sigmas * sigma) scene_.push_back(all[i]);
+    out_.scene_matches_dropped = static_cast<int>(all.size() - scene_.size());
+    if (static_cast<int>(scene_.size()) < options_.min_scene_matches) {
+      scene_.clear();
+      return true;
+    }
+    const double corner_sigma = std::max(boards_only.residual_sigma_px, 1e-4);
+    scene_weight_ = corner_sigma / sigma;
+    scene_loss_ = std::make_unique<ceres::CauchyLoss>(options_.scene_loss_sigmas * corner_sigma);
+    return true;
+  }
+
+  // 1.4826 times the median of |values| (the standard deviation for Gaussian values); 0 if none.
+  static double robustSpread(std::vector<double> values) {
+    if (values.empty()) return 0.0;
+    const size_t mid = values.size() / 2;
+    std::nth_element(values.begin(), values.begin() + mid, values.end());
+    return 1.4826 * values[mid];
+  }
+
   // The initial cameras (2): the calibration in force, Zhang's closed form, or - for the device
   // model - a free shared-pose solve, whose virtual boards the nominal device is aligned to next.
   bool initializeCameras() {
@@ -258,6 +312,7 @@ class AdjustmentRun {
       BundleAdjustmentOptions free_options = options_;
       free_options.board_pose_mode = BoardPoseMode::kSharedAcrossFrames;
       free_options.compute_covariance = false;
+      free_options.use_scene_matches = false;  // a start: the boards alone are quick and enough
       CalibrationInput free_input = input_;
       free_input.boards = layout_;
       free_input.device = nullptr;
@@ -380,6 +435,11 @@ class AdjustmentRun {
       scatter_sq_ += t.scatter_sq;
       residuals_.push_back(r);
     }
+    for (const SceneMatch& m : scene_)
+      scene_ids_.push_back(problem_.AddResidualBlock(
+          SceneEpipolarCost::Create(m, scene_focal_px_, &scene_weight_), scene_loss_.get(),
+          intrinsics_[0].data(), intrinsics_[1].data(), extrinsics_.data()));
+    out_.scene_matches_used = static_cast<int>(scene_.size());
     out_.frames_used = valid_.frames_used;
     out_.boards_left = static_cast<int>(boards_seen[0].size());
     out_.boards_right = static_cast<int>(boards_seen[1].size());
@@ -502,6 +562,7 @@ class AdjustmentRun {
 
     std::vector<double*> blocks;
     problem_.GetParameterBlocks(&blocks);
+    free_parameters_ = 0;
     for (double* b : blocks)
       if (!problem_.IsParameterBlockConstant(b))
         free_parameters_ += problem_.ParameterBlockTangentSize(b);
@@ -512,7 +573,22 @@ class AdjustmentRun {
       problem_.EvaluateResidualBlock(id, false, &cost, nullptr, nullptr);
       prior_cost += cost;
     }
-    const double data_cost = std::max(0.0, ceres_summary_.final_cost - prior_cost);
+    // The scene's matches have their own noise (weighed against the corners' by scene_weight_):
+    // not in the corners' residual variance either.
+    double scene_cost = 0.0;
+    std::vector<double> scene_distances;
+    for (ceres::ResidualBlockId id : scene_ids_) {
+      double cost = 0.0, r = 0.0;
+      problem_.EvaluateResidualBlock(id, true, &cost, &r, nullptr);
+      scene_cost += cost;
+      scene_distances.push_back(std::abs(r) / scene_weight_);
+    }
+    if (!scene_ids_.empty()) {
+      out_.scene_sigma_px = std::max(options_.min_scene_sigma_px, robustSpread(scene_distances));
+      out_.scene_outliers = static_cast<int>(std::count_if(scene_distances.begin(), scene_distances.end(),
+                                                           [&](double d) { return d > 3.0 * out_.scene_sigma_px; }));
+    }
+    const double data_cost = std::max(0.0, ceres_summary_.final_cost - prior_cost - scene_cost);
     sigma2_ = dof_ > 0 ? (2.0 * data_cost + scatter_sq_) / dof_ : 0.0;
     out_.residual_sigma_px = std::sqrt(sigma2_);
     const int tracks = static_cast<int>(residuals_.size());
@@ -526,6 +602,17 @@ class AdjustmentRun {
       // Chi-square over mean_dof: beyond 3 of its standard deviations, not chance.
       if (ratio > 1.0 + 3.0 * std::sqrt(2.0 / mean_dof)) sigma2_ *= ratio;
     }
+  }
+
+  // The scene's weight from the joint solution's spreads (6b), once: true when it moved by more
+  // than a tenth, so that the solve is worth repeating.
+  bool reweightScene() {
+    if (scene_ids_.empty() || scene_reweighted_) return false;
+    scene_reweighted_ = true;
+    const double weight = std::sqrt(std::max(sigma2_, 1e-8)) / out_.scene_sigma_px;
+    const bool moved = std::abs(weight / scene_weight_ - 1.0) > 0.1;
+    scene_weight_ = weight;
+    return moved;
   }
 
   // Covariance of the camera blocks (7), scaled by the residual variance estimate.
@@ -598,6 +685,14 @@ class AdjustmentRun {
 
   // validateInputs
   BoardPoseMode mode_ = BoardPoseMode::kAuto;
+  // prepareScene: the matches used, their weight against the corners (read by their costs at
+  // every evaluation), the focal length that turns their distances into pixels, their loss.
+  std::vector<SceneMatch> scene_;
+  double scene_weight_ = 1.0;
+  double scene_focal_px_ = 1.0;
+  std::unique_ptr<ceres::LossFunction> scene_loss_;
+  std::vector<ceres::ResidualBlockId> scene_ids_;
+  bool scene_reweighted_ = false;
   bool device_mode_ = false;
   bool shared_ = true;  // one pose per virtual board for all frames (not kPerFrame)
   std::vector<VirtualBoard> device_layout_;
@@ -652,6 +747,7 @@ BundleAdjustmentSummary evaluateFixedCalibration(const StereoRig& rig,
                                                  const CalibrationDevice* device) {
   options.initialization = InitializationMode::kFromInForce;
   options.compute_covariance = false;
+  options.use_scene_matches = false;  // the corners' fit, as the quality gate compares it
   BundleAdjustmentConfig config;
   config.constant_left_intrinsics = true;
   config.constant_right_intrinsics = true;

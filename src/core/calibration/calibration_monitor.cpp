@@ -5,9 +5,7 @@
 #include <cmath>
 #include <limits>
 #include <opencv2/calib3d.hpp>
-#include <opencv2/features2d.hpp>
 #include <opencv2/imgproc.hpp>
-#include <opencv2/video/tracking.hpp>
 #include <sstream>
 #include <stdexcept>
 
@@ -115,12 +113,8 @@ std::string CalibrationMonitorOptions::Check() const {
   if (depth_frame_stride < 1) return "depth_frame_stride must be >= 1";
   if (!positive(smoothing_time_s)) return "smoothing_time_s must be > 0";
   if (!positive(band_half_height_px)) return "band_half_height_px must be > 0";
-  if (max_features < 10) return "max_features must be >= 10";
-  if (fast_threshold < 1 || fast_threshold > 255) return "fast_threshold must be in [1, 255]";
-  if (grid_cols < 1 || grid_rows < 1) return "grid_cols and grid_rows must be >= 1";
-  if (lk_window_px < 5 || lk_window_px % 2 == 0) return "lk_window_px must be odd and >= 5";
-  if (lk_levels < 0 || lk_levels > 6) return "lk_levels must be in [0, 6]";
-  if (!positive(lk_max_backward_error_px)) return "lk_max_backward_error_px must be > 0";
+  const std::string matching_problem = matching.Check();
+  if (!matching_problem.empty()) return "matching." + matching_problem;
   if (min_matches < 5) return "min_matches must be >= 5";
   if (!positive(huber_px)) return "huber_px must be > 0";
   if (!positive(max_depth_age_s)) return "max_depth_age_s must be > 0";
@@ -173,7 +167,7 @@ struct CalibrationMonitor::Impl {
   CalibrationHealth residual_level = CalibrationHealth::kGood;
 
   // Buffers reused from frame to frame.
-  std::vector<cv::Mat> pyramid_left, pyramid_right;
+  SceneMatchBuffers buffers;
 
   void advance(double t) { now = std::max(now, t); }
   // The depth mode counts once its smoothing has seen one time constant of frames (its first
@@ -293,77 +287,23 @@ bool CalibrationMonitor::Impl::addDepthFrame(double t, const cv::Mat& left_raw, 
   }
   const cv::Mat left = toGray(left_raw, "left"), right = toGray(right_raw, "right");
 
-  // Features: FAST corners, the strongest per grid cell so that they cover the image (a roll is
-  // measured by the spread of the rows' offsets across the image).
-  std::vector<cv::KeyPoint> keypoints;
-  cv::FAST(left, keypoints, options.fast_threshold, true);
-  const int margin = options.lk_window_px / 2 + 2;
-  const int cells = options.grid_cols * options.grid_rows;
-  const size_t per_cell = static_cast<size_t>(std::max(1, options.max_features / cells));
-  std::vector<std::vector<cv::KeyPoint>> grid(cells);
-  for (const auto& k : keypoints) {
-    if (k.pt.x < margin || k.pt.y < margin || k.pt.x > size.width - 1 - margin || k.pt.y > size.height - 1 - margin)
-      continue;
-    const int cx = std::min(options.grid_cols - 1, static_cast<int>(k.pt.x * options.grid_cols / size.width));
-    const int cy = std::min(options.grid_rows - 1, static_cast<int>(k.pt.y * options.grid_rows / size.height));
-    grid[cy * options.grid_cols + cx].push_back(k);
-  }
-  std::vector<cv::Point2f> left_points, right_points, guesses;
-  for (auto& cell : grid) {
-    if (cell.size() > per_cell) {
-      std::nth_element(cell.begin(), cell.begin() + per_cell, cell.end(),
-                       [](const cv::KeyPoint& a, const cv::KeyPoint& b) { return a.response > b.response; });
-      cell.resize(per_cell);
-    }
-    for (const auto& k : cell) {
-      left_points.push_back(k.pt);
-      // Start where a point at infinity would be (the rotation between the cameras), so that
-      // the search only has to cover the disparity.
-      const Eigen::Vector2d ray = rig.left.pixelToNormalized(Eigen::Vector2d(k.pt.x, k.pt.y));
-      Eigen::Vector2d guess;
-      if (!rig.right.project(rig.right_from_left.linear() * ray.homogeneous(), &guess) || !rig.right.inImage(guess))
-        guess = Eigen::Vector2d(k.pt.x, k.pt.y);
-      right_points.emplace_back(static_cast<float>(guess.x()), static_cast<float>(guess.y()));
-      guesses.push_back(right_points.back());
-    }
-  }
-  if (static_cast<int>(left_points.size()) < options.min_matches) {
-    depth_note = "too few scene features (" + std::to_string(left_points.size()) + ")";
+  int features = 0;
+  const std::vector<SceneMatch> found = matchStereoScene(left, right, rig, options.matching, &buffers, &features);
+  if (features < options.min_matches) {
+    depth_note = "too few scene features (" + std::to_string(features) + ")";
     updateLevels();
     return false;
   }
-
-  // Pyramidal Lucas-Kanade left -> right, then right -> left: a match whose way back misses its
-  // start is dropped (the left-right consistency check).
-  const cv::Size window(options.lk_window_px, options.lk_window_px);
-  cv::buildOpticalFlowPyramid(left, pyramid_left, window, options.lk_levels);
-  cv::buildOpticalFlowPyramid(right, pyramid_right, window, options.lk_levels);
-  const cv::TermCriteria criteria(cv::TermCriteria::COUNT | cv::TermCriteria::EPS, 10, 0.01);
-  std::vector<uchar> status, status_back;
-  std::vector<float> error;
-  cv::calcOpticalFlowPyrLK(pyramid_left, pyramid_right, left_points, right_points, status, error, window,
-                           options.lk_levels, criteria, cv::OPTFLOW_USE_INITIAL_FLOW);
-  // The way back starts from the left pixel the right one would have without the disparity
-  // found, so that it has to find the disparity again.
-  std::vector<cv::Point2f> back(left_points.size());
-  for (size_t i = 0; i < left_points.size(); ++i) back[i] = left_points[i] + (right_points[i] - guesses[i]);
-  cv::calcOpticalFlowPyrLK(pyramid_right, pyramid_left, right_points, back, status_back, error, window,
-                           options.lk_levels, criteria, cv::OPTFLOW_USE_INITIAL_FLOW);
 
   // Rectify the matches with the calibration in force: offset of the rows, and its derivative
   // with respect to a rotation of the right camera about x and z (deg).
   std::vector<double> offsets;
   std::vector<Eigen::Vector2d> jacobians;
-  offsets.reserve(left_points.size());
-  jacobians.reserve(left_points.size());
-  for (size_t i = 0; i < left_points.size(); ++i) {
-    if (!status[i] || !status_back[i]) continue;
-    const cv::Point2f d = back[i] - left_points[i];
-    if (d.dot(d) > options.lk_max_backward_error_px * options.lk_max_backward_error_px) continue;
-    const Eigen::Vector2d pr(right_points[i].x, right_points[i].y);
-    if (!rig.right.inImage(pr)) continue;
-    const Eigen::Vector3d hl = H1 * rig.left.pixelToNormalized(Eigen::Vector2d(left_points[i].x, left_points[i].y)).homogeneous();
-    const Eigen::Vector3d ray = rig.right.pixelToNormalized(pr).homogeneous();
+  offsets.reserve(found.size());
+  jacobians.reserve(found.size());
+  for (const SceneMatch& m : found) {
+    const Eigen::Vector3d hl = H1 * rig.left.pixelToNormalized(Eigen::Vector2d(m.left_u, m.left_v)).homogeneous();
+    const Eigen::Vector3d ray = rig.right.pixelToNormalized(Eigen::Vector2d(m.right_u, m.right_v)).homogeneous();
     const Eigen::Vector3d hr = H2 * ray;
     if (hl.z() <= 0 || hr.z() <= 0) continue;
     const double disparity = hl.x() / hl.z() - hr.x() / hr.z();

@@ -37,6 +37,17 @@
 // Cost: the device model runs a free shared-pose solve first (its start), so it costs more
 // than shared poses alone (bench_calibrator prints the solve times).
 //
+// Scene constraints (StereoObservation::scene of the frames): correspondences of the scene
+// between the two cameras at one instant (scene_matches.h), each an epipolar constraint on both
+// cameras and the extrinsics (scene_epipolar_cost.h). The boards all lie about 1.2 m away, where a small
+// turn of the right camera and a shift of it look alike; the scene's points at every depth tell
+// them apart, which is what the vertical misalignment of a depth user depends on. Their noise
+// (matching on scene texture) differs from the corners': a solve without them comes first, the
+// matches' robust spread at its solution weighs them against the corners' residual variance
+// (and drops those beyond max_scene_residual_sigmas), and after the joint solve the weight is
+// set from both spreads again (once more solved when it moved by more than a tenth), so that
+// the covariance counts each kind of observation at its own noise.
+//
 // Solve() runs in named stages (bundle_adjuster.cpp): validate the inputs, initial cameras,
 // parameter blocks, residuals, held blocks and manifolds, Ceres, residual statistics and
 // outliers, covariance. Its result depends on the input alone, to the last bit: the block order
@@ -96,6 +107,16 @@ struct BundleAdjustmentOptions {
   // only while the device is within them (a knock may move it further): set it knowingly.
   double device_prior_angle_deg = 50.0;
   double device_prior_position_m = 0.1;
+  // Scene constraints (the frames' StereoObservation::scene), used unless use_scene_matches is
+  // false. Fewer usable matches than min_scene_matches: not used. Matches further from their
+  // epipolar line than max_scene_residual_sigmas robust spreads at the solve without them are
+  // dropped (wrong matches: repeated texture); the rest are under a Cauchy loss at
+  // scene_loss_sigmas spreads. The spread is taken as at least min_scene_sigma_px (px).
+  bool use_scene_matches = true;
+  int min_scene_matches = 50;
+  double max_scene_residual_sigmas = 5.0;
+  double scene_loss_sigmas = 3.0;
+  double min_scene_sigma_px = 0.02;
 
   // Empty when usable, otherwise what is wrong.
   std::string Check() const;
@@ -185,6 +206,13 @@ struct BundleAdjustmentSummary {
   // Device model: the estimated device (given layout, estimated pose and planes).
   std::optional<CalibrationDevice> device;
   std::vector<std::string> dropped;  // observations dropped by validation, with the reason
+  // Scene constraints: matches used (after the wrong ones were dropped), their robust spread
+  // about their epipolar lines (px; the Sampson distance) at the solution, and how many of the
+  // used ones lie beyond 3 spreads.
+  int scene_matches_used = 0;
+  int scene_matches_dropped = 0;
+  double scene_sigma_px = 0.0;
+  int scene_outliers = 0;
 };
 
 class BundleAdjuster {

@@ -44,6 +44,7 @@
 #include <string>
 #include <vector>
 
+#include "embedded_calibration_stereo/core/calibration/scene_matches.h"
 #include "embedded_calibration_stereo/core/depth/rectification.h"
 #include "embedded_calibration_stereo/core/geometry/calibration_device.h"
 #include "embedded_calibration_stereo/core/geometry/observation.h"
@@ -75,12 +76,7 @@ struct CalibrationMonitorOptions {
   int depth_frame_stride = 2;
   double smoothing_time_s = 0.5;     // exponential smoothing of the fitted tilt/roll
   double band_half_height_px = 3.0;  // matches further from their rectified row are dropped
-  int max_features = 200;            // FAST corners kept (strongest per grid cell)
-  int fast_threshold = 8;
-  int grid_cols = 8, grid_rows = 5;  // bucketing of the features over the left image
-  int lk_window_px = 13;
-  int lk_levels = 3;
-  double lk_max_backward_error_px = 0.3;  // forward-backward check (left-right consistency)
+  SceneMatchOptions matching;  // the scene correspondences (scene_matches.h)
   int min_matches = 30;                   // fewer: the frame gives no measurement
   double huber_px = 0.3;                  // Huber scale of the row-offset fit
   double max_depth_age_s = 2.0;           // older depth measurement: not used for the state

@@ -1,0 +1,289 @@
+// Scene correspondences as epipolar constraints of the calibration (scene_matches.h,
+// scene_epipolar_cost.h, bundle_adjuster.h):
+//  - the cost: zero on true correspondences of a distorted rig, derivatives as central
+//    differences give them (the undistortion's one Newton step carries the implicit function's
+//    derivative);
+//  - the solve: one light window of the drive_photo head (its device, the window tracker's
+//    corner noise), with and without scene matches at every depth (synthetic, with wrong
+//    matches among them), judged against the truth in a depth user's terms (stereo_accuracy.h):
+//    the matches separate the stereo rotation from the translation, so the vertical
+//    misalignment falls several times, the wrong matches are dropped, and the covariance still
+//    predicts the true errors (each kind of observation weighed at its own noise);
+//  - the matcher on rendered drive_photo light-off frames (the head driving, movers), against the
+//    simulator's true calibration through OpenCV's rectification (an independent model): the
+//    matches' vertical offset after rectification.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <Eigen/Core>  // before opencv2/core/eigen.hpp
+#include <opencv2/calib3d.hpp>
+#include <opencv2/core/eigen.hpp>
+#include <opencv2/imgproc.hpp>
+#include <memory>
+#include <random>
+#include <vector>
+
+#include "embedded_calibration_stereo/core/calibration/bundle_adjuster.h"
+#include "embedded_calibration_stereo/core/calibration/scene_epipolar_cost.h"
+#include "embedded_calibration_stereo/core/calibration/scene_matches.h"
+#include "embedded_calibration_stereo/core/calibration/stereo_accuracy.h"
+#include "embedded_calibration_stereo/core/geometry/config_io.h"
+#include "embedded_calibration_stereo/core/sim/sim_rig.h"
+#include "embedded_calibration_stereo/test_support/synthetic_observations.h"
+
+namespace ecs {
+namespace {
+
+// The window tracker's corner RMS on drive_photo (test_window_tracker), per coordinate.
+constexpr double kWindowCornerNoisePx = 0.023 / M_SQRT2;
+// The matcher's spread about the true epipolar line on drive_photo (bench_calibrate_moving
+// --scene 1 prints it), per coordinate, and the share of wrong matches injected.
+constexpr double kSceneNoisePx = 0.06;
+constexpr double kWrongShare = 0.05;
+
+struct Head {
+  StereoRig truth;
+  CalibrationDevice device;
+};
+
+Head driveHead() {
+  cv::FileStorage fs = openYaml(ECS_SOURCE_DIR "/config/drive_photo.yaml");
+  return {loadStereoRig(fs["rig"], "rig"), loadDevice(fs["device"], "device")};
+}
+
+// `count` correspondences of scene points spread over the left image at inverse depths uniform
+// between 1/22 m and 1/1.5 m (the corridor), noisy by `noise_px` per coordinate, a share
+// `wrong` of them wrong matches (repeated texture): displaced by up to 10 px along the rows and
+// by 1-3 px across them (a match wrong only along its epipolar line is a wrong depth, which an
+// epipolar constraint neither sees nor minds). *wrong_count: how many.
+std::vector<SceneMatch> syntheticScene(const StereoRig& rig, int count, double noise_px, double wrong, int seed,
+                                       int* wrong_count = nullptr) {
+  if (wrong_count) *wrong_count = 0;
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> uniform(0.0, 1.0);
+  std::normal_distribution<double> noise(0.0, noise_px);
+  std::vector<SceneMatch> matches;
+  while (static_cast<int>(matches.size()) < count) {
+    const Eigen::Vector2d left(uniform(rng) * rig.left.width, uniform(rng) * rig.left.height);
+    const double z = 1.0 / (1.0 / 22.0 + uniform(rng) * (1.0 / 1.5 - 1.0 / 22.0));
+    Eigen::Vector2d right;
+    const Eigen::Vector3d p = z * rig.left.pixelToNormalized(left).homogeneous();
+    if (!rig.right.project(rig.right_from_left * p, &right) || !rig.right.inImage(right)) continue;
+    Eigen::Vector2d l = left + Eigen::Vector2d(noise(rng), noise(rng));
+    Eigen::Vector2d r = right + Eigen::Vector2d(noise(rng), noise(rng));
+    if (uniform(rng) < wrong) {
+      const double across = (1.0 + 2.0 * uniform(rng)) * (uniform(rng) < 0.5 ? -1.0 : 1.0);
+      r += Eigen::Vector2d(20.0 * uniform(rng) - 10.0, across);
+      if (wrong_count) ++*wrong_count;
+    }
+    matches.push_back({static_cast<float>(l.x()), static_cast<float>(l.y()), static_cast<float>(r.x()),
+                       static_cast<float>(r.y())});
+  }
+  return matches;
+}
+
+std::array<double, 9> block(const PinholeCamera& c) {
+  return {{c.fx, c.fy, c.cx, c.cy, c.dist[0], c.dist[1], c.dist[2], c.dist[3], c.dist[4]}};
+}
+std::array<double, 6> block(const Eigen::Isometry3d& t) {
+  const Eigen::AngleAxisd aa(t.linear());
+  const Eigen::Vector3d r = aa.angle() * aa.axis(), p = t.translation();
+  return {{r.x(), r.y(), r.z(), p.x(), p.y(), p.z()}};
+}
+
+TEST(SceneEpipolarCost, ZeroOnTrueCorrespondencesAndDerivativesAsCentralDifferences) {
+  const Head head = driveHead();
+  const std::vector<SceneMatch> matches = syntheticScene(head.truth, 200, 0.0, 0.0, 3);
+  std::array<double, 9> left = block(head.truth.left), right = block(head.truth.right);
+  std::array<double, 6> extrinsics = block(head.truth.right_from_left);
+  const double unit = 1.0;
+  double worst = 0.0;
+  for (const SceneMatch& m : matches) {
+    double r = 1.0;
+    ASSERT_TRUE(SceneEpipolarCost(m, head.truth.right.fy, &unit)(left.data(), right.data(), extrinsics.data(), &r));
+    worst = std::max(worst, std::abs(r));
+  }
+  // float pixel coordinates: ~3e-5 px of rounding.
+  EXPECT_LT(worst, 2e-4) << "px on true correspondences";
+
+  // Autodiff (the Newton step's derivative) against central differences of the double residual,
+  // at a rig off the truth so that the residuals and their slopes are not special.
+  left[kFx] *= 1.01;
+  right[kK1] += 0.01;
+  extrinsics[1] += 0.002;
+  double* blocks[3] = {left.data(), right.data(), extrinsics.data()};
+  const int sizes[3] = {9, 9, 6};
+  std::unique_ptr<ceres::CostFunction> cost(SceneEpipolarCost::Create(matches[7], head.truth.right.fy, &unit));
+  double residual = 0.0, j_left[9], j_right[9], j_extrinsics[6];
+  double* jacobians[3] = {j_left, j_right, j_extrinsics};
+  ASSERT_TRUE(cost->Evaluate(blocks, &residual, jacobians));
+  for (int b = 0; b < 3; ++b)
+    for (int i = 0; i < sizes[b]; ++i) {
+      if (b < 2 && i == kK3) continue;  // k3 unused by the head, but differentiable all the same
+      const double step = std::max(1e-7, 1e-6 * std::abs(blocks[b][i]));
+      const double keep = blocks[b][i];
+      double plus = 0.0, minus = 0.0;
+      blocks[b][i] = keep + step;
+      SceneEpipolarCost(matches[7], head.truth.right.fy, &unit)(left.data(), right.data(), extrinsics.data(), &plus);
+      blocks[b][i] = keep - step;
+      SceneEpipolarCost(matches[7], head.truth.right.fy, &unit)(left.data(), right.data(), extrinsics.data(), &minus);
+      blocks[b][i] = keep;
+      const double numeric = (plus - minus) / (2.0 * step);
+      EXPECT_NEAR(jacobians[b][i], numeric, 1e-5 * std::max(1.0, std::abs(numeric)))
+          << "block " << b << " parameter " << i;
+    }
+}
+
+struct WindowResult {
+  double misalignment = 0, bias = 0, predicted_misalignment = 0, predicted_bias = 0;
+  int used = 0, dropped = 0;
+  double sigma = 0;
+};
+
+WindowResult solveWindow(const Head& head, int trial, const std::vector<SceneMatch>* scene) {
+  SyntheticObservationOptions o;
+  o.frames = 1;
+  o.noise_sigma_px = kWindowCornerNoisePx;
+  o.seed = 1700 + trial;
+  std::vector<StereoObservation> frames = generateSyntheticObservations(head.truth, head.device.virtualBoards(), o);
+  if (scene) frames[0].scene = *scene;
+  const CalibrationDevice nominal = perturbDevice(head.device, 0.001, 0.5, 1800 + trial);
+  CalibrationInput input;
+  input.frames = &frames;
+  input.device = &nominal;
+  input.image_width = head.truth.left.width;
+  input.image_height = head.truth.left.height;
+  input.in_force = driftedRig(head.truth, 1.05, Eigen::Vector3d(0.02, 0.07, -0.03));
+  BundleAdjustmentConfig terms;
+  terms.estimate_tangential = true;
+  const BundleAdjustmentSummary r = BundleAdjuster({}, terms).Solve(input);
+  EXPECT_TRUE(r.success && r.covariance_ok) << r.message;
+  WindowResult w;
+  if (!r.success || !r.covariance_ok) return w;
+  const StereoAccuracy t = evaluateStereoAccuracy(r.rig, head.truth);
+  const StereoAccuracy p = predictStereoAccuracy(r.rig, r.rig_covariance);
+  w.misalignment = t.misalignment_px.rms;
+  w.bias = t.disparity_bias_px.rms;
+  w.predicted_misalignment = p.misalignment_px.rms;
+  w.predicted_bias = p.disparity_bias_px.rms;
+  w.used = r.scene_matches_used;
+  w.dropped = r.scene_matches_dropped;
+  w.sigma = r.scene_sigma_px;
+  return w;
+}
+
+struct Rms {
+  double misalignment = 0, bias = 0, predicted_misalignment = 0, predicted_bias = 0;
+};
+
+// RMS over `trials` windows; scene_count 0: boards only.
+Rms runWindows(const Head& head, int trials, int scene_count, double scene_noise_px) {
+  Rms rms;
+  for (int trial = 0; trial < trials; ++trial) {
+    int wrong = 0;
+    const std::vector<SceneMatch> scene =
+        syntheticScene(head.truth, scene_count, scene_noise_px, kWrongShare, 50 + trial, &wrong);
+    const WindowResult w = solveWindow(head, trial, scene_count ? &scene : nullptr);
+    if (scene_count) {
+      // The wrong matches are dropped (at the matcher's noise nearly all: near the image's
+      // corners the distortion bends the epipolar lines, and a shift along the rows can undo
+      // some of a 1 px offset across them; at 0.25 px, 5 spreads are more than 1 px: those
+      // wrong ones stay, under the robust loss), few good ones with them; the spread is the
+      // good matches' own (Sampson: the distance in the joint 4-D space).
+      const double dropped_good_share = (w.dropped - wrong) / static_cast<double>(scene_count);
+      if (scene_noise_px <= kSceneNoisePx) EXPECT_GE(w.dropped, 0.9 * wrong) << "window " << trial;
+      EXPECT_LE(dropped_good_share, 0.01) << "window " << trial;
+      EXPECT_NEAR(w.sigma, scene_noise_px, 0.25 * scene_noise_px) << "window " << trial;
+    }
+    rms.misalignment += w.misalignment * w.misalignment / trials;
+    rms.bias += w.bias * w.bias / trials;
+    rms.predicted_misalignment += w.predicted_misalignment * w.predicted_misalignment / trials;
+    rms.predicted_bias += w.predicted_bias * w.predicted_bias / trials;
+  }
+  for (double* v : {&rms.misalignment, &rms.bias, &rms.predicted_misalignment, &rms.predicted_bias}) *v = std::sqrt(*v);
+  std::printf("[ figures  ] %3d scene matches at %.2f px: misalignment %.4f px (predicted %.4f), bias %.4f px "
+              "(predicted %.4f), RMS over %d windows\n",
+              scene_count, scene_noise_px, rms.misalignment, rms.predicted_misalignment, rms.bias,
+              rms.predicted_bias, trials);
+  return rms;
+}
+
+void expectAsPredicted(const Rms& r) {
+  EXPECT_LE(std::max(r.misalignment / r.predicted_misalignment, r.predicted_misalignment / r.misalignment), 1.5);
+  EXPECT_LE(std::max(r.bias / r.predicted_bias, r.predicted_bias / r.bias), 1.5);
+}
+
+// 20 windows: the RMS over them scatters by about a sixth; 1.5 leaves room for that.
+TEST(SceneConstraints, SeparateRotationFromTranslationAndKeepTheCovarianceHonest) {
+  const Head head = driveHead();
+  const Rms boards = runWindows(head, 20, 0, 0.0);
+  const Rms scene = runWindows(head, 20, 600, kSceneNoisePx);
+  expectAsPredicted(boards);
+  expectAsPredicted(scene);
+  EXPECT_LT(scene.misalignment, 0.35 * boards.misalignment);
+  EXPECT_LT(scene.bias, boards.bias);
+  // Noisier matches count for less, and the prediction follows them.
+  const Rms noisy = runWindows(head, 20, 600, 0.25);
+  expectAsPredicted(noisy);
+  EXPECT_GT(noisy.predicted_misalignment, 1.5 * scene.predicted_misalignment);
+}
+
+TEST(SceneConstraints, TooFewMatchesAreNotUsed) {
+  const Head head = driveHead();
+  const std::vector<SceneMatch> scene = syntheticScene(head.truth, BundleAdjustmentOptions().min_scene_matches - 1,
+                                                       kSceneNoisePx, 0.0, 9);
+  const WindowResult with = solveWindow(head, 0, &scene), without = solveWindow(head, 0, nullptr);
+  EXPECT_EQ(with.used, 0);
+  EXPECT_EQ(with.misalignment, without.misalignment);
+  EXPECT_EQ(with.bias, without.bias);
+}
+
+// The matcher on rendered light-off frames of the moving world: the matches' vertical offset
+// after rectifying them with the true calibration (OpenCV: stereoRectify, undistortPoints).
+TEST(SceneMatches, LieOnTheTrueEpipolarLinesOfRenderedFrames) {
+  const SimRigConfig config = loadSimRigConfig(ECS_SOURCE_DIR "/config/drive_photo.yaml");
+  SimRig sim(config);
+  const StereoRig& rig = config.rig;
+  const cv::Size size(rig.left.width, rig.left.height);
+  const auto K = [](const PinholeCamera& c) { return cv::Matx33d(c.fx, 0, c.cx, 0, c.fy, c.cy, 0, 0, 1); };
+  const auto D = [](const PinholeCamera& c) { return cv::Mat(std::vector<double>(c.dist.begin(), c.dist.end()), true); };
+  cv::Mat R, t, R1, R2, P1, P2, Q;
+  cv::eigen2cv(Eigen::Matrix3d(rig.right_from_left.linear()), R);
+  cv::eigen2cv(Eigen::Vector3d(rig.right_from_left.translation()), t);
+  cv::stereoRectify(K(rig.left), D(rig.left), K(rig.right), D(rig.right), size, R, t, R1, R2, P1, P2, Q,
+                    cv::CALIB_ZERO_DISPARITY, 0);
+  SceneMatchBuffers buffers;
+  std::vector<double> offsets;
+  int frames = 0;
+  for (double time_s : {1.0, 2.3, 4.1, 6.7, 9.2}) {
+    const SimFrame f = sim.render(time_s, 0.0, 400 + frames);
+    cv::Mat left = f.left, right = f.right;
+    if (left.channels() == 3) cv::cvtColor(f.left, left, cv::COLOR_BGR2GRAY);
+    if (right.channels() == 3) cv::cvtColor(f.right, right, cv::COLOR_BGR2GRAY);
+    const std::vector<SceneMatch> matches = matchStereoScene(left, right, rig, SceneMatchOptions(), &buffers);
+    EXPECT_GE(matches.size(), 60u) << "at " << time_s << " s";
+    std::vector<cv::Point2f> l, r, lr, rr;
+    for (const SceneMatch& m : matches) {
+      l.emplace_back(m.left_u, m.left_v);
+      r.emplace_back(m.right_u, m.right_v);
+    }
+    if (l.empty()) continue;
+    cv::undistortPoints(l, lr, K(rig.left), D(rig.left), R1, P1);
+    cv::undistortPoints(r, rr, K(rig.right), D(rig.right), R2, P2);
+    for (size_t i = 0; i < lr.size(); ++i) offsets.push_back(std::abs(lr[i].y - rr[i].y));
+    ++frames;
+  }
+  ASSERT_GE(offsets.size(), 400u);
+  std::sort(offsets.begin(), offsets.end());
+  const double median = offsets[offsets.size() / 2], p90 = offsets[offsets.size() * 9 / 10];
+  std::printf("[ figures  ] %zu matches in %d frames: vertical offset after rectification with the truth, median "
+              "%.3f px, 90 %% %.3f px, max %.2f px\n",
+              offsets.size(), frames, median, p90, offsets.back());
+  EXPECT_LE(median, 0.08);
+  EXPECT_LE(p90, 0.5);
+}
+
+}  // namespace
+}  // namespace ecs
