@@ -45,7 +45,6 @@
 #include "embedded_calibration_stereo/core/calibration/bundle_adjuster.h"
 #include "embedded_calibration_stereo/core/calibration/quality_gate.h"
 #include "embedded_calibration_stereo/core/calibration/scene_epipolar_cost.h"
-#include "embedded_calibration_stereo/core/calibration/scene_matches.h"
 #include "embedded_calibration_stereo/core/calibration/stereo_accuracy.h"
 #include "embedded_calibration_stereo/core/sim/sim_rig.h"
 #include "embedded_calibration_stereo/core/tracker/board_teacher.h"
@@ -81,31 +80,31 @@ struct Args {
   int saddle = 0;            // 1: refine the tracked corners by the saddle-model fit
   int light_off_gap = 1;     // --learn-window: frame periods from the light-off frames to the window's ends
   double truth_noise = -1;  // >= 0: the simulator's true corners plus this Gaussian noise instead of tracking
-  int scene = 0;            // 1: the light-off frames' scene correspondences join the window's observation
+  int scene = 0;  // 1: the window observation carries its light-off frames' scene correspondences
 };
 
-// The scene correspondences of one light-off stereo frame, and their distance to the true
-// epipolar line (the Sampson distance under the frame's true calibration, px) in *distances.
-void addSceneMatches(const SimFrame& off, const StereoRig& guide, SceneMatchBuffers* buffers,
-                     std::vector<SceneMatch>* out, std::vector<double>* distances) {
-  cv::Mat left = off.left, right = off.right;
-  if (left.channels() == 3) cv::cvtColor(off.left, left, cv::COLOR_BGR2GRAY);
-  if (right.channels() == 3) cv::cvtColor(off.right, right, cv::COLOR_BGR2GRAY);
-  const StereoRig& t = off.truth;
-  const double l[9] = {t.left.fx, t.left.fy, t.left.cx, t.left.cy, t.left.dist[0], t.left.dist[1], t.left.dist[2],
-                       t.left.dist[3], t.left.dist[4]};
-  const double r[9] = {t.right.fx, t.right.fy, t.right.cx, t.right.cy, t.right.dist[0], t.right.dist[1],
-                       t.right.dist[2], t.right.dist[3], t.right.dist[4]};
-  const Eigen::AngleAxisd aa(t.right_from_left.linear());
-  const Eigen::Vector3d rv = aa.angle() * aa.axis(), tv = t.right_from_left.translation();
-  const double e[6] = {rv.x(), rv.y(), rv.z(), tv.x(), tv.y(), tv.z()};
-  const double unit = 1.0;
-  for (const SceneMatch& m : matchStereoScene(left, right, guide, SceneMatchOptions(), buffers)) {
-    out->push_back(m);
-    double d = 0.0;
-    SceneEpipolarCost(m, t.right.fy, &unit)(l, r, e, &d);
-    distances->push_back(std::abs(d));
+// Distances of scene correspondences to their true epipolar lines (the Sampson distance under
+// the true calibration, px), sorted.
+std::vector<double> epipolarDistances(const std::vector<SceneMatch>& matches, const StereoRig& truth) {
+  const PinholeCamera* cameras[2] = {&truth.left, &truth.right};
+  double intrinsics[2][9];
+  for (int c = 0; c < 2; ++c) {
+    const PinholeCamera& k = *cameras[c];
+    const double values[9] = {k.fx, k.fy, k.cx, k.cy, k.dist[0], k.dist[1], k.dist[2], k.dist[3], k.dist[4]};
+    std::copy(values, values + 9, intrinsics[c]);
   }
+  const Eigen::AngleAxisd aa(truth.right_from_left.linear());
+  const Eigen::Vector3d r = aa.angle() * aa.axis(), t = truth.right_from_left.translation();
+  const double extrinsics[6] = {r.x(), r.y(), r.z(), t.x(), t.y(), t.z()};
+  const double unit = 1.0;
+  std::vector<double> distances;
+  for (const SceneMatch& m : matches) {
+    double d = 0.0;
+    SceneEpipolarCost(m, truth.right.fy, &unit)(intrinsics[0], intrinsics[1], extrinsics, &d);
+    distances.push_back(std::abs(d));
+  }
+  std::sort(distances.begin(), distances.end());
+  return distances;
 }
 
 // The drift script: one event per `every` windows, cycling.
@@ -254,7 +253,9 @@ int main(int argc, char** argv) {
   PatternTracker tracker(prior, tracker_options);
   WindowTrackerOptions window_options;
   if (const char* it = std::getenv("LEARN_ITERATIONS")) window_options.learner.iterations = std::atoi(it);
-  WindowTracker window_tracker(prior, tracker_options, window_options);
+  window_options.scene_matches = args.scene != 0;
+  // The scene matching is guided by the nominal calibration, as the tracker nodelet's.
+  WindowTracker window_tracker(prior, tracker_options, window_options, config.rig);
   BundleAdjustmentConfig terms;
   terms.estimate_tangential = true;  // the scenario's lenses have p1, p2
   BundleAdjustmentOptions adjustment;
@@ -266,7 +267,6 @@ int main(int argc, char** argv) {
   const QualityGate gate{gate_options};
   const std::vector<VirtualBoard> boards = config.device.virtualBoards();
   StereoRig in_force = config.rig;  // the head starts calibrated
-  SceneMatchBuffers scene_buffers;
   DriftScript drift;
   int windows = 0, commits = 0, worse = 0, rejected = 0;
   double worst_after_mis = 0, worst_after_bias = 0;
@@ -282,8 +282,7 @@ int main(int argc, char** argv) {
     WindowFrames window[2];
     int corners = 0, truth_corners = 0;
     WindowCornerErrors errors;
-    std::vector<SceneMatch> scene;
-    std::vector<double> scene_distances;
+
     for (int k = 0; k < args.frames; ++k) {
       const double t = t_start + k / args.fps;
       const uint64_t frame_index = static_cast<uint64_t>(std::llround(t * args.fps));
@@ -295,7 +294,6 @@ int main(int argc, char** argv) {
           for (int o = args.off_frames; o >= 1; --o) {
             const double tb = t_start - (args.light_off_gap + o - 1) / args.fps;
             const SimFrame before = sim.render(tb, 0.0, static_cast<uint64_t>(std::llround(tb * args.fps)));
-            if (args.scene) addSceneMatches(before, in_force, &scene_buffers, &scene, &scene_distances);
             window[0].light_off_before.push_back(before.left);
             window[1].light_off_before.push_back(before.right);
           }
@@ -308,7 +306,6 @@ int main(int argc, char** argv) {
           for (int o = 1; o <= args.off_frames; ++o) {
             const double ta = t_start + (args.frames - 1 + args.light_off_gap + o - 1) / args.fps;
             const SimFrame after = sim.render(ta, 0.0, static_cast<uint64_t>(std::llround(ta * args.fps)));
-            if (args.scene) addSceneMatches(after, in_force, &scene_buffers, &scene, &scene_distances);
             window[0].light_off_after.push_back(after.left);
             window[1].light_off_after.push_back(after.right);
           }
@@ -324,9 +321,8 @@ int main(int argc, char** argv) {
                     std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - w0).count(),
                     tracked.saddle_failures);
         StereoObservation obs = tracked.observation;
-        obs.scene = scene;
-        if (args.scene && !scene_distances.empty()) {
-          std::sort(scene_distances.begin(), scene_distances.end());
+        if (!obs.scene.empty()) {
+          const std::vector<double> scene_distances = epipolarDistances(obs.scene, last.truth);
           const size_t n = scene_distances.size();
           std::printf("    %zu scene matches; distance to the true epipolar line: median %.3f px, 90 %% %.3f px, "
                       "max %.2f px\n",

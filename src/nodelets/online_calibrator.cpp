@@ -483,8 +483,10 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
         std::lock_guard<std::mutex> lock(mutex_);
         uncommitted_ = std::move(uncommitted);
       }
-      const std::string input =
+      std::string input =
           job.window_observation ? "a window observation" : std::to_string(job.frames.size()) + " frames";
+      if (status.scene_matches_used > 0)
+        input += " and " + std::to_string(status.scene_matches_used) + " scene correspondences";
       NODELET_INFO("OnlineCalibrator: %s, %s%s%s%s (rms %.3f / %.3f px, %.0f ms)", input.c_str(),
                    job.dry_run ? "dry run, " : "", status.accepted ? "accepted" : "not accepted",
                    status.reason.empty() ? "" : ": ", status.reason.c_str(), status.rms_left_px,

@@ -20,7 +20,10 @@
 // frame of a burst shares): it keeps the message pointers of the burst's settled light-on frames
 // and of the last settled light-off frame before it, and at the first settled light-off frame
 // after it hands them to its worker thread, which publishes one observation for the burst on
-// calibration/window_observations, stamped with the burst's last light-on frame.
+// calibration/window_observations, stamped with the burst's last light-on frame. With
+// scene_matches (default), that observation also carries the scene correspondences of the
+// light-off frames before and after the burst (guided by device_config's nominal cameras): the
+// calibrator's epipolar constraints at every depth.
 #include <cv_bridge/cv_bridge.h>
 #include <diagnostic_updater/diagnostic_updater.h>
 #include <nodelet/nodelet.h>
@@ -130,6 +133,7 @@ class PatternTrackerNodelet : public nodelet::Nodelet {
     const int queue_size = read.atLeast("queue_size", 10, 1);
     stale_background_level_ = read.atLeast("stale_background_level", ecs::TrackerOptions().stale_background_level, 0.0);
     window_tracking_ = read.get("window_tracking", false);
+    window_options_.scene_matches = read.get("scene_matches", true);
     try {
       device_ = ecs::loadSimRigConfig(device_config_);
     } catch (const std::exception& e) {
@@ -188,7 +192,7 @@ class PatternTrackerNodelet : public nodelet::Nodelet {
     ecs::TrackerOptions options;
     options.stale_background_level = stale_background_level_;
     auto window_tracker =
-        window_tracking_ ? std::make_shared<ecs::WindowTracker>(prior, options, window_options_) : nullptr;
+        window_tracking_ ? std::make_shared<ecs::WindowTracker>(prior, options, window_options_, device_.rig) : nullptr;
     tracker_ = std::make_unique<ecs::PatternTracker>(prior, options);
     window_tracker_ = std::move(window_tracker);  // the worker keeps the previous one until its window is done
     background_stamp_ = ros::Time();  // the tracker has no background yet
@@ -517,7 +521,7 @@ class PatternTrackerNodelet : public nodelet::Nodelet {
     const auto t0 = std::chrono::steady_clock::now();
     StereoPatternObservation msg;
     int corners = 0, saddle_failures = 0;
-    std::string error;
+    std::string error, scene_problem;
     try {
       ecs::WindowFrames frames[2];
       // The images stay owned by their messages (job); rgb8 becomes BGR here, off the callback.
@@ -534,6 +538,7 @@ class PatternTrackerNodelet : public nodelet::Nodelet {
       const ecs::WindowTrack track = job.tracker->track(frames[0], frames[1], job.header.stamp.toSec());
       msg = toMsg(track.observation);
       saddle_failures = track.saddle_failures;
+      scene_problem = track.scene_problem;
       for (const auto* side : {&msg.left, &msg.right})
         for (const BoardObservation& b : *side) corners += static_cast<int>(b.corner_ids.size());
     } catch (const std::exception& e) {
@@ -545,9 +550,12 @@ class PatternTrackerNodelet : public nodelet::Nodelet {
       msg.header = job.header;
       window_observations_pub_.publish(msg);
       std::snprintf(text, sizeof(text),
-                    "burst of %zu light-on frames ending at %.3f s: %d corners (%d dropped by the saddle fit) "
-                    "in %.0f ms",
-                    job.light_on[0].size(), job.header.stamp.toSec(), corners, saddle_failures, ms);
+                    "burst of %zu light-on frames ending at %.3f s: %d corners (%d dropped by the saddle fit), "
+                    "%zu scene correspondences, in %.0f ms",
+                    job.light_on[0].size(), job.header.stamp.toSec(), corners, saddle_failures, msg.scene.size(), ms);
+      if (!scene_problem.empty())
+        NODELET_WARN_THROTTLE(30.0, "PatternTracker: %s (device_config %s)", scene_problem.c_str(),
+                              device_config_.c_str());
     } else {
       std::snprintf(text, sizeof(text), "burst of %zu light-on frames ending at %.3f s not tracked: %s",
                     job.light_on[0].size(), job.header.stamp.toSec(), error.c_str());
@@ -649,7 +657,7 @@ class PatternTrackerNodelet : public nodelet::Nodelet {
 
   // Window tracking (see the class comment for the threads).
   bool window_tracking_ = false;  // parameter
-  const ecs::WindowTrackerOptions window_options_;
+  ecs::WindowTrackerOptions window_options_;  // set in onInit
   std::shared_ptr<ecs::WindowTracker> window_tracker_;  // null without a prior; callback queue
   std::optional<LightBurstCollector> bursts_;           // with window_tracking; callback queue
   ros::Publisher window_observations_pub_;

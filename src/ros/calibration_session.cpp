@@ -84,6 +84,7 @@ CalibratorParams loadCalibratorParams(const ros::NodeHandle& pnh, const std::str
   p.terms.estimate_tangential = read.get("estimate_tangential", p.terms.estimate_tangential);
   p.terms.estimate_k3 = read.get("estimate_k3", p.terms.estimate_k3);
   non_negative("loss_scale_px", &p.adjustment.loss_scale_px);
+  p.adjustment.use_scene_matches = read.get("scene_constraints", p.adjustment.use_scene_matches);
   non_negative("max_rms_px", &p.gate.max_rms_px);
   non_negative("max_epipolar_rms_px", &p.gate.max_epipolar_rms_px);
   non_negative("max_outlier_fraction", &p.gate.max_outlier_fraction);
@@ -150,6 +151,8 @@ CalibrationStatus makeStatus(const ecs::BundleAdjustmentSummary& summary, const 
   status.reason = decision.accepted ? "" : decision.reason;
   status.frames_used = static_cast<uint32_t>(summary.frames_used);
   status.corners_used = static_cast<uint32_t>(summary.corners_used);
+  status.scene_matches_used = static_cast<uint32_t>(summary.scene_matches_used);
+  status.scene_sigma_px = summary.scene_sigma_px;
   status.rms_left_px = summary.rms_left_px;
   status.rms_right_px = summary.rms_right_px;
   status.epipolar_rms_px = summary.epipolar_rms_px;

@@ -145,6 +145,12 @@ StereoPatternObservation toMsg(const ecs::StereoObservation& observation) {
   msg.header.stamp.fromSec(observation.stamp);
   for (const auto& b : observation.left) msg.left.push_back(toMsg(b));
   for (const auto& b : observation.right) msg.right.push_back(toMsg(b));
+  msg.scene.reserve(observation.scene.size());
+  for (const ecs::SceneMatch& m : observation.scene) {
+    SceneMatch s;
+    s.left_u = m.left_u, s.left_v = m.left_v, s.right_u = m.right_u, s.right_v = m.right_v;
+    msg.scene.push_back(s);
+  }
   return msg;
 }
 
@@ -153,6 +159,8 @@ ecs::StereoObservation fromMsg(const StereoPatternObservation& msg) {
   observation.stamp = msg.header.stamp.toSec();
   for (const auto& b : msg.left) observation.left.push_back(fromMsg(b));
   for (const auto& b : msg.right) observation.right.push_back(fromMsg(b));
+  observation.scene.reserve(msg.scene.size());
+  for (const SceneMatch& s : msg.scene) observation.scene.push_back({s.left_u, s.left_v, s.right_u, s.right_v});
   return observation;
 }
 

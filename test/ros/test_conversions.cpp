@@ -184,6 +184,7 @@ TEST(Conversions, ObservationsRoundTrip) {
   obs.left = {b};
   b.board_id = 5;
   obs.right = {b, b};
+  obs.scene = {{1.25f, 2.5f, 3.75f, 4.0f}, {700.5f, 470.25f, 650.125f, 469.0f}};
   const StereoPatternObservation msg = toMsg(obs);
   EXPECT_EQ(msg.header.stamp.toSec(), 1234.5);
   ASSERT_EQ(msg.left.size(), 1u);
@@ -197,6 +198,15 @@ TEST(Conversions, ObservationsRoundTrip) {
   EXPECT_EQ(back.right[1].u, obs.right[1].u);
   EXPECT_EQ(back.right[1].v, obs.right[1].v);
   EXPECT_EQ(back.right[0].board_id, 5);
+  ASSERT_EQ(msg.scene.size(), 2u);
+  EXPECT_EQ(msg.scene[1].right_u, 650.125f);
+  ASSERT_EQ(back.scene.size(), 2u);
+  for (size_t i = 0; i < 2; ++i) {
+    EXPECT_EQ(back.scene[i].left_u, obs.scene[i].left_u);
+    EXPECT_EQ(back.scene[i].left_v, obs.scene[i].left_v);
+    EXPECT_EQ(back.scene[i].right_u, obs.scene[i].right_u);
+    EXPECT_EQ(back.scene[i].right_v, obs.scene[i].right_v);
+  }
 }
 
 TEST(Conversions, TransformStampedMapsChildPointsIntoTheParentFrame) {

@@ -17,6 +17,8 @@ std::string WindowTrackerOptions::Check() const {
     problems.push_back("saddle_radius_squares must be in (0.1, 0.5)");
   if (max_saddle_radius_px < 2) problems.push_back("max_saddle_radius_px must be >= 2");
   if (min_light_on_frames < 1) problems.push_back("min_light_on_frames must be >= 1");
+  const std::string matching_problems = matching.Check();
+  if (!matching_problems.empty()) problems.push_back("matching: " + matching_problems);
   std::string joined;
   for (const std::string& p : problems) joined += (joined.empty() ? "" : "; ") + p;
   return joined;
@@ -76,8 +78,8 @@ int refineCornersBySaddleFit(const cv::Mat& image, const CameraPrior& prior, con
 }
 
 WindowTracker::WindowTracker(const PatternPrior& prior, const TrackerOptions& tracker_options,
-                             const WindowTrackerOptions& options)
-    : tracker_(prior, tracker_options), options_(options) {
+                             const WindowTrackerOptions& options, std::optional<StereoRig> guide)
+    : tracker_(prior, tracker_options), options_(options), guide_(std::move(guide)) {
   const std::string problems = options.Check();
   if (!problems.empty()) throw ConfigError("window tracker options", problems);
 }
@@ -129,6 +131,25 @@ WindowTrack WindowTracker::track(const WindowFrames& left, const WindowFrames& r
     if (!error[c].empty()) throw std::invalid_argument(std::string(c ? "right: " : "left: ") + error[c]);
   result.observation.left = std::move(corners[0]);
   result.observation.right = std::move(corners[1]);
+  if (options_.scene_matches && guide_) {
+    // The light-off frames are stereo frames: left and right of one instant, pair by pair.
+    const auto grey = [](const cv::Mat& image) {
+      if (image.channels() == 1) return image;
+      cv::Mat out;
+      cv::cvtColor(image, out, cv::COLOR_BGR2GRAY);
+      return out;
+    };
+    for (const auto side : {&WindowFrames::light_off_before, &WindowFrames::light_off_after})
+      for (size_t i = 0; i < std::min((left.*side).size(), (right.*side).size()); ++i) {
+        if ((left.*side)[i].size() != cv::Size(guide_->left.width, guide_->left.height)) {
+          result.scene_problem = "the guide calibration is for another image size; no scene correspondences";
+          continue;
+        }
+        const std::vector<SceneMatch> m =
+            matchStereoScene(grey((left.*side)[i]), grey((right.*side)[i]), *guide_, options_.matching, &scene_buffers_);
+        result.observation.scene.insert(result.observation.scene.end(), m.begin(), m.end());
+      }
+  }
   result.corners_tracked = tracked[0] + tracked[1];
   result.saddle_failures = dropped[0] + dropped[1];
   return result;

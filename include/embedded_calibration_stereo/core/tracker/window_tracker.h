@@ -18,14 +18,19 @@
 //  3. every corner is refined by a blurred-saddle model fit on I_C (saddle_refinement.h), free of
 //     the sub-pixel bias of cv::cornerSubPix that would otherwise be the same in every window.
 // The result is one observation per window, whose corner errors are independent from corner to
-// corner (docs/figures.md measures them on drive_photo).
+// corner (docs/figures.md measures them on drive_photo). Given a guide calibration, the
+// observation also carries the scene correspondences of the window's light-off frames
+// (scene_matches.h): epipolar constraints at every depth for the calibrator, taken under the
+// same calibration as the boards.
 //
 // Threading: not thread-safe (one owner thread, e.g. the tracker nodelet's worker); the two
 // cameras are processed in parallel inside track().
 #include <opencv2/core.hpp>
+#include <optional>
 #include <string>
 #include <vector>
 
+#include "embedded_calibration_stereo/core/calibration/scene_matches.h"
 #include "embedded_calibration_stereo/core/depth/device_image_learner.h"
 #include "embedded_calibration_stereo/core/tracker/pattern_tracker.h"
 #include "embedded_calibration_stereo/core/tracker/saddle_refinement.h"
@@ -39,6 +44,9 @@ struct WindowTrackerOptions {
   double saddle_radius_squares = 0.45;
   int max_saddle_radius_px = 8;
   int min_light_on_frames = 3;   // fewer: no observation (a verification flash is one frame)
+  // The light-off frames' scene correspondences (with a guide calibration only).
+  bool scene_matches = true;
+  SceneMatchOptions matching;
   // Empty when usable; otherwise one message per problem, joined by "; ".
   std::string Check() const;
 };
@@ -56,13 +64,16 @@ struct WindowTrack {
   cv::Mat device[2];              // the learned I_C per camera (CV_32F, grey levels)
   int corners_tracked = 0;        // on I_C before the saddle fit
   int saddle_failures = 0;        // corners dropped because their saddle fit failed
+  std::string scene_problem;      // why there are no scene correspondences; empty otherwise
 };
 
 class WindowTracker {
  public:
-  // Throws ConfigError on an invalid prior or options.
+  // Throws ConfigError on an invalid prior or options. `guide`: a calibration close to the
+  // head's (the nominal one will do: it only guides the scene matching's search); without it
+  // the observations carry no scene correspondences.
   WindowTracker(const PatternPrior& prior, const TrackerOptions& tracker_options,
-                const WindowTrackerOptions& options);
+                const WindowTrackerOptions& options, std::optional<StereoRig> guide = std::nullopt);
 
   // Tracks one window. Throws std::invalid_argument when a camera has no light-off frame, fewer
   // than min_light_on_frames light-on frames, or frames of different sizes or types.
@@ -74,6 +85,8 @@ class WindowTracker {
  private:
   PatternTracker tracker_;  // its own board states, followed from window to window
   WindowTrackerOptions options_;
+  std::optional<StereoRig> guide_;
+  SceneMatchBuffers scene_buffers_;
 };
 
 // Refines tracked corners by the saddle fit on `image` (CV_32FC1 or CV_8UC1, scene-free); the
