@@ -12,7 +12,7 @@
 //                          [--teach-frames K] [--min-change X] [--min-improvement R]
 //                          [--combine 0|1] [--align 0|1] [--free-poses 0|1]
 //                          [--truth-background 0|1] [--truth-noise SIGMA] [--saddle 0|1]
-//                          [--learn-window 0|1|2] [--off-frames K] [--scene 0|1]
+//                          [--learn-window 0|1|2] [--off-frames K] [--scene 0|1] [--filter 0|1]
 // --min-change / --min-improvement: the gate's min_change_in_predicted / min_rms_improvement_rel;
 // what limits the accuracy (docs/figures.md): --combine 1 tracks the mean of the window's frames
 // (one observation per window), --align 0 reports cornerSubPix corners instead of the whole-board
@@ -43,6 +43,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "embedded_calibration_stereo/core/calibration/bundle_adjuster.h"
+#include "embedded_calibration_stereo/core/calibration/calibration_filter.h"
 #include "embedded_calibration_stereo/core/calibration/quality_gate.h"
 #include "embedded_calibration_stereo/core/calibration/scene_epipolar_cost.h"
 #include "embedded_calibration_stereo/core/calibration/stereo_accuracy.h"
@@ -81,6 +82,7 @@ struct Args {
   int light_off_gap = 1;     // --learn-window: frame periods from the light-off frames to the window's ends
   double truth_noise = -1;  // >= 0: the simulator's true corners plus this Gaussian noise instead of tracking
   int scene = 0;  // 1: the window observation carries its light-off frames' scene correspondences
+  int filter = 0;  // 1: earlier windows' solves as the prior of the groups a window does not contradict
 };
 
 // Distances of scene correspondences to their true epipolar lines (the Sampson distance under
@@ -224,6 +226,7 @@ int main(int argc, char** argv) {
     else if (!std::strcmp(argv[i], "--saddle")) args.saddle = std::atoi(value());
     else if (!std::strcmp(argv[i], "--light-off-gap")) args.light_off_gap = std::atoi(value());
     else if (!std::strcmp(argv[i], "--scene")) args.scene = std::atoi(value());
+    else if (!std::strcmp(argv[i], "--filter")) args.filter = std::atoi(value());
     else {
       std::fprintf(stderr, "usage: bench_calibrate_moving [--config FILE] [--minutes M] [--period S] [--frames N] "
                            "[--fps F] [--teach-frames K]   (default config: $ECS_SOURCE_DIR/config/drive_photo.yaml)\n");
@@ -268,6 +271,7 @@ int main(int argc, char** argv) {
   const std::vector<VirtualBoard> boards = config.device.virtualBoards();
   StereoRig in_force = config.rig;  // the head starts calibrated
   DriftScript drift;
+  CalibrationFilter filter;
   int windows = 0, commits = 0, worse = 0, rejected = 0;
   double worst_after_mis = 0, worst_after_bias = 0;
   const int window_count = static_cast<int>(args.minutes * 60.0 / args.period_s);
@@ -369,7 +373,24 @@ int main(int argc, char** argv) {
     input.image_width = config.rig.left.width;
     input.image_height = config.rig.left.height;
     input.in_force = in_force;
-    const BundleAdjustmentSummary candidate = adjuster.Solve(input);
+    BundleAdjustmentSummary candidate = adjuster.Solve(input);
+    std::string prior_note;
+    if (args.filter && candidate.success) {
+      // What earlier windows taught, as the prior of the groups this window does not contradict.
+      std::vector<std::string> changed;
+      if (const std::optional<RigPrior> prior = filter.priorFor(candidate, t_start, &changed)) {
+        input.rig_prior = prior;
+        candidate = adjuster.Solve(input);
+        prior_note = "prior on " + std::to_string(prior->activeCount()) + " parameters";
+      } else {
+        prior_note = filter.hasState() ? "no prior" : "no state yet";
+      }
+      if (!changed.empty()) {
+        prior_note += "; changed:";
+        for (const std::string& g : changed) prior_note += " " + g + ",";
+        prior_note.pop_back();
+      }
+    }
     GateDecision decision;
     if (candidate.success) {
       const BundleAdjustmentSummary in_force_fit =
@@ -383,6 +404,9 @@ int main(int argc, char** argv) {
     std::printf("t %6.1f s%s%s: %d of %d corners tracked (%.3f px RMS, %.3f px common to the window); %s\n", t_start,
                 event.empty() ? "" : ", after ", event.c_str(), corners, truth_corners, errors.rms(),
                 errors.sharedRms(), decision.reason.c_str());
+    if (!prior_note.empty()) std::printf("    filter: %s\n", prior_note.c_str());
+    if (args.filter && candidate.success && candidate.covariance_ok && (decision.accepted || decision.in_force_confirmed))
+      filter.setState(candidate.rig, candidate.rig_covariance, t_start);
     if (!decision.accepted) {
       ++rejected;
       print("in force:", old_a);

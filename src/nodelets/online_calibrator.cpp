@@ -487,10 +487,11 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
           job.window_observation ? "a window observation" : std::to_string(job.frames.size()) + " frames";
       if (status.scene_matches_used > 0)
         input += " and " + std::to_string(status.scene_matches_used) + " scene correspondences";
-      NODELET_INFO("OnlineCalibrator: %s, %s%s%s%s (rms %.3f / %.3f px, %.0f ms)", input.c_str(),
+      const std::string& prior = session_->priorNote();
+      NODELET_INFO("OnlineCalibrator: %s, %s%s%s%s (rms %.3f / %.3f px, %.0f ms%s%s)", input.c_str(),
                    job.dry_run ? "dry run, " : "", status.accepted ? "accepted" : "not accepted",
                    status.reason.empty() ? "" : ": ", status.reason.c_str(), status.rms_left_px,
-                   status.rms_right_px, status.solve_ms);
+                   status.rms_right_px, status.solve_ms, prior.empty() ? "" : "; ", prior.c_str());
       {
         std::lock_guard<std::mutex> lock(mutex_);
         last_solve_ = status;

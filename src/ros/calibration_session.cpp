@@ -85,6 +85,9 @@ CalibratorParams loadCalibratorParams(const ros::NodeHandle& pnh, const std::str
   p.terms.estimate_k3 = read.get("estimate_k3", p.terms.estimate_k3);
   non_negative("loss_scale_px", &p.adjustment.loss_scale_px);
   p.adjustment.use_scene_matches = read.get("scene_constraints", p.adjustment.use_scene_matches);
+  p.prior_from_earlier_windows = read.get("prior_from_earlier_windows", p.prior_from_earlier_windows);
+  p.filter.change_probability = read.get("change_probability", p.filter.change_probability);
+  if (const std::string e = p.filter.Check(); !e.empty()) throw ecs::ConfigError("change_probability", e);
   non_negative("max_rms_px", &p.gate.max_rms_px);
   non_negative("max_epipolar_rms_px", &p.gate.max_epipolar_rms_px);
   non_negative("max_outlier_fraction", &p.gate.max_outlier_fraction);
@@ -182,7 +185,8 @@ CalibrationSession::CalibrationSession(ros::NodeHandle nh, CalibratorParams para
       device_(std::move(device)),
       boards_(device_.virtualBoards()),
       adjuster_(params_.adjustment, params_.terms),
-      gate_(params_.gate) {}
+      gate_(params_.gate),
+      filter_(params_.filter) {}
 
 CalibrationStatus CalibrationSession::solve(const std::vector<ecs::StereoObservation>& frames,
                                             const sensor_msgs::CameraInfo* left_info,
@@ -208,7 +212,29 @@ CalibrationStatus CalibrationSession::solve(const std::vector<ecs::StereoObserva
   input.image_height = static_cast<int>(left_info->height);
   if (have_in_force) input.in_force = in_force;  // otherwise an uncalibrated head: Zhang start
 
-  const ecs::BundleAdjustmentSummary candidate = adjuster_.Solve(input);
+  // What earlier windows taught holds only under the calibration it was learned with.
+  if (filter_in_force_ && !(carriesCalibration(*left_info, filter_in_force_->first) &&
+                            carriesCalibration(*right_info, filter_in_force_->second))) {
+    filter_.reset();
+    filter_in_force_.reset();
+  }
+  ecs::BundleAdjustmentSummary candidate = adjuster_.Solve(input);
+  const double stamp = frames.empty() ? 0.0 : frames.back().stamp;
+  prior_note_.clear();
+  if (params_.prior_from_earlier_windows && candidate.success && filter_.hasState()) {
+    std::vector<std::string> changed;
+    if (const std::optional<ecs::RigPrior> prior = filter_.priorFor(candidate, stamp, &changed)) {
+      input.rig_prior = prior;
+      ecs::BundleAdjustmentSummary with_prior = adjuster_.Solve(input);
+      if (with_prior.success) {
+        with_prior.solve_ms += candidate.solve_ms;  // both solves are this window's
+        candidate = std::move(with_prior);
+        prior_note_ = "prior from earlier windows on " + std::to_string(prior->activeCount()) + " parameters";
+      }
+    }
+    for (size_t i = 0; i < changed.size(); ++i)
+      prior_note_ += (i == 0 ? (prior_note_.empty() ? "changed: " : "; changed: ") : ", ") + changed[i];
+  }
   ecs::BundleAdjustmentSummary in_force_fit;
   if (have_in_force && candidate.success)
     in_force_fit = ecs::evaluateFixedCalibration(in_force, frames, boards_, params_.adjustment, &device_);
@@ -230,6 +256,13 @@ CalibrationStatus CalibrationSession::solve(const std::vector<ecs::StereoObserva
     const bool small_change = decision.reason.rfind("rejected: change", 0) == 0;
     status.reason = kInForceConfirmedReason +
                     (small_change ? " (" + decision.reason.substr(10) + ")" : std::string(rms));
+  }
+  // A solve the gate found sound is what the next window learns from, committed or not (a
+  // calibration in force confirmed is still measured better by the solve that confirmed it).
+  const bool learn = !dry_run && candidate.covariance_ok && (decision.accepted || decision.in_force_confirmed);
+  if (learn) {
+    filter_.setState(candidate.rig, candidate.rig_covariance, stamp);
+    filter_in_force_.emplace(*left_info, *right_info);
   }
   if (!decision.accepted || dry_run) {
     if (decision.accepted) status.reason = "dry run: acceptable, not committed";
@@ -259,12 +292,16 @@ CalibrationStatus CalibrationSession::solve(const std::vector<ecs::StereoObserva
   }
   // status.epoch stays `epoch`: how far the driver moves its epoch per set_camera_info is the
   // driver's business, so the caller reads the new epoch from the driver's frames.
+  if (learn) filter_in_force_.emplace(infos.left, infos.right);
   *committed = std::move(infos);
   return status;
 }
 
 std::string CalibrationSession::commitAgain(const UncommittedCalibration& calibration) {
-  return commit(calibration.infos, calibration.rig, calibration.left_in_force);
+  const std::string error = commit(calibration.infos, calibration.rig, calibration.left_in_force);
+  // The state learned from this calibration's solve now holds under it.
+  if (error.empty() && filter_in_force_) filter_in_force_.emplace(calibration.infos.left, calibration.infos.right);
+  return error;
 }
 
 std::string CalibrationSession::commit(const CommittedCalibration& infos, const ecs::StereoRig& rig,

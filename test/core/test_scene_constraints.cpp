@@ -53,37 +53,6 @@ Head driveHead() {
   return {loadStereoRig(fs["rig"], "rig"), loadDevice(fs["device"], "device")};
 }
 
-// `count` correspondences of scene points spread over the left image at inverse depths uniform
-// between 1/22 m and 1/1.5 m (the corridor), noisy by `noise_px` per coordinate, a share
-// `wrong` of them wrong matches (repeated texture): displaced by up to 10 px along the rows and
-// by 1-3 px across them (a match wrong only along its epipolar line is a wrong depth, which an
-// epipolar constraint neither sees nor minds). *wrong_count: how many.
-std::vector<SceneMatch> syntheticScene(const StereoRig& rig, int count, double noise_px, double wrong, int seed,
-                                       int* wrong_count = nullptr) {
-  if (wrong_count) *wrong_count = 0;
-  std::mt19937 rng(seed);
-  std::uniform_real_distribution<double> uniform(0.0, 1.0);
-  std::normal_distribution<double> noise(0.0, noise_px);
-  std::vector<SceneMatch> matches;
-  while (static_cast<int>(matches.size()) < count) {
-    const Eigen::Vector2d left(uniform(rng) * rig.left.width, uniform(rng) * rig.left.height);
-    const double z = 1.0 / (1.0 / 22.0 + uniform(rng) * (1.0 / 1.5 - 1.0 / 22.0));
-    Eigen::Vector2d right;
-    const Eigen::Vector3d p = z * rig.left.pixelToNormalized(left).homogeneous();
-    if (!rig.right.project(rig.right_from_left * p, &right) || !rig.right.inImage(right)) continue;
-    Eigen::Vector2d l = left + Eigen::Vector2d(noise(rng), noise(rng));
-    Eigen::Vector2d r = right + Eigen::Vector2d(noise(rng), noise(rng));
-    if (uniform(rng) < wrong) {
-      const double across = (1.0 + 2.0 * uniform(rng)) * (uniform(rng) < 0.5 ? -1.0 : 1.0);
-      r += Eigen::Vector2d(20.0 * uniform(rng) - 10.0, across);
-      if (wrong_count) ++*wrong_count;
-    }
-    matches.push_back({static_cast<float>(l.x()), static_cast<float>(l.y()), static_cast<float>(r.x()),
-                       static_cast<float>(r.y())});
-  }
-  return matches;
-}
-
 std::array<double, 9> block(const PinholeCamera& c) {
   return {{c.fx, c.fy, c.cx, c.cy, c.dist[0], c.dist[1], c.dist[2], c.dist[3], c.dist[4]}};
 }
@@ -95,7 +64,7 @@ std::array<double, 6> block(const Eigen::Isometry3d& t) {
 
 TEST(SceneEpipolarCost, ZeroOnTrueCorrespondencesAndDerivativesAsCentralDifferences) {
   const Head head = driveHead();
-  const std::vector<SceneMatch> matches = syntheticScene(head.truth, 200, 0.0, 0.0, 3);
+  const std::vector<SceneMatch> matches = generateSyntheticSceneMatches(head.truth, 200, 0.0, 0.0, 3);
   std::array<double, 9> left = block(head.truth.left), right = block(head.truth.right);
   std::array<double, 6> extrinsics = block(head.truth.right_from_left);
   const double unit = 1.0;
@@ -184,7 +153,7 @@ Rms runWindows(const Head& head, int trials, int scene_count, double scene_noise
   for (int trial = 0; trial < trials; ++trial) {
     int wrong = 0;
     const std::vector<SceneMatch> scene =
-        syntheticScene(head.truth, scene_count, scene_noise_px, kWrongShare, 50 + trial, &wrong);
+        generateSyntheticSceneMatches(head.truth, scene_count, scene_noise_px, kWrongShare, 50 + trial, &wrong);
     const WindowResult w = solveWindow(head, trial, scene_count ? &scene : nullptr);
     if (scene_count) {
       // The wrong matches are dropped (at the matcher's noise nearly all: near the image's
@@ -232,7 +201,7 @@ TEST(SceneConstraints, SeparateRotationFromTranslationAndKeepTheCovarianceHonest
 
 TEST(SceneConstraints, TooFewMatchesAreNotUsed) {
   const Head head = driveHead();
-  const std::vector<SceneMatch> scene = syntheticScene(head.truth, BundleAdjustmentOptions().min_scene_matches - 1,
+  const std::vector<SceneMatch> scene = generateSyntheticSceneMatches(head.truth, BundleAdjustmentOptions().min_scene_matches - 1,
                                                        kSceneNoisePx, 0.0, 9);
   const WindowResult with = solveWindow(head, 0, &scene), without = solveWindow(head, 0, nullptr);
   EXPECT_EQ(with.used, 0);

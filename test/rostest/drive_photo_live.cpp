@@ -30,6 +30,7 @@
 #include "embedded_calibration_stereo/core/calibration/stereo_accuracy.h"
 #include "embedded_calibration_stereo/ros/calibration_session.h"
 #include "embedded_calibration_stereo/ros/conversions.h"
+#include "embedded_calibration_stereo/test_support/corner_score.h"
 
 using embedded_calibration_stereo::CalibrationMode;
 using embedded_calibration_stereo::CalibrationStatus;
@@ -69,6 +70,8 @@ struct Fixture {
   Collector<CameraInfo> truth_right{nh, "ground_truth/right/camera_info", 1000};
   Collector<CalibrationStatus> status{nh, "calibration/status"};
   Collector<StereoPatternObservation> windows{nh, "calibration/window_observations", 1000};
+  // The simulator's true corners of every frame: each window observation against its last frame's.
+  Collector<StereoPatternObservation> truth_corners{nh, "ground_truth/observations", 1000};
   Collector<diagnostic_msgs::DiagnosticArray> diagnostics{nh, "/diagnostics", 1000};
 };
 
@@ -285,6 +288,18 @@ TEST(DrivePhotoLive, ZoomThermalAndKnockAreRecalibratedAndNoCommitIsWorse) {
   }
   const auto windows = f.windows.snapshot();
   std::printf("window observations: %zu for %d bursts of >= 3 settled light-on frames\n", windows.size(), bursts);
+  const auto truths = f.truth_corners.snapshot();
+  for (const auto& w : windows)
+    for (const auto& t : truths)
+      if (t->header.stamp == w->header.stamp) {
+        const ecs::StereoObservation tracked = embedded_calibration_stereo::fromMsg(*w),
+                                     truth = embedded_calibration_stereo::fromMsg(*t);
+        ecs::CornerScore left, right;
+        left.add(tracked.left, truth.left);
+        right.add(tracked.right, truth.right);
+        std::printf("  window at %.3f s against the truth: left %s, right %s; %zu scene correspondences\n",
+                    w->header.stamp.toSec(), left.str().c_str(), right.str().c_str(), w->scene.size());
+      }
   std::set<std::string> lines;  // the tracker's word on each burst (diagnostics, once a second)
   for (const auto& array : f.diagnostics.snapshot())
     for (const auto& status : array->status)

@@ -16,6 +16,7 @@
 
 #include "embedded_calibration_stereo/CalibrationStatus.h"
 #include "embedded_calibration_stereo/core/calibration/bundle_adjuster.h"
+#include "embedded_calibration_stereo/core/calibration/calibration_filter.h"
 #include "embedded_calibration_stereo/core/geometry/calibration_device.h"
 #include "embedded_calibration_stereo/core/geometry/observation.h"
 #include "embedded_calibration_stereo/core/calibration/quality_gate.h"
@@ -60,6 +61,10 @@ struct CalibratorParams {
   ecs::BundleAdjustmentOptions adjustment;
   ecs::BundleAdjustmentConfig terms;  // which distortion terms are estimated (k1 k2 by default)
   ecs::GateOptions gate;
+  // Each window solved again with what the earlier ones taught as the prior of the parameter
+  // groups it does not contradict (calibration_filter.h).
+  bool prior_from_earlier_windows = true;
+  ecs::CalibrationFilterOptions filter;
 };
 
 // Reads the private parameters; throws ecs::ConfigError naming a bad one.
@@ -142,6 +147,8 @@ class CalibrationSession {
   void broadcastTransform(const ecs::StereoRig& rig);
 
   const ecs::CalibrationDevice& device() const { return device_; }
+  // What the last solve took from earlier windows, in words ("" when nothing): for the log.
+  const std::string& priorNote() const { return prior_note_; }
   const std::vector<ecs::VirtualBoard>& boards() const { return boards_; }
 
  private:
@@ -160,6 +167,12 @@ class CalibrationSession {
   std::vector<ecs::VirtualBoard> boards_;
   ecs::BundleAdjuster adjuster_;
   ecs::QualityGate gate_;
+  // What earlier windows taught, valid while the calibration in force is the one it was
+  // learned under (filter_in_force_: left, right; another one, a rollback or a calibration set
+  // from outside, resets it). Touched by solve() and commitAgain() only: the worker thread.
+  ecs::CalibrationFilter filter_;
+  std::optional<std::pair<sensor_msgs::CameraInfo, sensor_msgs::CameraInfo>> filter_in_force_;
+  std::string prior_note_;
   std::mutex tf_mutex_;  // guards tf_broadcaster_
   tf2_ros::StaticTransformBroadcaster tf_broadcaster_;
 };

@@ -20,6 +20,7 @@
 #include "embedded_calibration_stereo/core/calibration/epipolar_error.h"
 #include "embedded_calibration_stereo/core/calibration/observation_validator.h"
 #include "embedded_calibration_stereo/core/calibration/reprojection_cost.h"
+#include "embedded_calibration_stereo/core/calibration/rig_prior_cost.h"
 #include "embedded_calibration_stereo/core/calibration/scene_epipolar_cost.h"
 
 namespace ecs {
@@ -41,6 +42,8 @@ std::string BundleAdjustmentOptions::Check() const {
     return "max_scene_residual_sigmas, scene_loss_sigmas and min_scene_sigma_px must be > 0";
   return "";
 }
+
+int RigPrior::activeCount() const { return static_cast<int>(std::count(active.begin(), active.end(), true)); }
 
 RigParameters rigParameters(const StereoRig& rig) {
   RigParameters p;
@@ -175,12 +178,12 @@ class AdjustmentRun {
   AdjustmentRun& operator=(const AdjustmentRun&) = delete;
 
   BundleAdjustmentSummary run() {
-    if (!validateInputs() || !prepareScene() || !initializeCameras() || !buildParameterBlocks()) return out_;
+    if (!validateInputs() || !prepareWeights() || !initializeCameras() || !buildParameterBlocks()) return out_;
     addResiduals();
     holdBlocksAndSetManifolds();
     if (!runSolver()) return out_;
     residualStatistics();
-    if (reweightScene()) {
+    if (reweight()) {
       if (!runSolver()) return out_;
       residualStatistics();
     }
@@ -260,19 +263,27 @@ class AdjustmentRun {
     return true;
   }
 
-  // Scene constraints (1b): solved without them first; at that solution, the matches' robust
-  // spread about their epipolar lines, the wrong matches dropped, and their weight against the
-  // corners (both spreads). Too few matches: boards only.
-  bool prepareScene() {
+  // Scene constraints and rig prior (1b): their weights against the corners need the corners'
+  // residual variance, so the boards are solved alone first. At that solution, the scene
+  // matches' robust spread about their epipolar lines, the wrong matches dropped, and their
+  // weight (both spreads). Too few matches: boards only.
+  bool prepareWeights() {
     std::vector<SceneMatch> all;
     if (options_.use_scene_matches)
       for (const StereoObservation& f : *input_.frames) all.insert(all.end(), f.scene.begin(), f.scene.end());
-    if (static_cast<int>(all.size()) < options_.min_scene_matches) return true;
+    const bool scene = static_cast<int>(all.size()) >= options_.min_scene_matches;
+    const bool prior = input_.rig_prior && input_.rig_prior->activeCount() > 0;
+    if (!scene && !prior) return true;
     BundleAdjustmentOptions boards_options = options_;
     boards_options.compute_covariance = false;
     boards_options.use_scene_matches = false;
-    const BundleAdjustmentSummary boards_only = BundleAdjuster(boards_options, config_).Solve(input_);
+    CalibrationInput boards_input = input_;
+    boards_input.rig_prior.reset();
+    const BundleAdjustmentSummary boards_only = BundleAdjuster(boards_options, config_).Solve(boards_input);
     if (!boards_only.success) return fail(boards_only.message);
+    const double corner_sigma = std::max(boards_only.residual_sigma_px, 1e-4);
+    prior_weight_ = corner_sigma;
+    if (!scene) return true;
     const Intrinsics left = toBlock(boards_only.rig.left), right = toBlock(boards_only.rig.right);
     const std::array<double, kExtrinsicsSize> extrinsics = toBlock(boards_only.rig.right_from_left);
     scene_focal_px_ = boards_only.rig.right.fy;
@@ -291,7 +302,6 @@ class AdjustmentRun {
       scene_.clear();
       return true;
     }
-    const double corner_sigma = std::max(boards_only.residual_sigma_px, 1e-4);
     scene_weight_ = corner_sigma / sigma;
     scene_loss_ = std::make_unique<ceres::CauchyLoss>(options_.scene_loss_sigmas * corner_sigma);
     return true;
@@ -440,9 +450,38 @@ class AdjustmentRun {
           SceneEpipolarCost::Create(m, scene_focal_px_, &scene_weight_), scene_loss_.get(),
           intrinsics_[0].data(), intrinsics_[1].data(), extrinsics_.data()));
     out_.scene_matches_used = static_cast<int>(scene_.size());
+    addRigPrior();
     out_.frames_used = valid_.frames_used;
     out_.boards_left = static_cast<int>(boards_seen[0].size());
     out_.boards_right = static_cast<int>(boards_seen[1].size());
+  }
+
+  // The rig prior over the parameters it has that this solve estimates (its marginal over them).
+  void addRigPrior() {
+    if (!input_.rig_prior || !problem_.HasParameterBlock(intrinsics_[0].data()) ||
+        !problem_.HasParameterBlock(intrinsics_[1].data()) || !problem_.HasParameterBlock(extrinsics_.data()))
+      return;
+    const RigPrior& prior = *input_.rig_prior;
+    const std::vector<int> held = heldIntrinsics(config_);
+    const bool constant[3] = {config_.constant_left_intrinsics, config_.constant_right_intrinsics,
+                              config_.constant_extrinsics};
+    std::vector<int> index;
+    for (int i = 0; i < kRigParameterCount; ++i) {
+      const int block = i < kIntrinsicsSize ? 0 : i < 2 * kIntrinsicsSize ? 1 : 2;
+      const bool held_term = block < 2 && std::count(held.begin(), held.end(), i % kIntrinsicsSize) > 0;
+      if (prior.active[i] && !constant[block] && !held_term) index.push_back(i);
+    }
+    if (index.empty()) return;
+    const int n = static_cast<int>(index.size());
+    Eigen::VectorXd mean(n);
+    Eigen::MatrixXd covariance(n, n);
+    for (int a = 0; a < n; ++a) {
+      mean[a] = prior.mean[index[a]];
+      for (int b = 0; b < n; ++b) covariance(a, b) = prior.covariance(index[a], index[b]);
+    }
+    prior_ids_.push_back(problem_.AddResidualBlock(new RigPriorCost(index, mean, covariance, &prior_weight_), nullptr,
+                                                   intrinsics_[0].data(), intrinsics_[1].data(), extrinsics_.data()));
+    out_.prior_parameters = n;
   }
 
   // What the config holds (constant blocks, held distortion terms as a subset manifold), the
@@ -464,8 +503,11 @@ class AdjustmentRun {
       camera_blocks_.push_back(extrinsics_.data());
       if (config_.constant_extrinsics) problem_.SetParameterBlockConstant(extrinsics_.data());
     }
-    if (device_mode_)
-      prior_ids_ = device_blocks_->configure(&problem_, priors_, config_.constant_board_poses);
+    if (device_mode_) {
+      const std::vector<ceres::ResidualBlockId> device_priors =
+          device_blocks_->configure(&problem_, priors_, config_.constant_board_poses);
+      prior_ids_.insert(prior_ids_.end(), device_priors.begin(), device_priors.end());
+    }
     for (BoardPose& pose : pose_blocks_) {
       if (!problem_.HasParameterBlock(pose.data())) continue;
       problem_.SetManifold(
@@ -567,7 +609,7 @@ class AdjustmentRun {
       if (!problem_.IsParameterBlockConstant(b))
         free_parameters_ += problem_.ParameterBlockTangentSize(b);
     dof_ = 2 * out_.corners_used - free_parameters_;
-    double prior_cost = 0.0;  // the device prior is no observation: not in the residual variance
+    double prior_cost = 0.0;  // the priors are no observations: not in the residual variance
     for (ceres::ResidualBlockId id : prior_ids_) {
       double cost = 0.0;
       problem_.EvaluateResidualBlock(id, false, &cost, nullptr, nullptr);
@@ -604,14 +646,19 @@ class AdjustmentRun {
     }
   }
 
-  // The scene's weight from the joint solution's spreads (6b), once: true when it moved by more
-  // than a tenth, so that the solve is worth repeating.
-  bool reweightScene() {
-    if (scene_ids_.empty() || scene_reweighted_) return false;
-    scene_reweighted_ = true;
-    const double weight = std::sqrt(std::max(sigma2_, 1e-8)) / out_.scene_sigma_px;
-    const bool moved = std::abs(weight / scene_weight_ - 1.0) > 0.1;
-    scene_weight_ = weight;
+  // The scene's and the rig prior's weights from the joint solution's spreads (6b), once: true
+  // when one moved by more than a tenth, so that the solve is worth repeating.
+  bool reweight() {
+    if ((scene_ids_.empty() && out_.prior_parameters == 0) || reweighted_) return false;
+    reweighted_ = true;
+    const double corner_sigma = std::sqrt(std::max(sigma2_, 1e-8));
+    bool moved = std::abs(corner_sigma / prior_weight_ - 1.0) > 0.1;
+    prior_weight_ = corner_sigma;
+    if (!scene_ids_.empty()) {
+      const double weight = corner_sigma / out_.scene_sigma_px;
+      moved |= std::abs(weight / scene_weight_ - 1.0) > 0.1;
+      scene_weight_ = weight;
+    }
     return moved;
   }
 
@@ -685,14 +732,15 @@ class AdjustmentRun {
 
   // validateInputs
   BoardPoseMode mode_ = BoardPoseMode::kAuto;
-  // prepareScene: the matches used, their weight against the corners (read by their costs at
+  // prepareWeights: the matches used, their weight against the corners (read by their costs at
   // every evaluation), the focal length that turns their distances into pixels, their loss.
   std::vector<SceneMatch> scene_;
   double scene_weight_ = 1.0;
   double scene_focal_px_ = 1.0;
   std::unique_ptr<ceres::LossFunction> scene_loss_;
   std::vector<ceres::ResidualBlockId> scene_ids_;
-  bool scene_reweighted_ = false;
+  double prior_weight_ = 1.0;  // the rig prior's (the corners' residual sigma)
+  bool reweighted_ = false;
   bool device_mode_ = false;
   bool shared_ = true;  // one pose per virtual board for all frames (not kPerFrame)
   std::vector<VirtualBoard> device_layout_;

@@ -174,4 +174,30 @@ StereoRig driftedRig(const StereoRig& truth, double focal_scale,
   return rig;
 }
 
+std::vector<SceneMatch> generateSyntheticSceneMatches(const StereoRig& rig, int count, double noise_px,
+                                                      double wrong, uint64_t seed, int* wrong_count) {
+  if (wrong_count) *wrong_count = 0;
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> uniform(0.0, 1.0);
+  std::normal_distribution<double> noise(0.0, noise_px);
+  std::vector<SceneMatch> matches;
+  while (static_cast<int>(matches.size()) < count) {
+    const Eigen::Vector2d left(uniform(rng) * rig.left.width, uniform(rng) * rig.left.height);
+    const double z = 1.0 / (1.0 / 22.0 + uniform(rng) * (1.0 / 1.5 - 1.0 / 22.0));
+    Eigen::Vector2d right;
+    const Eigen::Vector3d p = z * rig.left.pixelToNormalized(left).homogeneous();
+    if (!rig.right.project(rig.right_from_left * p, &right) || !rig.right.inImage(right)) continue;
+    const Eigen::Vector2d l = left + Eigen::Vector2d(noise(rng), noise(rng));
+    Eigen::Vector2d r = right + Eigen::Vector2d(noise(rng), noise(rng));
+    if (uniform(rng) < wrong) {
+      const double across = (1.0 + 2.0 * uniform(rng)) * (uniform(rng) < 0.5 ? -1.0 : 1.0);
+      r += Eigen::Vector2d(20.0 * uniform(rng) - 10.0, across);
+      if (wrong_count) ++*wrong_count;
+    }
+    matches.push_back({static_cast<float>(l.x()), static_cast<float>(l.y()), static_cast<float>(r.x()),
+                       static_cast<float>(r.y())});
+  }
+  return matches;
+}
+
 }  // namespace ecs

@@ -142,6 +142,30 @@ struct BundleAdjustmentConfig {
   std::string Check() const;
 };
 
+// The parameter vector of a rig in the bundle adjuster's order, that of
+// BundleAdjustmentSummary::rig_covariance (its camera and extrinsics blocks): left fx, fy, cx,
+// cy, k1, k2, p1, p2, k3; the same of the right camera; right_from_left rotation vector (rad)
+// then translation (m).
+constexpr int kRigParameterCount = 24;
+using RigParameters = Eigen::Matrix<double, kRigParameterCount, 1>;
+using RigCovariance = Eigen::Matrix<double, kRigParameterCount, kRigParameterCount>;
+RigParameters rigParameters(const StereoRig& rig);
+// The rig of a parameter vector; image sizes (and skew) come from `like`.
+StereoRig rigFromParameters(const RigParameters& parameters, const StereoRig& like);
+
+// A Gaussian prior on some of the rig's parameters (rigParameters() order): what earlier
+// windows taught about the parameters this one is not known to have changed
+// (calibration_filter.h). The solve adds it as a residual (its cost is not in the residual
+// variance), weighed so that the covariance counts it at its own covariance; parameters the
+// solve holds are left out of it.
+struct RigPrior {
+  RigParameters mean = RigParameters::Zero();
+  // Of the active parameters (the marginal over them); the other rows and columns are ignored.
+  RigCovariance covariance = RigCovariance::Zero();
+  std::array<bool, kRigParameterCount> active{};
+  int activeCount() const;
+};
+
 struct CalibrationInput {
   const std::vector<StereoObservation>* frames = nullptr;
   // Layout of the virtual boards (CalibrationDevice::virtualBoards()): ids, cols, rows, square,
@@ -153,18 +177,9 @@ struct CalibrationInput {
   const CalibrationDevice* device = nullptr;
   int image_width = 0, image_height = 0;  // must match the cameras of the calibration in force
   std::optional<StereoRig> in_force;
+  // Optional prior on the rig's parameters (see RigPrior).
+  std::optional<RigPrior> rig_prior;
 };
-
-// The parameter vector of a rig in the bundle adjuster's order, that of
-// BundleAdjustmentSummary::rig_covariance (its camera and extrinsics blocks): left fx, fy, cx, cy, k1, k2, p1, p2, k3; the same
-// of the right camera; right_from_left rotation vector (rad) then translation (m).
-constexpr int kRigParameterCount = 24;
-using RigParameters = Eigen::Matrix<double, kRigParameterCount, 1>;
-using RigCovariance = Eigen::Matrix<double, kRigParameterCount, kRigParameterCount>;
-RigParameters rigParameters(const StereoRig& rig);
-// The rig of a parameter vector; image sizes (and skew) come from `like`.
-StereoRig rigFromParameters(const RigParameters& parameters, const StereoRig& like);
-
 
 // One standard deviation per reported parameter; zero for parameters held constant.
 struct CameraStddev {
@@ -211,6 +226,7 @@ struct BundleAdjustmentSummary {
   // used ones lie beyond 3 spreads.
   int scene_matches_used = 0;
   int scene_matches_dropped = 0;
+  int prior_parameters = 0;  // parameters the rig prior informed (estimated and active)
   double scene_sigma_px = 0.0;
   int scene_outliers = 0;
 };

@@ -64,6 +64,15 @@ StereoRig driftedRig(const StereoRig& truth, double focal_scale,
 CalibrationDevice perturbDevice(const CalibrationDevice& device, double position_m,
                                 double angle_deg, uint64_t seed);
 
+// Scene correspondences of a corridor-like scene (StereoObservation::scene): `count` points
+// spread over the left image at inverse depths uniform between 1/22 m and 1/1.5 m, seen by both
+// cameras of `rig`, noisy by `noise_px` per coordinate; a share `wrong` of them are wrong
+// matches (repeated texture): displaced by up to 10 px along the rows and by 1-3 px across them
+// (a match wrong only along its epipolar line is a wrong depth, which an epipolar constraint
+// neither sees nor minds). *wrong_count (optional): how many. Seeded.
+std::vector<SceneMatch> generateSyntheticSceneMatches(const StereoRig& rig, int count, double noise_px,
+                                                      double wrong, uint64_t seed, int* wrong_count = nullptr);
+
 // Errors of an estimated rig against the truth, per camera (0 left, 1 right) where it applies.
 struct RigErrors {
   double fx_rel[2], fy_rel[2];  // |estimate - truth| / truth

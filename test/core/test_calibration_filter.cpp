@@ -1,0 +1,188 @@
+// Carrying what earlier windows taught into the next window's solve (calibration_filter.h, the
+// bundle adjuster's RigPrior), on the drive_photo head (its device, one window observation at
+// the window tracker's corner noise and the scene's correspondences, both synthetic with known
+// truth):
+//  - the innovation test's limits are the chi-square quantiles of the tables;
+//  - a zoom, a knock and a 0.05 deg turn about the vertical axis (the weakest direction) are
+//    each recognised as the change of the groups they move, and other groups are rarely taken
+//    as changed (the test's level, 5 %);
+//  - after a knock, the window solved with the prior of the groups that did not change (learned
+//    from three windows before it) is closer to the truth than the window alone, and its
+//    covariance still predicts its errors (20 windows, against the truth in a depth user's
+//    terms, stereo_accuracy.h).
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdio>
+#include <set>
+#include <string>
+#include <vector>
+
+#include "embedded_calibration_stereo/core/calibration/bundle_adjuster.h"
+#include "embedded_calibration_stereo/core/calibration/calibration_filter.h"
+#include "embedded_calibration_stereo/core/calibration/stereo_accuracy.h"
+#include "embedded_calibration_stereo/core/geometry/config_io.h"
+#include "embedded_calibration_stereo/test_support/synthetic_observations.h"
+
+namespace ecs {
+namespace {
+
+constexpr double kWindowCornerNoisePx = 0.023 / M_SQRT2;  // test_window_tracker, per coordinate
+constexpr double kSceneNoisePx = 0.06;                    // test_scene_constraints
+
+struct Head {
+  StereoRig truth;
+  CalibrationDevice device;
+};
+
+Head driveHead() {
+  cv::FileStorage fs = openYaml(ECS_SOURCE_DIR "/config/drive_photo.yaml");
+  return {loadStereoRig(fs["rig"], "rig"), loadDevice(fs["device"], "device")};
+}
+
+// One window of `truth` solved as the calibrator does (the nominal device off by manufacturing
+// tolerances, p1 and p2 estimated), with `prior` if given.
+BundleAdjustmentSummary solveWindow(const Head& head, const StereoRig& truth, int seed,
+                                    const std::optional<RigPrior>& prior = std::nullopt) {
+  SyntheticObservationOptions o;
+  o.frames = 1;
+  o.noise_sigma_px = kWindowCornerNoisePx;
+  o.seed = 3000 + seed;
+  std::vector<StereoObservation> frames = generateSyntheticObservations(truth, head.device.virtualBoards(), o);
+  frames[0].scene = generateSyntheticSceneMatches(truth, 600, kSceneNoisePx, 0.0, 4000 + seed);
+  const CalibrationDevice nominal = perturbDevice(head.device, 0.001, 0.5, 1800);
+  CalibrationInput input;
+  input.frames = &frames;
+  input.device = &nominal;
+  input.image_width = truth.left.width;
+  input.image_height = truth.left.height;
+  input.in_force = head.truth;
+  input.rig_prior = prior;
+  BundleAdjustmentConfig terms;
+  terms.estimate_tangential = true;
+  const BundleAdjustmentSummary r = BundleAdjuster({}, terms).Solve(input);
+  EXPECT_TRUE(r.success && r.covariance_ok) << r.message;
+  return r;
+}
+
+// A filter whose state has learned from `windows` windows of the truth (the first alone, each
+// next one with the prior the filter gives it), as the calibrator's does while nothing changes.
+CalibrationFilter learnedFilter(const Head& head, int windows, int seed, const CalibrationFilterOptions& options) {
+  CalibrationFilter filter(options);
+  for (int w = 0; w < windows; ++w) {
+    const BundleAdjustmentSummary alone = solveWindow(head, head.truth, seed + 100 * w);
+    const std::optional<RigPrior> prior = filter.priorFor(alone, 5.0 * w);
+    const BundleAdjustmentSummary solved = prior ? solveWindow(head, head.truth, seed + 100 * w, prior) : alone;
+    filter.setState(solved.rig, solved.rig_covariance, 5.0 * w);
+  }
+  return filter;
+}
+
+StereoRig knocked(const StereoRig& truth) {
+  StereoRig rig = truth;
+  Eigen::Isometry3d knock = Eigen::Isometry3d::Identity();
+  knock.linear() = Eigen::AngleAxisd(0.04 * M_PI / 180.0, Eigen::Vector3d(0.6, -0.45, 0.66).normalized())
+                       .toRotationMatrix();
+  knock.translation() = Eigen::Vector3d(0.0008, 0.0003, -0.0005);
+  rig.right_from_left = knock * rig.right_from_left;
+  return rig;
+}
+
+// The synthetic corners' noise is what the solves' covariances say.
+CalibrationFilterOptions exactNoise() {
+  CalibrationFilterOptions o;
+  o.covariance_scale = 1.0;
+  return o;
+}
+
+TEST(CalibrationFilter, ChiSquareQuantilesAreTheTables) {
+  // Upper 0.1 % and 5 % points (any statistics table).
+  EXPECT_NEAR(chiSquareQuantile(1e-3, 1), 10.828, 1e-3);
+  EXPECT_NEAR(chiSquareQuantile(1e-3, 2), 13.816, 1e-3);
+  EXPECT_NEAR(chiSquareQuantile(1e-3, 3), 16.266, 1e-3);
+  EXPECT_NEAR(chiSquareQuantile(1e-3, 4), 18.467, 1e-3);
+  EXPECT_NEAR(chiSquareQuantile(1e-3, 5), 20.515, 1e-3);
+  EXPECT_NEAR(chiSquareQuantile(0.05, 2), 5.991, 1e-3);
+  EXPECT_NEAR(chiSquareQuantile(0.05, 3), 7.815, 1e-3);
+}
+
+TEST(CalibrationFilter, ChangesAreTheGroupsTheyMove) {
+  const Head head = driveHead();
+  struct Case {
+    const char* name;
+    StereoRig truth;
+    std::set<std::string> expected;
+  };
+  StereoRig zoomed = head.truth;
+  zoomed.left = zoomed.left.withFocalScale(1.05);
+  zoomed.right = zoomed.right.withFocalScale(1.05);
+  const std::vector<Case> cases = {
+      {"nothing", head.truth, {}},
+      {"5 % zoom", zoomed, {"left focal length", "right focal length"}},
+      {"knock", knocked(head.truth), {"stereo rotation", "stereo translation"}},
+      {"0.05 deg turn", driftedRig(head.truth, 1.0, Eigen::Vector3d(0.0, 0.05, 0.0)), {"stereo rotation"}},
+  };
+  const int seeds = 5;
+  int unexpected = 0, tests = 0;
+  for (int seed = 0; seed < seeds; ++seed) {
+    const CalibrationFilter filter = learnedFilter(head, 3, 10 * seed, exactNoise());
+    for (const Case& c : cases) {
+      const BundleAdjustmentSummary window = solveWindow(head, c.truth, 10 * seed + 1);
+      std::vector<std::string> changed;
+      const std::optional<RigPrior> prior = filter.priorFor(window, 15.0, &changed);
+      const std::set<std::string> flagged(changed.begin(), changed.end());
+      for (const std::string& g : c.expected) EXPECT_EQ(flagged.count(g), 1u) << c.name << ", seed " << seed << ": " << g;
+      for (const std::string& g : flagged) unexpected += c.expected.count(g) == 0;
+      tests += static_cast<int>(calibrationGroupNames().size() - c.expected.size());
+      ASSERT_TRUE(prior.has_value()) << c.name;
+      // Every estimated parameter of the unflagged groups has a prior (k3 is held).
+      int expected_active = 0;
+      for (size_t g = 0; g < calibrationGroupNames().size(); ++g) {
+        const std::string& name = calibrationGroupNames()[g];
+        if (flagged.count(name)) continue;
+        expected_active += name.find("focal") != std::string::npos || name.find("principal") != std::string::npos ? 2
+                           : name.find("distortion") != std::string::npos                                          ? 4
+                                                                                                                    : 3;
+      }
+      EXPECT_EQ(prior->activeCount(), expected_active) << c.name;
+    }
+  }
+  std::printf("[ figures  ] %d of %d unchanged groups taken as changed\n", unexpected, tests);
+  // Binomial(tests, 0.05): mean 5 % of them; 12 % is beyond 3 of its standard deviations.
+  EXPECT_LE(unexpected, 0.12 * tests);
+}
+
+TEST(CalibrationFilter, ThePriorOfTheUnchangedGroupsBringsAKnockedWindowCloserAsPredicted) {
+  const Head head = driveHead();
+  const StereoRig after = knocked(head.truth);
+  double alone_m = 0, alone_b = 0, fused_m = 0, fused_b = 0, fused_pm = 0, fused_pb = 0;
+  const int trials = 20;
+  for (int t = 0; t < trials; ++t) {
+    const CalibrationFilter filter = learnedFilter(head, 3, 1000 + 10 * t, exactNoise());
+    const BundleAdjustmentSummary alone = solveWindow(head, after, 1001 + 10 * t);
+    const std::optional<RigPrior> prior = filter.priorFor(alone, 15.0);
+    ASSERT_TRUE(prior.has_value());
+    const BundleAdjustmentSummary fused = solveWindow(head, after, 1001 + 10 * t, prior);
+    EXPECT_EQ(fused.prior_parameters, prior->activeCount());
+    const StereoAccuracy a = evaluateStereoAccuracy(alone.rig, after), f = evaluateStereoAccuracy(fused.rig, after);
+    const StereoAccuracy p = predictStereoAccuracy(fused.rig, fused.rig_covariance);
+    alone_m += std::pow(a.misalignment_px.rms, 2) / trials;
+    alone_b += std::pow(a.disparity_bias_px.rms, 2) / trials;
+    fused_m += std::pow(f.misalignment_px.rms, 2) / trials;
+    fused_b += std::pow(f.disparity_bias_px.rms, 2) / trials;
+    fused_pm += std::pow(p.misalignment_px.rms, 2) / trials;
+    fused_pb += std::pow(p.disparity_bias_px.rms, 2) / trials;
+  }
+  for (double* v : {&alone_m, &alone_b, &fused_m, &fused_b, &fused_pm, &fused_pb}) *v = std::sqrt(*v);
+  std::printf("[ figures  ] after a knock, RMS over %d windows: alone misalignment %.4f px, bias %.4f px; with the "
+              "prior of the unchanged groups misalignment %.4f px (predicted %.4f), bias %.4f px (predicted %.4f)\n",
+              trials, alone_m, alone_b, fused_m, fused_pm, fused_b, fused_pb);
+  EXPECT_LT(fused_b, 0.85 * alone_b);
+  EXPECT_LT(fused_m, 1.1 * alone_m);
+  // 20 windows scatter an RMS by about a sixth.
+  EXPECT_LE(std::max(fused_b / fused_pb, fused_pb / fused_b), 1.5);
+  EXPECT_LE(std::max(fused_m / fused_pm, fused_pm / fused_m), 1.5);
+}
+
+}  // namespace
+}  // namespace ecs
