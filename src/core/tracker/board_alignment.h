@@ -20,7 +20,8 @@
 // image's, so the scene's texture cannot steer the steps) with Huber weights, so a scene
 // edge or a moving object counts as little as a few pixels of noise.
 //
-// Threading: a template is built once and then only read; alignBoard touches nothing shared.
+// Threading: a template is built once and then only read; alignBoard touches nothing shared (its
+// working memory is per thread).
 #include <opencv2/core.hpp>
 #include <vector>
 
@@ -37,6 +38,7 @@ struct AlignmentTemplate {
   std::vector<cv::Point2f> grad;     // dT / d(normalised taught coordinates)
   std::vector<int> cell;             // brightness cell of each sample (an eighth of a square on a side)
   int cells = 0;
+  std::vector<int> cell_start;       // the samples are in cell order: cell c's are [cell_start[c], cell_start[c + 1])
   std::vector<cv::Point2f> corners;  // corner id -> normalised taught coordinates
   std::vector<int> corner;           // the corner id nearest to each sample
   bool empty() const { return ref.empty(); }
