@@ -253,7 +253,13 @@ AlignmentResult alignBoard(const AlignmentTemplate& t, const cv::Mat& gray, cons
   const int n = static_cast<int>(t.ref.size());
   static thread_local AlignScratch scratch;
   AlignScratch& s = scratch;
-  s.level.assign(t.cells, 0.0);  // a_c (solved with the first step whatever they start at)
+  // a_c: last frame's when warm, so that the first pass's residuals (and with them its Huber
+  // weights and robust scale) are the fitted ones, not the image's grey levels; the step re-solves
+  // them in any case.
+  if (warm && static_cast<int>(start.levels.size()) == t.cells)
+    s.level = start.levels;
+  else
+    s.level.assign(t.cells, 0.0);
   s.jac.resize(n, kP);
   s.weight.resize(n);
   s.res.resize(n);
@@ -389,6 +395,7 @@ AlignmentResult alignBoard(const AlignmentTemplate& t, const cv::Mat& gray, cons
     }
   }
   result.huber = huber;
+  result.levels = s.level;
   result.a = cv::Matx33d(h[0], h[1], h[2], h[3], h[4], h[5], h[6], h[7], 1.0);
   result.contrast = b;
   // Each corner's own contrast: sum T r / sum T^2 over its samples, r the image minus its cell's

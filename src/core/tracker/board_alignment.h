@@ -55,6 +55,7 @@ struct AlignmentResult {
   cv::Matx33d a;            // normalised taught coordinates -> pixel
   double contrast = 0.0;    // b: half the bright-dark difference, grey levels
   double huber = 0.0;       // robust residual scale of the last pass, grey levels
+  std::vector<double> levels;  // a_c per cell, grey levels
   int samples = 0;
   int passes = 0;
   bool converged = false;  // the last step moved the board's corners by less than 0.03 px
@@ -64,8 +65,8 @@ struct AlignmentResult {
 };
 
 // gray: CV_8UC1 image. start.a: the starting map (within a pixel or so). With warm (the last
-// frame's result, the board not moved since) its contrast and residual scale are taken as they
-// are, which saves the photometric-only first pass. Gauss-Newton steps stop after max_steps or
+// frame's result, the board not moved since) its contrast, cell levels and residual scale are
+// taken as they are, which saves the photometric-only first pass. Gauss-Newton steps stop after max_steps or
 // when a step moved the board's corners by less than 0.03 px.
 AlignmentResult alignBoard(const AlignmentTemplate& t, const cv::Mat& gray, const AlignmentResult& start,
                            bool warm, int max_steps);

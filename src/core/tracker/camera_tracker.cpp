@@ -585,6 +585,7 @@ BoardCorners CameraTracker::trackBoardOnce(const cv::Mat& gray, int index, bool 
         start.a = state.align_a;
         start.contrast = state.align_contrast;
         start.huber = state.align_huber;
+        start.levels = state.align_levels;
       }
       bool started = warm || tracker::fitAlignmentStart(tmpl, ref_ids, ref_pos, &start.a);
       if (started && !warm && !from_refined) {
@@ -634,6 +635,7 @@ BoardCorners CameraTracker::trackBoardOnce(const cv::Mat& gray, int index, bool 
       state.align_a = fit.a;
       state.align_contrast = fit.contrast;
       state.align_huber = fit.huber;
+      state.align_levels = fit.levels;
     }
     stats.aligned = aligned;
     // Refined corners alone are not trusted on a raw image: the scene can pull one by more than
