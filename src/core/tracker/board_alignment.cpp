@@ -200,12 +200,14 @@ namespace {
 // board after another), so that a pass allocates nothing.
 struct AlignScratch {
   std::vector<double> level;  // a_c
-  // Per sample: the Jacobian (one column per parameter), the Huber weight, the residual and the
-  // image value of the last pass (NaN outside the image).
+  // Per sample: where it lands (px, py, and 1 / the homography's w), the Jacobian (one column per
+  // parameter), the Huber weight, the residual, its absolute value, and the image value of the
+  // last pass and whether it was inside the image (1 or 0).
+  std::vector<float> px, py, iw;
   Eigen::Matrix<float, Eigen::Dynamic, 9> jac;
   Eigen::VectorXf weight, res, weighted_res;
   Eigen::MatrixXf rows;  // sqrt(w) times the centred Jacobian
-  std::vector<float> vals, absres;
+  std::vector<float> absres, vals, inside;
   // Per cell: the weighted means of the Jacobian and of the residual (for the back-substitution).
   Eigen::Matrix<double, Eigen::Dynamic, 9> cell_j;
   std::vector<double> cell_r;
@@ -214,10 +216,11 @@ struct AlignScratch {
   std::vector<float> in_bin;
 };
 
-// The element a full std::nth_element would put at index n / 2, of n values >= 0. A
-// histogram finds the bin that holds it, a selection among that bin's values the value itself:
-// a selection over every sample used to be the solver's largest single cost.
-float upperMedian(const float* values, int n, AlignScratch* s) {
+// The element a full std::nth_element would put at index used / 2, of the `used` values >= 0
+// among n (the others are negative). A histogram finds the bin that holds it, a selection among
+// that bin's values the value itself: a selection over every sample used to be the solver's
+// largest single cost.
+float upperMedian(const float* values, int n, int used, AlignScratch* s) {
   constexpr int kBins = 1024;
   constexpr float kPerUnit = 16.0f;  // bins per grey level: the last one holds all from 63.9375 up
   s->histogram.assign(kBins, 0);
@@ -225,12 +228,13 @@ float upperMedian(const float* values, int n, AlignScratch* s) {
   const auto binOf = [](float v) {
     return v < (kBins - 1) / kPerUnit ? static_cast<int>(v * kPerUnit) : kBins - 1;
   };
-  for (int k = 0; k < n; ++k) ++s->histogram[binOf(values[k])];
-  int rank = n / 2, bin = 0;
+  for (int k = 0; k < n; ++k)
+    if (values[k] >= 0.0f || std::isnan(values[k])) ++s->histogram[binOf(values[k])];
+  int rank = used / 2, bin = 0;
   while (rank >= s->histogram[bin]) rank -= s->histogram[bin++];
   s->in_bin.clear();
   for (int k = 0; k < n; ++k)
-    if (binOf(values[k]) == bin) s->in_bin.push_back(values[k]);
+    if ((values[k] >= 0.0f || std::isnan(values[k])) && binOf(values[k]) == bin) s->in_bin.push_back(values[k]);
   std::nth_element(s->in_bin.begin(), s->in_bin.begin() + rank, s->in_bin.end());
   return s->in_bin[rank];
 }
@@ -263,7 +267,11 @@ AlignmentResult alignBoard(const AlignmentTemplate& t, const cv::Mat& gray, cons
   s.jac.resize(n, kP);
   s.weight.resize(n);
   s.res.resize(n);
+  s.px.resize(n);
+  s.py.resize(n);
+  s.iw.resize(n);
   s.vals.resize(n);
+  s.inside.resize(n);
   s.absres.resize(n);
   s.cell_j.resize(t.cells, kP);
   s.cell_r.resize(t.cells);
@@ -276,55 +284,74 @@ AlignmentResult alignBoard(const AlignmentTemplate& t, const cv::Mat& gray, cons
     // Pass 0 fits only the photometric terms (the start map is close): parameters first..8.
     const bool geometric = it > 0;
     const int first = geometric ? 0 : kP - 1;
-    // 1. Residual, weight and Jacobian of every sample (float: the solve below is in double,
-    // and single precision is far below the image noise here).
+    // 1. Residual, weight and Jacobian of every sample, in single precision (the solve below is
+    // in double; float is far below the image noise here), in three loops so that the two without
+    // gathers vectorise.
     const float h0 = static_cast<float>(h[0]), h1 = static_cast<float>(h[1]), h2 = static_cast<float>(h[2]);
     const float h3 = static_cast<float>(h[3]), h4 = static_cast<float>(h[4]), h5 = static_cast<float>(h[5]);
     const float h6 = static_cast<float>(h[6]), h7 = static_cast<float>(h[7]);
     const float bf = static_cast<float>(b), huber_f = static_cast<float>(huber);
+    // (The arrays are distinct, which GCC cannot prove for this many: ivdep lets it vectorise.)
+    const cv::Point2f *ref = t.ref.data(), *grad = t.grad.data();
+    const float* value = t.value.data();
+    const int* cell = t.cell.data();
+    float *px = s.px.data(), *py = s.py.data(), *iw = s.iw.data(), *vals = s.vals.data();
+    float *inside = s.inside.data(), *res = s.res.data(), *absres = s.absres.data(), *weight = s.weight.data();
+    float* jac = s.jac.data();  // column p (parameter p) at jac + p * n
+#pragma GCC ivdep
+    for (int k = 0; k < n; ++k) {
+      const float u = ref[k].x, v = ref[k].y;
+      iw[k] = 1.0f / (h6 * u + h7 * v + 1.0f);
+      px[k] = (h0 * u + h1 * v + h2) * iw[k];
+      py[k] = (h3 * u + h4 * v + h5) * iw[k];
+    }
+    // The image there (bilinear) and the sample's model level. Outside the image: no weight, so
+    // the sample adds nothing to any sum.
     int used = 0;
     for (int k = 0; k < n; ++k) {
-      const float u = t.ref[k].x, v = t.ref[k].y;
-      const float iw = 1.0f / (h6 * u + h7 * v + 1.0f);
-      const float px = (h0 * u + h1 * v + h2) * iw, py = (h3 * u + h4 * v + h5) * iw;
-      if (!(px >= 0.0f && py >= 0.0f && px < max_x && py < max_y)) {
-        // Outside the image: no weight, so it adds nothing to any sum.
-        s.vals[k] = std::numeric_limits<float>::quiet_NaN();
-        s.weight[k] = 0.0f;
-        s.res[k] = 0.0f;
-        for (int p = 0; p < kP; ++p) s.jac(k, p) = 0.0f;
-        continue;
+      float val = 0.0f;
+      inside[k] = 0.0f;
+      if (px[k] >= 0.0f && py[k] >= 0.0f && px[k] < max_x && py[k] < max_y) {
+        const int x0 = static_cast<int>(px[k]), y0 = static_cast<int>(py[k]);
+        const float fx = px[k] - x0, fy = py[k] - y0;
+        const uchar* r0 = image + y0 * stride + x0;
+        const uchar* r1 = r0 + stride;
+        val = (1 - fy) * ((1 - fx) * r0[0] + fx * r0[1]) + fy * ((1 - fx) * r1[0] + fx * r1[1]);
+        inside[k] = 1.0f;
+        ++used;
       }
-      const int x0 = static_cast<int>(px), y0 = static_cast<int>(py);
-      const float fx = px - x0, fy = py - y0;
-      const uchar* r0 = image + y0 * stride + x0;
-      const uchar* r1 = r0 + stride;
-      const float val = (1 - fy) * ((1 - fx) * r0[0] + fx * r0[1]) + fy * ((1 - fx) * r1[0] + fx * r1[1]);
-      const float tv = t.value[k];
-      const float r = val - (static_cast<float>(s.level[t.cell[k]]) + bf * tv);
-      s.vals[k] = val;
+      vals[k] = val;
+      res[k] = val - static_cast<float>(s.level[cell[k]]);
+    }
+#pragma GCC ivdep
+    for (int k = 0; k < n; ++k) {
+      const float r = res[k] - bf * value[k];
       const float ar = std::abs(r);
-      s.absres[used++] = ar;
-      s.weight[k] = ar <= huber_f ? 1.0f : huber_f / ar;
-      s.res[k] = r;
-      if (geometric) {
+      res[k] = r;
+      absres[k] = inside[k] > 0.0f ? ar : -1.0f;  // -1: left out of the robust scale
+      weight[k] = inside[k] * huber_f / std::max(ar, huber_f);
+      jac[8 * n + k] = -value[k];
+    }
+    if (geometric) {
+#pragma GCC ivdep
+      for (int k = 0; k < n; ++k) {
         // The gradient of the fitted pattern, not of the image: the scene's own texture then
         // enters only through the residual, weighted by the pattern's edges (a matched filter).
-        const float j00 = (h0 - px * h6) * iw, j01 = (h1 - px * h7) * iw;
-        const float j10 = (h3 - py * h6) * iw, j11 = (h4 - py * h7) * iw;
+        const float u = ref[k].x, v = ref[k].y, w = iw[k], x = px[k], y = py[k];
+        const float j00 = (h0 - x * h6) * w, j01 = (h1 - x * h7) * w;
+        const float j10 = (h3 - y * h6) * w, j11 = (h4 - y * h7) * w;
         const float bdet = bf / (j00 * j11 - j01 * j10);
-        const float tu = t.grad[k].x, tw = t.grad[k].y;
+        const float tu = grad[k].x, tw = grad[k].y;
         const float gx = bdet * (j11 * tu - j10 * tw), gy = bdet * (-j01 * tu + j00 * tw);
-        const float gp = -(gx * px + gy * py) * iw;
-        s.jac(k, 0) = gx * u * iw, s.jac(k, 1) = gx * v * iw, s.jac(k, 2) = gx * iw;
-        s.jac(k, 3) = gy * u * iw, s.jac(k, 4) = gy * v * iw, s.jac(k, 5) = gy * iw;
-        s.jac(k, 6) = gp * u, s.jac(k, 7) = gp * v;
+        const float gp = -(gx * x + gy * y) * w;
+        jac[k] = gx * u * w, jac[n + k] = gx * v * w, jac[2 * n + k] = gx * w;
+        jac[3 * n + k] = gy * u * w, jac[4 * n + k] = gy * v * w, jac[5 * n + k] = gy * w;
+        jac[6 * n + k] = gp * u, jac[7 * n + k] = gp * v;
       }
-      s.jac(k, 8) = -tv;
     }
     if (used < 50) return result;
     // Robust scale from this pass's residuals (normal: MAD * 1.4826), Huber at 1.345 sigma.
-    huber = std::max(1.0, 1.345 * 1.4826 * upperMedian(s.absres.data(), used, &s));
+    huber = std::max(1.0, 1.345 * 1.4826 * upperMedian(s.absres.data(), n, used, &s));
     // 2. Eliminate the cell levels (their Jacobian is -1). The Schur complement of a cell's level
     // is the weighted covariance of its samples: subtract each cell's weighted mean Jacobian
     // from its samples, then H = sum w j j^T and g = sum w j r over the centred rows (which also
@@ -402,7 +429,7 @@ AlignmentResult alignBoard(const AlignmentTemplate& t, const cv::Mat& gray, cons
   // level (the image as the last pass sampled it: one step from the result, too small to matter).
   std::vector<double> tr(t.corners.size(), 0.0), tt(t.corners.size(), 0.0);
   for (int k = 0; k < n; ++k) {
-    if (std::isnan(s.vals[k])) continue;
+    if (s.inside[k] == 0.0f) continue;
     const double tv = t.value[k];
     tr[t.corner[k]] += tv * (s.vals[k] - s.level[t.cell[k]]);
     tt[t.corner[k]] += tv * tv;
