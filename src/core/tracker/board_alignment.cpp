@@ -40,6 +40,11 @@ namespace {
 constexpr double kSmoothResidualPx = 0.1;
 // Side (px) of the alignment's brightness cells.
 constexpr double kCellPx = 3.5;
+// Gauss-Newton stops after a step that moved the board's corners by less than this (px): the
+// next step (re-weighting, the last of the non-linearity within the edge blur) would be a
+// fraction of it, below the frame-to-frame noise of the fit. In steady state one step from last
+// frame's alignment then usually suffices.
+constexpr double kConvergedPx = 0.05;
 
 std::vector<cv::Point2f> smoothOffsets(const BoardPrior& board) {
   const int n = board.cornerCount();
@@ -413,9 +418,7 @@ AlignmentResult alignBoard(const AlignmentTemplate& t, const cv::Mat& gray, cons
         const cv::Point2f c = t.corners[id];
         shift = std::max(shift, cv::norm(applyHomography(moved, c.x, c.y) - applyHomography(before, c.x, c.y)));
       }
-      // Near-linear within the edge blur: after a step this small the next one would be ~100
-      // times smaller.
-      if (shift < 0.03) {
+      if (shift < kConvergedPx) {
         result.converged = true;
         break;
       }

@@ -58,7 +58,7 @@ struct AlignmentResult {
   std::vector<double> levels;  // a_c per cell, grey levels
   int samples = 0;
   int passes = 0;
-  bool converged = false;  // the last step moved the board's corners by less than 0.03 px
+  bool converged = false;  // the last step moved the board's corners by less than 0.05 px
   // Per corner id: the pattern's contrast fitted on the samples nearest that corner alone, as a
   // fraction of `contrast` (what an occluder hides); NaN for corners without samples.
   std::vector<float> corner_contrast;
@@ -67,7 +67,7 @@ struct AlignmentResult {
 // gray: CV_8UC1 image. start.a: the starting map (within a pixel or so). With warm (the last
 // frame's result, the board not moved since) its contrast, cell levels and residual scale are
 // taken as they are, which saves the photometric-only first pass. Gauss-Newton steps stop after max_steps or
-// when a step moved the board's corners by less than 0.03 px.
+// when a step moved the board's corners by less than 0.05 px.
 AlignmentResult alignBoard(const AlignmentTemplate& t, const cv::Mat& gray, const AlignmentResult& start,
                            bool warm, int max_steps);
 
