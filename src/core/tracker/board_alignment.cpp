@@ -229,17 +229,18 @@ float upperMedian(const float* values, int n, int used, AlignScratch* s) {
   constexpr int kBins = 1024;
   constexpr float kPerUnit = 16.0f;  // bins per grey level: the last one holds all from 63.9375 up
   s->histogram.assign(kBins, 0);
-  // (NaN, from a diverged fit, goes to the last bin.)
+  // NaN (from a diverged fit) counts, in the last bin.
+  const auto counted = [](float v) { return !(v < 0.0f); };
   const auto binOf = [](float v) {
     return v < (kBins - 1) / kPerUnit ? static_cast<int>(v * kPerUnit) : kBins - 1;
   };
   for (int k = 0; k < n; ++k)
-    if (values[k] >= 0.0f || std::isnan(values[k])) ++s->histogram[binOf(values[k])];
+    if (counted(values[k])) ++s->histogram[binOf(values[k])];
   int rank = used / 2, bin = 0;
   while (rank >= s->histogram[bin]) rank -= s->histogram[bin++];
   s->in_bin.clear();
   for (int k = 0; k < n; ++k)
-    if ((values[k] >= 0.0f || std::isnan(values[k])) && binOf(values[k]) == bin) s->in_bin.push_back(values[k]);
+    if (counted(values[k]) && binOf(values[k]) == bin) s->in_bin.push_back(values[k]);
   std::nth_element(s->in_bin.begin(), s->in_bin.begin() + rank, s->in_bin.end());
   return s->in_bin[rank];
 }
@@ -290,8 +291,8 @@ AlignmentResult alignBoard(const AlignmentTemplate& t, const cv::Mat& gray, cons
     const bool geometric = it > 0;
     const int first = geometric ? 0 : kP - 1;
     // 1. Residual, weight and Jacobian of every sample, in single precision (the solve below is
-    // in double; float is far below the image noise here), in three loops so that the two without
-    // gathers vectorise.
+    // in double; float is far below the image noise here), in loops that vectorise apart from the
+    // one that reads the image.
     const float h0 = static_cast<float>(h[0]), h1 = static_cast<float>(h[1]), h2 = static_cast<float>(h[2]);
     const float h3 = static_cast<float>(h[3]), h4 = static_cast<float>(h[4]), h5 = static_cast<float>(h[5]);
     const float h6 = static_cast<float>(h[6]), h7 = static_cast<float>(h[7]);
