@@ -4,7 +4,6 @@
 #include <Eigen/Dense>
 #include <algorithm>
 #include <cmath>
-#include <cstring>
 #include <cstdio>
 #include <cstdlib>
 #include <limits>
@@ -29,22 +28,6 @@ cv::Point2f offsetAt(const BoardPrior& board, double gx, double gy) {
 
 inline double phi(double d, double blur) { return 0.5 * (1.0 + std::erf(d / (blur * M_SQRT2))); }
 
-inline bool bilinear(const cv::Mat& img, float x, float y, float* out) {
-  const int x0 = static_cast<int>(std::floor(x)), y0 = static_cast<int>(std::floor(y));
-  if (x0 < 0 || y0 < 0 || x0 + 1 >= img.cols || y0 + 1 >= img.rows) return false;
-  const float fx = x - x0, fy = y - y0;
-  if (img.type() == CV_8UC1) {
-    const uchar* r0 = img.ptr<uchar>(y0) + x0;
-    const uchar* r1 = img.ptr<uchar>(y0 + 1) + x0;
-    *out = (1 - fy) * ((1 - fx) * r0[0] + fx * r0[1]) + fy * ((1 - fx) * r1[0] + fx * r1[1]);
-  } else {
-    const float* r0 = img.ptr<float>(y0) + x0;
-    const float* r1 = img.ptr<float>(y0 + 1) + x0;
-    *out = (1 - fy) * ((1 - fx) * r0[0] + fx * r0[1]) + fy * ((1 - fx) * r1[0] + fx * r1[1]);
-  }
-  return true;
-}
-
 }  // namespace
 
 namespace {
@@ -57,6 +40,11 @@ namespace {
 constexpr double kSmoothResidualPx = 0.1;
 // Side (px) of the alignment's brightness cells.
 constexpr double kCellPx = 3.5;
+// Gauss-Newton stops after a step that moved the board's corners by less than this (px): the
+// next step (re-weighting, the last of the non-linearity within the edge blur) would be a
+// fraction of it, below the frame-to-frame noise of the fit. In steady state one step from last
+// frame's alignment then usually suffices.
+constexpr double kConvergedPx = 0.05;
 
 std::vector<cv::Point2f> smoothOffsets(const BoardPrior& board) {
   const int n = board.cornerCount();
@@ -184,7 +172,7 @@ AlignmentTemplate buildAlignmentTemplate(const BoardPrior& taught_board, double 
   used.erase(std::unique(used.begin(), used.end()), used.end());
   for (int& c : t.cell) c = static_cast<int>(std::lower_bound(used.begin(), used.end(), c) - used.begin());
   t.cells = static_cast<int>(used.size());
-  // Samples in cell order: the solver's per-cell sums are then written in sequence (the cells
+  // Samples in cell order: the solver takes each cell's samples as one range (the cells
   // are small and numbered along the grid, so the image is still read locally).
   std::vector<size_t> order(t.ref.size());
   for (size_t k = 0; k < order.size(); ++k) order[k] = k;
@@ -198,6 +186,9 @@ AlignmentTemplate buildAlignmentTemplate(const BoardPrior& taught_board, double 
     sorted.corner[k] = t.corner[order[k]];
   }
   t = std::move(sorted);
+  t.cell_start.assign(t.cells + 1, 0);
+  for (int c : t.cell) ++t.cell_start[c + 1];
+  for (int c = 0; c < t.cells; ++c) t.cell_start[c + 1] += t.cell_start[c];
   return t;
 }
 
@@ -208,8 +199,57 @@ bool fitAlignmentStart(const AlignmentTemplate& t, const std::vector<int>& ids,
   return fitHomographyLeastSquares(from, pixels, a);
 }
 
+namespace {
+
+// Working memory of alignBoard, kept per thread between calls (each tracker thread aligns one
+// board after another), so that a pass allocates nothing.
+struct AlignScratch {
+  std::vector<double> level;  // a_c
+  // Per sample: where it lands (px, py, and 1 / the homography's w), the Jacobian (one column per
+  // parameter), the Huber weight, the residual, its absolute value, and the image value of the
+  // last pass and whether it was inside the image (1 or 0).
+  std::vector<float> px, py, iw;
+  Eigen::Matrix<float, Eigen::Dynamic, 9> jac;
+  Eigen::VectorXf weight, res, weighted_res;
+  Eigen::MatrixXf rows;  // sqrt(w) times the centred Jacobian
+  std::vector<float> absres, vals, inside;
+  // Per cell: the weighted means of the Jacobian and of the residual (for the back-substitution).
+  Eigen::Matrix<double, Eigen::Dynamic, 9> cell_j;
+  std::vector<double> cell_r;
+  std::vector<char> cell_used;
+  std::vector<int> histogram;
+  std::vector<float> in_bin;
+};
+
+// The element a full std::nth_element would put at index used / 2, of the `used` values >= 0
+// among n (the others are negative). A histogram finds the bin that holds it, a selection among
+// that bin's values the value itself: a selection over every sample used to be the solver's
+// largest single cost.
+float upperMedian(const float* values, int n, int used, AlignScratch* s) {
+  constexpr int kBins = 1024;
+  constexpr float kPerUnit = 16.0f;  // bins per grey level: the last one holds all from 63.9375 up
+  s->histogram.assign(kBins, 0);
+  // NaN (from a diverged fit) counts, in the last bin.
+  const auto counted = [](float v) { return !(v < 0.0f); };
+  const auto binOf = [](float v) {
+    return v < (kBins - 1) / kPerUnit ? static_cast<int>(v * kPerUnit) : kBins - 1;
+  };
+  for (int k = 0; k < n; ++k)
+    if (counted(values[k])) ++s->histogram[binOf(values[k])];
+  int rank = used / 2, bin = 0;
+  while (rank >= s->histogram[bin]) rank -= s->histogram[bin++];
+  s->in_bin.clear();
+  for (int k = 0; k < n; ++k)
+    if (counted(values[k]) && binOf(values[k]) == bin) s->in_bin.push_back(values[k]);
+  std::nth_element(s->in_bin.begin(), s->in_bin.begin() + rank, s->in_bin.end());
+  return s->in_bin[rank];
+}
+
+}  // namespace
+
 AlignmentResult alignBoard(const AlignmentTemplate& t, const cv::Mat& gray, const AlignmentResult& start,
                            bool warm, int max_steps) {
+  CV_Assert(gray.type() == CV_8UC1);
   // Parameters: the 8 of the homography and the contrast b; each cell's own brightness a_c is
   // eliminated (Schur complement), which is cheap since a sample belongs to one cell.
   constexpr int kP = 9;
@@ -220,102 +260,153 @@ AlignmentResult alignBoard(const AlignmentTemplate& t, const cv::Mat& gray, cons
   double h[8] = {a_norm(0, 0), a_norm(0, 1), a_norm(0, 2), a_norm(1, 0),
                  a_norm(1, 1), a_norm(1, 2), a_norm(2, 0), a_norm(2, 1)};
   double b = warm ? start.contrast : 0.0;
-  std::vector<double> level(t.cells, 0.0);  // a_c (solved with the first step whatever they start at)
-  struct CellSums {
-    double w, wr, wj[kP];
-  };
-  std::vector<CellSums> sums(t.cells);
-  const size_t n = t.ref.size();
-  std::vector<float> absres;
-  absres.reserve(n);
-  Eigen::Matrix<double, Eigen::Dynamic, kP> rows;
-  Eigen::VectorXd rhs;
-  // The image at each sample in the last pass (NaN outside it).
-  std::vector<float> vals(n);
+  const int n = static_cast<int>(t.ref.size());
+  static thread_local AlignScratch scratch;
+  AlignScratch& s = scratch;
+  // a_c: last frame's when warm, so that the first pass's residuals (and with them its Huber
+  // weights and robust scale) are the fitted ones, not the image's grey levels; the step re-solves
+  // them in any case.
+  if (warm && static_cast<int>(start.levels.size()) == t.cells)
+    s.level = start.levels;
+  else
+    s.level.assign(t.cells, 0.0);
+  s.jac.resize(n, kP);
+  s.weight.resize(n);
+  s.res.resize(n);
+  s.px.resize(n);
+  s.py.resize(n);
+  s.iw.resize(n);
+  s.vals.resize(n);
+  s.inside.resize(n);
+  s.absres.resize(n);
+  s.cell_j.resize(t.cells, kP);
+  s.cell_r.resize(t.cells);
+  s.cell_used.resize(t.cells);
+  const float max_x = static_cast<float>(gray.cols - 1), max_y = static_cast<float>(gray.rows - 1);
+  const size_t stride = gray.step[0];
+  const uchar* image = gray.data;
   double huber = warm ? start.huber : 1e30;
   for (int it = warm ? 1 : 0; it <= max_steps; ++it) {
     // Pass 0 fits only the photometric terms (the start map is close): parameters first..8.
     const bool geometric = it > 0;
     const int first = geometric ? 0 : kP - 1;
-    // Weighted Jacobian rows (sqrt(w) j) and residuals, multiplied out below in one product.
-    rows.resize(static_cast<Eigen::Index>(n), kP);
-    rhs.resize(static_cast<Eigen::Index>(n));
-    std::memset(sums.data(), 0, sums.size() * sizeof(CellSums));
-    absres.clear();
-    std::fill(vals.begin(), vals.end(), std::numeric_limits<float>::quiet_NaN());
+    // 1. Residual, weight and Jacobian of every sample, in single precision (the solve below is
+    // in double; float is far below the image noise here), in loops that vectorise apart from the
+    // one that reads the image.
+    const float h0 = static_cast<float>(h[0]), h1 = static_cast<float>(h[1]), h2 = static_cast<float>(h[2]);
+    const float h3 = static_cast<float>(h[3]), h4 = static_cast<float>(h[4]), h5 = static_cast<float>(h[5]);
+    const float h6 = static_cast<float>(h[6]), h7 = static_cast<float>(h[7]);
+    const float bf = static_cast<float>(b), huber_f = static_cast<float>(huber);
+    // (The arrays are distinct, which GCC cannot prove for this many: ivdep lets it vectorise.)
+    const cv::Point2f *ref = t.ref.data(), *grad = t.grad.data();
+    const float* value = t.value.data();
+    const int* cell = t.cell.data();
+    float *px = s.px.data(), *py = s.py.data(), *iw = s.iw.data(), *vals = s.vals.data();
+    float *inside = s.inside.data(), *res = s.res.data(), *absres = s.absres.data(), *weight = s.weight.data();
+    float* jac = s.jac.data();  // column p (parameter p) at jac + p * n
+#pragma GCC ivdep
+    for (int k = 0; k < n; ++k) {
+      const float u = ref[k].x, v = ref[k].y;
+      iw[k] = 1.0f / (h6 * u + h7 * v + 1.0f);
+      px[k] = (h0 * u + h1 * v + h2) * iw[k];
+      py[k] = (h3 * u + h4 * v + h5) * iw[k];
+    }
+    // The image there (bilinear) and the sample's model level. Outside the image: no weight, so
+    // the sample adds nothing to any sum.
     int used = 0;
-    double j[kP] = {};
-    for (size_t k = 0; k < n; ++k) {
-      const double u = t.ref[k].x, v = t.ref[k].y;
-      const double iw = 1.0 / (h[6] * u + h[7] * v + 1.0);
-      const double px = (h[0] * u + h[1] * v + h[2]) * iw, py = (h[3] * u + h[4] * v + h[5]) * iw;
-      float val;
-      if (!bilinear(gray, static_cast<float>(px), static_cast<float>(py), &val)) continue;
-      const double tv = t.value[k];
-      const int c = t.cell[k];
-      const double r = val - (level[c] + b * tv);
+    for (int k = 0; k < n; ++k) {
+      float val = 0.0f;
+      inside[k] = 0.0f;
+      if (px[k] >= 0.0f && py[k] >= 0.0f && px[k] < max_x && py[k] < max_y) {
+        const int x0 = static_cast<int>(px[k]), y0 = static_cast<int>(py[k]);
+        const float fx = px[k] - x0, fy = py[k] - y0;
+        const uchar* r0 = image + y0 * stride + x0;
+        const uchar* r1 = r0 + stride;
+        val = (1 - fy) * ((1 - fx) * r0[0] + fx * r0[1]) + fy * ((1 - fx) * r1[0] + fx * r1[1]);
+        inside[k] = 1.0f;
+        ++used;
+      }
       vals[k] = val;
-      const double ar = std::abs(r);
-      absres.push_back(static_cast<float>(ar));
-      const double wr = ar <= huber ? 1.0 : huber / ar;
-      if (geometric) {
+      res[k] = val - static_cast<float>(s.level[cell[k]]);
+    }
+#pragma GCC ivdep
+    for (int k = 0; k < n; ++k) {
+      const float r = res[k] - bf * value[k];
+      const float ar = std::abs(r);
+      res[k] = r;
+      absres[k] = inside[k] > 0.0f ? ar : -1.0f;  // -1: left out of the robust scale
+      weight[k] = inside[k] * huber_f / std::max(ar, huber_f);
+      jac[8 * n + k] = -value[k];
+    }
+    if (geometric) {
+#pragma GCC ivdep
+      for (int k = 0; k < n; ++k) {
         // The gradient of the fitted pattern, not of the image: the scene's own texture then
         // enters only through the residual, weighted by the pattern's edges (a matched filter).
-        const double j00 = (h[0] - px * h[6]) * iw, j01 = (h[1] - px * h[7]) * iw;
-        const double j10 = (h[3] - py * h[6]) * iw, j11 = (h[4] - py * h[7]) * iw;
-        const double bdet = b / (j00 * j11 - j01 * j10);
-        const double tu = t.grad[k].x, tw = t.grad[k].y;
-        const double gx = bdet * (j11 * tu - j10 * tw), gy = bdet * (-j01 * tu + j00 * tw);
-        const double gp = -(gx * px + gy * py) * iw;
-        j[0] = gx * u * iw, j[1] = gx * v * iw, j[2] = gx * iw;
-        j[3] = gy * u * iw, j[4] = gy * v * iw, j[5] = gy * iw;
-        j[6] = gp * u, j[7] = gp * v;
+        const float u = ref[k].x, v = ref[k].y, w = iw[k], x = px[k], y = py[k];
+        const float j00 = (h0 - x * h6) * w, j01 = (h1 - x * h7) * w;
+        const float j10 = (h3 - y * h6) * w, j11 = (h4 - y * h7) * w;
+        const float bdet = bf / (j00 * j11 - j01 * j10);
+        const float tu = grad[k].x, tw = grad[k].y;
+        const float gx = bdet * (j11 * tu - j10 * tw), gy = bdet * (-j01 * tu + j00 * tw);
+        const float gp = -(gx * x + gy * y) * w;
+        jac[k] = gx * u * w, jac[n + k] = gx * v * w, jac[2 * n + k] = gx * w;
+        jac[3 * n + k] = gy * u * w, jac[4 * n + k] = gy * v * w, jac[5 * n + k] = gy * w;
+        jac[6 * n + k] = gp * u, jac[7 * n + k] = gp * v;
       }
-      j[8] = -tv;
-      CellSums& cs = sums[c];
-      cs.w += wr;
-      cs.wr += wr * r;
-      const double sw = std::sqrt(wr);
-      for (int p = 0; p < kP; ++p) {
-        rows(used, p) = sw * j[p];
-        cs.wj[p] += wr * j[p];
-      }
-      rhs(used) = sw * r;
-      ++used;
     }
     if (used < 50) return result;
     // Robust scale from this pass's residuals (normal: MAD * 1.4826), Huber at 1.345 sigma.
-    std::nth_element(absres.begin(), absres.begin() + absres.size() / 2, absres.end());
-    huber = std::max(1.0, 1.345 * 1.4826 * absres[absres.size() / 2]);
+    huber = std::max(1.0, 1.345 * 1.4826 * upperMedian(s.absres.data(), n, used, &s));
+    // 2. Eliminate the cell levels (their Jacobian is -1). The Schur complement of a cell's level
+    // is the weighted covariance of its samples: subtract each cell's weighted mean Jacobian
+    // from its samples, then H = sum w j j^T and g = sum w j r over the centred rows (which also
+    // keeps the single-precision sums free of cancellation).
+    for (int c = 0; c < t.cells; ++c) {
+      const int k0 = t.cell_start[c], k1 = t.cell_start[c + 1];
+      double sw = 0, swr = 0, swj[kP] = {};
+      for (int k = k0; k < k1; ++k) {
+        const double w = s.weight[k];
+        sw += w;
+        swr += w * s.res[k];
+        for (int p = first; p < kP; ++p) swj[p] += w * s.jac(k, p);
+      }
+      s.cell_used[c] = sw > 0;
+      if (sw <= 0) continue;
+      s.cell_r[c] = swr / sw;
+      for (int p = first; p < kP; ++p) {
+        const double mean = swj[p] / sw;
+        s.cell_j(c, p) = mean;
+        const float mean_f = static_cast<float>(mean);
+        for (int k = k0; k < k1; ++k) s.jac(k, p) -= mean_f;
+      }
+    }
+    // 3. Normal equations of the centred rows, scaled by sqrt(w) (one symmetric product).
+    s.weight = s.weight.cwiseSqrt();
+    const Eigen::Index cols = kP - first;
+    s.rows = s.jac.rightCols(cols).array().colwise() * s.weight.array();
+    s.weighted_res = s.weight.cwiseProduct(s.res);
+    Eigen::Matrix<float, kP, kP> hf = Eigen::Matrix<float, kP, kP>::Zero();
+    hf.topLeftCorner(cols, cols).selfadjointView<Eigen::Lower>().rankUpdate(s.rows.transpose());
+    Eigen::Matrix<float, kP, 1> gf = Eigen::Matrix<float, kP, 1>::Zero();
+    gf.head(cols).noalias() = s.rows.transpose() * s.weighted_res;
     Mat full = Mat::Identity();
     Vec g = Vec::Zero();
-    const auto top = rows.topRows(used);
-    const Mat hs = top.transpose() * top;
-    const Vec gs = top.transpose() * rhs.head(used);
     for (int p = first; p < kP; ++p) {
-      g[p] = gs[p];
-      for (int q = first; q < kP; ++q) full(p, q) = hs(p, q);
-    }
-    // Eliminate the cell levels (their Jacobian is -1): H -= wj wj^T / w, g -= wj wr / w.
-    for (const CellSums& cs : sums) {
-      if (cs.w <= 0) continue;
-      for (int p = first; p < kP; ++p) {
-        for (int q = first; q < kP; ++q) full(p, q) -= cs.wj[p] * cs.wj[q] / cs.w;
-        g[p] -= cs.wj[p] * cs.wr / cs.w;
-      }
+      g[p] = gf[p - first];
+      for (int q = first; q <= p; ++q) full(p, q) = full(q, p) = hf(p - first, q - first);
     }
     const Vec delta = full.ldlt().solve(-g);
     if (!delta.allFinite()) return result;
     for (int p = first; p < 8; ++p) h[p] += delta[p];
     b += delta[8];
     ++result.passes;
-    // Back-substitute each level: w da = wr - wj . delta (its Jacobian is -1).
+    // Back-substitute each level (its Jacobian is -1): da = mean r + mean j . delta over the cell.
     for (int c = 0; c < t.cells; ++c) {
-      const CellSums& cs = sums[c];
-      if (cs.w <= 0) continue;
+      if (!s.cell_used[c]) continue;
       double dot = 0;
-      for (int p = first; p < kP; ++p) dot += cs.wj[p] * delta[p];
-      level[c] += (cs.wr + dot) / cs.w;
+      for (int p = first; p < kP; ++p) dot += s.cell_j(c, p) * delta[p];
+      s.level[c] += s.cell_r[c] + dot;
     }
     result.samples = used;
     if (geometric) {
@@ -328,24 +419,23 @@ AlignmentResult alignBoard(const AlignmentTemplate& t, const cv::Mat& gray, cons
         const cv::Point2f c = t.corners[id];
         shift = std::max(shift, cv::norm(applyHomography(moved, c.x, c.y) - applyHomography(before, c.x, c.y)));
       }
-      // Near-linear within the edge blur: after a step this small the next one would be ~100
-      // times smaller.
-      if (shift < 0.03) {
+      if (shift < kConvergedPx) {
         result.converged = true;
         break;
       }
     }
   }
   result.huber = huber;
+  result.levels = s.level;
   result.a = cv::Matx33d(h[0], h[1], h[2], h[3], h[4], h[5], h[6], h[7], 1.0);
   result.contrast = b;
   // Each corner's own contrast: sum T r / sum T^2 over its samples, r the image minus its cell's
   // level (the image as the last pass sampled it: one step from the result, too small to matter).
   std::vector<double> tr(t.corners.size(), 0.0), tt(t.corners.size(), 0.0);
-  for (size_t k = 0; k < n; ++k) {
-    if (std::isnan(vals[k])) continue;
+  for (int k = 0; k < n; ++k) {
+    if (s.inside[k] == 0.0f) continue;
     const double tv = t.value[k];
-    tr[t.corner[k]] += tv * (vals[k] - level[t.cell[k]]);
+    tr[t.corner[k]] += tv * (s.vals[k] - s.level[t.cell[k]]);
     tt[t.corner[k]] += tv * tv;
   }
   result.corner_contrast.assign(t.corners.size(), std::numeric_limits<float>::quiet_NaN());

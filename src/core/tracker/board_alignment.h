@@ -20,7 +20,8 @@
 // image's, so the scene's texture cannot steer the steps) with Huber weights, so a scene
 // edge or a moving object counts as little as a few pixels of noise.
 //
-// Threading: a template is built once and then only read; alignBoard touches nothing shared.
+// Threading: a template is built once and then only read; alignBoard touches nothing shared (its
+// working memory is per thread).
 #include <opencv2/core.hpp>
 #include <vector>
 
@@ -37,6 +38,7 @@ struct AlignmentTemplate {
   std::vector<cv::Point2f> grad;     // dT / d(normalised taught coordinates)
   std::vector<int> cell;             // brightness cell of each sample (an eighth of a square on a side)
   int cells = 0;
+  std::vector<int> cell_start;       // the samples are in cell order: cell c's are [cell_start[c], cell_start[c + 1])
   std::vector<cv::Point2f> corners;  // corner id -> normalised taught coordinates
   std::vector<int> corner;           // the corner id nearest to each sample
   bool empty() const { return ref.empty(); }
@@ -53,18 +55,19 @@ struct AlignmentResult {
   cv::Matx33d a;            // normalised taught coordinates -> pixel
   double contrast = 0.0;    // b: half the bright-dark difference, grey levels
   double huber = 0.0;       // robust residual scale of the last pass, grey levels
+  std::vector<double> levels;  // a_c per cell, grey levels
   int samples = 0;
   int passes = 0;
-  bool converged = false;  // the last step moved the board's corners by less than 0.03 px
+  bool converged = false;  // the last step moved the board's corners by less than 0.05 px
   // Per corner id: the pattern's contrast fitted on the samples nearest that corner alone, as a
   // fraction of `contrast` (what an occluder hides); NaN for corners without samples.
   std::vector<float> corner_contrast;
 };
 
 // gray: CV_8UC1 image. start.a: the starting map (within a pixel or so). With warm (the last
-// frame's result, the board not moved since) its contrast and residual scale are taken as they
-// are, which saves the photometric-only first pass. Gauss-Newton steps stop after max_steps or
-// when a step moved the board's corners by less than 0.03 px.
+// frame's result, the board not moved since) its contrast, cell levels and residual scale are
+// taken as they are, which saves the photometric-only first pass. Gauss-Newton steps stop after max_steps or
+// when a step moved the board's corners by less than 0.05 px.
 AlignmentResult alignBoard(const AlignmentTemplate& t, const cv::Mat& gray, const AlignmentResult& start,
                            bool warm, int max_steps);
 

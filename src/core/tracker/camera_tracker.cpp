@@ -440,21 +440,6 @@ BoardCorners CameraTracker::trackBoardOnce(const cv::Mat& gray, int index, bool 
                               static_cast<int>(std::ceil(options_.min_board_fraction * stats.predicted)));
   if (stats.predicted < needed) return out;
 
-  const int saddle_box = std::max(1, static_cast<int>(std::lround(0.12 * square)));
-  const int reach = static_cast<int>(std::ceil(0.6 * square)) + saddle_box + window + 2;
-  float umin = 1e9f, vmin = 1e9f, umax = -1e9f, vmax = -1e9f;
-  for (const cv::Point2f& g : board.outerGridPoints()) {
-    const cv::Point2f p = applyHomography(h, g.x, g.y);
-    umin = std::min(umin, p.x);
-    vmin = std::min(vmin, p.y);
-    umax = std::max(umax, p.x);
-    vmax = std::max(vmax, p.y);
-  }
-  const BoxSampler saddle_sampler(
-      gray,
-      cv::Rect(static_cast<int>(umin) - reach, static_cast<int>(vmin) - reach,
-               static_cast<int>(umax - umin) + 2 * reach, static_cast<int>(vmax - vmin) + 2 * reach),
-      saddle_box);
   const float min_contrast =
       static_cast<float>(std::max(options_.min_contrast, options_.relative_contrast * board.contrast));
   const double max_shift = options_.max_refine_shift * window;
@@ -468,6 +453,23 @@ BoardCorners CameraTracker::trackBoardOnce(const cv::Mat& gray, int index, bool 
   // Steps 2-5 (refinement, saddle test, re-fit).
   const auto refine = [&]() {
     refine_done = true;
+    // Box means for the saddle test (an integral image of the board's region: built only here,
+    // since the steady state on a raw image skips the refinement).
+    const int saddle_box = std::max(1, static_cast<int>(std::lround(0.12 * square)));
+    const int reach = static_cast<int>(std::ceil(0.6 * square)) + saddle_box + window + 2;
+    float umin = 1e9f, vmin = 1e9f, umax = -1e9f, vmax = -1e9f;
+    for (const cv::Point2f& g : board.outerGridPoints()) {
+      const cv::Point2f p = applyHomography(h, g.x, g.y);
+      umin = std::min(umin, p.x);
+      vmin = std::min(vmin, p.y);
+      umax = std::max(umax, p.x);
+      vmax = std::max(vmax, p.y);
+    }
+    const BoxSampler saddle_sampler(
+        gray,
+        cv::Rect(static_cast<int>(umin) - reach, static_cast<int>(vmin) - reach,
+                 static_cast<int>(umax - umin) + 2 * reach, static_cast<int>(vmax - vmin) + 2 * reach),
+        saddle_box);
     for (int iteration = 0; iteration < options_.max_iterations && !todo.empty(); ++iteration) {
       // 2. Predict and refine.
       std::vector<cv::Point2f> points;
@@ -585,6 +587,7 @@ BoardCorners CameraTracker::trackBoardOnce(const cv::Mat& gray, int index, bool 
         start.a = state.align_a;
         start.contrast = state.align_contrast;
         start.huber = state.align_huber;
+        start.levels = state.align_levels;
       }
       bool started = warm || tracker::fitAlignmentStart(tmpl, ref_ids, ref_pos, &start.a);
       if (started && !warm && !from_refined) {
@@ -634,6 +637,7 @@ BoardCorners CameraTracker::trackBoardOnce(const cv::Mat& gray, int index, bool 
       state.align_a = fit.a;
       state.align_contrast = fit.contrast;
       state.align_huber = fit.huber;
+      state.align_levels = fit.levels;
     }
     stats.aligned = aligned;
     // Refined corners alone are not trusted on a raw image: the scene can pull one by more than

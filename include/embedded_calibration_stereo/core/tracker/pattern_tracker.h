@@ -167,11 +167,12 @@ class CameraTracker {
     double last_score = 0.0;  // re-centring score of the last good frame
     cv::Matx33d homography;   // grid (col, row) -> pixel, minus offsets
     std::vector<cv::Point2f> offsets;
-    // Last whole-board alignment (normalised taught coordinates -> pixel), its contrast and
-    // robust residual scale; valid while the board is aligned frame after frame.
+    // Last whole-board alignment (normalised taught coordinates -> pixel), its contrast, robust
+    // residual scale and brightness cell levels; valid while the board is aligned frame after frame.
     bool align_valid = false;
     cv::Matx33d align_a;
     double align_contrast = 0.0, align_huber = 0.0;
+    std::vector<double> align_levels;
   };
   std::vector<BoardCorners> trackAll(const cv::Mat& gray, bool on_difference, bool align);
   // wide: skip the quick steady-state check, search the whole re-centring window.
