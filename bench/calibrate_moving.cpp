@@ -380,6 +380,8 @@ int main(int argc, char** argv) {
       std::vector<std::string> changed;
       if (const std::optional<RigPrior> prior = filter.priorFor(candidate, t_start, &changed)) {
         input.rig_prior = prior;
+        const BundleAdjustmentSummary alone = candidate;
+        input.weights_from = &alone;
         candidate = adjuster.Solve(input);
         prior_note = "prior on " + std::to_string(prior->activeCount()) + " parameters";
       } else {

@@ -355,6 +355,9 @@ class Monitor:
         self.health = None
         self.frames_by_health = {}  # state name -> [frames, lit frames]
         self.health_changes = []
+        # Runs of light-on frames (wall time of the first, length): calibration bursts are the
+        # runs longer than a verification flash.
+        self.light_runs = []
         sub = lambda topic, cls, key: rospy.Subscriber(
             ns + "/" + topic, cls, lambda m: self.store(key, m), queue_size=2)
         self.subs = [
@@ -419,10 +422,14 @@ class Monitor:
 
     def on_mode(self, msg):
         with self.lock:
+            previous = self.mode
             self.mode = msg
             self.modes += 1
             if msg.light_on:
                 self.light_on_frames += 1
+                if previous is None or not previous.light_on:
+                    self.light_runs.append([time.time(), 0])
+                self.light_runs[-1][1] += 1
             counts = self.frames_by_health.setdefault(health_name(self.health), [0, 0])
             counts[0] += 1
             counts[1] += 1 if msg.light_on else 0
@@ -576,11 +583,18 @@ def verdict(timeline, script, epochs, tool_problem=None):
     return lines, met
 
 
-def health_report(mon, script, health_steps):
+# A run of more light-on frames than this is a calibration burst (a verification flash lights
+# settle_frames + 1).
+FLASH_FRAMES = 4
+
+
+def health_report(mon, script, health_steps, epochs, t0):
     """Lines on calibration/health: the share of lit frames while GOOD, and for each drift event
-    how long the health took to leave GOOD and to come back."""
+    how long the health took to leave GOOD, to light a calibration burst, to commit and to come
+    back."""
     with mon.lock:
         by_state = {k: list(v) for k, v in mon.frames_by_health.items()}
+        bursts = [start - t0 for start, frames in mon.light_runs if frames > FLASH_FRAMES]
     if not health_steps:
         return ["calibration health: no calibration/health message received"]
     frames, lit = by_state.get("GOOD", [0, 0])
@@ -598,8 +612,12 @@ def health_report(mon, script, health_steps):
             lines.append("  %s at %.1f s: health stayed GOOD until the next event" % (name, te))
             continue
         back = next((t for t, state in health_steps if t > left and state == 1), None)
-        lines.append("  %s at %.1f s: health left GOOD after %.1f s, GOOD again %s" % (
-            name, te, left - te, "%.1f s after that" % (back - left) if back is not None else "never"))
+        burst = next((t for t in bursts if t >= left - 0.5), None)
+        commit = next((t for t in epochs if t > left), None)
+        after = lambda t: "%.1f s after that" % (t - left) if t is not None and t < end else "not before the next event"
+        lines.append("  %s at %.1f s: health left GOOD after %.1f s; calibration burst %s, commit %s, GOOD again %s" % (
+            name, te, left - te, after(burst), after(commit),
+            after(back) if back is not None else "never"))
     return lines
 
 
@@ -788,7 +806,7 @@ def main():
 
     tool.close()
     report_lines, bounds_met = verdict(timeline, script, epochs, tool.problem)
-    report_lines += health_report(mon, script, health_steps)
+    report_lines += health_report(mon, script, health_steps, epochs, t0)
     summary, frames = write_results(args.out, mon, timeline, script, epochs, t, report_lines, bounds_met,
                                     health_steps)
     for line in summary + report_lines:

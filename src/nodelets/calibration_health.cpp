@@ -14,8 +14,13 @@
 // WARN). calibration_wanted tells an on-demand driver to calibrate: BAD, or DEGRADED until the
 // calibrator confirms the calibration in force as the best it can do (calibration/status) and
 // again once a signal doubles since.
-// A new calibration (a new calibration_epoch) resets the monitor. The first verification of it
-// must find it GOOD; when it does not and the previous calibration was doing better (GOOD, or
+// A new calibration (a new calibration_epoch) resets the monitor. Its verification places the
+// boards where the calibrator's solve that made it placed them (its calibration/status, matched
+// by the intrinsics; it may follow the driver's first frames: the first verification waits for
+// it up to solve_boards_wait_s), or where device_config puts them for any other calibration. A
+// solve's cameras and board poses explain the boards together: against the nominal device, the
+// small errors a solve has in either look like a turn or a zoom of several times their effect on
+// depth. The first verification of a new calibration must find it GOOD; when it does not and the previous calibration was doing better (GOOD, or
 // a better state), the previous pair is sent back to the driver's left|right/set_camera_info
 // (rollback true), and calibration/health, calibration/status and the diagnostics say why.
 #include <cv_bridge/cv_bridge.h>
@@ -62,9 +67,14 @@ using sensor_msgs::ImageConstPtr;
 
 struct HealthParams {
   std::string device_config;
-  // true: the device's boards sit where device_config puts them (verification against their
-  // poses: a common zoom is seen); false: each board's pose is fitted in each frame.
+  // true: the boards sit at their poses (verification against them: a common zoom is seen), as
+  // the solve of the calibration in force placed them (calibration/status), or where
+  // device_config puts them for a calibration no solve here made; false: each board's pose is
+  // fitted in each frame.
   bool boards_posed = true;
+  // A new calibration waits this long (wall) for its solve's board poses before it is verified
+  // against device_config's; 0: never waits.
+  double solve_boards_wait_s = 2.0;
   int depth_every_n_frames = 2;  // measured here; the monitor's own stride is 1
   int queue_size = 5;
   bool rollback = true;
@@ -79,6 +89,7 @@ HealthParams loadParams(const ros::NodeHandle& pnh, const std::string& default_d
   p.device_config = read.get("device_config", default_device_config);
   if (p.device_config.empty()) throw ecs::ConfigError("device_config", "missing");
   p.boards_posed = read.get("boards_posed", p.boards_posed);
+  p.solve_boards_wait_s = read.inRange("solve_boards_wait_s", p.solve_boards_wait_s, 0.0, 60.0);
   p.depth_every_n_frames = read.atLeast("depth_every_n_frames", p.depth_every_n_frames, 1);
   p.queue_size = read.atLeast("queue_size", p.queue_size, 1);
   p.rollback = read.get("rollback", p.rollback);
@@ -111,6 +122,18 @@ uint8_t toMsgState(ecs::CalibrationHealth state) {
     case ecs::CalibrationHealth::kBad: return CalibrationHealth::BAD;
     default: return CalibrationHealth::UNKNOWN;
   }
+}
+
+// Whether `intrinsics` (fx, fy, cx, cy, then D, as in CalibrationStatus) are those of `info`.
+bool sameIntrinsics(const std::vector<double>& intrinsics, const CameraInfo& info) {
+  const auto near = [](double a, double b) { return std::abs(a - b) <= 1e-6 * std::max(1.0, std::abs(b)); };
+  if (intrinsics.size() != 4 + info.D.size()) return false;
+  if (!near(intrinsics[0], info.K[0]) || !near(intrinsics[1], info.K[4]) || !near(intrinsics[2], info.K[2]) ||
+      !near(intrinsics[3], info.K[5]))
+    return false;
+  for (size_t i = 0; i < info.D.size(); ++i)
+    if (!near(intrinsics[4 + i], info.D[i])) return false;
+  return true;
 }
 
 // Worse states rank higher; UNKNOWN ranks nowhere (nothing to compare).
@@ -191,13 +214,15 @@ class CalibrationHealthNodelet : public nodelet::Nodelet {
     diagnostics_->add("calibration_health", this, &CalibrationHealthNodelet::diagnose);
     timer_ = nh.createWallTimer(ros::WallDuration(1.0), [this](const ros::WallTimerEvent&) {
       collectRestore();
+      stopWaitingForBoards();
       diagnostics_->update();
     });
     NODELET_INFO("CalibrationHealth: depth mode on %s and %s (every %d settled light-off frame%s), verification "
                  "on %s, boards %s, %s",
                  left_sub_.getTopic().c_str(), right_sub_.getTopic().c_str(), params_.depth_every_n_frames,
                  params_.depth_every_n_frames == 1 ? "" : "s", observations_sub_.getTopic().c_str(),
-                 params_.boards_posed ? "at their poses of device_config" : "posed per frame",
+                 params_.boards_posed ? "at their poses of the calibration's solve (device_config's for others)"
+                                      : "posed per frame",
                  params_.rollback ? "a new calibration that verifies worse is rolled back"
                                   : "no rollback");
   }
@@ -216,6 +241,7 @@ class CalibrationHealthNodelet : public nodelet::Nodelet {
   // Every frame (the camera_info of its stamp arrived before it: the driver publishes it first).
   void onMode(const CalibrationModeConstPtr& mode) {
     collectRestore();
+    stopWaitingForBoards();
     const ros::Time stamp = mode->header.stamp;
     frames_.push_back({stamp, mode->calibration_epoch, mode->light_on && mode->settled});
     if (frames_.size() > kKeptFrames) frames_.pop_front();
@@ -268,6 +294,16 @@ class CalibrationHealthNodelet : public nodelet::Nodelet {
     for (const FrameSeen& frame : frames_)
       if (frame.stamp == msg->header.stamp) seen = &frame;
     if (!seen || !seen->lit || seen->epoch != *epoch_) return;
+    if (waiting_for_boards_ && !stopWaitingForBoards()) {
+      deferred_ = msg;  // verified once the solve's boards are known (or the wait is over)
+      return;
+    }
+    verify(msg);
+  }
+
+  // A settled light-on frame of the calibration in force: the monitor checks it against the
+  // boards.
+  void verify(const StereoPatternObservationConstPtr& msg) {
     const ecs::StereoObservation observation = fromMsg(*msg);
     if (observation.left.empty() && observation.right.empty()) return;
     bool verified = false;
@@ -285,14 +321,61 @@ class CalibrationHealthNodelet : public nodelet::Nodelet {
     publish(msg->header.stamp);
   }
 
-  // The calibrator found nothing better than the calibration in force: while DEGRADED, no more
+  // An accepted solve: its board poses, for verifying its calibration once it is in force. The
+  // calibrator found nothing better than the calibration in force: while DEGRADED, no more
   // windows are wanted for it until a signal doubles.
   void onStatus(const CalibrationStatusConstPtr& status) {
+    if (status->accepted && !status->board_ids.empty() && status->board_ids.size() == status->board_poses.size()) {
+      SolvedBoards solved{status->left_intrinsics, status->right_intrinsics, boards_};
+      std::vector<ecs::VirtualBoard> placed;
+      for (ecs::VirtualBoard board : boards_)
+        for (size_t i = 0; i < status->board_ids.size(); ++i)
+          if (status->board_ids[i] == board.virtual_id) {
+            board.rig_from_board = fromPoseMsg(status->board_poses[i]);
+            placed.push_back(board);
+          }
+      solved.boards = std::move(placed);
+      solved_.push_back(std::move(solved));
+      if (solved_.size() > kKeptSolves) solved_.pop_front();
+      if (waiting_for_boards_) useSolveBoards();
+    }
     if (status->accepted || status->reason.rfind(kInForceConfirmedReason, 0) != 0) return;
     if (!epoch_ || status->epoch != *epoch_ || !monitor_->hasCalibration()) return;
     const ecs::HealthReport report = monitor_->report();
     if (rank(report.state) <= 0) return;
     confirmed_severity_ = severity(report);
+  }
+
+  // The newest accepted solve whose calibration is the one in force gives the boards to verify
+  // it against; true when there was one. A verification deferred meanwhile runs now.
+  bool useSolveBoards() {
+    if (!in_force_ || !rig_in_force_ || !monitor_->hasCalibration()) return false;
+    for (auto it = solved_.rbegin(); it != solved_.rend(); ++it) {
+      if (!sameIntrinsics(it->left, in_force_->first) || !sameIntrinsics(it->right, in_force_->second)) continue;
+      monitor_->setCalibration(*rig_in_force_, static_cast<int>(*epoch_), it->boards, true);
+      boards_source_ = "its solve";
+      waiting_for_boards_.reset();
+      runDeferred();
+      return true;
+    }
+    return false;
+  }
+
+  // The wait for a solve's boards is over: true, and a deferred verification runs against
+  // device_config's boards.
+  bool stopWaitingForBoards() {
+    if (!waiting_for_boards_) return true;
+    if (ros::WallTime::now() < *waiting_for_boards_) return false;
+    waiting_for_boards_.reset();
+    runDeferred();
+    return true;
+  }
+
+  void runDeferred() {
+    if (!deferred_) return;
+    const StereoPatternObservationConstPtr msg = deferred_;
+    deferred_.reset();
+    verify(msg);
   }
 
   // The largest signal in units of its DEGRADED threshold (signals not measured count 0).
@@ -331,8 +414,16 @@ class CalibrationHealthNodelet : public nodelet::Nodelet {
       calibration_problem_ = "calibration of epoch " + std::to_string(epoch) + " not usable: " + error;
     } else {
       try {
+        rig_in_force_ = rig;
         monitor_->setCalibration(rig, static_cast<int>(epoch), boards_, params_.boards_posed);
+        boards_source_ = "device_config";
         calibration_problem_.clear();
+        // A solve's calibration is verified against its solve's boards: already here, or soon
+        // (its status follows the driver's first frames with it).
+        waiting_for_boards_.reset();
+        deferred_.reset();
+        if (params_.boards_posed && !useSolveBoards() && params_.solve_boards_wait_s > 0.0)
+          waiting_for_boards_ = ros::WallTime::now() + ros::WallDuration(params_.solve_boards_wait_s);
       } catch (const std::exception& e) {
         calibration_problem_ = "calibration of epoch " + std::to_string(epoch) + " not usable: " + e.what();
       }
@@ -466,6 +557,7 @@ class CalibrationHealthNodelet : public nodelet::Nodelet {
     }
     status.add("state", ecs::toString(report.state));
     status.add("calibration epoch", epoch_.value_or(0));
+    status.add("boards verified against", waiting_for_boards_ ? "waiting for its solve's" : boards_source_);
     status.add("misalignment (px)", report.misalignment_px);
     status.add("misalignment sd (px)", report.misalignment_sd_px);
     status.add("board rms left (px)", report.board_rms_left_px);
@@ -500,8 +592,20 @@ class CalibrationHealthNodelet : public nodelet::Nodelet {
     ecs::CalibrationHealth previous_state;
   };
 
+  // Board poses of the calibrator's accepted solves, with the intrinsics they were solved with.
+  struct SolvedBoards {
+    std::vector<double> left, right;  // as CalibrationStatus: fx, fy, cx, cy, D
+    std::vector<ecs::VirtualBoard> boards;
+  };
+  static constexpr size_t kKeptSolves = 8;
+
   HealthParams params_;
-  std::vector<ecs::VirtualBoard> boards_;
+  std::vector<ecs::VirtualBoard> boards_;  // device_config's
+  std::deque<SolvedBoards> solved_;
+  std::optional<ecs::StereoRig> rig_in_force_;
+  std::string boards_source_;                         // what the calibration in force is verified against
+  std::optional<ros::WallTime> waiting_for_boards_;   // a new calibration waits for its solve's boards until then
+  StereoPatternObservationConstPtr deferred_;         // the verification that waits with it
   std::unique_ptr<ecs::CalibrationMonitor> monitor_;
   message_filters::Subscriber<Image> left_sub_, right_sub_;
   message_filters::Subscriber<CameraInfo> left_info_sub_, right_info_sub_;

@@ -166,6 +166,11 @@ CalibrationStatus makeStatus(const ecs::BundleAdjustmentSummary& summary, const 
   status.rotation_stddev_deg = summary.rotation_stddev_deg;
   status.solve_ms = summary.solve_ms;
   fillPredictedAccuracy(summary, rectification, &status);
+  if (summary.success)
+    for (const auto& [id, rig_from_board] : summary.rig_from_board) {
+      status.board_ids.push_back(static_cast<uint16_t>(id));
+      status.board_poses.push_back(toPoseMsg(rig_from_board));
+    }
   return status;
 }
 
@@ -225,7 +230,9 @@ CalibrationStatus CalibrationSession::solve(const std::vector<ecs::StereoObserva
     std::vector<std::string> changed;
     if (const std::optional<ecs::RigPrior> prior = filter_.priorFor(candidate, stamp, &changed)) {
       input.rig_prior = prior;
+      input.weights_from = &candidate;
       ecs::BundleAdjustmentSummary with_prior = adjuster_.Solve(input);
+      input.weights_from = nullptr;
       if (with_prior.success) {
         with_prior.solve_ms += candidate.solve_ms;  // both solves are this window's
         candidate = std::move(with_prior);

@@ -164,6 +164,29 @@ ecs::StereoObservation fromMsg(const StereoPatternObservation& msg) {
   return observation;
 }
 
+geometry_msgs::Pose toPoseMsg(const Eigen::Isometry3d& parent_from_child) {
+  geometry_msgs::Pose pose;
+  const Eigen::Vector3d t = parent_from_child.translation();
+  const Eigen::Quaterniond q(parent_from_child.rotation());
+  pose.position.x = t.x();
+  pose.position.y = t.y();
+  pose.position.z = t.z();
+  pose.orientation.x = q.x();
+  pose.orientation.y = q.y();
+  pose.orientation.z = q.z();
+  pose.orientation.w = q.w();
+  return pose;
+}
+
+Eigen::Isometry3d fromPoseMsg(const geometry_msgs::Pose& pose) {
+  Eigen::Isometry3d t = Eigen::Isometry3d::Identity();
+  t.linear() = Eigen::Quaterniond(pose.orientation.w, pose.orientation.x, pose.orientation.y, pose.orientation.z)
+                   .normalized()
+                   .toRotationMatrix();
+  t.translation() = Eigen::Vector3d(pose.position.x, pose.position.y, pose.position.z);
+  return t;
+}
+
 geometry_msgs::TransformStamped toTransformStamped(const Eigen::Isometry3d& parent_from_child,
                                                    const std::string& parent_frame,
                                                    const std::string& child_frame,
@@ -172,15 +195,11 @@ geometry_msgs::TransformStamped toTransformStamped(const Eigen::Isometry3d& pare
   msg.header.stamp = stamp;
   msg.header.frame_id = parent_frame;
   msg.child_frame_id = child_frame;
-  const Eigen::Vector3d t = parent_from_child.translation();
-  const Eigen::Quaterniond q(parent_from_child.rotation());
-  msg.transform.translation.x = t.x();
-  msg.transform.translation.y = t.y();
-  msg.transform.translation.z = t.z();
-  msg.transform.rotation.x = q.x();
-  msg.transform.rotation.y = q.y();
-  msg.transform.rotation.z = q.z();
-  msg.transform.rotation.w = q.w();
+  const geometry_msgs::Pose pose = toPoseMsg(parent_from_child);
+  msg.transform.translation.x = pose.position.x;
+  msg.transform.translation.y = pose.position.y;
+  msg.transform.translation.z = pose.position.z;
+  msg.transform.rotation = pose.orientation;
   return msg;
 }
 

@@ -14,11 +14,14 @@
 #include <memory>
 #include <string>
 
+#include "embedded_calibration_stereo/core/calibration/bundle_adjuster.h"
 #include "embedded_calibration_stereo/core/calibration/calibration_monitor.h"
 #include "embedded_calibration_stereo/core/calibration/stereo_accuracy.h"
 #include "embedded_calibration_stereo/core/sim/sim_rig.h"
 #include "embedded_calibration_stereo/core/tracker/pattern_tracker.h"
+#include "embedded_calibration_stereo/core/geometry/config_io.h"
 #include "embedded_calibration_stereo/test_support/sim_prior.h"
+#include "embedded_calibration_stereo/test_support/synthetic_observations.h"
 
 namespace ecs {
 namespace {
@@ -376,6 +379,63 @@ TEST(CalibrationMonitor, LargeTiltKnockBadWithinTwoSeconds) {
   EXPECT_GE(delay, 0.0) << r.reason;
   EXPECT_EQ(r.state, CalibrationHealth::kBad) << r.reason;
   EXPECT_NEAR(r.right_rotation_deg.x(), truth.x(), 0.05);
+}
+
+}  // namespace
+}  // namespace ecs
+
+namespace ecs {
+namespace {
+
+// A verification judges a calibration against board poses. A solve estimates the cameras and the
+// board poses together: a window's solve (the drive_photo head, the window tracker's corner noise
+// and scene correspondences, synthetic with known truth) checked with the true corners against
+// its own solve's board poses shows no change, against the device's true (nominal) poses a
+// change several times what its errors do to depth. So the health nodelet verifies a
+// calibration against its solve's boards (health_solve_boards.test).
+TEST(CalibrationMonitor, ASolvesCalibrationIsVerifiedAgainstItsSolvesBoards) {
+  cv::FileStorage fs = openYaml(ECS_SOURCE_DIR "/config/drive_photo.yaml");
+  const StereoRig truth = loadStereoRig(fs["rig"], "rig");
+  const CalibrationDevice device = loadDevice(fs["device"], "device");
+  double true_sum = 0.0, nominal_sum = 0.0, solve_worst = 0.0;
+  const int windows = 8;
+  for (int seed = 0; seed < windows; ++seed) {
+    SyntheticObservationOptions o;
+    o.noise_sigma_px = 0.023 / M_SQRT2;
+    o.seed = 3000 + seed;
+    std::vector<StereoObservation> frames = generateSyntheticObservations(truth, device.virtualBoards(), o);
+    frames[0].scene = generateSyntheticSceneMatches(truth, 600, 0.06, 0.0, 4000 + seed);
+    CalibrationInput input;
+    input.frames = &frames;
+    input.device = &device;
+    input.in_force = truth;
+    BundleAdjustmentConfig terms;
+    terms.estimate_tangential = true;
+    const BundleAdjustmentSummary solve = BundleAdjuster({}, terms).Solve(input);
+    ASSERT_TRUE(solve.success) << solve.message;
+    SyntheticObservationOptions v;
+    v.noise_sigma_px = 0.02;
+    v.seed = 9000 + seed;
+    const StereoObservation verification = generateSyntheticObservations(truth, device.virtualBoards(), v)[0];
+    std::vector<VirtualBoard> solved = device.virtualBoards();
+    for (VirtualBoard& b : solved) b.rig_from_board = solve.rig_from_board.at(b.virtual_id);
+    double reported[2];
+    for (int k = 0; k < 2; ++k) {
+      CalibrationMonitor monitor(CalibrationMonitorOptions{});
+      monitor.setCalibration(solve.rig, 1, k == 0 ? device.virtualBoards() : solved, true);
+      ASSERT_TRUE(monitor.addVerification(1.0, verification));
+      reported[k] = monitor.report().disparity_bias_px;
+    }
+    const double true_bias = evaluateStereoAccuracy(solve.rig, truth).disparity_bias_px.rms;
+    std::printf("[ figures  ] window %d: true disparity bias %.4f px; verification against the true board poses %.4f "
+                "px, against its solve's %.4f px\n",
+                seed, true_bias, reported[0], reported[1]);
+    true_sum += true_bias;
+    nominal_sum += reported[0];
+    solve_worst = std::max(solve_worst, reported[1]);
+  }
+  EXPECT_LT(solve_worst, 0.02);                     // noise only: 0.02 px corners on one frame
+  EXPECT_GT(nominal_sum, 2.0 * true_sum);           // what the nominal poses would have reported
 }
 
 }  // namespace

@@ -12,6 +12,7 @@
 //    image_geometry::StereoCameraModel::baseline() equals the rig's baseline.
 // All functions are pure and thread-safe.
 #include <Eigen/Geometry>
+#include <geometry_msgs/Pose.h>
 #include <geometry_msgs/TransformStamped.h>
 #include <sensor_msgs/CameraInfo.h>
 #include <string>
@@ -60,6 +61,10 @@ ecs::BoardCorners fromMsg(const BoardObservation& msg);
 // core stamp is in seconds); frame_id is set by the caller.
 StereoPatternObservation toMsg(const ecs::StereoObservation& observation);
 ecs::StereoObservation fromMsg(const StereoPatternObservation& msg);
+
+// A rigid transform <-> geometry_msgs/Pose (the child frame's pose in the parent's).
+geometry_msgs::Pose toPoseMsg(const Eigen::Isometry3d& parent_from_child);
+Eigen::Isometry3d fromPoseMsg(const geometry_msgs::Pose& pose);
 
 // A rigid transform as a TransformStamped from `parent_frame` to `child_frame`: the pose of the
 // child frame expressed in the parent frame (tf convention: p_parent = T * p_child).

@@ -274,19 +274,25 @@ class AdjustmentRun {
     const bool scene = static_cast<int>(all.size()) >= options_.min_scene_matches;
     const bool prior = input_.rig_prior && input_.rig_prior->activeCount() > 0;
     if (!scene && !prior) return true;
-    BundleAdjustmentOptions boards_options = options_;
-    boards_options.compute_covariance = false;
-    boards_options.use_scene_matches = false;
-    CalibrationInput boards_input = input_;
-    boards_input.rig_prior.reset();
-    const BundleAdjustmentSummary boards_only = BundleAdjuster(boards_options, config_).Solve(boards_input);
-    if (!boards_only.success) return fail(boards_only.message);
-    const double corner_sigma = std::max(boards_only.residual_sigma_px, 1e-4);
+    const BundleAdjustmentSummary* reference = input_.weights_from;
+    BundleAdjustmentSummary boards_only;
+    if (!reference || !reference->success) {
+      BundleAdjustmentOptions boards_options = options_;
+      boards_options.compute_covariance = false;
+      boards_options.use_scene_matches = false;
+      CalibrationInput boards_input = input_;
+      boards_input.rig_prior.reset();
+      boards_input.weights_from = nullptr;
+      boards_only = BundleAdjuster(boards_options, config_).Solve(boards_input);
+      if (!boards_only.success) return fail(boards_only.message);
+      reference = &boards_only;
+    }
+    const double corner_sigma = std::max(reference->residual_sigma_px, 1e-4);
     prior_weight_ = corner_sigma;
     if (!scene) return true;
-    const Intrinsics left = toBlock(boards_only.rig.left), right = toBlock(boards_only.rig.right);
-    const std::array<double, kExtrinsicsSize> extrinsics = toBlock(boards_only.rig.right_from_left);
-    scene_focal_px_ = boards_only.rig.right.fy;
+    const Intrinsics left = toBlock(reference->rig.left), right = toBlock(reference->rig.right);
+    const std::array<double, kExtrinsicsSize> extrinsics = toBlock(reference->rig.right_from_left);
+    scene_focal_px_ = reference->rig.right.fy;
     const double unit = 1.0;
     std::vector<double> distances;
     for (const SceneMatch& m : all) {
@@ -324,6 +330,8 @@ class AdjustmentRun {
       free_options.compute_covariance = false;
       free_options.use_scene_matches = false;  // a start: the boards alone are quick and enough
       CalibrationInput free_input = input_;
+      free_input.rig_prior.reset();  // a start, as above
+      free_input.weights_from = nullptr;
       free_input.boards = layout_;
       free_input.device = nullptr;
       free_input.image_width = width_;

@@ -166,6 +166,8 @@ struct RigPrior {
   int activeCount() const;
 };
 
+struct BundleAdjustmentSummary;
+
 struct CalibrationInput {
   const std::vector<StereoObservation>* frames = nullptr;
   // Layout of the virtual boards (CalibrationDevice::virtualBoards()): ids, cols, rows, square,
@@ -179,6 +181,10 @@ struct CalibrationInput {
   std::optional<StereoRig> in_force;
   // Optional prior on the rig's parameters (see RigPrior).
   std::optional<RigPrior> rig_prior;
+  // Optional: a solve of the same frames (e.g. without the prior) whose corner residual sigma,
+  // scene spread and solution weigh the scene and the prior, instead of a solve of the boards
+  // alone first.
+  const BundleAdjustmentSummary* weights_from = nullptr;
 };
 
 // One standard deviation per reported parameter; zero for parameters held constant.
