@@ -43,16 +43,15 @@ using sensor_msgs::CameraInfo;
 namespace {
 
 // The accuracy targets for depth after the drift (px RMS over the field of view, %, relative):
-// printed, met or not. A window observation (the window tracker, one per burst) at the corner
-// noise reached here gives a calibration whose own predicted misalignment and bias are about
-// the targets (test_calibration_at_tracker_noise), so a run meets them or not by chance
-// (docs/figures.md); the test holds the calibration to what it reaches, with margin: well inside
-// what the drift caused (a 2.6 px disparity bias).
+// printed, met or not. The window after the knock is one window observation with its scene
+// correspondences and what the earlier windows taught; its predicted bias is about 0.04 px, so a
+// run meets every target most times, not every time (docs/figures.md). The test holds the
+// calibration to what it reaches with margin: well inside what the drift caused (a 2.6 px
+// disparity bias); the misalignment and fx to their targets.
 constexpr double kTargetMisalignmentPx = 0.05, kTargetBiasPx = 0.05, kTargetDepthError10mPct = 0.7,
                  kTargetFocalRel = 0.0005, kTargetBaselineRel = 0.001;
-// The baseline is the least determined here (the knock moves it 0.67 %).
-constexpr double kMisalignmentPx = 0.25, kBiasPx = 0.4, kDepthError10mPct = 7.0, kFocalRel = 0.003,
-                 kBaselineRel = 0.01;
+constexpr double kMisalignmentPx = 0.05, kBiasPx = 0.15, kDepthError10mPct = 2.0, kFocalRel = 0.0005,
+                 kBaselineRel = 0.003;
 // A commit is worse than the calibration it replaced when its combined error against the same
 // truth, hypot(misalignment RMS, bias RMS), is larger by more than this (px).
 constexpr double kWorsePx = 0.01;
