@@ -23,7 +23,11 @@
 #include <string>
 #include <vector>
 
+#include "embedded_calibration_stereo/test_support/run_command.h"
+
 namespace {
+
+using ecs::runCommand;
 
 const std::string kBoardDir = "/usr/share/doc/opencv-doc/examples/data/";
 const std::string kSceneDir = "/usr/lib/python3/dist-packages/skimage/data/";
@@ -47,17 +51,6 @@ std::string tempDir() {
   return dir ? std::string(dir) + "/" : std::string();
 }
 
-// Runs a command; returns its exit status and its stdout.
-int run(const std::string& command, std::string* out) {
-  FILE* pipe = ::popen(command.c_str(), "r");
-  if (!pipe) return -1;
-  char buffer[4096];
-  out->clear();
-  size_t n;
-  while ((n = std::fread(buffer, 1, sizeof(buffer), pipe)) > 0) out->append(buffer, n);
-  const int status = ::pclose(pipe);
-  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-}
 
 // OpenCV's corners on the clean photo in the tool's documented order for a plain board.
 bool referenceCorners(const cv::Mat& gray, std::vector<cv::Point2f>* out) {
@@ -158,9 +151,9 @@ TEST(TrackPatternPhotos, RealChessboardOnRealScenes) {
     ASSERT_TRUE(referenceCorners(board, &opencv)) << "OpenCV finds no 9x6 board in " << board_path;
     const std::string prior = dir + photo + ".yaml";
     std::string out;
-    ASSERT_EQ(run(tool + " teach --board 9x6 --image " + board_path + " --out " + prior + " 2>/dev/null", &out), 0)
+    ASSERT_EQ(runCommand(tool + " teach --board 9x6 --image " + board_path + " --out " + prior + " 2>/dev/null", &out), 0)
         << "track_pattern teach failed on " << board_path;
-    ASSERT_EQ(run(tool + " track --prior " + prior + " --image " + board_path + " 2>/dev/null", &out), 0);
+    ASSERT_EQ(runCommand(tool + " track --prior " + prior + " --image " + board_path + " 2>/dev/null", &out), 0);
     const Score clean = score(out, opencv);
     clean_total.add(clean);
     const std::vector<cv::Point2f> tracked_clean = parse(out, kGrid.area());
@@ -175,7 +168,7 @@ TEST(TrackPatternPhotos, RealChessboardOnRealScenes) {
         cv::addWeighted(background, 1.0 - r, board, r, 0.0, composite);
         const std::string path = dir + photo + "_" + name + "_" + std::to_string(r) + ".png";
         ASSERT_TRUE(cv::imwrite(path, composite));
-        const int status = run(tool + " track --prior " + prior + " --image " + path + " 2>/dev/null", &out);
+        const int status = runCommand(tool + " track --prior " + prior + " --image " + path + " 2>/dev/null", &out);
         EXPECT_TRUE(status == 0 || status == 1) << "track_pattern track failed on " << path;
         const Score s = score(out, tracked_clean), s_cv = score(out, opencv);
         per_ratio[r].add(s);
