@@ -341,6 +341,8 @@ class CalibrationHealthNodelet : public nodelet::Nodelet {
     }
     if (status->accepted || status->reason.rfind(kInForceConfirmedReason, 0) != 0) return;
     if (!epoch_ || status->epoch != *epoch_ || !monitor_->hasCalibration()) return;
+    // A window taken before the health left GOOD confirms nothing about what it sees now.
+    if (left_good_at_ && status->newest_frame < *left_good_at_) return;
     const ecs::HealthReport report = monitor_->report();
     if (rank(report.state) <= 0) return;
     confirmed_severity_ = severity(report);
@@ -408,6 +410,7 @@ class CalibrationHealthNodelet : public nodelet::Nodelet {
     epoch_ = epoch;
     in_force_ = std::make_pair(left, right);
     confirmed_severity_.reset();
+    left_good_at_.reset();
     ecs::StereoRig rig;
     std::string error;
     if (!fromStereoCameraInfo(left, right, &rig, &error)) {
@@ -521,6 +524,8 @@ class CalibrationHealthNodelet : public nodelet::Nodelet {
     msg->reason = reasonOf(report);
     const int level = rank(report.state);
     if (level == 0) confirmed_severity_.reset();  // GOOD again: a later change wants a window again
+    if (level == 0) left_good_at_.reset();
+    if (level > 0 && !left_good_at_) left_good_at_ = stamp;
     // BAD: always (depth cannot be trusted). DEGRADED: until the calibrator confirms the
     // calibration in force as its best, and again once a signal doubles since.
     msg->calibration_wanted =
@@ -624,6 +629,7 @@ class CalibrationHealthNodelet : public nodelet::Nodelet {
   std::optional<std::pair<CameraInfo, CameraInfo>> restored_;  // sent back to the driver, not seen yet
   std::future<std::string> restore_;                           // the running restore: "" or why it failed
   std::optional<uint32_t> restored_epoch_;
+  std::optional<ros::Time> left_good_at_;  // stamp of the first verdict below GOOD since the last GOOD
   std::optional<double> confirmed_severity_;  // severity() when the calibrator confirmed the calibration                     // the epoch of the restored calibration
   std::string calibration_problem_, last_restore_;
   uint64_t light_off_frames_ = 0, depth_frames_ = 0, verifications_ = 0, restores_ = 0;

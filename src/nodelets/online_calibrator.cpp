@@ -17,6 +17,9 @@
 // calibration/window_observations instead (one observation per light burst, tracked as a whole,
 // seconds after the burst): each one is solved as a window of one frame, and the windows of
 // per-frame observations are not; those still serve calibration/recalibrate.
+// Each window is solved again with what the earlier ones taught (prior_from_earlier_windows);
+// a calibration/health verdict below GOOD since then (when a health nodelet runs) says the rig
+// changed: the stereo rotation and focal lengths then get no prior.
 // For a bag replay (launch/replay.launch: no driver, use_sim_time) the parameter commit:=none
 // solves and gates every window as usual but commits nowhere except /tf_static; only header
 // stamps (sim time) order the frames, and solve durations are wall time.
@@ -41,6 +44,7 @@
 #include <thread>
 #include <vector>
 
+#include "embedded_calibration_stereo/CalibrationHealth.h"
 #include "embedded_calibration_stereo/CalibrationMode.h"
 #include "embedded_calibration_stereo/Recalibrate.h"
 #include "embedded_calibration_stereo/core/geometry/config_error.h"
@@ -99,7 +103,7 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
       window_timer_.stop();
       commit_retry_timer_.stop();
       for (ros::Subscriber* sub :
-           {&observations_sub_, &window_observations_sub_, &mode_sub_, &left_info_sub_, &right_info_sub_})
+           {&observations_sub_, &window_observations_sub_, &mode_sub_, &left_info_sub_, &right_info_sub_, &health_sub_})
         sub->shutdown();
       throw;
     }
@@ -134,6 +138,12 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
         "left/camera_info", 1, [this](const sensor_msgs::CameraInfoConstPtr& m) { storeInfo(true, m); });
     right_info_sub_ = nh.subscribe<sensor_msgs::CameraInfo>(
         "right/camera_info", 1, [this](const sensor_msgs::CameraInfoConstPtr& m) { storeInfo(false, m); });
+    // The health's verdicts below GOOD say that the rig changed since earlier windows.
+    health_sub_ = nh.subscribe<CalibrationHealth>("calibration/health", 10, [this](const CalibrationHealthConstPtr& h) {
+      if (h->state != CalibrationHealth::DEGRADED && h->state != CalibrationHealth::BAD) return;
+      std::lock_guard<std::mutex> lock(mutex_);
+      health_problem_s_ = std::max(health_problem_s_.value_or(0.0), h->header.stamp.toSec());
+    });
     set_light_client_ = nh.serviceClient<std_srvs::SetBool>("set_light");  // exists() only: calls are bounded
     diagnostics_ = std::make_unique<diagnostic_updater::Updater>(nh, pnh, getName());
     diagnostics_->setHardwareID("online_calibrator");
@@ -458,6 +468,7 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
       Job job;
       sensor_msgs::CameraInfoConstPtr left, right;
       uint32_t epoch;
+      std::optional<double> health_problem_s;
       {
         std::unique_lock<std::mutex> lock(mutex_);
         cv_.wait(lock, [this] { return stopping_ || !jobs_.empty(); });
@@ -467,6 +478,7 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
         left = left_info_;
         right = right_info_;
         epoch = epoch_;
+        health_problem_s = health_problem_s_;
       }
       if (job.commit_again) {
         commitAgain();
@@ -475,7 +487,8 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
       std::optional<CommittedCalibration> committed;
       std::optional<UncommittedCalibration> uncommitted;
       CalibrationStatus status =
-          session_->solve(job.frames, left.get(), right.get(), epoch, job.dry_run, &committed, &uncommitted);
+          session_->solve(job.frames, left.get(), right.get(), epoch, job.dry_run, &committed, &uncommitted,
+                          health_problem_s);
       if (committed) readCommittedEpoch(*committed, epoch, &status);
       if (!job.dry_run) {
         // The newest solve decides: a calibration not stored is tried again (scheduleCommitAgain);
@@ -790,7 +803,8 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
   CalibratorParams params_;
   std::unique_ptr<CalibrationSession> session_;  // worker thread only (boards(): any thread)
   ros::Publisher status_pub_;
-  ros::Subscriber observations_sub_, window_observations_sub_, mode_sub_, left_info_sub_, right_info_sub_;
+  ros::Subscriber observations_sub_, window_observations_sub_, mode_sub_, left_info_sub_, right_info_sub_, health_sub_;
+  std::optional<double> health_problem_s_;  // newest health verdict below GOOD (stamp, s); mutex_
   ros::ServiceServer recalibrate_srv_;
   ros::CallbackQueue service_queue_;  // calibration/recalibrate only (see the class comment)
   std::unique_ptr<ros::AsyncSpinner> service_spinner_;

@@ -92,8 +92,9 @@ const char* toString(PriorState s) {
 //    onInit, joined in the destructor): frameCb collects a burst's message pointers (bursts_,
 //    callback queue only) and hands them over with the WindowTracker in force (a shared_ptr:
 //    a new prior makes a new tracker, the worker finishes with the one it got) through
-//    window_job_; the worker alone runs that tracker and publishes on window_observations_pub_.
-//    window_mutex_ guards window_job_, window_busy_, window_stopping_ and the window figures;
+//    window_job_ (one burst waits while the worker is busy: the newest); the worker alone runs
+//    that tracker and publishes on window_observations_pub_. window_mutex_ guards window_job_,
+//    window_stopping_ and the window figures;
 //  - input_ (un)subscribes the inputs under its own mutex (lazy_synced_input.h).
 class PatternTrackerNodelet : public nodelet::Nodelet {
  public:
@@ -477,12 +478,14 @@ class PatternTrackerNodelet : public nodelet::Nodelet {
       }
       job.header = ended.burst.light_on.back().first->header;
       std::lock_guard<std::mutex> lock(window_mutex_);
-      if (window_busy_) {
-        problem = "the previous burst is still being tracked";
-      } else {
-        window_busy_ = true;
-        window_job_ = std::move(job);
+      // While the worker tracks a burst, the newest one waits: after a change it is the one
+      // that matters. A burst still waiting when a newer one ends is dropped.
+      if (window_job_) {
+        ++windows_dropped_;
+        window_summary_ = "burst ending at " + std::to_string(window_job_->header.stamp.toSec()) +
+                          " s dropped: a newer one ended while the worker was busy";
       }
+      window_job_ = std::move(job);
     }
     if (problem.empty()) {
       window_cv_.notify_all();
@@ -511,8 +514,6 @@ class PatternTrackerNodelet : public nodelet::Nodelet {
         window_job_.reset();
       }
       trackWindow(job);
-      std::lock_guard<std::mutex> lock(window_mutex_);
-      window_busy_ = false;
     }
   }
 
@@ -665,7 +666,6 @@ class PatternTrackerNodelet : public nodelet::Nodelet {
   std::mutex window_mutex_;  // guards everything below
   std::condition_variable window_cv_;
   std::optional<WindowJob> window_job_;  // handed over, not taken by the worker yet
-  bool window_busy_ = false;             // a job handed over and not finished
   bool window_stopping_ = false;
   std::string window_summary_ = "no burst yet";  // the last burst: tracked (corners, ms) or why not
   uint64_t windows_tracked_ = 0, windows_dropped_ = 0;

@@ -197,7 +197,8 @@ CalibrationStatus CalibrationSession::solve(const std::vector<ecs::StereoObserva
                                             const sensor_msgs::CameraInfo* left_info,
                                             const sensor_msgs::CameraInfo* right_info, uint32_t epoch,
                                             bool dry_run, std::optional<CommittedCalibration>* committed,
-                                            std::optional<UncommittedCalibration>* uncommitted) {
+                                            std::optional<UncommittedCalibration>* uncommitted,
+                                            std::optional<double> health_problem_s) {
   committed->reset();
   if (uncommitted) uncommitted->reset();
   if (!left_info || !right_info) {
@@ -227,8 +228,10 @@ CalibrationStatus CalibrationSession::solve(const std::vector<ecs::StereoObserva
   const double stamp = frames.empty() ? 0.0 : frames.back().stamp;
   prior_note_.clear();
   if (params_.prior_from_earlier_windows && candidate.success && filter_.hasState()) {
-    std::vector<std::string> changed;
-    if (const std::optional<ecs::RigPrior> prior = filter_.priorFor(candidate, stamp, &changed)) {
+    std::vector<std::string> changed, seen_by_health;
+    if (health_problem_s && *health_problem_s >= filter_.stateTime())
+      seen_by_health = {"left focal length", "right focal length", "stereo rotation"};
+    if (const std::optional<ecs::RigPrior> prior = filter_.priorFor(candidate, stamp, &changed, seen_by_health)) {
       input.rig_prior = prior;
       input.weights_from = &candidate;
       ecs::BundleAdjustmentSummary with_prior = adjuster_.Solve(input);
@@ -255,6 +258,7 @@ CalibrationStatus CalibrationSession::solve(const std::vector<ecs::StereoObserva
   rectification.alpha = params_.rectification_alpha;
   CalibrationStatus status = makeStatus(candidate, decision, rectification);
   status.epoch = epoch;
+  if (!frames.empty()) status.newest_frame.fromSec(frames.back().stamp);
   if (decision.in_force_confirmed) {
     char rms[96];
     std::snprintf(rms, sizeof(rms), " (RMS %.3f px; the new solve %.3f px, no better)", ecs::combinedRms(in_force_fit),

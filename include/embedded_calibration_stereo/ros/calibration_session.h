@@ -135,10 +135,14 @@ class CalibrationSession {
   // driver, and the caller reads the epoch the driver put in force from the driver's frames
   // (see carriesCalibration); `*committed` is reset otherwise. When a commit failed,
   // `*uncommitted` (if given) holds what commitAgain() needs; it is reset otherwise.
+  // `health_problem_s` (optional): the stamp (s) of the newest calibration/health verdict below
+  // GOOD; when it is not older than what earlier windows taught, the stereo rotation and the
+  // focal lengths (what the health's change model sees) get no prior from them.
   CalibrationStatus solve(const std::vector<ecs::StereoObservation>& frames,
                           const sensor_msgs::CameraInfo* left_info, const sensor_msgs::CameraInfo* right_info,
                           uint32_t epoch, bool dry_run, std::optional<CommittedCalibration>* committed,
-                          std::optional<UncommittedCalibration>* uncommitted = nullptr);
+                          std::optional<UncommittedCalibration>* uncommitted = nullptr,
+                          std::optional<double> health_problem_s = std::nullopt);
 
   // Commits `calibration` again (worker thread). Empty on success, otherwise why not.
   std::string commitAgain(const UncommittedCalibration& calibration);

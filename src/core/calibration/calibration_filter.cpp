@@ -82,7 +82,8 @@ void CalibrationFilter::setState(const StereoRig& rig, const RigCovariance& cova
 }
 
 std::optional<RigPrior> CalibrationFilter::priorFor(const BundleAdjustmentSummary& window, double time_s,
-                                                    std::vector<std::string>* changed) const {
+                                                    std::vector<std::string>* changed,
+                                                    const std::vector<std::string>& known_changed) const {
   if (changed) changed->clear();
   if (!state_ || !window.success || !window.covariance_ok) return std::nullopt;
   const RigParameters state = rigParameters(state_->rig), measured = rigParameters(window.rig);
@@ -106,6 +107,10 @@ std::optional<RigPrior> CalibrationFilter::priorFor(const BundleAdjustmentSummar
   prior.mean = state;
   prior.covariance = prior_covariance;
   for (const Group& g : groups()) {
+    if (std::find(known_changed.begin(), known_changed.end(), g.name) != known_changed.end()) {
+      if (changed) changed->push_back(g.name);
+      continue;
+    }
     // The group's parameters both solves estimated (a held term has no variance).
     std::vector<int> index;
     for (int i : g.index)

@@ -72,8 +72,12 @@ class CalibrationFilter {
   // The prior for a window at time_s whose own solve (no prior, with its covariance) is
   // `window`; `changed` (optional) receives the names of the groups taken as changed. None
   // without a state, without the window's covariance, or when every group changed.
+  // `known_changed`: groups another witness saw change (calibrationGroupNames()' names), taken
+  // as changed whatever the test says.
   std::optional<RigPrior> priorFor(const BundleAdjustmentSummary& window, double time_s,
-                                   std::vector<std::string>* changed = nullptr) const;
+                                   std::vector<std::string>* changed = nullptr,
+                                   const std::vector<std::string>& known_changed = {}) const;
+  double stateTime() const { return state_ ? state_->time_s : 0.0; }
 
   const CalibrationFilterOptions& options() const { return options_; }
 
