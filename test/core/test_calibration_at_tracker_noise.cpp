@@ -31,6 +31,7 @@
 #include "embedded_calibration_stereo/core/calibration/stereo_accuracy.h"
 #include "embedded_calibration_stereo/core/geometry/config_io.h"
 #include "embedded_calibration_stereo/test_support/synthetic_observations.h"
+#include "embedded_calibration_stereo/test_support/synthetic_window.h"
 
 namespace ecs {
 namespace {
@@ -59,16 +60,6 @@ struct WindowFigures {
   double predicted_misalignment_px = 0, predicted_bias_px = 0;  // from the solve's covariance
 };
 
-struct Head {
-  StereoRig truth;
-  CalibrationDevice device;
-};
-
-Head driveHead() {
-  cv::FileStorage fs = openYaml(ECS_SOURCE_DIR "/config/drive_photo.yaml");
-  return {loadStereoRig(fs["rig"], "rig"), loadDevice(fs["device"], "device")};
-}
-
 size_t depthIndex(const StereoAccuracy& a, double depth_m) {
   for (size_t d = 0; d < a.at_depth.size(); ++d)
     if (a.at_depth[d].depth_m == depth_m) return d;
@@ -95,22 +86,14 @@ WindowFigures figuresOf(const BundleAdjustmentSummary& r, const StereoRig& truth
 }
 
 // One window solved as the live calibrator solves it; its errors against the truth.
-WindowFigures solveWindow(const Head& head, double noise_px, int trial, int frame_count) {
-  SyntheticObservationOptions o;
-  o.frames = frame_count;
-  o.noise_sigma_px = noise_px;
-  o.seed = 1700 + trial;
-  const std::vector<StereoObservation> frames = generateSyntheticObservations(head.truth, head.device.virtualBoards(), o);
-  const CalibrationDevice nominal = perturbDevice(head.device, 0.001, 0.5, 1800 + trial);
-  CalibrationInput input;
-  input.frames = &frames;
-  input.device = &nominal;
-  input.image_width = head.truth.left.width;
-  input.image_height = head.truth.left.height;
-  input.in_force = driftedRig(head.truth, 1.05, Eigen::Vector3d(0.02, 0.07, -0.03));
-  BundleAdjustmentConfig terms;
-  terms.estimate_tangential = true;
-  const BundleAdjustmentSummary r = BundleAdjuster({}, terms).Solve(input);
+WindowFigures solveWindow(const ScenarioHead& head, double noise_px, int trial, int frame_count) {
+  SyntheticWindow w;
+  w.frames = frame_count;
+  w.corner_noise_px = noise_px;
+  w.corner_seed = 1700 + trial;
+  w.device_seed = 1800 + trial;
+  w.in_force = driftedRig(head.truth, 1.05, Eigen::Vector3d(0.02, 0.07, -0.03));
+  const BundleAdjustmentSummary r = solveSyntheticWindow(head, head.truth, w);
   EXPECT_TRUE(r.success && r.covariance_ok) << r.message;
   EXPECT_EQ(r.board_poses, "device model");
   if (!r.success) return WindowFigures();
@@ -120,25 +103,20 @@ WindowFigures solveWindow(const Head& head, double noise_px, int trial, int fram
 // One window observation of `truth` at the window tracker's noise with its light-off frames'
 // scene correspondences, solved as the calibrator does (with `prior` and the spreads of
 // `alone`, its solve without it, when given).
-BundleAdjustmentSummary solveProductWindow(const Head& head, const StereoRig& truth, int seed,
+BundleAdjustmentSummary solveProductWindow(const ScenarioHead& head, const StereoRig& truth, int seed,
                                            const std::optional<RigPrior>& prior, const BundleAdjustmentSummary* alone) {
-  SyntheticObservationOptions o;
-  o.noise_sigma_px = kWindowTrackerNoisePx;
-  o.seed = 5000 + seed;
-  std::vector<StereoObservation> frames = generateSyntheticObservations(truth, head.device.virtualBoards(), o);
-  frames[0].scene = generateSyntheticSceneMatches(truth, kSceneMatches, kSceneNoisePx, 0.02, 6000 + seed);
-  const CalibrationDevice nominal = perturbDevice(head.device, 0.001, 0.5, 1800 + seed);
-  CalibrationInput input;
-  input.frames = &frames;
-  input.device = &nominal;
-  input.image_width = truth.left.width;
-  input.image_height = truth.left.height;
-  input.in_force = head.truth;
-  input.rig_prior = prior;
-  input.weights_from = alone;
-  BundleAdjustmentConfig terms;
-  terms.estimate_tangential = true;
-  return BundleAdjuster({}, terms).Solve(input);
+  SyntheticWindow w;
+  w.corner_noise_px = kWindowTrackerNoisePx;
+  w.corner_seed = 5000 + seed;
+  w.scene_matches = kSceneMatches;
+  w.scene_noise_px = kSceneNoisePx;
+  w.scene_wrong = 0.02;
+  w.scene_seed = 6000 + seed;
+  w.device_seed = 1800 + seed;
+  w.in_force = head.truth;
+  w.prior = prior;
+  w.weights_from = alone;
+  return solveSyntheticWindow(head, truth, w);
 }
 
 void printFigures(const char* label, const WindowFigures& w) {
@@ -166,7 +144,7 @@ double rmsOf(const std::vector<WindowFigures>& windows, double WindowFigures::*f
 }
 
 // Solves `trials` windows at `noise_px`, prints each, the worst and the RMS over the windows.
-std::vector<WindowFigures> runTrials(const Head& head, double noise_px, int trials,
+std::vector<WindowFigures> runTrials(const ScenarioHead& head, double noise_px, int trials,
                                      int frame_count = kWindowFrames) {
   const auto start = std::chrono::steady_clock::now();
   std::vector<WindowFigures> all;
@@ -215,7 +193,7 @@ void expectRmsAsPredicted(const std::vector<WindowFigures>& windows) {
 // (a window's figure is the RMS of a few Gaussian error modes: that far out less than once in
 // 2000 windows). fx stays within its target in every window.
 TEST(CalibrationAtTrackerNoise, TrueErrorsAreThePredictedAtTheTrackersNoise) {
-  const Head head = driveHead();
+  const ScenarioHead head = loadScenarioHead(ECS_SOURCE_DIR "/config/drive_photo.yaml");
   const std::vector<WindowFigures> windows = runTrials(head, kTrackerNoisePx, trialCount(20));
   expectRmsAsPredicted(windows);
   if (HasFatalFailure()) return;
@@ -232,7 +210,7 @@ TEST(CalibrationAtTrackerNoise, TrueErrorsAreThePredictedAtTheTrackersNoise) {
 // errors independent per corner. Printed (with the share of windows within every target), and
 // its true errors must be those predicted, as for the per-frame tracker's windows above.
 TEST(CalibrationAtTrackerNoise, TrueErrorsAreThePredictedAtTheWindowTrackersNoise) {
-  const Head head = driveHead();
+  const ScenarioHead head = loadScenarioHead(ECS_SOURCE_DIR "/config/drive_photo.yaml");
   const std::vector<WindowFigures> windows = runTrials(head, kWindowTrackerNoisePx, trialCount(20), 1);
   expectRmsAsPredicted(windows);
 }
@@ -244,7 +222,7 @@ TEST(CalibrationAtTrackerNoise, TrueErrorsAreThePredictedAtTheWindowTrackersNois
 // zoom and a knock of the right camera (as the demo's). The accuracy targets for depth hold as
 // the RMS over the windows; the share of windows within every target is printed.
 TEST(CalibrationAtTrackerNoise, WindowsWithTheSceneAndEarlierWindowsMeetTheDepthTargets) {
-  const Head head = driveHead();
+  const ScenarioHead head = loadScenarioHead(ECS_SOURCE_DIR "/config/drive_photo.yaml");
   StereoRig after = head.truth;
   after.left = after.left.withFocalScale(1.05);
   after.right = after.right.withFocalScale(1.05);
@@ -291,7 +269,7 @@ TEST(CalibrationAtTrackerNoise, WindowsWithTheSceneAndEarlierWindowsMeetTheDepth
 
 // The dim device: printed, not held to anything.
 TEST(CalibrationAtTrackerNoise, PrintsTheDimDevicesFigures) {
-  const Head head = driveHead();
+  const ScenarioHead head = loadScenarioHead(ECS_SOURCE_DIR "/config/drive_photo.yaml");
   EXPECT_EQ(static_cast<int>(runTrials(head, kDimTrackerNoisePx, trialCount(5)).size()), trialCount(5));
 }
 

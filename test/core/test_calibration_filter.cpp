@@ -21,8 +21,8 @@
 #include "embedded_calibration_stereo/core/calibration/bundle_adjuster.h"
 #include "embedded_calibration_stereo/core/calibration/calibration_filter.h"
 #include "embedded_calibration_stereo/core/calibration/stereo_accuracy.h"
-#include "embedded_calibration_stereo/core/geometry/config_io.h"
 #include "embedded_calibration_stereo/test_support/synthetic_observations.h"
+#include "embedded_calibration_stereo/test_support/synthetic_window.h"
 
 namespace ecs {
 namespace {
@@ -30,44 +30,26 @@ namespace {
 constexpr double kWindowCornerNoisePx = 0.023 / M_SQRT2;  // test_window_tracker, per coordinate
 constexpr double kSceneNoisePx = 0.06;                    // test_scene_constraints
 
-struct Head {
-  StereoRig truth;
-  CalibrationDevice device;
-};
-
-Head driveHead() {
-  cv::FileStorage fs = openYaml(ECS_SOURCE_DIR "/config/drive_photo.yaml");
-  return {loadStereoRig(fs["rig"], "rig"), loadDevice(fs["device"], "device")};
-}
-
 // One window of `truth` solved as the calibrator does (the nominal device off by manufacturing
 // tolerances, p1 and p2 estimated), with `prior` if given.
-BundleAdjustmentSummary solveWindow(const Head& head, const StereoRig& truth, int seed,
+BundleAdjustmentSummary solveWindow(const ScenarioHead& head, const StereoRig& truth, int seed,
                                     const std::optional<RigPrior>& prior = std::nullopt) {
-  SyntheticObservationOptions o;
-  o.frames = 1;
-  o.noise_sigma_px = kWindowCornerNoisePx;
-  o.seed = 3000 + seed;
-  std::vector<StereoObservation> frames = generateSyntheticObservations(truth, head.device.virtualBoards(), o);
-  frames[0].scene = generateSyntheticSceneMatches(truth, 600, kSceneNoisePx, 0.0, 4000 + seed);
-  const CalibrationDevice nominal = perturbDevice(head.device, 0.001, 0.5, 1800);
-  CalibrationInput input;
-  input.frames = &frames;
-  input.device = &nominal;
-  input.image_width = truth.left.width;
-  input.image_height = truth.left.height;
-  input.in_force = head.truth;
-  input.rig_prior = prior;
-  BundleAdjustmentConfig terms;
-  terms.estimate_tangential = true;
-  const BundleAdjustmentSummary r = BundleAdjuster({}, terms).Solve(input);
+  SyntheticWindow w;
+  w.corner_noise_px = kWindowCornerNoisePx;
+  w.corner_seed = 3000 + seed;
+  w.scene_matches = 600;
+  w.scene_noise_px = kSceneNoisePx;
+  w.scene_seed = 4000 + seed;
+  w.in_force = head.truth;
+  w.prior = prior;
+  const BundleAdjustmentSummary r = solveSyntheticWindow(head, truth, w);
   EXPECT_TRUE(r.success && r.covariance_ok) << r.message;
   return r;
 }
 
 // A filter whose state has learned from `windows` windows of the truth (the first alone, each
 // next one with the prior the filter gives it), as the calibrator's does while nothing changes.
-CalibrationFilter learnedFilter(const Head& head, int windows, int seed, const CalibrationFilterOptions& options) {
+CalibrationFilter learnedFilter(const ScenarioHead& head, int windows, int seed, const CalibrationFilterOptions& options) {
   CalibrationFilter filter(options);
   for (int w = 0; w < windows; ++w) {
     const BundleAdjustmentSummary alone = solveWindow(head, head.truth, seed + 100 * w);
@@ -107,7 +89,7 @@ TEST(CalibrationFilter, ChiSquareQuantilesAreTheTables) {
 }
 
 TEST(CalibrationFilter, ChangesAreTheGroupsTheyMove) {
-  const Head head = driveHead();
+  const ScenarioHead head = loadScenarioHead(ECS_SOURCE_DIR "/config/drive_photo.yaml");
   struct Case {
     const char* name;
     StereoRig truth;
@@ -153,7 +135,7 @@ TEST(CalibrationFilter, ChangesAreTheGroupsTheyMove) {
 }
 
 TEST(CalibrationFilter, ThePriorOfTheUnchangedGroupsBringsAKnockedWindowCloserAsPredicted) {
-  const Head head = driveHead();
+  const ScenarioHead head = loadScenarioHead(ECS_SOURCE_DIR "/config/drive_photo.yaml");
   const StereoRig after = knocked(head.truth);
   double alone_m = 0, alone_b = 0, fused_m = 0, fused_b = 0, fused_pm = 0, fused_pb = 0;
   const int trials = 20;

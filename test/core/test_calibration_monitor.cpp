@@ -14,14 +14,13 @@
 #include <memory>
 #include <string>
 
-#include "embedded_calibration_stereo/core/calibration/bundle_adjuster.h"
 #include "embedded_calibration_stereo/core/calibration/calibration_monitor.h"
 #include "embedded_calibration_stereo/core/calibration/stereo_accuracy.h"
 #include "embedded_calibration_stereo/core/sim/sim_rig.h"
 #include "embedded_calibration_stereo/core/tracker/pattern_tracker.h"
-#include "embedded_calibration_stereo/core/geometry/config_io.h"
 #include "embedded_calibration_stereo/test_support/sim_prior.h"
 #include "embedded_calibration_stereo/test_support/synthetic_observations.h"
+#include "embedded_calibration_stereo/test_support/synthetic_window.h"
 
 namespace ecs {
 namespace {
@@ -394,24 +393,19 @@ namespace {
 // change several times what its errors do to depth. So the health nodelet verifies a
 // calibration against its solve's boards (health_solve_boards.test).
 TEST(CalibrationMonitor, ASolvesCalibrationIsVerifiedAgainstItsSolvesBoards) {
-  cv::FileStorage fs = openYaml(ECS_SOURCE_DIR "/config/drive_photo.yaml");
-  const StereoRig truth = loadStereoRig(fs["rig"], "rig");
-  const CalibrationDevice device = loadDevice(fs["device"], "device");
+  const ScenarioHead head = loadScenarioHead(ECS_SOURCE_DIR "/config/drive_photo.yaml");
+  const StereoRig& truth = head.truth;
+  const CalibrationDevice& device = head.device;
   double true_sum = 0.0, nominal_sum = 0.0, solve_worst = 0.0;
   const int windows = 8;
   for (int seed = 0; seed < windows; ++seed) {
-    SyntheticObservationOptions o;
-    o.noise_sigma_px = 0.023 / M_SQRT2;
-    o.seed = 3000 + seed;
-    std::vector<StereoObservation> frames = generateSyntheticObservations(truth, device.virtualBoards(), o);
-    frames[0].scene = generateSyntheticSceneMatches(truth, 600, 0.06, 0.0, 4000 + seed);
-    CalibrationInput input;
-    input.frames = &frames;
-    input.device = &device;
-    input.in_force = truth;
-    BundleAdjustmentConfig terms;
-    terms.estimate_tangential = true;
-    const BundleAdjustmentSummary solve = BundleAdjuster({}, terms).Solve(input);
+    SyntheticWindow w;
+    w.corner_noise_px = 0.023 / M_SQRT2;
+    w.corner_seed = 3000 + seed;
+    w.scene_matches = 600;
+    w.scene_seed = 4000 + seed;
+    w.device_error_m = w.device_error_deg = 0.0;
+    const BundleAdjustmentSummary solve = solveSyntheticWindow(head, truth, w);
     ASSERT_TRUE(solve.success) << solve.message;
     SyntheticObservationOptions v;
     v.noise_sigma_px = 0.02;

@@ -32,6 +32,7 @@
 #include "embedded_calibration_stereo/core/geometry/config_io.h"
 #include "embedded_calibration_stereo/core/sim/sim_rig.h"
 #include "embedded_calibration_stereo/test_support/synthetic_observations.h"
+#include "embedded_calibration_stereo/test_support/synthetic_window.h"
 
 namespace ecs {
 namespace {
@@ -43,16 +44,6 @@ constexpr double kWindowCornerNoisePx = 0.023 / M_SQRT2;
 constexpr double kSceneNoisePx = 0.06;
 constexpr double kWrongShare = 0.05;
 
-struct Head {
-  StereoRig truth;
-  CalibrationDevice device;
-};
-
-Head driveHead() {
-  cv::FileStorage fs = openYaml(ECS_SOURCE_DIR "/config/drive_photo.yaml");
-  return {loadStereoRig(fs["rig"], "rig"), loadDevice(fs["device"], "device")};
-}
-
 std::array<double, 9> block(const PinholeCamera& c) {
   return {{c.fx, c.fy, c.cx, c.cy, c.dist[0], c.dist[1], c.dist[2], c.dist[3], c.dist[4]}};
 }
@@ -63,7 +54,7 @@ std::array<double, 6> block(const Eigen::Isometry3d& t) {
 }
 
 TEST(SceneEpipolarCost, ZeroOnTrueCorrespondencesAndDerivativesAsCentralDifferences) {
-  const Head head = driveHead();
+  const ScenarioHead head = loadScenarioHead(ECS_SOURCE_DIR "/config/drive_photo.yaml");
   const std::vector<SceneMatch> matches = generateSyntheticSceneMatches(head.truth, 200, 0.0, 0.0, 3);
   std::array<double, 9> left = block(head.truth.left), right = block(head.truth.right);
   std::array<double, 6> extrinsics = block(head.truth.right_from_left);
@@ -111,23 +102,18 @@ struct WindowResult {
   double sigma = 0;
 };
 
-WindowResult solveWindow(const Head& head, int trial, const std::vector<SceneMatch>* scene) {
-  SyntheticObservationOptions o;
-  o.frames = 1;
-  o.noise_sigma_px = kWindowCornerNoisePx;
-  o.seed = 1700 + trial;
-  std::vector<StereoObservation> frames = generateSyntheticObservations(head.truth, head.device.virtualBoards(), o);
-  if (scene) frames[0].scene = *scene;
-  const CalibrationDevice nominal = perturbDevice(head.device, 0.001, 0.5, 1800 + trial);
-  CalibrationInput input;
-  input.frames = &frames;
-  input.device = &nominal;
-  input.image_width = head.truth.left.width;
-  input.image_height = head.truth.left.height;
-  input.in_force = driftedRig(head.truth, 1.05, Eigen::Vector3d(0.02, 0.07, -0.03));
-  BundleAdjustmentConfig terms;
-  terms.estimate_tangential = true;
-  const BundleAdjustmentSummary r = BundleAdjuster({}, terms).Solve(input);
+WindowResult solveWindow(const ScenarioHead& head, int trial, int scene_count, double scene_noise_px,
+                         int* wrong = nullptr) {
+  SyntheticWindow window;
+  window.corner_noise_px = kWindowCornerNoisePx;
+  window.corner_seed = 1700 + trial;
+  window.scene_matches = scene_count;
+  window.scene_noise_px = scene_noise_px;
+  window.scene_wrong = kWrongShare;
+  window.scene_seed = 50 + trial;
+  window.device_seed = 1800 + trial;
+  window.in_force = driftedRig(head.truth, 1.05, Eigen::Vector3d(0.02, 0.07, -0.03));
+  const BundleAdjustmentSummary r = solveSyntheticWindow(head, head.truth, window, wrong);
   EXPECT_TRUE(r.success && r.covariance_ok) << r.message;
   WindowResult w;
   if (!r.success || !r.covariance_ok) return w;
@@ -148,13 +134,11 @@ struct Rms {
 };
 
 // RMS over `trials` windows; scene_count 0: boards only.
-Rms runWindows(const Head& head, int trials, int scene_count, double scene_noise_px) {
+Rms runWindows(const ScenarioHead& head, int trials, int scene_count, double scene_noise_px) {
   Rms rms;
   for (int trial = 0; trial < trials; ++trial) {
     int wrong = 0;
-    const std::vector<SceneMatch> scene =
-        generateSyntheticSceneMatches(head.truth, scene_count, scene_noise_px, kWrongShare, 50 + trial, &wrong);
-    const WindowResult w = solveWindow(head, trial, scene_count ? &scene : nullptr);
+    const WindowResult w = solveWindow(head, trial, scene_count, scene_noise_px, &wrong);
     if (scene_count) {
       // The wrong matches are dropped (at the matcher's noise nearly all: near the image's
       // corners the distortion bends the epipolar lines, and a shift along the rows can undo
@@ -186,7 +170,7 @@ void expectAsPredicted(const Rms& r) {
 
 // 20 windows: the RMS over them scatters by about a sixth; 1.5 leaves room for that.
 TEST(SceneConstraints, SeparateRotationFromTranslationAndKeepTheCovarianceHonest) {
-  const Head head = driveHead();
+  const ScenarioHead head = loadScenarioHead(ECS_SOURCE_DIR "/config/drive_photo.yaml");
   const Rms boards = runWindows(head, 20, 0, 0.0);
   const Rms scene = runWindows(head, 20, 600, kSceneNoisePx);
   expectAsPredicted(boards);
@@ -200,10 +184,9 @@ TEST(SceneConstraints, SeparateRotationFromTranslationAndKeepTheCovarianceHonest
 }
 
 TEST(SceneConstraints, TooFewMatchesAreNotUsed) {
-  const Head head = driveHead();
-  const std::vector<SceneMatch> scene = generateSyntheticSceneMatches(head.truth, BundleAdjustmentOptions().min_scene_matches - 1,
-                                                       kSceneNoisePx, 0.0, 9);
-  const WindowResult with = solveWindow(head, 0, &scene), without = solveWindow(head, 0, nullptr);
+  const ScenarioHead head = loadScenarioHead(ECS_SOURCE_DIR "/config/drive_photo.yaml");
+  const WindowResult with = solveWindow(head, 0, BundleAdjustmentOptions().min_scene_matches - 1, kSceneNoisePx);
+  const WindowResult without = solveWindow(head, 0, 0, 0.0);
   EXPECT_EQ(with.used, 0);
   EXPECT_EQ(with.misalignment, without.misalignment);
   EXPECT_EQ(with.bias, without.bias);
