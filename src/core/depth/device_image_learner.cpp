@@ -6,6 +6,7 @@
 #include <cstdio>
 #include <cstring>
 #include <limits>
+#include <numeric>
 #include <opencv2/core/hal/intrin.hpp>
 #include <opencv2/imgproc.hpp>
 #include <opencv2/video/tracking.hpp>  // cv::DISOpticalFlow
@@ -23,6 +24,9 @@ std::string DeviceLearnerOptions::Check() const {
   if (!(max_standard_error > 0.0)) problems.push_back("max_standard_error must be > 0");
   if (iterations < 0 || iterations > 5) problems.push_back("iterations must be in [0, 5]");
   if (!(inlier_threshold > 0.0)) problems.push_back("inlier_threshold must be > 0");
+  if (first_pass_pairs < 0) problems.push_back("first_pass_pairs must be >= 0");
+  if (flow_refinement_iterations < 0 || flow_refinement_iterations > 20)
+    problems.push_back("flow_refinement_iterations must be in [0, 20]");
   std::string joined;
   for (const std::string& p : problems) joined += (joined.empty() ? "" : "; ") + p;
   return joined;
@@ -33,7 +37,7 @@ void LightPairSet::reset(uint32_t epoch) {
   epoch_ = epoch;
 }
 
-void LightPairSet::add(const cv::Mat& light_off, const cv::Mat& light_on) {
+void LightPairSet::add(const cv::Mat& light_off, const cv::Mat& light_on, int frames_apart) {
   for (const cv::Mat* m : {&light_off, &light_on}) {
     if (m->empty()) throw std::invalid_argument("light pair: empty image");
     if (m->type() != CV_8UC1 && m->type() != CV_8UC3)
@@ -45,7 +49,7 @@ void LightPairSet::add(const cv::Mat& light_off, const cv::Mat& light_on) {
   if (!pairs_.empty() && (pairs_.front().light_on.size() != light_on.size() ||
                           pairs_.front().light_on.type() != light_on.type()))
     throw std::invalid_argument("light pair: size or type differs from the pairs held");
-  pairs_.push_back({light_off, light_on});
+  pairs_.push_back({light_off, light_on, frames_apart});
   while (static_cast<int>(pairs_.size()) > max_pairs_) pairs_.pop_front();
 }
 
@@ -358,20 +362,30 @@ LearnedDevice learnDeviceImage(const std::vector<LightPair>& pairs, const Device
   cv::parallel_for_(cv::Range(0, n), [&](const cv::Range& r) {
     for (int i = r.start; i < r.end; ++i) images[i] = prepare(pairs[i]);
   });
-  std::vector<Sample> samples(n);
+  // Every pair, and the first aligned pass's: the first_pass_pairs fewest frames apart.
+  std::vector<int> all(n);
+  std::iota(all.begin(), all.end(), 0);
+  std::vector<int> closest = all;
+  std::stable_sort(closest.begin(), closest.end(),
+                   [&](int a, int b) { return pairs[a].frames_apart < pairs[b].frames_apart; });
+  if (options.first_pass_pairs > 0 && options.first_pass_pairs < n) closest.resize(options.first_pass_pairs);
   for (int pass = 0; pass <= options.iterations; ++pass) {
+    const std::vector<int>& use = pass == 1 ? closest : all;
+    const int m = static_cast<int>(use.size());
+    std::vector<Sample> samples(m);
     // Flow is per pair and independent: pairs run in parallel, one DIS instance each.
-    cv::parallel_for_(cv::Range(0, n), [&](const cv::Range& r) {
+    cv::parallel_for_(cv::Range(0, m), [&](const cv::Range& r) {
       cv::Ptr<cv::DISOpticalFlow> dis = cv::DISOpticalFlow::create(cv::DISOpticalFlow::PRESET_MEDIUM);
-      for (int i = r.start; i < r.end; ++i) samples[i] = samplePair(images[i], device, dis.get());
+      dis->setVariationalRefinementIterations(options.flow_refinement_iterations);
+      for (int i = r.start; i < r.end; ++i) samples[i] = samplePair(images[use[i]], device, dis.get());
     });
     if (pass > 0) {
       // Each sample is on the scale of the previous estimate; that scale is pinned to the median
       // pair's light-on gain, so that it cannot drift from pass to pass.
       std::vector<double> gains;
       for (const Sample& s : samples) gains.push_back(s.gain_on);
-      std::nth_element(gains.begin(), gains.begin() + n / 2, gains.end());
-      const double median_gain = gains[n / 2];
+      std::nth_element(gains.begin(), gains.begin() + m / 2, gains.end());
+      const double median_gain = gains[m / 2];
       for (Sample& s : samples) s.value *= median_gain;
     }
     const bool last = pass == options.iterations;
