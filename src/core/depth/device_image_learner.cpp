@@ -249,9 +249,10 @@ void combine(const std::vector<Sample>& samples, double threshold, cv::Mat* devi
   const int n = static_cast<int>(samples.size());
   const std::vector<std::pair<int, int>> network = sortingNetwork(n);
   // Mono pixels whose samples are all valid (nearly all of them) are sorted kLanes at a time by
-  // the network, branch-free (the compiler vectorises the lanes); the others one by one.
+  // the network, branch-free (SIMD min and max); the others one by one.
   constexpr int kLanes = 8;
-  static_assert(kLanes == sizeof(uint64_t) && kLanes % cv::v_float32x4::nlanes == 0, "lanes: one uint64 of valid flags");
+  static_assert(kLanes == sizeof(uint64_t) && kLanes % cv::v_float32x4::nlanes == 0,
+                "kLanes: the valid flags of a block are read as one uint64");
   cv::parallel_for_(cv::Range(0, size.height), [&](const cv::Range& rows) {
     std::vector<const float*> value_rows(n);
     std::vector<const uchar*> valid_rows(n);
