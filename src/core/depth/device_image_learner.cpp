@@ -2,10 +2,16 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <cstdio>
+#include <cstring>
+#include <limits>
+#include <numeric>
+#include <opencv2/core/hal/intrin.hpp>
 #include <opencv2/imgproc.hpp>
 #include <opencv2/video/tracking.hpp>  // cv::DISOpticalFlow
 #include <stdexcept>
+#include <utility>
 
 namespace ecs {
 
@@ -18,6 +24,9 @@ std::string DeviceLearnerOptions::Check() const {
   if (!(max_standard_error > 0.0)) problems.push_back("max_standard_error must be > 0");
   if (iterations < 0 || iterations > 5) problems.push_back("iterations must be in [0, 5]");
   if (!(inlier_threshold > 0.0)) problems.push_back("inlier_threshold must be > 0");
+  if (first_pass_pairs < 0) problems.push_back("first_pass_pairs must be >= 0");
+  if (flow_refinement_iterations < 0 || flow_refinement_iterations > 20)
+    problems.push_back("flow_refinement_iterations must be in [0, 20]");
   std::string joined;
   for (const std::string& p : problems) joined += (joined.empty() ? "" : "; ") + p;
   return joined;
@@ -28,7 +37,7 @@ void LightPairSet::reset(uint32_t epoch) {
   epoch_ = epoch;
 }
 
-void LightPairSet::add(const cv::Mat& light_off, const cv::Mat& light_on) {
+void LightPairSet::add(const cv::Mat& light_off, const cv::Mat& light_on, int frames_apart) {
   for (const cv::Mat* m : {&light_off, &light_on}) {
     if (m->empty()) throw std::invalid_argument("light pair: empty image");
     if (m->type() != CV_8UC1 && m->type() != CV_8UC3)
@@ -40,7 +49,7 @@ void LightPairSet::add(const cv::Mat& light_off, const cv::Mat& light_on) {
   if (!pairs_.empty() && (pairs_.front().light_on.size() != light_on.size() ||
                           pairs_.front().light_on.type() != light_on.type()))
     throw std::invalid_argument("light pair: size or type differs from the pairs held");
-  pairs_.push_back({light_off, light_on});
+  pairs_.push_back({light_off, light_on, frames_apart});
   while (static_cast<int>(pairs_.size()) > max_pairs_) pairs_.pop_front();
 }
 
@@ -82,17 +91,22 @@ struct Sample {
 };
 
 // Least-squares k, s of on = k * a + s * c over `mask`, twice: the second time without the
-// pixels whose residual exceeds 3 robust sigmas of the first (the scene moved there).
+// pixels whose residual exceeds 3 robust sigmas of the first (the scene moved there). Two gains
+// need far fewer pixels than an image has: every other pixel of every other row is used.
 void fitGains(const cv::Mat& on, const cv::Mat& a, const cv::Mat& c, const cv::Mat& mask, double* k,
               double* s) {
-  cv::Mat use = mask.clone();
+  constexpr int kStep = 2;
+  double limit = std::numeric_limits<double>::infinity();
   for (int pass = 0; pass < 2; ++pass) {
     double aa = 0, ac = 0, cc = 0, ao = 0, co = 0;
-    for (int y = 0; y < on.rows; ++y) {
+    std::vector<float> residuals;
+    if (pass == 0) residuals.reserve(on.total() / (kStep * kStep));
+    for (int y = 0; y < on.rows; y += kStep) {
       const float *o = on.ptr<float>(y), *pa = a.ptr<float>(y), *pc = c.ptr<float>(y);
-      const uchar* m = use.ptr<uchar>(y);
-      for (int x = 0; x < on.cols; ++x) {
+      const uchar* m = mask.ptr<uchar>(y);
+      for (int x = 0; x < on.cols; x += kStep) {
         if (!m[x]) continue;
+        if (pass == 1 && !(std::abs(o[x] - *k * pa[x] - *s * pc[x]) <= limit)) continue;
         aa += pa[x] * pa[x];
         ac += pa[x] * pc[x];
         cc += pc[x] * pc[x];
@@ -105,118 +119,225 @@ void fitGains(const cv::Mat& on, const cv::Mat& a, const cv::Mat& c, const cv::M
     *k = (ao * cc - co * ac) / det;
     *s = (co * aa - ao * ac) / det;
     if (pass == 1) break;
-    cv::Mat residual = cv::abs(on - *k * a - *s * c);
-    std::vector<float> values;
-    values.reserve(on.total() / 4);
-    for (int y = 0; y < on.rows; y += 2) {
-      const float* r = residual.ptr<float>(y);
-      const uchar* m = use.ptr<uchar>(y);
-      for (int x = 0; x < on.cols; x += 2)
-        if (m[x]) values.push_back(r[x]);
+    for (int y = 0; y < on.rows; y += kStep) {
+      const float *o = on.ptr<float>(y), *pa = a.ptr<float>(y), *pc = c.ptr<float>(y);
+      const uchar* m = mask.ptr<uchar>(y);
+      for (int x = 0; x < on.cols; x += kStep)
+        if (m[x]) residuals.push_back(static_cast<float>(std::abs(o[x] - *k * pa[x] - *s * pc[x])));
     }
-    if (values.empty()) return;
-    std::nth_element(values.begin(), values.begin() + values.size() / 2, values.end());
-    const double limit = std::max(3.0, 3.0 * 1.4826 * values[values.size() / 2]);
-    use &= residual <= limit;
+    if (residuals.empty()) return;
+    std::nth_element(residuals.begin(), residuals.begin() + residuals.size() / 2, residuals.end());
+    limit = std::max(3.0, 3.0 * 1.4826 * residuals[residuals.size() / 2]);
   }
 }
 
+// A pair's images as every pass uses them, converted once.
+struct PairImages {
+  cv::Mat on, off;            // CV_32FC(channels)
+  cv::Mat on_grey, off_grey;  // CV_32FC1 (shared with on, off for mono images)
+  cv::Mat off_grey8;          // CV_8UC1: what the flow is measured against
+};
+
+PairImages prepare(const LightPair& pair) {
+  PairImages p;
+  p.on = toFloat(pair.light_on);
+  p.off = toFloat(pair.light_off);
+  p.off_grey8 = grey(pair.light_off);
+  p.on_grey = pair.light_on.channels() == 1 ? p.on : toFloat(grey(pair.light_on));
+  p.off_grey = pair.light_off.channels() == 1 ? p.off : toFloat(p.off_grey8);
+  return p;
+}
+
 // The pair's sample of I_C; `device` (float, the pair's channels) empty for the unaligned pass.
-Sample samplePair(const LightPair& pair, const cv::Mat& device, cv::DISOpticalFlow* dis) {
+Sample samplePair(const PairImages& pair, const cv::Mat& device, cv::DISOpticalFlow* dis) {
   Sample sample;
-  const cv::Mat on = toFloat(pair.light_on), off = toFloat(pair.light_off);
-  const cv::Size size = on.size();
+  const cv::Size size = pair.on.size();
   if (device.empty()) {
-    sample.value = on - off;
+    sample.value = pair.on - pair.off;
     sample.valid = cv::Mat(size, CV_8U, cv::Scalar(255));
     return sample;
   }
   const cv::Mat device_grey = channelMean(device);
   // The light-on frame without the lit pattern (as far as it is known), against which the
   // scene's motion is measured.
-  cv::Mat on_grey = toFloat(grey(pair.light_on)), scene_on;
+  cv::Mat scene_on;
   {
     // Its gain first: on ~ k off + s I_C without alignment is biased by the motion, but only the
     // pattern's removal needs it, and a few percent off leaves a faint pattern the flow ignores.
     double k = 1.0, s = 1.0;
-    const cv::Mat off_grey = toFloat(grey(pair.light_off));
-    fitGains(on_grey, off_grey, device_grey, cv::Mat(size, CV_8U, cv::Scalar(255)), &k, &s);
-    cv::Mat(on_grey - s * device_grey).convertTo(scene_on, CV_8U);
+    fitGains(pair.on_grey, pair.off_grey, device_grey, cv::Mat(size, CV_8U, cv::Scalar(255)), &k, &s);
+    cv::Mat(pair.on_grey - s * device_grey).convertTo(scene_on, CV_8U);
   }
   cv::Mat flow;
-  dis->calc(scene_on, grey(pair.light_off), flow);  // scene_on(x) ~ off(x + flow(x))
+  dis->calc(scene_on, pair.off_grey8, flow);  // scene_on(x) ~ off(x + flow(x))
   cv::Mat map(size, CV_32FC2);
+  sample.valid.create(size, CV_8U);
+  const float right = static_cast<float>(size.width - 1), bottom = static_cast<float>(size.height - 1);
   for (int y = 0; y < size.height; ++y) {
     const cv::Point2f* f = flow.ptr<cv::Point2f>(y);
     cv::Point2f* m = map.ptr<cv::Point2f>(y);
-    for (int x = 0; x < size.width; ++x) m[x] = cv::Point2f(x + f[x].x, y + f[x].y);
+    uchar* valid = sample.valid.ptr<uchar>(y);
+    for (int x = 0; x < size.width; ++x) {
+      m[x] = cv::Point2f(x + f[x].x, y + f[x].y);
+      // Where the flow points outside the light-off frame there is nothing to subtract.
+      valid[x] = m[x].x >= 0.f && m[x].y >= 0.f && m[x].x <= right && m[x].y <= bottom ? 255 : 0;
+    }
   }
-  cv::Mat aligned, inside;
-  cv::remap(off, aligned, map, cv::noArray(), cv::INTER_LINEAR, cv::BORDER_CONSTANT, cv::Scalar::all(-1));
-  // Where the flow points outside the light-off frame there is nothing to subtract.
-  cv::Mat ones(size, CV_32F, cv::Scalar(1)), weight;
-  cv::remap(ones, weight, map, cv::noArray(), cv::INTER_LINEAR, cv::BORDER_CONSTANT, cv::Scalar(0));
-  inside = weight > 0.999f;
+  cv::Mat aligned;
+  cv::remap(pair.off, aligned, map, cv::noArray(), cv::INTER_LINEAR, cv::BORDER_CONSTANT, cv::Scalar::all(-1));
 
   double k = 1.0, s = 1.0;
-  fitGains(on_grey, channelMean(aligned), device_grey, inside, &k, &s);
+  fitGains(pair.on_grey, channelMean(aligned), device_grey, sample.valid, &k, &s);
   if (!(s > 0.05)) s = 1.0;  // a degenerate fit: keep the scale of the estimate
-  sample.value = (on - k * aligned) * (1.0 / s);
-  sample.valid = inside;
+  sample.value = (pair.on - k * aligned) * (1.0 / s);
   sample.gain_on = s;
   return sample;
 }
 
+// The comparators of a sorting network for n values: Batcher's odd-even merge sort for the next
+// power of two, keeping those between the first n (the others would compare a value with the
+// +infinity padding, which never moves).
+std::vector<std::pair<int, int>> sortingNetwork(int n) {
+  int p2 = 1;
+  while (p2 < n) p2 *= 2;
+  std::vector<std::pair<int, int>> network;
+  for (int p = 1; p < p2; p *= 2)
+    for (int k = p; k >= 1; k /= 2)
+      for (int j = k % p; j + k < p2; j += 2 * k)
+        for (int i = 0; i < std::min(k, p2 - j - k); ++i)
+          if ((i + j) / (2 * p) == (i + j + k) / (2 * p) && i + j + k < n) network.emplace_back(i + j, i + j + k);
+  return network;
+}
+
+// What the inliers of one pixel give: their mean (`median` when there is none), their count and
+// the standard error of the mean.
+struct Robust {
+  float mean;
+  int count;
+  float standard_error;
+};
+inline Robust inlierMean(double sum, double sum2, int count, float median) {
+  const double mean = count ? sum / count : median;
+  // Spread of the inliers; with one inlier nothing is known of it.
+  const double var = count > 1 ? std::max(0.0, (sum2 - count * mean * mean) / (count - 1)) : 1e6;
+  return {static_cast<float>(mean), count, static_cast<float>(std::sqrt(var / std::max(count, 1)))};
+}
+
+// The median of sorted[0, m) and what the values[0, m) within `threshold` of it give.
+inline Robust robustMean(const float* values, const float* sorted, int m, double threshold) {
+  const float median = m % 2 ? sorted[m / 2] : 0.5f * (sorted[m / 2] + sorted[m / 2 - 1]);
+  double sum = 0, sum2 = 0;
+  int count = 0;
+  for (int i = 0; i < m; ++i) {
+    if (std::abs(values[i] - median) > threshold) continue;
+    sum += values[i];
+    sum2 += double(values[i]) * values[i];
+    ++count;
+  }
+  return inlierMean(sum, sum2, count, median);
+}
+
 // Per pixel: the median of the valid samples, then the mean of those within `threshold` of it.
+// `support` and `standard_error` may be null (an intermediate pass needs the estimate only).
 void combine(const std::vector<Sample>& samples, double threshold, cv::Mat* device, cv::Mat* support,
              cv::Mat* standard_error) {
   const cv::Size size = samples.front().value.size();
   const int channels = samples.front().value.channels();
   device->create(size, CV_MAKETYPE(CV_32F, channels));
-  support->create(size, CV_8U);
-  standard_error->create(size, CV_32F);
+  if (support) support->create(size, CV_8U);
+  if (standard_error) standard_error->create(size, CV_32F);
   const int n = static_cast<int>(samples.size());
+  const std::vector<std::pair<int, int>> network = sortingNetwork(n);
+  // Mono pixels whose samples are all valid (nearly all of them) are sorted kLanes at a time by
+  // the network, branch-free (SIMD min and max); the others one by one.
+  constexpr int kLanes = 8;
+  static_assert(kLanes == sizeof(uint64_t) && kLanes % cv::v_float32x4::nlanes == 0,
+                "kLanes: the valid flags of a block are read as one uint64");
   cv::parallel_for_(cv::Range(0, size.height), [&](const cv::Range& rows) {
-    std::vector<float> values(n), sorted(n);
+    std::vector<const float*> value_rows(n);
+    std::vector<const uchar*> valid_rows(n);
+    std::vector<float> block(n * kLanes), values(n), sorted(n);
     for (int y = rows.start; y < rows.end; ++y) {
+      for (int i = 0; i < n; ++i) {
+        value_rows[i] = samples[i].value.ptr<float>(y);
+        valid_rows[i] = samples[i].valid.ptr<uchar>(y);
+      }
       float* out = device->ptr<float>(y);
-      uchar* count_out = support->ptr<uchar>(y);
-      float* se_out = standard_error->ptr<float>(y);
-      for (int x = 0; x < size.width; ++x) {
+      uchar* count_out = support ? support->ptr<uchar>(y) : nullptr;
+      float* se_out = standard_error ? standard_error->ptr<float>(y) : nullptr;
+      const auto onePixel = [&](int x) {
         int worst_count = 255;
         float worst_se = 0.f;
         for (int ch = 0; ch < channels; ++ch) {
+          const int at = x * channels + ch;
           int m = 0;
           for (int i = 0; i < n; ++i)
-            if (samples[i].valid.ptr<uchar>(y)[x]) values[m++] = samples[i].value.ptr<float>(y)[x * channels + ch];
+            if (valid_rows[i][x]) values[m++] = value_rows[i][at];
           if (m == 0) {
-            out[x * channels + ch] = 0.f;
+            out[at] = 0.f;
             worst_count = 0;
             worst_se = 1e9f;
             continue;
           }
-          std::copy(values.begin(), values.begin() + m, sorted.begin());
-          std::nth_element(sorted.begin(), sorted.begin() + m / 2, sorted.begin() + m);
-          float median = sorted[m / 2];
-          if (m % 2 == 0) median = 0.5f * (median + *std::max_element(sorted.begin(), sorted.begin() + m / 2));
-          double sum = 0, sum2 = 0;
-          int count = 0;
-          for (int i = 0; i < m; ++i) {
-            if (std::abs(values[i] - median) > threshold) continue;
-            sum += values[i];
-            sum2 += double(values[i]) * values[i];
-            ++count;
+          for (int i = 0; i < m; ++i) {  // insertion sort: a few dozen samples at most
+            const float v = values[i];
+            int j = i;
+            for (; j > 0 && sorted[j - 1] > v; --j) sorted[j] = sorted[j - 1];
+            sorted[j] = v;
           }
-          const double mean = count ? sum / count : median;
-          out[x * channels + ch] = static_cast<float>(mean);
-          // Spread of the inliers; with one inlier nothing is known of it.
-          const double var = count > 1 ? std::max(0.0, (sum2 - count * mean * mean) / (count - 1)) : 1e6;
-          worst_count = std::min(worst_count, count);
-          worst_se = std::max(worst_se, static_cast<float>(std::sqrt(var / std::max(count, 1))));
+          const Robust r = robustMean(values.data(), sorted.data(), m, threshold);
+          out[at] = r.mean;
+          worst_count = std::min(worst_count, r.count);
+          worst_se = std::max(worst_se, r.standard_error);
         }
-        count_out[x] = static_cast<uchar>(std::min(worst_count, 255));
-        se_out[x] = worst_se;
+        if (count_out) count_out[x] = static_cast<uchar>(std::min(worst_count, 255));
+        if (se_out) se_out[x] = worst_se;
+      };
+      int x = 0;
+      for (; channels == 1 && x + kLanes <= size.width; x += kLanes) {
+        bool all_valid = true;
+        for (int i = 0; i < n && all_valid; ++i) {
+          uint64_t lanes;  // the kLanes valid flags (255 or 0) at once
+          std::memcpy(&lanes, valid_rows[i] + x, sizeof(lanes));
+          all_valid = lanes == ~uint64_t(0);
+        }
+        if (!all_valid) {
+          for (int l = 0; l < kLanes; ++l) onePixel(x + l);
+          continue;
+        }
+        for (int i = 0; i < n; ++i) std::memcpy(&block[i * kLanes], value_rows[i] + x, kLanes * sizeof(float));
+        for (const std::pair<int, int>& c : network) {
+          float* a = &block[c.first * kLanes];
+          float* b = &block[c.second * kLanes];
+          for (int l = 0; l < kLanes; l += cv::v_float32x4::nlanes) {
+            const cv::v_float32x4 va = cv::v_load(a + l), vb = cv::v_load(b + l);
+            cv::v_store(a + l, cv::v_min(va, vb));
+            cv::v_store(b + l, cv::v_max(va, vb));
+          }
+        }
+        // The median and the inliers' sums, lane by lane (as robustMean, in the same order).
+        const float* lower = &block[((n - 1) / 2) * kLanes];
+        const float* upper = &block[(n / 2) * kLanes];
+        float median[kLanes];
+        double sum[kLanes] = {}, sum2[kLanes] = {}, count[kLanes] = {};
+        for (int l = 0; l < kLanes; ++l) median[l] = n % 2 ? upper[l] : 0.5f * (upper[l] + lower[l]);
+        for (int i = 0; i < n; ++i) {
+          const float* v = value_rows[i] + x;
+          for (int l = 0; l < kLanes; ++l) {
+            const double value = v[l], inlier = std::abs(v[l] - median[l]) <= threshold ? 1.0 : 0.0;
+            sum[l] += inlier * value;
+            sum2[l] += inlier * value * value;
+            count[l] += inlier;
+          }
+        }
+        for (int l = 0; l < kLanes; ++l) {
+          const Robust r = inlierMean(sum[l], sum2[l], static_cast<int>(count[l]), median[l]);
+          out[x + l] = r.mean;
+          if (count_out) count_out[x + l] = static_cast<uchar>(std::min(r.count, 255));
+          if (se_out) se_out[x + l] = r.standard_error;
+        }
       }
+      for (; x < size.width; ++x) onePixel(x);
     }
   });
 }
@@ -238,23 +359,39 @@ LearnedDevice learnDeviceImage(const std::vector<LightPair>& pairs, const Device
   LearnedDevice learned;
   cv::Mat device;
   const int n = static_cast<int>(pairs.size());
-  std::vector<Sample> samples(n);
+  std::vector<PairImages> images(n);
+  cv::parallel_for_(cv::Range(0, n), [&](const cv::Range& r) {
+    for (int i = r.start; i < r.end; ++i) images[i] = prepare(pairs[i]);
+  });
+  // Every pair, and the first aligned pass's: the first_pass_pairs fewest frames apart.
+  std::vector<int> all(n);
+  std::iota(all.begin(), all.end(), 0);
+  std::vector<int> closest = all;
+  std::stable_sort(closest.begin(), closest.end(),
+                   [&](int a, int b) { return pairs[a].frames_apart < pairs[b].frames_apart; });
+  if (options.first_pass_pairs > 0 && options.first_pass_pairs < n) closest.resize(options.first_pass_pairs);
   for (int pass = 0; pass <= options.iterations; ++pass) {
+    const std::vector<int>& use = pass == 1 ? closest : all;
+    const int m = static_cast<int>(use.size());
+    std::vector<Sample> samples(m);
     // Flow is per pair and independent: pairs run in parallel, one DIS instance each.
-    cv::parallel_for_(cv::Range(0, n), [&](const cv::Range& r) {
+    cv::parallel_for_(cv::Range(0, m), [&](const cv::Range& r) {
       cv::Ptr<cv::DISOpticalFlow> dis = cv::DISOpticalFlow::create(cv::DISOpticalFlow::PRESET_MEDIUM);
-      for (int i = r.start; i < r.end; ++i) samples[i] = samplePair(pairs[i], device, dis.get());
+      dis->setVariationalRefinementIterations(options.flow_refinement_iterations);
+      for (int i = r.start; i < r.end; ++i) samples[i] = samplePair(images[use[i]], device, dis.get());
     });
     if (pass > 0) {
       // Each sample is on the scale of the previous estimate; that scale is pinned to the median
       // pair's light-on gain, so that it cannot drift from pass to pass.
       std::vector<double> gains;
       for (const Sample& s : samples) gains.push_back(s.gain_on);
-      std::nth_element(gains.begin(), gains.begin() + n / 2, gains.end());
-      const double median_gain = gains[n / 2];
+      std::nth_element(gains.begin(), gains.begin() + m / 2, gains.end());
+      const double median_gain = gains[m / 2];
       for (Sample& s : samples) s.value *= median_gain;
     }
-    combine(samples, options.inlier_threshold, &device, &learned.support, &learned.standard_error);
+    const bool last = pass == options.iterations;
+    combine(samples, options.inlier_threshold, &device, last ? &learned.support : nullptr,
+            last ? &learned.standard_error : nullptr);
   }
   learned.device_template.device = device;
   learned.device_template.calibration_epoch = epoch;

@@ -77,6 +77,13 @@ int refineCornersBySaddleFit(const cv::Mat& image, const CameraPrior& prior, con
   return dropped;
 }
 
+DeviceLearnerOptions windowLearnerOptions() {
+  DeviceLearnerOptions options;
+  options.first_pass_pairs = 2;
+  options.flow_refinement_iterations = 2;
+  return options;
+}
+
 WindowTracker::WindowTracker(const PatternPrior& prior, const TrackerOptions& tracker_options,
                              const WindowTrackerOptions& options, std::optional<StereoRig> guide)
     : tracker_(prior, tracker_options), options_(options), guide_(std::move(guide)) {
@@ -107,10 +114,15 @@ WindowTrack WindowTracker::track(const WindowFrames& left, const WindowFrames& r
         const int n = static_cast<int>(f.light_on.size());
         for (int i = 0; i < n; ++i) {
           const bool first_half = 2 * i < n;
-          const std::vector<cv::Mat>& side = (first_half && !f.light_off_before.empty()) || f.light_off_after.empty()
-                                                 ? f.light_off_before
-                                                 : f.light_off_after;
-          for (const cv::Mat& off : side) set.add(off, f.light_on[i]);
+          const bool before = (first_half && !f.light_off_before.empty()) || f.light_off_after.empty();
+          // Frames apart counted from the window's ends (the gap to the light-off frames is the
+          // same on both sides): only their order matters.
+          const int before_count = static_cast<int>(f.light_off_before.size());
+          if (before)
+            for (int j = 0; j < before_count; ++j) set.add(f.light_off_before[j], f.light_on[i], i + before_count - j);
+          else
+            for (int j = 0; j < static_cast<int>(f.light_off_after.size()); ++j)
+              set.add(f.light_off_after[j], f.light_on[i], n - i + j);
         }
         DeviceLearnerOptions learner = options_.learner;
         learner.min_pairs = 2;

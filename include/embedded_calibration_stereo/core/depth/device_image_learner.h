@@ -16,7 +16,8 @@
 //     samples within `inlier_threshold` of it. A sample far from the median is where the scene
 //     moved (a mover, an occlusion edge, parallax the flow missed) and is left out.
 // The first pass has no estimate of I_C: it takes the per-pixel median of unaligned differences,
-// then `iterations` passes of 1-3 refine it. The scale of I_C is the median pair's light-on gain;
+// then `iterations` passes of 1-3 refine it (the first of them, optionally, with the pairs
+// closest in time only: first_pass_pairs). The scale of I_C is the median pair's light-on gain;
 // the Separator's per-tile alpha absorbs the rest.
 //
 // Confidence: per pixel, the number of inlier samples (`support`) and the standard error of the
@@ -51,6 +52,13 @@ struct DeviceLearnerOptions {
   double max_standard_error = 3.0;  // readiness: per pixel, grey levels, > 0
   int iterations = 2;               // alignment passes after the unaligned first pass, 0..5
   double inlier_threshold = 6.0;    // grey levels from the per-pixel median, > 0
+  // The first alignment pass uses only this many pairs (0: all), those whose two frames are the
+  // fewest frames apart (LightPair::frames_apart): the scene moved least between them, so their
+  // flow is the most reliable, and that pass's estimate only serves to remove the pattern for
+  // the next pass's flow. The later passes use every pair.
+  int first_pass_pairs = 0;
+  // Variational refinement iterations per pyramid level of the flow (DIS; its medium preset has 5).
+  int flow_refinement_iterations = 5;
   // Empty when usable; otherwise one message per problem, joined by "; ".
   std::string Check() const;
 };
@@ -58,6 +66,7 @@ struct DeviceLearnerOptions {
 // One light-off frame and one light-on frame of one camera, a few frames apart.
 struct LightPair {
   cv::Mat light_off, light_on;  // CV_8UC1 or CV_8UC3, one size and type; never written after
+  int frames_apart = 0;         // frame periods between the two (0: not known)
 };
 
 // The pairs of one camera under one calibration epoch.
@@ -69,7 +78,7 @@ class LightPairSet {
   // Keeps references to both images (the caller must not write them afterwards). Throws
   // std::invalid_argument on an empty image, an unsupported type, or a size or type different
   // from the pairs already held.
-  void add(const cv::Mat& light_off, const cv::Mat& light_on);
+  void add(const cv::Mat& light_off, const cv::Mat& light_on, int frames_apart = 0);
   std::vector<LightPair> snapshot() const { return {pairs_.begin(), pairs_.end()}; }
   int size() const { return static_cast<int>(pairs_.size()); }
   uint32_t epoch() const { return epoch_; }

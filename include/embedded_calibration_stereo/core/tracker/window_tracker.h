@@ -12,7 +12,8 @@
 //     light-on frame is paired with the light-off frames on its nearer side (the first half of
 //     the window with those before it, the second half with those after): the scene moved less
 //     in between, so the flow is better, and it takes half the time of pairing every frame with
-//     both sides (bench_calibrate_moving, docs/figures.md);
+//     both sides (bench_calibrate_moving, docs/figures.md). The first alignment pass, which only
+//     has to remove the pattern for the next pass's flow, uses the pairs closest in time;
 //  2. the boards are tracked on I_C, which shows no scene (CameraTracker::trackSceneFree; the
 //     board geometry is verified there, so no id can slip);
 //  3. every corner is refined by a blurred-saddle model fit on I_C (saddle_refinement.h), free of
@@ -37,8 +38,16 @@
 
 namespace ecs {
 
+// The device image learner's options a window is learned with by default.
+DeviceLearnerOptions windowLearnerOptions();
+
 struct WindowTrackerOptions {
-  DeviceLearnerOptions learner;  // its readiness fields are not used: a window is what it is
+  // Its readiness fields are not used (a window is what it is). By default the first alignment
+  // pass uses the two pairs closest in time only (with a light-off frame on each side: the
+  // light-on frame nearest each), whose scene moved least, and the flow's variational refinement
+  // runs 2 iterations instead of DIS's medium preset's 5: faster, and the corners are no worse
+  // (docs/figures.md).
+  DeviceLearnerOptions learner = windowLearnerOptions();
   SaddleFitOptions saddle;       // radius_px is set per corner from the board's square size
   // Saddle window half-size as a fraction of the local square side, clamped to [2, max] px.
   double saddle_radius_squares = 0.45;
@@ -52,8 +61,9 @@ struct WindowTrackerOptions {
 };
 
 // One camera's frames of one window: the settled light-on frames in time order, and the settled
-// light-off frames taken before the window (e.g. the last one) and after it (the first one);
-// either side may be empty, not both (both are far better: the scene moves one way only).
+// light-off frames taken before the window (e.g. the last one) and after it (the first one), in
+// time order; either side may be empty, not both (both are far better: the scene moves one way
+// only).
 // CV_8UC1 or CV_8UC3 (BGR), all of one size and type.
 struct WindowFrames {
   std::vector<cv::Mat> light_off_before, light_off_after, light_on;

@@ -1,0 +1,102 @@
+// WindowTracker timing on the moving drive_photo scenario: windows of 10 light-on frames at
+// 30 fps between a light-off frame before and one after (as test_window_tracker), each tracked
+// `repeats` times by one tracker (the boards' state follows from window to window).
+//   bench_window_tracker [--config FILE] [--windows N] [--repeats R] [--scene 0|1]
+// (default: $ECS_SOURCE_DIR/config/drive_photo.yaml, 6 windows 2 s apart, 3 repeats, no scene
+// correspondences). Prints per window the wall-clock ms of track(), the process CPU time it
+// took (both cameras' threads; on a loaded machine the wall time is inflated by other processes,
+// the CPU time much less) and the corners' RMS against the truth; then the medians.
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <ctime>
+#include <string>
+#include <vector>
+
+#include "embedded_calibration_stereo/core/sim/sim_rig.h"
+#include "embedded_calibration_stereo/core/tracker/window_tracker.h"
+#include "embedded_calibration_stereo/test_support/corner_score.h"
+#include "embedded_calibration_stereo/test_support/sim_prior.h"
+
+using namespace ecs;
+
+namespace {
+
+double cpuMs() {
+  timespec ts;
+  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
+  return 1e3 * ts.tv_sec + 1e-6 * ts.tv_nsec;
+}
+
+double median(std::vector<double> v) {
+  std::sort(v.begin(), v.end());
+  return v.empty() ? 0.0 : v[v.size() / 2];
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  const char* source = std::getenv("ECS_SOURCE_DIR");
+  std::string config = source ? std::string(source) + "/config/drive_photo.yaml" : "";
+  int windows = 6, repeats = 3, scene = 0;
+  for (int i = 1; i < argc; ++i) {
+    const auto value = [&]() -> const char* { return i + 1 < argc ? argv[++i] : ""; };
+    if (!std::strcmp(argv[i], "--config")) config = value();
+    else if (!std::strcmp(argv[i], "--windows")) windows = std::atoi(value());
+    else if (!std::strcmp(argv[i], "--repeats")) repeats = std::atoi(value());
+    else if (!std::strcmp(argv[i], "--scene")) scene = std::atoi(value());
+    else {
+      std::fprintf(stderr, "bench_window_tracker: unknown argument %s\n", argv[i]);
+      return 2;
+    }
+  }
+  if (config.empty() || windows < 1 || repeats < 1) {
+    std::fprintf(stderr, "bench_window_tracker: need --config (or ECS_SOURCE_DIR), windows and repeats >= 1\n");
+    return 2;
+  }
+  constexpr double kFps = 30.0;
+  constexpr int kLitFrames = 10;
+  const SimRigConfig rig_config = loadSimRigConfig(config);
+  SimRig sim(rig_config);
+  const PatternPrior prior = teachSimPrior(sim, 1.0);
+  WindowTrackerOptions options;
+  options.scene_matches = scene != 0;
+  WindowTracker tracker(prior, TrackerOptions(), options, rig_config.rig);
+  std::vector<double> wall_all, cpu_all, rms_all;
+  for (int w = 0; w < windows; ++w) {
+    const int j = 45 + 60 * w;  // the light-off frame before the window
+    WindowFrames left, right;
+    const SimFrame before = sim.render(j / kFps, 0.0, 500 + j);
+    left.light_off_before.push_back(before.left);
+    right.light_off_before.push_back(before.right);
+    SimFrame lit;
+    for (int k = 1; k <= kLitFrames; ++k) {
+      lit = sim.render((j + k) / kFps, 1.0, 1000 + j + k);
+      left.light_on.push_back(lit.left);
+      right.light_on.push_back(lit.right);
+    }
+    const SimFrame after = sim.render((j + kLitFrames + 1) / kFps, 0.0, 500 + j + kLitFrames + 1);
+    left.light_off_after.push_back(after.left);
+    right.light_off_after.push_back(after.right);
+    std::vector<double> wall, cpu;
+    CornerScore score;
+    for (int r = 0; r < repeats; ++r) {
+      const auto t0 = std::chrono::steady_clock::now();
+      const double c0 = cpuMs();
+      const WindowTrack track = tracker.track(left, right, (j + kLitFrames) / kFps);
+      cpu.push_back(cpuMs() - c0);
+      wall.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
+      if (r == 0) score.add(track.observation, lit.observations);
+    }
+    std::printf("window %d (t %.1f s): %.0f ms wall, %.0f ms CPU (median of %d); %s\n", w, j / kFps, median(wall),
+                median(cpu), repeats, score.str().c_str());
+    wall_all.push_back(median(wall));
+    cpu_all.push_back(median(cpu));
+    rms_all.push_back(score.rms());
+  }
+  std::printf("median over %d windows: %.0f ms wall, %.0f ms CPU, %.4f px RMS\n", windows, median(wall_all),
+              median(cpu_all), median(rms_all));
+  return 0;
+}
