@@ -13,6 +13,7 @@
 //                          [--combine 0|1] [--align 0|1] [--free-poses 0|1]
 //                          [--truth-background 0|1] [--truth-noise SIGMA] [--saddle 0|1]
 //                          [--learn-window 0|1|2] [--off-frames K] [--scene 0|1] [--filter 0|1]
+//                          [--refine R]
 // --min-change / --min-improvement: the gate's min_change_in_predicted / min_rms_improvement_rel;
 // what limits the accuracy (docs/figures.md): --combine 1 tracks the mean of the window's frames
 // (one observation per window), --align 0 reports cornerSubPix corners instead of the whole-board
@@ -37,6 +38,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -83,6 +85,7 @@ struct Args {
   double truth_noise = -1;  // >= 0: the simulator's true corners plus this Gaussian noise instead of tracking
   int scene = 0;  // 1: the window observation carries its light-off frames' scene correspondences
   int filter = 0;  // 1: earlier windows' solves as the prior of the groups a window does not contradict
+  double refine = 0.0;  // GateOptions::refine_ratio
 };
 
 // Distances of scene correspondences to their true epipolar lines (the Sampson distance under
@@ -227,6 +230,7 @@ int main(int argc, char** argv) {
     else if (!std::strcmp(argv[i], "--light-off-gap")) args.light_off_gap = std::atoi(value());
     else if (!std::strcmp(argv[i], "--scene")) args.scene = std::atoi(value());
     else if (!std::strcmp(argv[i], "--filter")) args.filter = std::atoi(value());
+    else if (!std::strcmp(argv[i], "--refine")) args.refine = std::atof(value());
     else {
       std::fprintf(stderr, "usage: bench_calibrate_moving [--config FILE] [--minutes M] [--period S] [--frames N] "
                            "[--fps F] [--teach-frames K]   (default config: $ECS_SOURCE_DIR/config/drive_photo.yaml)\n");
@@ -267,9 +271,11 @@ int main(int argc, char** argv) {
   GateOptions gate_options;
   gate_options.min_rms_improvement_rel = args.min_improvement;
   gate_options.min_change_in_predicted = args.min_change;
+  gate_options.refine_ratio = args.refine;
   const QualityGate gate{gate_options};
   const std::vector<VirtualBoard> boards = config.device.virtualBoards();
   StereoRig in_force = config.rig;  // the head starts calibrated
+  std::optional<double> in_force_predicted;  // of a committed solve (the start's is not known)
   DriftScript drift;
   CalibrationFilter filter;
   int windows = 0, commits = 0, worse = 0, rejected = 0;
@@ -398,7 +404,7 @@ int main(int argc, char** argv) {
       const BundleAdjustmentSummary in_force_fit =
           evaluateFixedCalibration(in_force, frames, boards, adjuster.options(),
                                    args.free_poses ? nullptr : &config.device);
-      decision = gate.evaluate(candidate, &in_force_fit);
+      decision = gate.evaluate(candidate, &in_force_fit, in_force_predicted);
     } else {
       decision.reason = "solve failed: " + candidate.message;
     }
@@ -432,6 +438,7 @@ int main(int argc, char** argv) {
     worst_after_mis = std::max(worst_after_mis, new_a.misalignment_px.rms);
     worst_after_bias = std::max(worst_after_bias, new_a.disparity_bias_px.rms);
     in_force = candidate.rig;
+    in_force_predicted = QualityGate::predictedPx(candidate);
   }
   const double minutes =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count() / 60.0;

@@ -75,6 +75,11 @@ struct HealthParams {
   // A new calibration waits this long (wall) for its solve's board poses before it is verified
   // against device_config's; 0: never waits.
   double solve_boards_wait_s = 2.0;
+  // A calibration the calibrator committed with a predicted misalignment or disparity bias
+  // (calibration/status) above this asks for more bursts, at most max_refinements in a row, so
+  // that it can refine it with what they add; 0: never.
+  double refine_predicted_px = 0.05;
+  int max_refinements = 2;
   int depth_every_n_frames = 2;  // measured here; the monitor's own stride is 1
   int queue_size = 5;
   bool rollback = true;
@@ -90,6 +95,8 @@ HealthParams loadParams(const ros::NodeHandle& pnh, const std::string& default_d
   if (p.device_config.empty()) throw ecs::ConfigError("device_config", "missing");
   p.boards_posed = read.get("boards_posed", p.boards_posed);
   p.solve_boards_wait_s = read.inRange("solve_boards_wait_s", p.solve_boards_wait_s, 0.0, 60.0);
+  p.refine_predicted_px = read.atLeast("refine_predicted_px", p.refine_predicted_px, 0.0);
+  p.max_refinements = read.inRange("max_refinements", p.max_refinements, 0, 10);
   p.depth_every_n_frames = read.atLeast("depth_every_n_frames", p.depth_every_n_frames, 1);
   p.queue_size = read.atLeast("queue_size", p.queue_size, 1);
   p.rollback = read.get("rollback", p.rollback);
@@ -325,6 +332,7 @@ class CalibrationHealthNodelet : public nodelet::Nodelet {
   // calibrator found nothing better than the calibration in force: while DEGRADED, no more
   // windows are wanted for it until a signal doubles.
   void onStatus(const CalibrationStatusConstPtr& status) {
+    noteRefinement(*status);
     if (status->accepted && !status->board_ids.empty() && status->board_ids.size() == status->board_poses.size()) {
       SolvedBoards solved{status->left_intrinsics, status->right_intrinsics, boards_};
       std::vector<ecs::VirtualBoard> placed;
@@ -346,6 +354,20 @@ class CalibrationHealthNodelet : public nodelet::Nodelet {
     const ecs::HealthReport report = monitor_->report();
     if (rank(report.state) <= 0) return;
     confirmed_severity_ = severity(report);
+  }
+
+  // A commit predicted worse than refine_predicted_px wants one more burst while it is in force,
+  // until a solve of a later window; refinements in a row are counted until the health leaves
+  // GOOD again (a new change).
+  void noteRefinement(const CalibrationStatus& status) {
+    if (params_.refine_predicted_px <= 0.0) return;
+    const double predicted = std::max(status.predicted_misalignment_rms_px, status.predicted_disparity_bias_rms_px);
+    if (status.accepted && predicted > params_.refine_predicted_px && refinements_ < params_.max_refinements) {
+      refine_ = Refinement{status.epoch, status.newest_frame, predicted};
+      ++refinements_;
+    } else if (refine_ && status.newest_frame > refine_->after) {
+      refine_.reset();
+    }
   }
 
   // The newest accepted solve whose calibration is the one in force gives the boards to verify
@@ -525,13 +547,23 @@ class CalibrationHealthNodelet : public nodelet::Nodelet {
     const int level = rank(report.state);
     if (level == 0) confirmed_severity_.reset();  // GOOD again: a later change wants a window again
     if (level == 0) left_good_at_.reset();
-    if (level > 0 && !left_good_at_) left_good_at_ = stamp;
+    if (level > 0 && !left_good_at_) {
+      left_good_at_ = stamp;
+      refinements_ = 0;  // a new change: its commits may be refined again
+    }
     // BAD: always (depth cannot be trusted). DEGRADED: until the calibrator confirms the
     // calibration in force as its best, and again once a signal doubles since.
     msg->calibration_wanted =
         level == 2 || (level == 1 && !(confirmed_severity_ && severity(report) < kRearmFactor * *confirmed_severity_));
     if (level == 1 && !msg->calibration_wanted)
       msg->reason += "; the calibrator found nothing better: no calibration window until a signal doubles";
+    if (refine_ && epoch_ && refine_->epoch == *epoch_ && level >= 0 && !msg->calibration_wanted) {
+      msg->calibration_wanted = true;
+      char text[120];
+      std::snprintf(text, sizeof(text), "; refining: the calibration's predicted error %.3f px (limit %.3f px)",
+                    refine_->predicted_px, params_.refine_predicted_px);
+      msg->reason += text;
+    }
     health_pub_.publish(msg);
   }
 
@@ -630,6 +662,14 @@ class CalibrationHealthNodelet : public nodelet::Nodelet {
   std::future<std::string> restore_;                           // the running restore: "" or why it failed
   std::optional<uint32_t> restored_epoch_;
   std::optional<ros::Time> left_good_at_;  // stamp of the first verdict below GOOD since the last GOOD
+  // A commit to refine: its epoch, its newest frame, its predicted error (px).
+  struct Refinement {
+    uint32_t epoch;
+    ros::Time after;
+    double predicted_px;
+  };
+  std::optional<Refinement> refine_;
+  int refinements_ = 0;  // refinements asked since the health last left GOOD
   std::optional<double> confirmed_severity_;  // severity() when the calibrator confirmed the calibration                     // the epoch of the restored calibration
   std::string calibration_problem_, last_restore_;
   uint64_t light_off_frames_ = 0, depth_frames_ = 0, verifications_ = 0, restores_ = 0;

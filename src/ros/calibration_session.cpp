@@ -87,6 +87,7 @@ CalibratorParams loadCalibratorParams(const ros::NodeHandle& pnh, const std::str
   p.adjustment.use_scene_matches = read.get("scene_constraints", p.adjustment.use_scene_matches);
   p.prior_from_earlier_windows = read.get("prior_from_earlier_windows", p.prior_from_earlier_windows);
   p.filter.change_probability = read.get("change_probability", p.filter.change_probability);
+  p.gate.refine_ratio = read.inRange("refine_ratio", 0.85, 0.0, 0.99);
   if (const std::string e = p.filter.Check(); !e.empty()) throw ecs::ConfigError("change_probability", e);
   non_negative("max_rms_px", &p.gate.max_rms_px);
   non_negative("max_epipolar_rms_px", &p.gate.max_epipolar_rms_px);
@@ -223,6 +224,7 @@ CalibrationStatus CalibrationSession::solve(const std::vector<ecs::StereoObserva
                             carriesCalibration(*right_info, filter_in_force_->second))) {
     filter_.reset();
     filter_in_force_.reset();
+    in_force_predicted_px_.reset();
   }
   ecs::BundleAdjustmentSummary candidate = adjuster_.Solve(input);
   const double stamp = frames.empty() ? 0.0 : frames.back().stamp;
@@ -252,7 +254,8 @@ CalibrationStatus CalibrationSession::solve(const std::vector<ecs::StereoObserva
   if (!candidate.success) {
     decision.reason = "solve failed: " + candidate.message;
   } else {
-    decision = gate_.evaluate(candidate, have_in_force ? &in_force_fit : nullptr);
+    decision = gate_.evaluate(candidate, have_in_force ? &in_force_fit : nullptr, in_force_predicted_px_);
+    if (decision.refinement) prior_note_ += (prior_note_.empty() ? "" : "; ") + decision.reason.substr(10);
   }
   ecs::RectificationOptions rectification;  // as toStereoCameraInfo() commits it
   rectification.alpha = params_.rectification_alpha;
@@ -298,12 +301,16 @@ CalibrationStatus CalibrationSession::solve(const std::vector<ecs::StereoObserva
   if (!commit_error.empty()) {
     status.accepted = false;
     status.reason = "not committed: " + commit_error;
-    if (uncommitted) *uncommitted = UncommittedCalibration{infos, candidate.rig, *left_info, *right_info, status};
+    if (uncommitted)
+      *uncommitted = UncommittedCalibration{infos, candidate.rig, *left_info, *right_info, status,
+                                            ecs::QualityGate::predictedPx(candidate)};
     return status;
   }
   // status.epoch stays `epoch`: how far the driver moves its epoch per set_camera_info is the
   // driver's business, so the caller reads the new epoch from the driver's frames.
   if (learn) filter_in_force_.emplace(infos.left, infos.right);
+  const double predicted = ecs::QualityGate::predictedPx(candidate);
+  in_force_predicted_px_ = predicted > 0.0 ? std::optional<double>(predicted) : std::nullopt;
   *committed = std::move(infos);
   return status;
 }
@@ -312,6 +319,9 @@ std::string CalibrationSession::commitAgain(const UncommittedCalibration& calibr
   const std::string error = commit(calibration.infos, calibration.rig, calibration.left_in_force);
   // The state learned from this calibration's solve now holds under it.
   if (error.empty() && filter_in_force_) filter_in_force_.emplace(calibration.infos.left, calibration.infos.right);
+  if (error.empty())
+    in_force_predicted_px_ =
+        calibration.predicted_px > 0.0 ? std::optional<double>(calibration.predicted_px) : std::nullopt;
   return error;
 }
 

@@ -87,6 +87,41 @@ TEST(QualityGate, NoImprovementOverACalibrationThatStillFitsIsRejected) {
   EXPECT_FALSE(w.in_force_confirmed) << w.reason;
 }
 
+// A candidate that only confirms the calibration in force replaces it when it is clearly better
+// known (refine_ratio): its predicted error against the one the calibration in force was
+// committed with, at the ratio's edge on both sides.
+TEST(QualityGate, AConfirmingSolveClearlyBetterKnownRefinesTheCalibrationInForce) {
+  const Scenario s;
+  const auto frames = s.observe(10, 2);
+  const BundleAdjustmentSummary candidate = s.solve(frames, s.truth);
+  const BundleAdjustmentSummary in_force = evaluateFixedCalibration(s.truth, frames, s.boards);
+  const double p = QualityGate::predictedPx(candidate);
+  ASSERT_GT(p, 0.0);
+  GateOptions o;
+  o.refine_ratio = 0.85;
+  const QualityGate gate(o);
+  const GateDecision refined = gate.evaluate(candidate, &in_force, p / 0.84);
+  EXPECT_TRUE(refined.accepted) << refined.reason;
+  EXPECT_TRUE(refined.refinement);
+  EXPECT_FALSE(refined.in_force_confirmed);
+  EXPECT_NEAR(refined.predicted_px, p, 1e-12);
+  EXPECT_NE(refined.reason.find("refinement"), std::string::npos) << refined.reason;
+  // Not clearly better known, no prediction of the calibration in force, or refinement off:
+  // the calibration in force stands, confirmed.
+  for (const GateDecision& d : {gate.evaluate(candidate, &in_force, p / 0.86), gate.evaluate(candidate, &in_force),
+                                QualityGate(GateOptions{}).evaluate(candidate, &in_force, p / 0.5)}) {
+    EXPECT_FALSE(d.accepted) << d.reason;
+    EXPECT_TRUE(d.in_force_confirmed) << d.reason;
+    EXPECT_FALSE(d.refinement);
+  }
+  // A candidate that fits clearly worse confirms nothing and refines nothing.
+  BundleAdjustmentSummary worse = candidate;
+  worse.rms_left_px = worse.rms_right_px = 1.2 * combinedRms(in_force);
+  EXPECT_FALSE(gate.evaluate(worse, &in_force, p / 0.5).accepted);
+  o.refine_ratio = 1.0;
+  EXPECT_NE(o.Check().find("refine_ratio"), std::string::npos);
+}
+
 TEST(QualityGate, SingleBoardSolveIsRejectedOrAccurate) {
   const Scenario s;
   const std::vector<VirtualBoard> one(s.boards.begin() + 1, s.boards.begin() + 2);

@@ -114,6 +114,7 @@ struct UncommittedCalibration {
   // side is refused): committed again only while the driver still publishes these.
   sensor_msgs::CameraInfo left_in_force, right_in_force;
   CalibrationStatus status;  // the solve's status (accepted false, reason "not committed: ...")
+  double predicted_px = 0.0;  // its predicted hypot(misalignment, disparity bias) (QualityGate::predictedPx)
 };
 
 // Solve, gate and commit. Threading: solve() runs on the calibrator's worker thread only (it
@@ -176,6 +177,7 @@ class CalibrationSession {
   // from outside, resets it). Touched by solve() and commitAgain() only: the worker thread.
   ecs::CalibrationFilter filter_;
   std::optional<std::pair<sensor_msgs::CameraInfo, sensor_msgs::CameraInfo>> filter_in_force_;
+  std::optional<double> in_force_predicted_px_;  // our calibration in force's predicted hypot(misalignment, bias)
   std::string prior_note_;
   std::mutex tf_mutex_;  // guards tf_broadcaster_
   tf2_ros::StaticTransformBroadcaster tf_broadcaster_;

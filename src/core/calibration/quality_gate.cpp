@@ -51,6 +51,7 @@ std::string GateOptions::Check() const {
   if (!(min_rms_improvement_rel >= 0)) return "min_rms_improvement_rel must be >= 0";
   if (!(in_force_max_rms_px > 0)) return "in_force_max_rms_px must be > 0";
   if (!(min_change_in_predicted >= 0)) return "min_change_in_predicted must be >= 0";
+  if (!(refine_ratio >= 0 && refine_ratio < 1)) return "refine_ratio must be in [0, 1)";
   return "";
 }
 
@@ -62,8 +63,18 @@ double combinedRms(const BundleAdjustmentSummary& s) {
                    n);
 }
 
-GateDecision QualityGate::evaluate(const BundleAdjustmentSummary& c,
-                                   const BundleAdjustmentSummary* in_force_fit) const {
+double QualityGate::predictedPx(const BundleAdjustmentSummary& c) {
+  if (!c.success || !c.covariance_ok) return 0.0;
+  try {
+    const StereoAccuracy p = predictStereoAccuracy(c.rig, c.rig_covariance);
+    return std::hypot(p.misalignment_px.rms, p.disparity_bias_px.rms);
+  } catch (const std::exception&) {
+    return 0.0;
+  }
+}
+
+GateDecision QualityGate::evaluate(const BundleAdjustmentSummary& c, const BundleAdjustmentSummary* in_force_fit,
+                                   std::optional<double> in_force_predicted_px) const {
   const GateOptions& o = options_;
   const auto reject = [](const std::string& why) {
     return GateDecision{false, "rejected: " + why};
@@ -105,6 +116,19 @@ GateDecision QualityGate::evaluate(const BundleAdjustmentSummary& c,
     return {true, "accepted: calibration in force cannot explain the observations (" +
                       in_force_fit->message + ")"};
   const double in_force_rms = combinedRms(*in_force_fit);
+  // A candidate that only confirms the calibration in force replaces it when clearly better
+  // known (refine_ratio); otherwise `kept` stands.
+  const auto refineOr = [&](GateDecision kept) {
+    if (!kept.in_force_confirmed || !(o.refine_ratio > 0) || !in_force_predicted_px || !(*in_force_predicted_px > 0))
+      return kept;
+    const double p = predictedPx(c);
+    if (!(p > 0 && p < o.refine_ratio * *in_force_predicted_px)) return kept;
+    GateDecision refined{true, "accepted: refinement of the calibration in force, predicted error " + fmt(p) +
+                                   " px against " + fmt(*in_force_predicted_px) + " px"};
+    refined.refinement = true;
+    refined.predicted_px = p;
+    return refined;
+  };
   // The significance of the change, when asked: "" when significant (or not asked), otherwise
   // the rejection; *note describes the change for the acceptance.
   std::string note;
@@ -137,7 +161,7 @@ GateDecision QualityGate::evaluate(const BundleAdjustmentSummary& c,
       GateDecision kept = reject(why);
       // The observations do not tell the two apart: the calibration in force stands.
       kept.in_force_confirmed = why.rfind("change", 0) == 0;
-      return kept;
+      return refineOr(kept);
     }
     return {true, "accepted: RMS " + fmt(candidate_rms) + " px vs " + fmt(in_force_rms) +
                       " px for the calibration in force" + note};
@@ -147,7 +171,7 @@ GateDecision QualityGate::evaluate(const BundleAdjustmentSummary& c,
                              fmt(100 * o.min_rms_improvement_rel) + "% lower)");
   // A fresh solve clearly worse than the calibration in force confirms nothing: something failed.
   kept.in_force_confirmed = candidate_rms <= in_force_rms * (1.0 + o.min_rms_improvement_rel);
-  return kept;
+  return refineOr(kept);
 }
 
 }  // namespace ecs

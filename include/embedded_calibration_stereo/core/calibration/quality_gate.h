@@ -8,6 +8,7 @@
 // rejected with a human-readable reason and nothing changes.
 //
 // Threading: immutable after construction; evaluate() is a pure function.
+#include <optional>
 #include <string>
 
 #include "embedded_calibration_stereo/core/calibration/bundle_adjuster.h"
@@ -44,6 +45,12 @@ struct GateOptions {
   // the tracker's corners share errors a slightly wrong calibration fits better than the true
   // one, so a better RMS alone can be a worse calibration.
   double min_change_in_predicted = 0.0;
+  // A candidate kept out only because it confirms the calibration in force (fits no better, or
+  // changes too little) replaces it when its predicted accuracy for depth, hypot(misalignment,
+  // disparity bias) RMS predicted from its covariance, is below this times the calibration in
+  // force's (evaluate()'s in_force_predicted_px): as well fitted and better known, e.g. solved with
+  // what the windows since the calibration in force taught (calibration_filter.h). 0: never.
+  double refine_ratio = 0.0;
 
   std::string Check() const;  // empty when usable
 };
@@ -54,6 +61,11 @@ struct GateDecision {
   // Rejected only because the candidate fits no better (and not clearly worse) than the
   // calibration in force: the calibration in force is confirmed by these observations.
   bool in_force_confirmed = false;
+  // Accepted as a refinement of the calibration in force (GateOptions::refine_ratio).
+  bool refinement = false;
+  // The candidate's predicted hypot(misalignment, disparity bias) RMS (px) when the gate computed
+  // it (min_change_in_predicted, refine_ratio), 0 otherwise.
+  double predicted_px = 0.0;
 };
 
 class QualityGate {
@@ -61,8 +73,12 @@ class QualityGate {
   explicit QualityGate(GateOptions options) : options_(options) {}
   // `in_force_fit`: evaluateFixedCalibration() of the calibration in force on the same
   // observations as the candidate; nullptr when no calibration is in force yet.
-  GateDecision evaluate(const BundleAdjustmentSummary& candidate,
-                        const BundleAdjustmentSummary* in_force_fit) const;
+  // `in_force_predicted_px`: the calibration in force's own predicted hypot(misalignment,
+  // disparity bias) RMS (the decision's predicted_px when it was accepted), for refine_ratio.
+  GateDecision evaluate(const BundleAdjustmentSummary& candidate, const BundleAdjustmentSummary* in_force_fit,
+                        std::optional<double> in_force_predicted_px = std::nullopt) const;
+  // The candidate's predicted hypot(misalignment, disparity bias) RMS (px); 0 without covariance.
+  static double predictedPx(const BundleAdjustmentSummary& candidate);
   const GateOptions& options() const { return options_; }
 
  private:
