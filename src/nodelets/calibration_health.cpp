@@ -77,8 +77,9 @@ struct HealthParams {
   double solve_boards_wait_s = 2.0;
   // A calibration the calibrator committed with a predicted misalignment or disparity bias
   // (calibration/status) above this asks for more bursts, at most max_refinements in a row, so
-  // that it can refine it with what they add; 0: never.
-  double refine_predicted_px = 0.05;
+  // that it can refine it with what they add; 0: never. The default is the DEGRADED thresholds':
+  // a calibration predicted no better than a degraded one. Such bursts light frames while GOOD.
+  double refine_predicted_px = 0.08;
   int max_refinements = 2;
   int depth_every_n_frames = 2;  // measured here; the monitor's own stride is 1
   int queue_size = 5;
