@@ -1,6 +1,6 @@
 // Calibration health monitor on drive_photo (config/drive_photo.yaml): its cost per frame at
 // 752x480 and its detection delays.
-//   bench_calibration_monitor [--cost-only] [--minutes M]
+//   bench_calibration_monitor [--cost-only | --no-drift-only] [--minutes M]
 // Prints:
 //   - cost: setCalibration, one depth-mode measurement (wall p50/p90 and process CPU over 3 x 60
 //     pre-rendered light-off frames, images in memory), the same per 30 fps frame at the default
@@ -9,7 +9,8 @@
 //     into a 30 fps run (depth mode every frame, one verification every 2 s, corners from the
 //     PatternTracker); thermal ramps of 0.01 deg/s about x, y, z: the turn at detection;
 //   - with --minutes M (default 0: skipped): M minutes of the undrifted drive with its movers
-//     (fixed seeds, motion by frame index), the number of frames not GOOD and the worst figures.
+//     (fixed seeds, motion by frame index), the number of frames not GOOD and the worst figures;
+//     --no-drift-only runs that alone (default 1 minute) and exits 1 when a frame was not GOOD.
 // Run from anywhere with ECS_SOURCE_DIR set to the package folder, or from the package folder.
 #include <algorithm>
 #include <chrono>
@@ -156,7 +157,8 @@ void ramp(int axis) {
               run.t - t0, run.turnDeg());
 }
 
-void soak(double minutes) {
+// Returns the frames not GOOD.
+int soak(double minutes) {
   Run run(2.0);
   const int frames = static_cast<int>(minutes * 60.0 * 30.0);
   int not_good = 0;
@@ -171,23 +173,28 @@ void soak(double minutes) {
   std::printf("no drift, %.1f min (%d frames, %d lit = %.2f %%): %d frames not GOOD; worst misalignment %.3f px, "
               "bias %.3f px, board residual %.3f px\n",
               minutes, frames, run.lit, 100.0 * run.lit / frames, not_good, worst_m, worst_b, worst_r);
+  return not_good;
 }
 
 }  // namespace
 
 int main(int argc, char** argv) {
-  bool cost_only = false;
+  bool cost_only = false, no_drift_only = false;
   double minutes = 0.0;
   for (int i = 1; i < argc; ++i) {
     if (!std::strcmp(argv[i], "--cost-only")) {
       cost_only = true;
+    } else if (!std::strcmp(argv[i], "--no-drift-only")) {
+      no_drift_only = true;
     } else if (!std::strcmp(argv[i], "--minutes") && i + 1 < argc) {
       minutes = std::atof(argv[++i]);
     } else {
-      std::fprintf(stderr, "usage: bench_calibration_monitor [--cost-only] [--minutes M]\n");
+      std::fprintf(stderr, "usage: bench_calibration_monitor [--cost-only | --no-drift-only] [--minutes M]\n");
       return 2;
     }
   }
+  // The no-drift run alone (CI's minute): exit status 1 when a frame was not GOOD.
+  if (no_drift_only) return soak(minutes > 0 ? minutes : 1.0) > 0 ? 1 : 0;
   costs();
   if (cost_only) return 0;
   std::printf("verification every 2 s (one lit frame in 60: 1.67 %% of frames)\n");
