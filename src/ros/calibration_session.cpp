@@ -231,8 +231,7 @@ CalibrationStatus CalibrationSession::solve(const std::vector<ecs::StereoObserva
   prior_note_.clear();
   if (params_.prior_from_earlier_windows && candidate.success && filter_.hasState()) {
     std::vector<std::string> changed, seen_by_health;
-    if (health_problem_s && *health_problem_s >= filter_.stateTime())
-      seen_by_health = {"left focal length", "right focal length", "stereo rotation"};
+    if (health_problem_s && *health_problem_s >= filter_.stateTime()) seen_by_health = ecs::turnAndZoomGroups();
     if (const std::optional<ecs::RigPrior> prior = filter_.priorFor(candidate, stamp, &changed, seen_by_health)) {
       input.rig_prior = prior;
       input.weights_from = &candidate;

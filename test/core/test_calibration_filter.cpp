@@ -130,6 +130,9 @@ TEST(CalibrationFilter, ChangesAreTheGroupsTheyMove) {
     }
   }
   std::printf("[ figures  ] %d of %d unchanged groups taken as changed\n", unexpected, tests);
+  // What a zoom and a pan move are the groups a health verdict releases.
+  EXPECT_EQ(std::set<std::string>(turnAndZoomGroups().begin(), turnAndZoomGroups().end()),
+            (std::set<std::string>{"left focal length", "right focal length", "stereo rotation"}));
   // Binomial(tests, 0.05): mean 5 % of them; 12 % is beyond 3 of its standard deviations.
   EXPECT_LE(unexpected, 0.12 * tests);
 }

@@ -42,6 +42,11 @@ double chiSquareSurvival(double x, int k) {
 
 }  // namespace
 
+const std::vector<std::string>& turnAndZoomGroups() {
+  static const std::vector<std::string> names = {groups()[0].name, groups()[3].name, groups()[6].name};
+  return names;
+}
+
 double chiSquareQuantile(double upper_tail, int dof) {
   if (!(upper_tail > 0.0 && upper_tail < 1.0) || dof < 1)
     throw std::invalid_argument("chiSquareQuantile: upper_tail in (0, 1) and dof >= 1");

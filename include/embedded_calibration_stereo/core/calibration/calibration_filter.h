@@ -52,6 +52,10 @@ struct CalibrationFilterOptions {
 // distortion", the same for the right camera, "stereo rotation", "stereo translation".
 const std::vector<std::string>& calibrationGroupNames();
 
+// The groups a turn of the right camera and a zoom move: what the health monitor's change model
+// (calibration_monitor.h) sees change.
+const std::vector<std::string>& turnAndZoomGroups();
+
 // The x that a chi-square variable with `dof` degrees of freedom exceeds with probability
 // `upper_tail` (the innovation test's limit).
 double chiSquareQuantile(double upper_tail, int dof);
