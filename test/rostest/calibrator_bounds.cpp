@@ -357,9 +357,13 @@ TEST(CalibratorBounds, AKilledCallerEndsItsRequestTheLightGoesOffAndAutomaticCal
   const int manager = ecs_test::nodePid("/stereo/stereo_manager");
   ASSERT_GT(manager, 0) << "cannot find the manager's pid";
   const size_t requests_before = fixture->light.requests().size();
+  const ecs_test::TempDir temp("ecs_calibrator_bounds_client");
   ecs_test::ChildProcess client({"rosservice", "call", "--wait", "/stereo/calibration/recalibrate",
-                                 "{frames: 4000000000, timeout_s: 1000000000.0, dry_run: false}"});
-  ASSERT_TRUE(fixture->light.waitForRequest(requests_before, true, 20.0)) << "the client's request never started";
+                                 "{frames: 4000000000, timeout_s: 1000000000.0, dry_run: false}"},
+                                {}, temp.path + "/rosservice.log");
+  ASSERT_TRUE(fixture->light.waitForRequest(requests_before, true, 20.0))
+      << "the client's request never started (rosservice " << (client.running() ? "still runs" : "ended")
+      << "), it printed:\n" << client.logTail();
   // Who holds the calibrator: the rosservice client's node.
   AsyncCall second(5, 2.0);
   ASSERT_TRUE(second.wait(3.0));
