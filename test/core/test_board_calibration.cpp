@@ -24,6 +24,7 @@
 #include "embedded_calibration_stereo/core/calibration/board_calibration_report.h"
 #include "embedded_calibration_stereo/core/geometry/camera_info_yaml.h"
 #include "embedded_calibration_stereo/test_support/flat_board_images.h"
+#include "embedded_calibration_stereo/test_support/run_command.h"
 #include "embedded_calibration_stereo/core/sim/sim_rig.h"
 
 namespace ecs {
@@ -278,15 +279,10 @@ std::string toolPath() {
 }
 
 int runTool(const std::string& arguments, std::string* output = nullptr) {
-  const std::string command = toolPath() + " " + arguments + " 2>&1";
-  FILE* pipe = ::popen(command.c_str(), "r");
-  if (!pipe) return -1;
   std::string text;
-  char buffer[512];
-  while (std::fgets(buffer, sizeof buffer, pipe)) text += buffer;
-  const int status = ::pclose(pipe);
+  const int status = runCommand(toolPath() + " " + arguments + " 2>&1", &text);
   if (output) *output = text;
-  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  return status;
 }
 
 std::string readText(const std::filesystem::path& path) {

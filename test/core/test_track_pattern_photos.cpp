@@ -51,7 +51,6 @@ std::string tempDir() {
   return dir ? std::string(dir) + "/" : std::string();
 }
 
-
 // OpenCV's corners on the clean photo in the tool's documented order for a plain board.
 bool referenceCorners(const cv::Mat& gray, std::vector<cv::Point2f>* out) {
   std::vector<cv::Point2f> c;

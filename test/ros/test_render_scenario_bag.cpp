@@ -21,6 +21,7 @@
 #include "embedded_calibration_stereo/StereoPatternObservation.h"
 #include "embedded_calibration_stereo/core/sim/sim_rig.h"
 #include "embedded_calibration_stereo/core/sim/trajectory.h"
+#include "embedded_calibration_stereo/test_support/run_command.h"
 
 namespace {
 
@@ -33,12 +34,7 @@ struct Result {
 
 Result runTool(const std::string& args) {
   Result r;
-  FILE* pipe = ::popen((std::string(ECS_RENDER_SCENARIO_BAG) + " " + args + " 2>&1").c_str(), "r");
-  if (!pipe) return r;
-  char buffer[4096];
-  while (size_t n = std::fread(buffer, 1, sizeof(buffer), pipe)) r.output.append(buffer, n);
-  const int status = ::pclose(pipe);
-  r.status = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  r.status = ecs::runCommand(std::string(ECS_RENDER_SCENARIO_BAG) + " " + args + " 2>&1", &r.output);
   return r;
 }
 

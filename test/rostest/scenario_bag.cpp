@@ -30,6 +30,7 @@
 #include "embedded_calibration_stereo/CalibrationMode.h"
 #include "embedded_calibration_stereo/CalibrationStatus.h"
 #include "embedded_calibration_stereo/StereoPatternObservation.h"
+#include "embedded_calibration_stereo/test_support/run_command.h"
 
 using embedded_calibration_stereo::CalibrationMode;
 using embedded_calibration_stereo::CalibrationStatus;
@@ -47,14 +48,8 @@ const std::string kManager = "/stereo/stereo_manager";
 
 std::string launchFile(const std::string& name) { return std::string(ECS_SOURCE_DIR) + "/launch/" + name; }
 
-int run(const std::string& command, std::string* output) {
-  FILE* pipe = ::popen((command + " 2>&1").c_str(), "r");
-  if (!pipe) return -1;
-  char buffer[4096];
-  while (size_t n = std::fread(buffer, 1, sizeof(buffer), pipe)) output->append(buffer, n);
-  const int status = ::pclose(pipe);
-  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-}
+// Exit status and output (stdout and stderr).
+int run(const std::string& command, std::string* output) { return ecs::runCommand(command + " 2>&1", output); }
 
 // Light windows of the bag: the stamps of their first and last light-on frames.
 struct Window {
