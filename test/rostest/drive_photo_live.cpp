@@ -43,20 +43,21 @@ using sensor_msgs::CameraInfo;
 namespace {
 
 // The accuracy targets for depth after the drift (px RMS over the field of view, %, relative):
-// printed, met or not. The window after the knock is one window observation with its scene
-// correspondences and what the earlier windows taught; its predicted bias is about 0.04-0.06 px,
-// so a run meets every target most times, not every time, and a window lit in a turn of the
-// drive under load reaches 2 % at 10 m (docs/figures.md). The test holds the calibration to what
-// it reaches with margin, well inside what the drift caused (a 2.6 px disparity bias).
+// printed, met or not. The window after the knock is one window observation of a 30-frame burst
+// with its scene correspondences and what the earlier windows taught; its own predicted bias is
+// about 0.04 px, and the runs measured met every target (docs/figures.md). The test holds the
+// calibration to the targets for misalignment and fx and to about twice the others: a run is a
+// sample of one window, and its bias a draw from that prediction.
 constexpr double kTargetMisalignmentPx = 0.05, kTargetBiasPx = 0.05, kTargetDepthError10mPct = 0.7,
                  kTargetFocalRel = 0.0005, kTargetBaselineRel = 0.001;
-constexpr double kMisalignmentPx = 0.1, kBiasPx = 0.3, kDepthError10mPct = 4.0, kFocalRel = 0.001,
-                 kBaselineRel = 0.005;
+constexpr double kMisalignmentPx = 0.05, kBiasPx = 0.12, kDepthError10mPct = 1.8, kFocalRel = 0.0005,
+                 kBaselineRel = 0.0025;
 // A commit is worse than the calibration it replaced when its combined error against the same
 // truth, hypot(misalignment RMS, bias RMS), is larger by more than this (px).
 constexpr double kWorsePx = 0.01;
 double combined(const ecs::StereoAccuracy& a) { return std::hypot(a.misalignment_px.rms, a.disparity_bias_px.rms); }
 constexpr double kThermalDegPerS = 0.03;
+constexpr double kFps = 30.0;  // the driver's fps (drive_photo_live.test)
 // A burst starts within a period of the drift, may be dropped while the tracker's worker is busy
 // with the one before, and is published once tracked.
 constexpr double kWindowTimeoutS = 25.0;
@@ -190,10 +191,13 @@ TEST(DrivePhotoLive, ZoomThermalAndKnockAreRecalibratedAndNoCommitIsWorse) {
   ASSERT_TRUE(during) << "no window solved after the zoom";
   std::printf("window during the thermal rotation: accepted %d (%s)\n", during->accepted, during->reason.c_str());
 
-  // The rotation stops where it got to (held as a fixed rotation), and a knock.
+  // The rotation stops where it got to (held as a fixed rotation), and a knock. The simulator's
+  // time is the frame index over fps, so the rotation ran for the frames rendered since the zoom.
+  int frames_since_zoom = 0;
+  for (const auto& m : f.modes.snapshot()) frames_since_zoom += m->header.stamp > zoom_time;
   SetRigDrift::Request knock;
   knock.focal_scale = 1.05;
-  knock.right_rotation_deg = {0.0, kThermalDegPerS * (ros::Time::now() - zoom_time).toSec(), 0.0};
+  knock.right_rotation_deg = {0.0, kThermalDegPerS * frames_since_zoom / kFps, 0.0};
   knock.knock_rotation_deg = {0.04, -0.03, 0.05};
   knock.knock_translation_m = {0.0008, 0.0003, -0.0005};
   ASSERT_TRUE(setDrift(knock));
@@ -243,6 +247,20 @@ TEST(DrivePhotoLive, ZoomThermalAndKnockAreRecalibratedAndNoCommitIsWorse) {
   const double fx_right = std::abs(committed.published.right.fx / committed.truth.right.fx - 1);
   const double baseline = std::abs(committed.published.baseline() / committed.truth.baseline() - 1);
   std::printf("fx %.4f / %.4f %%, baseline %.4f %%\n", 100 * fx_left, 100 * fx_right, 100 * baseline);
+  {  // where the error sits: principal points, the stereo rotation, the translation's direction
+    const Eigen::AngleAxisd turn(committed.published.right_from_left.linear() *
+                                 committed.truth.right_from_left.linear().transpose());
+    const Eigen::Vector3d turn_deg = turn.angle() * turn.axis() * 180.0 / M_PI;
+    const Eigen::Vector3d t_est = committed.published.right_from_left.translation().normalized(),
+                          t_true = committed.truth.right_from_left.translation().normalized();
+    std::printf("cx %+.3f / %+.3f px, cy %+.3f / %+.3f px, rotation error (%+.4f, %+.4f, %+.4f) deg, translation "
+                "direction %.4f deg\n",
+                committed.published.left.cx - committed.truth.left.cx,
+                committed.published.right.cx - committed.truth.right.cx,
+                committed.published.left.cy - committed.truth.left.cy,
+                committed.published.right.cy - committed.truth.right.cy, turn_deg.x(), turn_deg.y(), turn_deg.z(),
+                std::acos(std::min(1.0, t_est.dot(t_true))) * 180.0 / M_PI);
+  }
   const bool targets_met = a.misalignment_px.rms <= kTargetMisalignmentPx && a.disparity_bias_px.rms <= kTargetBiasPx &&
                            a.at_depth[3].depth_error_pct.rms <= kTargetDepthError10mPct &&
                            std::max(fx_left, fx_right) <= kTargetFocalRel && baseline <= kTargetBaselineRel;
