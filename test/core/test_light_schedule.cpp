@@ -179,23 +179,32 @@ TEST(LightSchedule, VerificationFlashesGiveOneSettledLightOnFrameEachPeriod) {
   }
 }
 
-TEST(LightSchedule, OnDemandBurstsOnlyWhileDemandedAndAtMostOncePerMinInterval) {
+// The interval counts from a burst's last lit frame: a longer burst leaves its window the same
+// time to be tracked, solved and committed before the next burst.
+TEST(LightSchedule, OnDemandBurstsOnlyWhileDemandedAndAtMostOncePerMinIntervalAfterTheLast) {
   const double fps = 30.0;
-  // No safety net (period 0), no flashes: the light stays off until demanded.
-  ecs::LightSchedule schedule(healthConfig(ecs::CalibrationTrigger::kOnDemand, 0.0, 3.0, 0.0));
-  auto idle = run(&schedule, 0.0, fps, 60);
-  EXPECT_TRUE(runs(idle).empty());
-  schedule.demand(true);
-  const auto states = run(&schedule, 2.0, fps, static_cast<int>(7 * fps));  // 2 .. 9 s
-  const auto bursts = runs(states);
-  ASSERT_EQ(bursts.size(), 3u);  // at 2, 5 and 8 s
-  for (size_t k = 0; k < bursts.size(); ++k) {
-    EXPECT_FALSE(bursts[k].verification);
-    EXPECT_EQ(bursts[k].settled, 10) << k;
-    EXPECT_NEAR(bursts[k].first / fps, 3.0 * k, 1.0 / fps + 1e-9) << k;
+  for (const int frames : {10, 30}) {
+    // No safety net (period 0), no flashes: the light stays off until demanded.
+    ecs::LightScheduleConfig c = healthConfig(ecs::CalibrationTrigger::kOnDemand, 0.0, 3.0, 0.0);
+    c.calibration_frames = frames;
+    ecs::LightSchedule schedule(c);
+    auto idle = run(&schedule, 0.0, fps, 60);
+    EXPECT_TRUE(runs(idle).empty());
+    schedule.demand(true);
+    const auto states = run(&schedule, 2.0, fps, static_cast<int>(10 * fps));  // 2 .. 12 s
+    const auto bursts = runs(states);
+    ASSERT_EQ(bursts.size(), 3u) << frames << " frames";
+    const int length = frames + 2;  // settle_frames 2
+    for (size_t k = 0; k < bursts.size(); ++k) {
+      EXPECT_FALSE(bursts[k].verification);
+      EXPECT_EQ(bursts[k].length, length) << k;
+      EXPECT_EQ(bursts[k].settled, frames) << k;
+      // Each starts 3 s after the frame that ended the one before.
+      EXPECT_NEAR(bursts[k].first / fps, k * (3.0 + (length - 1) / fps), 1.0 / fps + 1e-9) << frames << " frames, " << k;
+    }
+    schedule.demand(false);
+    EXPECT_TRUE(runs(run(&schedule, 12.0, fps, static_cast<int>(10 * fps))).empty());
   }
-  schedule.demand(false);
-  EXPECT_TRUE(runs(run(&schedule, 9.0, fps, static_cast<int>(10 * fps))).empty());
 }
 
 TEST(LightSchedule, OnDemandSafetyNetRestartsAfterEachDemandedBurst) {

@@ -25,7 +25,6 @@ void LightSchedule::request(bool on) {
 void LightSchedule::startBurst(double time_s) {
   if (burst_frames_left_ == 0) burst_frames_left_ = config_.settle_frames + config_.calibration_frames;
   flash_frames_left_ = 0;  // the burst's frames verify as well
-  last_burst_s_ = time_s;
   if (config_.verification_period_s > 0.0) next_flash_s_ = time_s + config_.verification_period_s;
 }
 
@@ -36,13 +35,13 @@ LightState LightSchedule::step(double time_s) {
     next_burst_s_ = time_s;
     next_flash_s_ = time_s + config_.verification_period_s;
     // The first burst at the first frame when there is a period; on demand, right away.
-    last_burst_s_ = time_s - config_.min_interval_s;
+    last_burst_end_s_ = time_s - config_.min_interval_s;
   }
   if (config_.period_s > 0.0 && time_s >= next_burst_s_) {
     startBurst(time_s);
     // Skip bursts missed while the driver was stalled instead of firing them back to back.
     while (next_burst_s_ <= time_s) next_burst_s_ += config_.period_s;
-  } else if (on_demand && demand_ && burst_frames_left_ == 0 && time_s - last_burst_s_ >= config_.min_interval_s) {
+  } else if (on_demand && demand_ && burst_frames_left_ == 0 && time_s - last_burst_end_s_ >= config_.min_interval_s) {
     startBurst(time_s);
     if (config_.period_s > 0.0) next_burst_s_ = time_s + config_.period_s;  // the safety net restarts
   }
@@ -56,7 +55,7 @@ LightState LightSchedule::step(double time_s) {
   }
   const bool flash = burst_frames_left_ == 0 && flash_frames_left_ > 0;
   const bool commanded_on = hold_on_ || burst_frames_left_ > 0 || flash;
-  if (burst_frames_left_ > 0) --burst_frames_left_;
+  if (burst_frames_left_ > 0 && --burst_frames_left_ == 0) last_burst_end_s_ = time_s;
   if (flash) --flash_frames_left_;
   LightState state = advance(commanded_on);
   state.verification = flash && !hold_on_;

@@ -7,8 +7,8 @@
 //    burst yields `calibration_frames` settled frames. Bursts start
 //      - trigger kPeriodic: every `period_s` seconds (0 = never; only on request), starting
 //        with the first frame;
-//      - trigger kOnDemand: while demand(true) holds (the calibration is not healthy), at most
-//        once every `min_interval_s`, and as a safety net `period_s` after the previous burst
+//      - trigger kOnDemand: while demand(true) holds (the calibration is not healthy), at the
+//        earliest `min_interval_s` after the previous burst ended, and as a safety net `period_s` after the previous burst
 //        (0 = no safety net), the first one at the first frame as with kPeriodic; or
 //  - during a verification flash, for `settle_frames + 1` frames (one settled light-on frame,
 //    for checking the calibration in force against the boards): every `verification_period_s`
@@ -32,7 +32,9 @@ struct LightScheduleConfig {
   int calibration_frames = 10; // settled frames with the light on per burst (>= 1)
   int settle_frames = 2;       // frames reported unsettled after each switch (>= 0)
   CalibrationTrigger trigger = CalibrationTrigger::kPeriodic;
-  double min_interval_s = 0.0;         // kOnDemand: shortest time between two burst starts
+  // kOnDemand: shortest time from a burst's last lit frame to the next burst: the window's time
+  // to be tracked, solved and committed, however long the burst was.
+  double min_interval_s = 0.0;
   double verification_period_s = 0.0;  // time between verification flashes; 0 = none
   // Empty when usable; otherwise a message naming the bad field.
   std::string validate() const;
@@ -80,7 +82,7 @@ class LightSchedule {
   bool demand_ = false;
   bool verify_soon_ = false;
   double next_burst_s_ = 0.0;    // the next periodic burst (kOnDemand: the safety net's)
-  double last_burst_s_ = 0.0;    // start of the latest burst (after started_)
+  double last_burst_end_s_ = 0.0;  // the latest burst's last lit frame (after started_)
   double next_flash_s_ = 0.0;    // the next verification flash
   int64_t burst_frames_left_ = 0;
   int64_t flash_frames_left_ = 0;
