@@ -207,6 +207,21 @@ TEST(LightSchedule, OnDemandBurstsOnlyWhileDemandedAndAtMostOncePerMinIntervalAf
   }
 }
 
+// A burst cut short by set_light false counts from its start: the next one still waits.
+TEST(LightSchedule, OnDemandBurstCutShortStillWaitsTheIntervalFromItsStart) {
+  const double fps = 30.0;
+  ecs::LightSchedule schedule(healthConfig(ecs::CalibrationTrigger::kOnDemand, 0.0, 3.0, 0.0));
+  schedule.demand(true);
+  auto states = run(&schedule, 0.0, fps, 4);  // a burst from the first frame
+  schedule.request(false);                     // cut short
+  auto rest = run(&schedule, 4 / fps, fps, static_cast<int>(4 * fps));
+  states.insert(states.end(), rest.begin(), rest.end());
+  const auto bursts = runs(states);
+  ASSERT_EQ(bursts.size(), 2u);
+  EXPECT_EQ(bursts[0].length, 4);
+  EXPECT_NEAR(bursts[1].first / fps, 3.0, 1.0 / fps + 1e-9);
+}
+
 TEST(LightSchedule, OnDemandSafetyNetRestartsAfterEachDemandedBurst) {
   const double fps = 30.0;
   ecs::LightSchedule schedule(healthConfig(ecs::CalibrationTrigger::kOnDemand, 4.0, 1.0, 0.0));

@@ -25,6 +25,7 @@ void LightSchedule::request(bool on) {
 void LightSchedule::startBurst(double time_s) {
   if (burst_frames_left_ == 0) burst_frames_left_ = config_.settle_frames + config_.calibration_frames;
   flash_frames_left_ = 0;  // the burst's frames verify as well
+  last_burst_end_s_ = time_s;  // moved to its last lit frame when it gets there
   if (config_.verification_period_s > 0.0) next_flash_s_ = time_s + config_.verification_period_s;
 }
 

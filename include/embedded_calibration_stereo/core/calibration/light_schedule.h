@@ -8,8 +8,9 @@
 //      - trigger kPeriodic: every `period_s` seconds (0 = never; only on request), starting
 //        with the first frame;
 //      - trigger kOnDemand: while demand(true) holds (the calibration is not healthy), at the
-//        earliest `min_interval_s` after the previous burst ended, and as a safety net `period_s` after the previous burst
-//        (0 = no safety net), the first one at the first frame as with kPeriodic; or
+//        earliest `min_interval_s` after the previous burst ended (a burst cut short by
+//        request(false): after it started), and as a safety net `period_s` after the previous
+//        burst (0 = no safety net), the first one at the first frame as with kPeriodic; or
 //  - during a verification flash, for `settle_frames + 1` frames (one settled light-on frame,
 //    for checking the calibration in force against the boards): every `verification_period_s`
 //    (0 = none) after the previous flash or burst, and at the next frame after verifySoon()
