@@ -71,6 +71,8 @@ CameraRays computeCameraRays(const PinholeCamera& camera) {
     }
   });
   rays.max_radius = *std::max_element(row_max_radius.begin(), row_max_radius.end());
+  cv::minMaxLoc(rays.x, &rays.x_min, &rays.x_max);
+  cv::minMaxLoc(rays.y, &rays.y_min, &rays.y_max);
   return rays;
 }
 

@@ -16,6 +16,8 @@ struct CameraRays {
   PinholeCamera camera;   // the intrinsics the maps were computed for
   cv::Mat x, y;           // CV_32F: undistorted normalised ray (x, y, 1) through each pixel centre
   double max_radius = 0;  // largest |(x, y)| over the image (bounds the visible cone)
+  // The pyramid x/z in [x_min, x_max], y/z in [y_min, y_max] holds every pixel's ray.
+  double x_min = 0, x_max = 0, y_min = 0, y_max = 0;
 
   // d(x, y)/d(u, v) at the ray (x, y), row-major (dx/du, dx/dv, dy/du, dy/dv).
   void jacobian(double x, double y, double J[4]) const;

@@ -13,7 +13,6 @@ namespace ecs {
 namespace sim {
 
 namespace {
-constexpr size_t kMaxMipLevels = 8;
 constexpr double kMaxTextureSide = 4096.0;  // texels: bounds a photograph's memory (64 MB)
 }  // namespace
 
@@ -64,7 +63,7 @@ SceneRenderer::TexturedPlane SceneRenderer::makeTexturedPlane(const ScenePlane& 
   if (p.texture_image.empty()) {
     const int w = static_cast<int>(std::ceil(p.width_m / p.texel_m)) + 2;
     const int h = static_cast<int>(std::ceil(p.height_m / p.texel_m)) + 2;
-    tp.mips.push_back(makeNoiseTexture(w, h, p.texture_seed));
+    tp.texture = MipTexture(makeNoiseTexture(w, h, p.texture_seed));
     tp.inv_texel_u = tp.inv_texel_v = static_cast<float>(1.0 / p.texel_m);
   } else {
     cv::Mat photo = loadPhotoTexture(p.texture_image);
@@ -90,15 +89,21 @@ SceneRenderer::TexturedPlane SceneRenderer::makeTexturedPlane(const ScenePlane& 
       cv::repeat(photo, static_cast<int>(copies_y), static_cast<int>(copies_x), repeated);
       photo = repeated;
     }
-    tp.mips.push_back(photo);
-  }
-  while (tp.mips.size() < kMaxMipLevels && std::min(tp.mips.back().cols, tp.mips.back().rows) >= 4) {
-    cv::Mat next;
-    cv::pyrDown(tp.mips.back(), next);
-    tp.mips.push_back(next);
+    tp.texture = MipTexture(photo);
   }
   return tp;
 }
+
+// A plane expressed as linear forms of the camera ray m = (x, y, 1), so that a pixel costs a
+// handful of multiply-adds per plane: t = numerator / (n.m), a = a0 + t (u.m), b = b0 + t (v.m).
+struct PlaneInCamera {
+  float n[3], u[3], v[3];
+  float numerator, a0, b0, width, height;
+  std::vector<int> span_lo, span_hi;  // per row, the columns [lo, hi) that can see the plane
+  const MipTexture* texture;
+  float inv_texel_u, inv_texel_v, texel_offset;
+  float footprint_scale;  // texels per metre along the finer texture axis
+};
 
 SceneRenderer::SceneRenderer(const SimSceneConfig& config) : enabled_(config.enabled) {
   if (!enabled_) return;
@@ -109,38 +114,6 @@ SceneRenderer::SceneRenderer(const SimSceneConfig& config) : enabled_(config.ena
 }
 
 namespace {
-
-inline float sampleBilinear(const cv::Mat& tex, float x, float y) {
-  x = std::min(std::max(x, 0.0f), tex.cols - 1.001f);
-  y = std::min(std::max(y, 0.0f), tex.rows - 1.001f);
-  const int x0 = static_cast<int>(x), y0 = static_cast<int>(y);
-  const float fx = x - x0, fy = y - y0;
-  const float* r0 = tex.ptr<float>(y0) + x0;
-  const float* r1 = tex.ptr<float>(y0 + 1) + x0;
-  return (1 - fy) * ((1 - fx) * r0[0] + fx * r0[1]) + fy * ((1 - fx) * r1[0] + fx * r1[1]);
-}
-
-// Texture value at level-0 texel coordinates (x, y) for a pixel footprint of `footprint` texels:
-// blends the two mip levels around log2(footprint); level 0 alone when a pixel covers less than a
-// texel.
-inline float sampleTrilinear(const std::vector<cv::Mat>& mips, float x, float y, float footprint) {
-  if (!(footprint > 1.0f)) return sampleBilinear(mips[0], x, y);
-  const float level = std::min(std::log2(footprint), static_cast<float>(mips.size() - 1));
-  const int l0 = static_cast<int>(level);
-  const int l1 = std::min(l0 + 1, static_cast<int>(mips.size()) - 1);
-  const float w = level - l0;
-  const float s0 = 1.0f / static_cast<float>(1 << l0), s1 = 1.0f / static_cast<float>(1 << l1);
-  const float v0 = sampleBilinear(mips[l0], x * s0, y * s0);
-  return w > 0.0f ? (1 - w) * v0 + w * sampleBilinear(mips[l1], x * s1, y * s1) : v0;
-}
-
-// A plane expressed as linear forms of the camera ray m = (x, y, 1), so that a pixel costs a
-// handful of multiply-adds per plane: t = numerator / (n.m), a = a0 + t (u.m), b = b0 + t (v.m).
-struct PlaneInCamera {
-  float n[3], u[3], v[3];
-  float numerator, a0, b0, width, height;
-  cv::Rect box;  // pixels that can see the plane
-};
 
 // Footprint of one pixel on a plane, in metres: the larger of the plane displacements (measured
 // along the plane's u and v axes) of the hit point t * m when the ray m = (x, y, 1) moves to the
@@ -158,31 +131,68 @@ inline float pixelFootprint(const PlaneInCamera& pc, float t, float x, float y, 
   return std::max(extent(dmx0, dmx1), extent(dmy0, dmy1));
 }
 
-// Image bounding box of a rectangle, from samples of its outline; the whole image when part of
-// it is behind the camera or outside the cone the image sees (distortion does not invert there).
-cv::Rect planeBoundingBox(const ScenePlane& p, const CameraRays& rays, const Eigen::Isometry3d& camera_from_rig) {
+// Keeps the part of a convex polygon where f(q) = n.q + d >= 0 (Sutherland-Hodgman, one plane).
+std::vector<Eigen::Vector3d> clipPolygon(const std::vector<Eigen::Vector3d>& polygon, const Eigen::Vector3d& n, double d) {
+  std::vector<Eigen::Vector3d> out;
+  for (size_t i = 0; i < polygon.size(); ++i) {
+    const Eigen::Vector3d& a = polygon[i];
+    const Eigen::Vector3d& b = polygon[(i + 1) % polygon.size()];
+    const double fa = n.dot(a) + d, fb = n.dot(b) + d;
+    if (fa >= 0) out.push_back(a);
+    if ((fa >= 0) != (fb >= 0)) out.push_back(a + (b - a) * (fa / (fa - fb)));
+  }
+  return out;
+}
+
+// Columns [lo, hi) of each row that can see a rectangle: its outline, clipped to the pyramid of
+// rays the image holds (where the distortion model is monotone), projected, and filled row by
+// row; dilated by a row and two columns, since the cast decides each pixel exactly.
+void planeRowSpans(const ScenePlane& p, const CameraRays& rays, const Eigen::Isometry3d& camera_from_world,
+                   PlaneInCamera* pc) {
   const PinholeCamera& cam = rays.camera;
-  const cv::Rect image(0, 0, cam.width, cam.height);
-  double umin = 1e30, umax = -1e30, vmin = 1e30, vmax = -1e30;
-  const int kSteps = 32;
-  for (int edge = 0; edge < 4; ++edge)
-    for (int k = 0; k <= kSteps; ++k) {
-      const double f = static_cast<double>(k) / kSteps;
-      const double a = edge == 0 ? f : edge == 1 ? 1.0 : edge == 2 ? 1.0 - f : 0.0;
-      const double b = edge == 0 ? 0.0 : edge == 1 ? f : edge == 2 ? 1.0 : 1.0 - f;
-      const Eigen::Vector3d q =
-          camera_from_rig * (p.origin + a * p.width_m * p.u_axis + b * p.height_m * p.v_axis);
-      if (q.z() <= 1e-6 || std::hypot(q.x() / q.z(), q.y() / q.z()) > 1.2 * rays.max_radius) return image;
+  const int H = cam.height, W = cam.width;
+  pc->span_lo.assign(H, W);
+  pc->span_hi.assign(H, 0);
+  std::vector<Eigen::Vector3d> polygon;
+  for (const Eigen::Vector2d& ab : {Eigen::Vector2d(0, 0), Eigen::Vector2d(1, 0), Eigen::Vector2d(1, 1), Eigen::Vector2d(0, 1)})
+    polygon.push_back(camera_from_world * (p.origin + ab.x() * p.width_m * p.u_axis + ab.y() * p.height_m * p.v_axis));
+  const double mx = 0.02 * std::max(std::abs(rays.x_min), std::abs(rays.x_max));
+  const double my = 0.02 * std::max(std::abs(rays.y_min), std::abs(rays.y_max));
+  polygon = clipPolygon(polygon, Eigen::Vector3d(0, 0, 1), -1e-4);
+  polygon = clipPolygon(polygon, Eigen::Vector3d(-1, 0, rays.x_max + mx), 0);
+  polygon = clipPolygon(polygon, Eigen::Vector3d(1, 0, -(rays.x_min - mx)), 0);
+  polygon = clipPolygon(polygon, Eigen::Vector3d(0, -1, rays.y_max + my), 0);
+  polygon = clipPolygon(polygon, Eigen::Vector3d(0, 1, -(rays.y_min - my)), 0);
+  if (polygon.size() < 3) return;
+  std::vector<int> lo(H, W), hi(H, -1);
+  const int kSteps = 64;
+  Eigen::Vector2d previous;
+  cam.project(polygon.back(), &previous);
+  for (size_t i = 0; i < polygon.size(); ++i) {
+    const Eigen::Vector3d& a = polygon[i];
+    const Eigen::Vector3d& b = polygon[(i + 1) % polygon.size()];
+    for (int k = 0; k < kSteps; ++k) {
       Eigen::Vector2d px;
-      cam.project(q, &px);
-      umin = std::min(umin, px.x()), umax = std::max(umax, px.x());
-      vmin = std::min(vmin, px.y()), vmax = std::max(vmax, px.y());
+      cam.project(a + (b - a) * (static_cast<double>(k) / kSteps), &px);
+      // Where the segment previous -> px crosses each row centre (its ends at the rows around them).
+      const double v0 = std::min(previous.y(), px.y()), v1 = std::max(previous.y(), px.y());
+      const int r0 = std::max(0, static_cast<int>(std::floor(v0))), r1 = std::min(H - 1, static_cast<int>(std::ceil(v1)));
+      for (int r = r0; r <= r1; ++r) {
+        const double f = v1 > v0 ? std::clamp((r - previous.y()) / (px.y() - previous.y()), 0.0, 1.0) : 0.0;
+        const double u = std::clamp(previous.x() + f * (px.x() - previous.x()), -8.0, W + 8.0);
+        lo[r] = std::min(lo[r], static_cast<int>(std::floor(u)) - 2);
+        hi[r] = std::max(hi[r], static_cast<int>(std::ceil(u)) + 3);
+      }
+      previous = px;
     }
-  const int pad = 2;
-  const cv::Rect box(static_cast<int>(std::floor(umin)) - pad, static_cast<int>(std::floor(vmin)) - pad,
-                     static_cast<int>(std::ceil(umax - umin)) + 2 * pad + 2,
-                     static_cast<int>(std::ceil(vmax - vmin)) + 2 * pad + 2);
-  return box & image;
+  }
+  // A row's span is [min, max] of the outline's crossings, widened to the rows around it.
+  for (int r = 0; r < H; ++r) {
+    for (int n = std::max(0, r - 1); n <= std::min(H - 1, r + 1); ++n) {
+      pc->span_lo[r] = std::min(pc->span_lo[r], std::max(0, lo[n]));
+      pc->span_hi[r] = std::max(pc->span_hi[r], std::min(W, hi[n]));
+    }
+  }
 }
 
 // Nearest-hit update of one row segment against one plane, 4 pixels at a time with OpenCV's
@@ -233,7 +243,161 @@ void castRowSegment(const PlaneInCamera& pc, int plane_index, const float* x, co
   }
 }
 
+// The rays of one image row and of its neighbour (the row below; above for the last row), for
+// the pixel footprints.
+struct RowRays {
+  const float *x, *y, *next_x, *next_y;
+  float next_sign;  // +1 when next is the row below
+  int width;
+};
+
+// Nearest hits along one row.
+struct RowHits {
+  std::vector<float> t, a, b;
+  std::vector<int> plane;  // -1: no hit
+  explicit RowHits(int width) : t(width), a(width), b(width), plane(width) {}
+};
+
+// z of a hit C + t R m in the depth frame: z_centre + t (r.m), m = (x, y, 1).
+struct DepthLine {
+  float z_centre, r[3];
+};
+
+void shadePixel(const std::vector<PlaneInCamera>& planes, const RowRays& rays, const RowHits& hits,
+                const DepthLine& line, int col, float* out, float* depth) {
+  const int p = hits.plane[col];
+  if (p < 0) {
+    out[col] = 0.0f;
+    if (depth) depth[col] = std::numeric_limits<float>::infinity();
+    return;
+  }
+  const PlaneInCamera& pc = planes[p];
+  const float* x = rays.x;
+  const float* y = rays.y;
+  const int next_col = col + 1 < rays.width ? col + 1 : col - 1;
+  const float col_sign = col + 1 < rays.width ? 1.0f : -1.0f;
+  const float footprint =
+      pixelFootprint(pc, hits.t[col], x[col], y[col], col_sign * (x[next_col] - x[col]),
+                     col_sign * (y[next_col] - y[col]), rays.next_sign * (rays.next_x[col] - x[col]),
+                     rays.next_sign * (rays.next_y[col] - y[col])) * pc.footprint_scale;
+  out[col] = pc.texture->sample(hits.a[col] * pc.inv_texel_u - pc.texel_offset,
+                                hits.b[col] * pc.inv_texel_v - pc.texel_offset, footprint);
+  if (depth) depth[col] = line.z_centre + hits.t[col] * (line.r[0] * x[col] + line.r[1] * y[col] + line.r[2]);
+}
+
+#if CV_SIMD128
+// Four pixels [col, col + 4) that all hit plane pc, none in the last column: pixelFootprint()
+// and MipTexture::sample() four at a time.
+void shadeGroup(const PlaneInCamera& pc, const RowRays& rays, const RowHits& hits, int col, float* out) {
+  using cv::v_float32x4;
+  const v_float32x4 x = cv::v_load(rays.x + col), y = cv::v_load(rays.y + col);
+  const v_float32x4 t = cv::v_load(hits.t.data() + col);
+  const v_float32x4 n0 = cv::v_setall_f32(pc.n[0]), n1 = cv::v_setall_f32(pc.n[1]);
+  const v_float32x4 inv_nm = cv::v_setall_f32(1.0f) / cv::v_fma(n0, x, cv::v_fma(n1, y, cv::v_setall_f32(pc.n[2])));
+  const auto extent2 = [&](const v_float32x4& d0, const v_float32x4& d1) {
+    const v_float32x4 k = cv::v_fma(n0, d0, n1 * d1) * inv_nm;
+    const v_float32x4 p0 = t * (d0 - x * k), p1 = t * (d1 - y * k), p2 = cv::v_setzero_f32() - t * k;
+    const v_float32x4 da = cv::v_fma(cv::v_setall_f32(pc.u[0]), p0,
+                                     cv::v_fma(cv::v_setall_f32(pc.u[1]), p1, cv::v_setall_f32(pc.u[2]) * p2));
+    const v_float32x4 db = cv::v_fma(cv::v_setall_f32(pc.v[0]), p0,
+                                     cv::v_fma(cv::v_setall_f32(pc.v[1]), p1, cv::v_setall_f32(pc.v[2]) * p2));
+    return cv::v_fma(da, da, db * db);
+  };
+  const v_float32x4 sign = cv::v_setall_f32(rays.next_sign);
+  const v_float32x4 across = extent2(cv::v_load(rays.x + col + 1) - x, cv::v_load(rays.y + col + 1) - y);
+  const v_float32x4 down = extent2(sign * (cv::v_load(rays.next_x + col) - x), sign * (cv::v_load(rays.next_y + col) - y));
+  const float scale2 = pc.footprint_scale * pc.footprint_scale;
+  const v_float32x4 footprint2 = cv::v_max(across, down) * cv::v_setall_f32(scale2);
+  // log2 of the footprint; NaN (level 0) unless it is above one texel.
+  const v_float32x4 log2_footprint = cv::v_select(footprint2 > cv::v_setall_f32(1.0f),
+                                                  fastLog2(footprint2) * cv::v_setall_f32(0.5f),
+                                                  cv::v_setzero_f32());
+  const v_float32x4 offset = cv::v_setall_f32(pc.texel_offset);
+  const v_float32x4 tx = cv::v_load(hits.a.data() + col) * cv::v_setall_f32(pc.inv_texel_u) - offset;
+  const v_float32x4 ty = cv::v_load(hits.b.data() + col) * cv::v_setall_f32(pc.inv_texel_v) - offset;
+  cv::v_store(out + col, pc.texture->sample4(tx, ty, log2_footprint));
+}
+
+void depthGroup(const RowRays& rays, const RowHits& hits, const DepthLine& line, int col, float* depth) {
+  const cv::v_float32x4 x = cv::v_load(rays.x + col), y = cv::v_load(rays.y + col);
+  const cv::v_float32x4 along = cv::v_fma(cv::v_setall_f32(line.r[0]), x,
+                                          cv::v_fma(cv::v_setall_f32(line.r[1]), y, cv::v_setall_f32(line.r[2])));
+  const cv::v_float32x4 z = cv::v_fma(cv::v_load(hits.t.data() + col), along, cv::v_setall_f32(line.z_centre));
+  const cv::v_float32x4 hit = cv::v_reinterpret_as_f32(cv::v_load(hits.plane.data() + col) >= cv::v_setzero_s32());
+  cv::v_store(depth + col, cv::v_select(hit, z, cv::v_setall_f32(std::numeric_limits<float>::infinity())));
+}
+#endif
+
+// Radiance (and depth) of one row from its nearest hits: groups of four pixels on one plane
+// are shaded together, the others (plane edges, misses, the last column) one by one.
+void shadeRow(const std::vector<PlaneInCamera>& planes, const RowRays& rays, const RowHits& hits,
+              const DepthLine& line, float* out, float* depth) {
+  int col = 0;
+#if CV_SIMD128
+  for (; col + 4 < rays.width; col += 4) {
+    const int p = hits.plane[col];
+    const bool one_plane =
+        p >= 0 && cv::v_check_all(cv::v_load(hits.plane.data() + col) == cv::v_setall_s32(p));
+    if (one_plane) {
+      shadeGroup(planes[p], rays, hits, col, out);
+      if (depth) depthGroup(rays, hits, line, col, depth);
+    } else {
+      for (int k = col; k < col + 4; ++k) shadePixel(planes, rays, hits, line, k, out, depth);
+    }
+  }
+#endif
+  for (; col < rays.width; ++col) shadePixel(planes, rays, hits, line, col, out, depth);
+}
+
+PlaneInCamera placeInCamera(const ScenePlane& plane, const Eigen::Vector3d& normal, const MipTexture& texture,
+                            float inv_texel_u, float inv_texel_v, float texel_offset, const CameraRays& rays,
+                            const Eigen::Isometry3d& world_from_camera) {
+  const Eigen::Matrix3d R = world_from_camera.linear();
+  const Eigen::Vector3d C = world_from_camera.translation();
+  PlaneInCamera pc;
+  const Eigen::Vector3d n = R.transpose() * normal;
+  const Eigen::Vector3d u = R.transpose() * plane.u_axis;
+  const Eigen::Vector3d v = R.transpose() * plane.v_axis;
+  for (int k = 0; k < 3; ++k) {
+    pc.n[k] = static_cast<float>(n[k]);
+    pc.u[k] = static_cast<float>(u[k]);
+    pc.v[k] = static_cast<float>(v[k]);
+  }
+  pc.numerator = static_cast<float>(normal.dot(plane.origin - C));
+  pc.a0 = static_cast<float>((C - plane.origin).dot(plane.u_axis));
+  pc.b0 = static_cast<float>((C - plane.origin).dot(plane.v_axis));
+  pc.width = static_cast<float>(plane.width_m);
+  pc.height = static_cast<float>(plane.height_m);
+  planeRowSpans(plane, rays, world_from_camera.inverse(), &pc);
+  pc.texture = &texture;
+  pc.inv_texel_u = inv_texel_u;
+  pc.inv_texel_v = inv_texel_v;
+  pc.texel_offset = texel_offset;
+  pc.footprint_scale = std::max(inv_texel_u, inv_texel_v);
+  return pc;
+}
+
 }  // namespace
+
+std::vector<PlaneInCamera> SceneRenderer::placePlanes(const CameraRays& rays, const Eigen::Isometry3d& world_from_camera,
+                                                      const std::vector<Eigen::Isometry3d>& world_from_movers) const {
+  std::vector<PlaneInCamera> planes;
+  for (const TexturedPlane& tp : planes_)
+    planes.push_back(placeInCamera(tp.plane, tp.normal, tp.texture, tp.inv_texel_u, tp.inv_texel_v,
+                                   tp.texel_offset, rays, world_from_camera));
+  // The movers at this frame's poses (same textures).
+  for (size_t i = 0; i < movers_.size(); ++i) {
+    const TexturedPlane& tp = movers_[i];
+    const Eigen::Isometry3d& pose = world_from_movers.at(i);
+    ScenePlane p = tp.plane;
+    p.origin = pose * tp.plane.origin;
+    p.u_axis = pose.linear() * tp.plane.u_axis;
+    p.v_axis = pose.linear() * tp.plane.v_axis;
+    planes.push_back(placeInCamera(p, pose.linear() * tp.normal, tp.texture, tp.inv_texel_u, tp.inv_texel_v,
+                                   tp.texel_offset, rays, world_from_camera));
+  }
+  return planes;
+}
 
 void SceneRenderer::render(const CameraRays& rays, const Eigen::Isometry3d& world_from_camera,
                            const Eigen::Isometry3d& depth_from_world,
@@ -242,97 +406,32 @@ void SceneRenderer::render(const CameraRays& rays, const Eigen::Isometry3d& worl
   const int W = rays.camera.width, H = rays.camera.height;
   radiance->create(H, W, CV_32F);
   if (depth_z) depth_z->create(H, W, CV_32F);
-  const Eigen::Matrix3d R = world_from_camera.linear();
-  const Eigen::Vector3d C = world_from_camera.translation();
-  // The fixed planes, then the movers placed at this frame's poses (same textures).
-  std::vector<const TexturedPlane*> sources;
-  std::vector<ScenePlane> placed;
-  std::vector<Eigen::Vector3d> normals;
-  for (const TexturedPlane& tp : planes_) {
-    sources.push_back(&tp);
-    placed.push_back(tp.plane);
-    normals.push_back(tp.normal);
-  }
-  for (size_t i = 0; i < movers_.size(); ++i) {
-    const TexturedPlane& tp = movers_[i];
-    const Eigen::Isometry3d& pose = world_from_movers.at(i);
-    ScenePlane p = tp.plane;
-    p.origin = pose * tp.plane.origin;
-    p.u_axis = pose.linear() * tp.plane.u_axis;
-    p.v_axis = pose.linear() * tp.plane.v_axis;
-    sources.push_back(&tp);
-    placed.push_back(p);
-    normals.push_back(pose.linear() * tp.normal);
-  }
-  std::vector<PlaneInCamera> planes;
-  const Eigen::Isometry3d camera_from_world = world_from_camera.inverse();
-  for (size_t i = 0; i < placed.size(); ++i) {
-    const ScenePlane& plane = placed[i];
-    PlaneInCamera pc;
-    const Eigen::Vector3d n = R.transpose() * normals[i];
-    const Eigen::Vector3d u = R.transpose() * plane.u_axis;
-    const Eigen::Vector3d v = R.transpose() * plane.v_axis;
-    for (int k = 0; k < 3; ++k) {
-      pc.n[k] = static_cast<float>(n[k]);
-      pc.u[k] = static_cast<float>(u[k]);
-      pc.v[k] = static_cast<float>(v[k]);
-    }
-    pc.numerator = static_cast<float>(normals[i].dot(plane.origin - C));
-    pc.a0 = static_cast<float>((C - plane.origin).dot(plane.u_axis));
-    pc.b0 = static_cast<float>((C - plane.origin).dot(plane.v_axis));
-    pc.width = static_cast<float>(plane.width_m);
-    pc.height = static_cast<float>(plane.height_m);
-    pc.box = planeBoundingBox(plane, rays, camera_from_world);
-    planes.push_back(pc);
-  }
+  const std::vector<PlaneInCamera> planes = placePlanes(rays, world_from_camera, world_from_movers);
   // Depth z of a hit C + t R m: e.(C + t R m) + d with (e, d) the z row of depth_from_world.
   const Eigen::Vector3d e = depth_from_world.linear().row(2).transpose();
-  const double zC = e.dot(C) + depth_from_world.translation().z();
-  const Eigen::Vector3d rz = R.transpose() * e;  // z of the ray direction, per unit t
-  const float inf = std::numeric_limits<float>::infinity();
+  const Eigen::Vector3d rz = world_from_camera.linear().transpose() * e;  // z of the ray direction, per unit t
+  DepthLine line;
+  line.z_centre = static_cast<float>(e.dot(world_from_camera.translation()) + depth_from_world.translation().z());
+  for (int k = 0; k < 3; ++k) line.r[k] = static_cast<float>(rz[k]);
 
   cv::parallel_for_(cv::Range(0, H), [&](const cv::Range& range) {
     // Plane-major per row: each plane updates the row's nearest hits in one SIMD pass over its
     // bounding box; the texture is then sampled once per pixel, for the nearest plane only.
-    std::vector<float> best_t(W), best_a(W), best_b(W);
-    std::vector<int> best_plane(W);
+    RowHits hits(W);
     for (int row = range.start; row < range.end; ++row) {
-      const float* x = rays.x.ptr<float>(row);
-      const float* y = rays.y.ptr<float>(row);
       // The neighbouring row's rays give the vertical pixel step (the previous one at the bottom).
-      const int other_row = row + 1 < H ? row + 1 : row - 1;
-      const float row_sign = row + 1 < H ? 1.0f : -1.0f;
-      const float* xn = rays.x.ptr<float>(other_row);
-      const float* yn = rays.y.ptr<float>(other_row);
-      std::fill(best_t.begin(), best_t.end(), inf);
-      std::fill(best_plane.begin(), best_plane.end(), -1);
+      const int next_row = row + 1 < H ? row + 1 : row - 1;
+      const RowRays row_rays{rays.x.ptr<float>(row), rays.y.ptr<float>(row), rays.x.ptr<float>(next_row),
+                             rays.y.ptr<float>(next_row), row + 1 < H ? 1.0f : -1.0f, W};
+      std::fill(hits.t.begin(), hits.t.end(), std::numeric_limits<float>::infinity());
+      std::fill(hits.plane.begin(), hits.plane.end(), -1);
       for (int p = 0; p < static_cast<int>(planes.size()); ++p) {
         const PlaneInCamera& pc = planes[p];
-        if (row < pc.box.y || row >= pc.box.y + pc.box.height) continue;
-        castRowSegment(pc, p, x, y, pc.box.x, pc.box.x + pc.box.width, best_t.data(), best_a.data(),
-                       best_b.data(), best_plane.data());
+        if (pc.span_lo[row] >= pc.span_hi[row]) continue;
+        castRowSegment(pc, p, row_rays.x, row_rays.y, pc.span_lo[row], pc.span_hi[row], hits.t.data(),
+                       hits.a.data(), hits.b.data(), hits.plane.data());
       }
-      float* out = radiance->ptr<float>(row);
-      float* depth = depth_z ? depth_z->ptr<float>(row) : nullptr;
-      for (int col = 0; col < W; ++col) {
-        const int p = best_plane[col];
-        if (p < 0) {
-          out[col] = 0.0f;
-          if (depth) depth[col] = inf;
-          continue;
-        }
-        const int next_col = col + 1 < W ? col + 1 : col - 1;
-        const float col_sign = col + 1 < W ? 1.0f : -1.0f;
-        const TexturedPlane& tp = *sources[p];
-        const float footprint =
-            pixelFootprint(planes[p], best_t[col], x[col], y[col], col_sign * (x[next_col] - x[col]),
-                           col_sign * (y[next_col] - y[col]), row_sign * (xn[col] - x[col]),
-                           row_sign * (yn[col] - y[col])) * std::max(tp.inv_texel_u, tp.inv_texel_v);
-        out[col] = sampleTrilinear(tp.mips, best_a[col] * tp.inv_texel_u - tp.texel_offset,
-                                   best_b[col] * tp.inv_texel_v - tp.texel_offset, footprint);
-        if (depth)
-          depth[col] = static_cast<float>(zC + best_t[col] * (rz.x() * x[col] + rz.y() * y[col] + rz.z()));
-      }
+      shadeRow(planes, row_rays, hits, line, radiance->ptr<float>(row), depth_z ? depth_z->ptr<float>(row) : nullptr);
     }
   });
 }

@@ -14,9 +14,12 @@
 
 #include "camera_rays.h"
 #include "embedded_calibration_stereo/core/sim/sim_rig.h"
+#include "mip_texture.h"
 
 namespace ecs {
 namespace sim {
+
+struct PlaneInCamera;  // a plane as linear forms of the camera ray (scene_renderer.cpp)
 
 class SceneRenderer {
  public:
@@ -37,13 +40,15 @@ class SceneRenderer {
   struct TexturedPlane {
     ScenePlane plane;
     Eigen::Vector3d normal;
-    // Mip levels of the texture (CV_32F grey levels): level 0 has texel (i, j) at plane
-    // coordinates ((i + texel_offset) / inv_texel_u, (j + texel_offset) / inv_texel_v): noise
-    // at texel corners (offset 0), photographs at pixel centres (offset 0.5); level k+1 is
-    // level k low-passed and halved (cv::pyrDown).
-    std::vector<cv::Mat> mips;
+    // The texture (grey levels): level-0 texel (i, j) at plane coordinates
+    // ((i + texel_offset) / inv_texel_u, (j + texel_offset) / inv_texel_v): noise at texel
+    // corners (offset 0), photographs at pixel centres (offset 0.5).
+    MipTexture texture;
     float inv_texel_u = 1.0f, inv_texel_v = 1.0f, texel_offset = 0.0f;
   };
+  // Every plane and mover as seen from the camera at world_from_camera.
+  std::vector<PlaneInCamera> placePlanes(const CameraRays& rays, const Eigen::Isometry3d& world_from_camera,
+                                                const std::vector<Eigen::Isometry3d>& world_from_movers) const;
   static TexturedPlane makeTexturedPlane(const ScenePlane& plane, const std::string& key);
   bool enabled_;
   std::vector<TexturedPlane> planes_, movers_;
