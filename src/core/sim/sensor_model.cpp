@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <opencv2/core/hal/intrin.hpp>
 #include <opencv2/imgproc.hpp>
 
 namespace ecs {
@@ -83,36 +84,79 @@ void AutoExposure::meter(double mean_grey) {
 
 // --- composeSensor ----------------------------------------------------------------------
 
-void composeSensor(const cv::Mat& scene, const cv::Mat& device, const SensorParams& p, uint64_t seed,
-                   int band_rows, cv::Mat* mono) {
+const float* gaussianNoisePool() {
+  static const std::vector<float> pool = [] {
+    std::vector<float> samples(kGaussianNoisePoolSize);
+    cv::Mat view(1, static_cast<int>(samples.size()), CV_32F, samples.data());
+    cv::RNG rng(0x6a09e667f3bcc909ULL);
+    rng.fill(view, cv::RNG::NORMAL, 0.0, 1.0);
+    return samples;
+  }();
+  return pool.data();
+}
+
+namespace {
+
+// What composeSensor() does to one row, as constants.
+struct RowSignal {
+  float scene_gain, device_gain;
+  bool sensor;                       // shot + read noise, clipped at the full well
+  float full_well_dn, inv_e_per_dn, read_dn2;
+  float noise_sigma;                 // without the sensor
+  float value(float scene, float device, float normal) const {
+    float s = scene_gain * scene + device_gain * device;
+    if (sensor) {
+      s = std::min(std::max(s, 0.0f), full_well_dn);
+      return s + normal * std::sqrt(s * inv_e_per_dn + read_dn2);
+    }
+    return s + normal * noise_sigma;
+  }
+#if CV_SIMD128
+  cv::v_float32x4 value4(const float* scene, const float* device, const float* normal) const {
+    cv::v_float32x4 s = cv::v_fma(cv::v_load(scene), cv::v_setall_f32(scene_gain),
+                                  cv::v_load(device) * cv::v_setall_f32(device_gain));
+    const cv::v_float32x4 n = cv::v_load(normal);
+    if (sensor) {
+      s = cv::v_min(cv::v_max(s, cv::v_setzero_f32()), cv::v_setall_f32(full_well_dn));
+      return cv::v_fma(n, cv::v_sqrt(cv::v_fma(s, cv::v_setall_f32(inv_e_per_dn), cv::v_setall_f32(read_dn2))), s);
+    }
+    return cv::v_fma(n, cv::v_setall_f32(noise_sigma), s);
+  }
+#endif
+};
+
+void composeRow(const RowSignal& signal, const float* scene, const float* device, const float* normal, int width,
+                uchar* out) {
+  int x = 0;
+#if CV_SIMD128
+  for (; x + 16 <= width; x += 16) {
+    const cv::v_int32x4 a = cv::v_round(signal.value4(scene + x, device + x, normal + x));
+    const cv::v_int32x4 b = cv::v_round(signal.value4(scene + x + 4, device + x + 4, normal + x + 4));
+    const cv::v_int32x4 c = cv::v_round(signal.value4(scene + x + 8, device + x + 8, normal + x + 8));
+    const cv::v_int32x4 d = cv::v_round(signal.value4(scene + x + 12, device + x + 12, normal + x + 12));
+    cv::v_store(out + x, cv::v_pack_u(cv::v_pack(a, b), cv::v_pack(c, d)));  // saturating, as convertTo
+  }
+#endif
+  for (; x < width; ++x) out[x] = cv::saturate_cast<uchar>(signal.value(scene[x], device[x], normal[x]));
+}
+
+}  // namespace
+
+void composeSensor(const cv::Mat& scene, const cv::Mat& device, const SensorParams& p, uint64_t seed, cv::Mat* mono) {
+  CV_Assert(scene.type() == CV_32F && device.type() == CV_32F && scene.size() == device.size());
   const int W = scene.cols, H = scene.rows;
   mono->create(H, W, CV_8U);
-  const int bands = (H + band_rows - 1) / band_rows;
   const double e_per_dn = p.sensor.gain_e_per_dn;
-  const double full_well_dn = p.sensor.full_well_e / e_per_dn;
-  const double read_dn2 = (p.sensor.read_noise_e / e_per_dn) * (p.sensor.read_noise_e / e_per_dn);
-  cv::parallel_for_(cv::Range(0, bands), [&](const cv::Range& range) {
-    cv::Mat sum, noise, sigma;
-    for (int band = range.start; band < range.end; ++band) {
-      const cv::Range rows(band * band_rows, std::min(H, (band + 1) * band_rows));
-      cv::addWeighted(scene.rowRange(rows), p.scene_gain, device.rowRange(rows), p.device_gain, 0.0, sum);
-      cv::RNG rng(mixSeed(seed ^ mixSeed(static_cast<uint64_t>(band) + 1)));
-      if (p.sensor.enabled) {
-        // Electrons: the signal fills the well up to full; Poisson shot noise (Gaussian with the
-        // same variance) plus read noise, back in grey levels.
-        cv::min(cv::max(sum, 0.0), full_well_dn, sum);
-        sigma = sum * (1.0 / e_per_dn) + read_dn2;
-        cv::sqrt(sigma, sigma);
-        noise.create(rows.size(), W, CV_32F);
-        rng.fill(noise, cv::RNG::NORMAL, 0.0, 1.0);
-        sum += noise.mul(sigma);
-      } else if (p.noise_sigma > 0) {
-        noise.create(rows.size(), W, CV_32F);
-        rng.fill(noise, cv::RNG::NORMAL, 0.0, p.noise_sigma);
-        sum += noise;
-      }
-      cv::Mat out = mono->rowRange(rows);
-      sum.convertTo(out, CV_8U);  // rounds to nearest and saturates
+  const double read_dn = p.sensor.read_noise_e / e_per_dn;
+  const RowSignal signal{static_cast<float>(p.scene_gain), static_cast<float>(p.device_gain), p.sensor.enabled,
+                         static_cast<float>(p.sensor.full_well_e / e_per_dn), static_cast<float>(1.0 / e_per_dn),
+                         static_cast<float>(read_dn * read_dn), static_cast<float>(p.noise_sigma)};
+  const float* pool = gaussianNoisePool();
+  const uint64_t runs = kGaussianNoisePoolSize - static_cast<uint64_t>(W);
+  cv::parallel_for_(cv::Range(0, H), [&](const cv::Range& range) {
+    for (int row = range.start; row < range.end; ++row) {
+      const float* normal = pool + mixSeed(seed ^ mixSeed(static_cast<uint64_t>(row) + 1)) % runs;
+      composeRow(signal, scene.ptr<float>(row), device.ptr<float>(row), normal, W, mono->ptr<uchar>(row));
     }
   });
 }

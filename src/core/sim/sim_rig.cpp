@@ -18,22 +18,12 @@ namespace {
 
 // Corners closer than this to the image border are not reported (a detector cannot refine them).
 constexpr double kObservationMarginPx = 5.0;
-// Rows per noise band: each band has its own RNG stream so the noise does not depend on how
-// cv::parallel_for_ splits the image.
-constexpr int kNoiseBandRows = 16;
 
 // Limits of a drift request (a simulation of small real-world changes, not arbitrary poses).
 constexpr double kMinFocalScale = 0.5, kMaxFocalScale = 2.0;
 constexpr double kMaxRotationDeg = 10.0;
 constexpr double kMaxThermalRateDegPerS = 1.0;
 constexpr double kMaxKnockTranslationM = 0.05;
-
-uint64_t mixSeed(uint64_t x) {  // splitmix64 finaliser
-  x += 0x9E3779B97F4A7C15ULL;
-  x = (x ^ (x >> 30)) * 0xBF58476D1CE4E5B9ULL;
-  x = (x ^ (x >> 27)) * 0x94D049BB133111EBULL;
-  return x ^ (x >> 31);
-}
 
 struct DriftState {
   double focal_scale = 1.0;
@@ -145,8 +135,6 @@ struct SimRig::Impl {
   void updateLayers(int index, const SimRigConfig& config, const std::vector<VirtualBoard>& boards,
                     const PinholeCamera& camera, const Eigen::Isometry3d& rig_from_camera,
                     const ScenePoses& poses);
-  void compose(const CameraLayers& layers, double device_gain, double noise_sigma, uint64_t seed,
-               const std::string& encoding, cv::Mat* image) const;
 };
 
 void SimRig::Impl::updateLayers(int index, const SimRigConfig& config,
@@ -203,29 +191,6 @@ void SimRig::Impl::updateLayers(int index, const SimRigConfig& config,
   fresh.scene_key = std::move(scene_key);
   fresh.valid = true;
   l = fresh;
-}
-
-void SimRig::Impl::compose(const CameraLayers& l, double device_gain, double noise_sigma,
-                           uint64_t seed, const std::string& encoding, cv::Mat* image) const {
-  const int W = l.scene.cols, H = l.scene.rows;
-  cv::Mat mono(H, W, CV_8U);
-  const int bands = (H + kNoiseBandRows - 1) / kNoiseBandRows;
-  cv::parallel_for_(cv::Range(0, bands), [&](const cv::Range& range) {
-    cv::Mat sum, noise;
-    for (int band = range.start; band < range.end; ++band) {
-      const cv::Range rows(band * kNoiseBandRows, std::min(H, (band + 1) * kNoiseBandRows));
-      cv::scaleAdd(l.device.rowRange(rows), device_gain, l.scene.rowRange(rows), sum);
-      if (noise_sigma > 0) {
-        noise.create(rows.size(), W, CV_32F);
-        cv::RNG rng(mixSeed(seed ^ mixSeed(static_cast<uint64_t>(band) + 1)));
-        rng.fill(noise, cv::RNG::NORMAL, 0.0, noise_sigma);
-        sum += noise;
-      }
-      cv::Mat out = mono.rowRange(rows);
-      sum.convertTo(out, CV_8U);  // rounds to nearest and saturates
-    }
-  });
-  toEncoding(mono, encoding, image);
 }
 
 SimRig::SimRig(SimRigConfig config) : config_(std::move(config)) {
@@ -365,22 +330,19 @@ SimFrame SimRig::render(const SimRenderRequest& request) const {
 
   impl_->updateLayers(0, config_, boards_, frame.truth.left, rig_from_camera[0], poses[0]);
   impl_->updateLayers(1, config_, boards_, frame.truth.right, rig_from_camera[1], poses[1]);
-  const uint64_t seed = mixSeed(request.noise_seed);
-  const uint64_t right_seed = mixSeed(seed ^ 0x5bd1e995ULL);
-  if (gain == 1.0 && !optics.sensor.enabled) {  // the ideal sensor
-    impl_->compose(impl_->layers[0], device_gain, config_.noise_sigma, seed, config_.encoding, &frame.left);
-    impl_->compose(impl_->layers[1], device_gain, config_.noise_sigma, right_seed, config_.encoding, &frame.right);
-    frame.left_scene = impl_->layers[0].scene_u8.clone();
-    frame.right_scene = impl_->layers[1].scene_u8.clone();
-  } else {
-    sim::SensorParams sensor{gain, gain * device_gain, config_.noise_sigma, optics.sensor};
-    const uint64_t seeds[2] = {seed, right_seed};
-    cv::Mat* images[2] = {&frame.left, &frame.right};
-    cv::Mat* scenes[2] = {&frame.left_scene, &frame.right_scene};
-    for (int i = 0; i < 2; ++i) {
-      cv::Mat mono, scene_mono;
-      sim::composeSensor(impl_->layers[i].scene, impl_->layers[i].device, sensor, seeds[i], kNoiseBandRows, &mono);
-      toEncoding(mono, config_.encoding, images[i]);
+  const uint64_t seed = sim::mixSeed(request.noise_seed);
+  const uint64_t right_seed = sim::mixSeed(seed ^ 0x5bd1e995ULL);
+  const sim::SensorParams sensor{gain, gain * device_gain, config_.noise_sigma, optics.sensor};
+  const uint64_t seeds[2] = {seed, right_seed};
+  cv::Mat* images[2] = {&frame.left, &frame.right};
+  cv::Mat* scenes[2] = {&frame.left_scene, &frame.right_scene};
+  for (int i = 0; i < 2; ++i) {
+    cv::Mat mono, scene_mono;  // fresh buffers: toEncoding() may share them with the frame
+    sim::composeSensor(impl_->layers[i].scene, impl_->layers[i].device, sensor, seeds[i], &mono);
+    toEncoding(mono, config_.encoding, images[i]);
+    if (gain == 1.0) {
+      *scenes[i] = impl_->layers[i].scene_u8.clone();
+    } else {
       impl_->layers[i].scene.convertTo(scene_mono, CV_8U, gain);
       toEncoding(scene_mono, config_.encoding, scenes[i]);
     }
