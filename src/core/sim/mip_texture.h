@@ -82,11 +82,19 @@ inline cv::v_float32x4 MipTexture::bilinear4(const cv::v_int32x4& offset, const 
                                              const cv::v_float32x4& xs, const cv::v_float32x4& ys) const {
   const cv::v_int32x4 x0 = cv::v_trunc(xs), y0 = cv::v_trunc(ys);
   const cv::v_float32x4 fx = xs - cv::v_cvt_f32(x0), fy = ys - cv::v_cvt_f32(y0);
-  const cv::v_int32x4 i00 = offset + y0 * stride + x0;
-  const cv::v_int32x4 one = cv::v_setall_s32(1);
-  const float* data = data_.data();
-  const cv::v_float32x4 v00 = cv::v_lut(data, i00), v01 = cv::v_lut(data, i00 + one);
-  const cv::v_float32x4 v10 = cv::v_lut(data, i00 + stride), v11 = cv::v_lut(data, i00 + stride + one);
+  // Each texel row of a bilinear neighbourhood is one 64-bit pair: lanes 0-1 and 2-3 are
+  // fetched as pairs, then two zips deinterleave them into the left and right texels.
+  alignas(16) int top_index[4], bottom_index[4];
+  cv::v_store_aligned(top_index, offset + y0 * stride + x0);
+  cv::v_store_aligned(bottom_index, cv::v_load_aligned(top_index) + stride);
+  const auto row_pair = [this](const int* index, cv::v_float32x4* left, cv::v_float32x4* right) {
+    cv::v_float32x4 z0, z1;
+    cv::v_zip(cv::v_lut_pairs(data_.data(), index), cv::v_lut_pairs(data_.data(), index + 2), z0, z1);
+    cv::v_zip(z0, z1, *left, *right);
+  };
+  cv::v_float32x4 v00, v01, v10, v11;
+  row_pair(top_index, &v00, &v01);
+  row_pair(bottom_index, &v10, &v11);
   const cv::v_float32x4 top = cv::v_fma(fx, v01 - v00, v00), bottom = cv::v_fma(fx, v11 - v10, v10);
   return cv::v_fma(fy, bottom - top, top);
 }
