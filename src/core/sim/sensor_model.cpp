@@ -84,17 +84,6 @@ void AutoExposure::meter(double mean_grey) {
 
 // --- composeSensor ----------------------------------------------------------------------
 
-const float* gaussianNoisePool() {
-  static const std::vector<float> pool = [] {
-    std::vector<float> samples(kGaussianNoisePoolSize);
-    cv::Mat view(1, static_cast<int>(samples.size()), CV_32F, samples.data());
-    cv::RNG rng(0x6a09e667f3bcc909ULL);
-    rng.fill(view, cv::RNG::NORMAL, 0.0, 1.0);
-    return samples;
-  }();
-  return pool.data();
-}
-
 namespace {
 
 // What composeSensor() does to one row, as constants.
@@ -142,21 +131,31 @@ void composeRow(const RowSignal& signal, const float* scene, const float* device
 
 }  // namespace
 
-void composeSensor(const cv::Mat& scene, const cv::Mat& device, const SensorParams& p, uint64_t seed, cv::Mat* mono) {
+void composeSensor(const cv::Mat& scene, const cv::Mat& device, const SensorParams& p, uint64_t seed,
+                   int band_rows, cv::Mat* mono) {
   CV_Assert(scene.type() == CV_32F && device.type() == CV_32F && scene.size() == device.size());
   const int W = scene.cols, H = scene.rows;
   mono->create(H, W, CV_8U);
   const double e_per_dn = p.sensor.gain_e_per_dn;
   const double read_dn = p.sensor.read_noise_e / e_per_dn;
+  const bool noisy = p.sensor.enabled || p.noise_sigma > 0;
+  // Unit deviates, scaled in the row pass: without the sensor model sigma is constant.
   const RowSignal signal{static_cast<float>(p.scene_gain), static_cast<float>(p.device_gain), p.sensor.enabled,
                          static_cast<float>(p.sensor.full_well_e / e_per_dn), static_cast<float>(1.0 / e_per_dn),
-                         static_cast<float>(read_dn * read_dn), static_cast<float>(p.noise_sigma)};
-  const float* pool = gaussianNoisePool();
-  const uint64_t runs = kGaussianNoisePoolSize - static_cast<uint64_t>(W);
-  cv::parallel_for_(cv::Range(0, H), [&](const cv::Range& range) {
-    for (int row = range.start; row < range.end; ++row) {
-      const float* normal = pool + mixSeed(seed ^ mixSeed(static_cast<uint64_t>(row) + 1)) % runs;
-      composeRow(signal, scene.ptr<float>(row), device.ptr<float>(row), normal, W, mono->ptr<uchar>(row));
+                         static_cast<float>(read_dn * read_dn), noisy ? static_cast<float>(p.noise_sigma) : 0.0f};
+  const int bands = (H + band_rows - 1) / band_rows;
+  cv::parallel_for_(cv::Range(0, bands), [&](const cv::Range& range) {
+    cv::Mat normal(band_rows, W, CV_32F, cv::Scalar(0));
+    for (int band = range.start; band < range.end; ++band) {
+      const cv::Range rows(band * band_rows, std::min(H, (band + 1) * band_rows));
+      if (noisy) {
+        cv::Mat n = normal.rowRange(0, rows.size());
+        cv::RNG rng(mixSeed(seed ^ mixSeed(static_cast<uint64_t>(band) + 1)));
+        rng.fill(n, cv::RNG::NORMAL, 0.0, 1.0);
+      }
+      for (int row = rows.start; row < rows.end; ++row)
+        composeRow(signal, scene.ptr<float>(row), device.ptr<float>(row), normal.ptr<float>(row - rows.start), W,
+                   mono->ptr<uchar>(row));
     }
   });
 }

@@ -59,20 +59,16 @@ class AutoExposure {
 // Noise and quantisation of one camera's frame: signal = scene_gain * scene +
 // device_gain * device (grey levels); with the sensor model the signal is clipped at the full
 // well and gets noise of sigma sqrt(read_e^2 + gain_e_per_dn * signal) / gain_e_per_dn,
-// otherwise Gaussian noise of noise_sigma; then rounded and saturated to 8 bit. Each row's
-// standard normal samples are a run of gaussianNoisePool() at an offset drawn from `seed` and
-// the row: the same frame whatever the threads, and no normal deviates drawn per frame.
+// otherwise Gaussian noise of noise_sigma; then rounded and saturated to 8 bit, in one pass per
+// row. The noise is drawn per band of `band_rows` rows from its own stream (seeded from `seed`
+// and the band), so it does not depend on how the image is split between threads.
 struct SensorParams {
   double scene_gain = 1.0, device_gain = 0.0;
   double noise_sigma = 0.0;  // without the sensor model
   SimSensorConfig sensor;
 };
 void composeSensor(const cv::Mat& scene, const cv::Mat& device, const SensorParams& params, uint64_t seed,
-                   cv::Mat* mono);
-
-// Standard normal samples, drawn once (fixed seed): kGaussianNoisePoolSize of them.
-constexpr size_t kGaussianNoisePoolSize = size_t(1) << 21;
-const float* gaussianNoisePool();
+                   int band_rows, cv::Mat* mono);
 
 // splitmix64 finaliser (the noise streams' seeding, as in sim_rig.cpp).
 uint64_t mixSeed(uint64_t x);

@@ -19,6 +19,10 @@ namespace {
 // Corners closer than this to the image border are not reported (a detector cannot refine them).
 constexpr double kObservationMarginPx = 5.0;
 
+// Rows per noise band: each band has its own RNG stream so the noise does not depend on how
+// cv::parallel_for_ splits the image.
+constexpr int kNoiseBandRows = 16;
+
 // Limits of a drift request (a simulation of small real-world changes, not arbitrary poses).
 constexpr double kMinFocalScale = 0.5, kMaxFocalScale = 2.0;
 constexpr double kMaxRotationDeg = 10.0;
@@ -338,7 +342,7 @@ SimFrame SimRig::render(const SimRenderRequest& request) const {
   cv::Mat* scenes[2] = {&frame.left_scene, &frame.right_scene};
   for (int i = 0; i < 2; ++i) {
     cv::Mat mono, scene_mono;  // fresh buffers: toEncoding() may share them with the frame
-    sim::composeSensor(impl_->layers[i].scene, impl_->layers[i].device, sensor, seeds[i], &mono);
+    sim::composeSensor(impl_->layers[i].scene, impl_->layers[i].device, sensor, seeds[i], kNoiseBandRows, &mono);
     toEncoding(mono, config_.encoding, images[i]);
     if (gain == 1.0) {
       *scenes[i] = impl_->layers[i].scene_u8.clone();
