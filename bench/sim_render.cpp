@@ -4,7 +4,8 @@
 // (ray maps and every layer rebuilt), and a thermal drift (the right camera's device layer
 // re-rendered every frame, as during the demo's thermal ramp).
 //
-// Usage: bench_sim_render [config.yaml ...] [frames]
+// Usage: bench_sim_render [--kernel NAME] [config.yaml ...] [frames]
+//   --kernel: the scene renderer's row kernel (SimRig::sceneKernelNames(); default the widest).
 //   Without a path, $ECS_SOURCE_DIR/config/{sim_rig,drive_photo,handheld_photo}.yaml are used.
 #include <algorithm>
 #include <chrono>
@@ -65,7 +66,7 @@ void report(const char* what, const Run& run) {
               s.mean, s.p95, s.max);
 }
 
-int benchScenario(const std::string& path, int frames) {
+int benchScenario(const std::string& path, int frames, const std::string& kernel) {
   ecs::SimRigConfig config;
   try {
     config = ecs::loadSimRigConfig(path);
@@ -92,6 +93,11 @@ int benchScenario(const std::string& path, int frames) {
     return 1;
   }
   ecs::SimRig& rig = *rig_ptr;
+  if (!kernel.empty() && !rig.useSceneKernel(kernel)) {
+    std::fprintf(stderr, "this build or CPU has no scene kernel '%s'\n", kernel.c_str());
+    return 1;
+  }
+  std::printf("scene kernel: %s\n", rig.sceneKernel().c_str());
   std::printf("construction (scene textures): %.1f ms\n", elapsedMs(start));
 
   const double dt = 1.0 / config.fps;
@@ -142,9 +148,12 @@ int benchScenario(const std::string& path, int frames) {
 int main(int argc, char** argv) {
   std::vector<std::string> paths;
   int frames = 100;
+  std::string kernel;
   for (int i = 1; i < argc; ++i) {
     const std::string arg = argv[i];
-    if (!arg.empty() && arg.find_first_not_of("0123456789") == std::string::npos)
+    if (arg == "--kernel" && i + 1 < argc)
+      kernel = argv[++i];
+    else if (!arg.empty() && arg.find_first_not_of("0123456789") == std::string::npos)
       frames = std::max(10, std::atoi(arg.c_str()));
     else
       paths.push_back(arg);
@@ -153,7 +162,7 @@ int main(int argc, char** argv) {
     const char* src = std::getenv("ECS_SOURCE_DIR");
     if (!src) {
       std::fprintf(stderr,
-                   "usage: %s [config.yaml ...] [frames]\n"
+                   "usage: %s [--kernel NAME] [config.yaml ...] [frames]\n"
                    "       (or set ECS_SOURCE_DIR to the package source directory)\n",
                    argv[0]);
       return 2;
@@ -162,6 +171,6 @@ int main(int argc, char** argv) {
       paths.push_back(std::string(src) + "/config/" + name + ".yaml");
   }
   int status = 0;
-  for (const std::string& path : paths) status |= benchScenario(path, frames);
+  for (const std::string& path : paths) status |= benchScenario(path, frames, kernel);
   return status;
 }

@@ -216,6 +216,44 @@ std::string loadError(const std::string& path) {
   return "";
 }
 
+TEST(SimTextures, EveryKernelRendersTheSameScene) {
+  // The scene kernels differ in vector width, gathers and fused multiply-adds only: the same
+  // pixels hit, the same texels, the same depth, to float rounding.
+  const std::vector<std::string> kernels = SimRig::sceneKernelNames();
+  if (kernels.size() < 2) GTEST_SKIP() << "this build or CPU has only the baseline scene kernel";
+  for (const char* scenario : {"drive_photo.yaml", "handheld_photo.yaml"}) {
+    const SimRigConfig config = loadSimRigConfig(kConfigDir + scenario);
+    SimRig baseline(config), wide(config);
+    ASSERT_TRUE(baseline.useSceneKernel("baseline"));
+    ASSERT_TRUE(wide.useSceneKernel(kernels.back()));
+    for (double t : {1.3, 4.7, 11.1}) {
+      const SimFrame a = baseline.render(t, 1.0, 5), b = wide.render(t, 1.0, 5);
+      for (int side = 0; side < 2; ++side) {
+        const cv::Mat& sa = side == 0 ? a.left_scene : a.right_scene;
+        const cv::Mat& sb = side == 0 ? b.left_scene : b.right_scene;
+        cv::Mat diff;
+        cv::absdiff(sa, sb, diff);
+        diff.convertTo(diff, CV_32F);
+        const double rms = std::sqrt(cv::mean(diff.mul(diff))[0]);
+        double max_diff;
+        cv::minMaxLoc(diff, nullptr, &max_diff);
+        std::printf("[ figures  ] %s t=%.1f %s: %s against baseline, scene RMS %.4f grey, max %.0f\n", scenario, t,
+                    side == 0 ? "left" : "right", kernels.back().c_str(), rms, max_diff);
+        EXPECT_LT(rms, 0.02) << scenario << " t=" << t;
+        EXPECT_LE(max_diff, 1.0) << scenario << " t=" << t;
+      }
+      const cv::Mat finite_a = a.left_depth < std::numeric_limits<float>::infinity();
+      const cv::Mat finite_b = b.left_depth < std::numeric_limits<float>::infinity();
+      EXPECT_EQ(cv::countNonZero(finite_a != finite_b), 0) << "the same pixels hit";
+      cv::Mat relative;
+      cv::divide(cv::abs(a.left_depth - b.left_depth), a.left_depth, relative);
+      double worst;
+      cv::minMaxLoc(relative, nullptr, &worst, nullptr, nullptr, finite_a & finite_b);
+      EXPECT_LT(worst, 1e-5) << scenario << " t=" << t;
+    }
+  }
+}
+
 TEST(SimScenarioConfig, ScenariosLoad) {
   const SimRigConfig drive = loadSimRigConfig(kConfigDir + "drive_photo.yaml");
   EXPECT_EQ(drive.trajectory.kind, SimTrajectory::Kind::kDrive);

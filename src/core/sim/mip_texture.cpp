@@ -39,26 +39,5 @@ cv::Mat MipTexture::level(int k) const {
   return cv::Mat(rows, stride_[k], CV_32F, const_cast<float*>(data_.data()) + offset_[k]);
 }
 
-float MipTexture::bilinear(int k, float x, float y) const {
-  x = std::min(std::max(x * scale_[k], 0.0f), max_x_[k]);
-  y = std::min(std::max(y * scale_[k], 0.0f), max_y_[k]);
-  const int x0 = static_cast<int>(x), y0 = static_cast<int>(y);
-  const float fx = x - x0, fy = y - y0;
-  const float* r0 = data_.data() + offset_[k] + y0 * stride_[k] + x0;
-  const float* r1 = r0 + stride_[k];
-  return (1 - fy) * ((1 - fx) * r0[0] + fx * r0[1]) + fy * ((1 - fx) * r1[0] + fx * r1[1]);
-}
-
-float MipTexture::sample(float x, float y, float footprint) const {
-  if (!(footprint > 1.0f)) return bilinear(0, x, y);
-  const float level = std::min(std::log2(footprint), static_cast<float>(levels_ - 1));
-  const int l0 = static_cast<int>(level);
-  const int l1 = std::min(l0 + 1, levels_ - 1);
-  const float w = level - l0;
-  const float v0 = bilinear(l0, x, y);
-  return w > 0.0f ? (1 - w) * v0 + w * bilinear(l1, x, y) : v0;
-}
-
-
 }  // namespace sim
 }  // namespace ecs

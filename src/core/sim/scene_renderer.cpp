@@ -3,7 +3,6 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
-#include <opencv2/core/hal/intrin.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
@@ -94,15 +93,10 @@ SceneRenderer::TexturedPlane SceneRenderer::makeTexturedPlane(const ScenePlane& 
   return tp;
 }
 
-// A plane expressed as linear forms of the camera ray m = (x, y, 1), so that a pixel costs a
-// handful of multiply-adds per plane: t = numerator / (n.m), a = a0 + t (u.m), b = b0 + t (v.m).
+// A plane as the kernels see it from one camera, and the columns of each row that can see it.
 struct PlaneInCamera {
-  float n[3], u[3], v[3];
-  float numerator, a0, b0, width, height;
+  scene_kernel::Plane kernel;
   std::vector<int> span_lo, span_hi;  // per row, the columns [lo, hi) that can see the plane
-  const MipTexture* texture;
-  float inv_texel_u, inv_texel_v, texel_offset;
-  float footprint_scale;  // texels per metre along the finer texture axis
 };
 
 SceneRenderer::SceneRenderer(const SimSceneConfig& config) : enabled_(config.enabled) {
@@ -114,22 +108,6 @@ SceneRenderer::SceneRenderer(const SimSceneConfig& config) : enabled_(config.ena
 }
 
 namespace {
-
-// Footprint of one pixel on a plane, in metres: the larger of the plane displacements (measured
-// along the plane's u and v axes) of the hit point t * m when the ray m = (x, y, 1) moves to the
-// next column (dmx) and to the next row (dmy). dP = t (dm - m (n.dm) / (n.m)).
-inline float pixelFootprint(const PlaneInCamera& pc, float t, float x, float y, float dmx0, float dmx1,
-                            float dmy0, float dmy1) {
-  const float nm = pc.n[0] * x + pc.n[1] * y + pc.n[2];
-  const auto extent = [&](float d0, float d1) {
-    const float k = (pc.n[0] * d0 + pc.n[1] * d1) / nm;
-    const float p0 = t * (d0 - x * k), p1 = t * (d1 - y * k), p2 = -t * k;
-    const float da = pc.u[0] * p0 + pc.u[1] * p1 + pc.u[2] * p2;
-    const float db = pc.v[0] * p0 + pc.v[1] * p1 + pc.v[2] * p2;
-    return std::sqrt(da * da + db * db);
-  };
-  return std::max(extent(dmx0, dmx1), extent(dmy0, dmy1));
-}
 
 // Keeps the part of a convex polygon where f(q) = n.q + d >= 0 (Sutherland-Hodgman, one plane).
 std::vector<Eigen::Vector3d> clipPolygon(const std::vector<Eigen::Vector3d>& polygon, const Eigen::Vector3d& n, double d) {
@@ -195,166 +173,13 @@ void planeRowSpans(const ScenePlane& p, const CameraRays& rays, const Eigen::Iso
   }
 }
 
-// Nearest-hit update of one row segment against one plane, 4 pixels at a time with OpenCV's
-// universal intrinsics (SSE or NEON), then a scalar tail.
-void castRowSegment(const PlaneInCamera& pc, int plane_index, const float* x, const float* y, int begin,
-                    int end, float* best_t, float* best_a, float* best_b, int* best_plane) {
-  const float kMinT = 1e-6f;
-  int col = begin;
-#if CV_SIMD128
-  const cv::v_float32x4 n0 = cv::v_setall_f32(pc.n[0]), n1 = cv::v_setall_f32(pc.n[1]),
-                        n2 = cv::v_setall_f32(pc.n[2]);
-  const cv::v_float32x4 u0 = cv::v_setall_f32(pc.u[0]), u1 = cv::v_setall_f32(pc.u[1]),
-                        u2 = cv::v_setall_f32(pc.u[2]);
-  const cv::v_float32x4 v0 = cv::v_setall_f32(pc.v[0]), v1 = cv::v_setall_f32(pc.v[1]),
-                        v2 = cv::v_setall_f32(pc.v[2]);
-  const cv::v_float32x4 numerator = cv::v_setall_f32(pc.numerator), a0 = cv::v_setall_f32(pc.a0),
-                        b0 = cv::v_setall_f32(pc.b0), width = cv::v_setall_f32(pc.width),
-                        height = cv::v_setall_f32(pc.height), min_t = cv::v_setall_f32(kMinT),
-                        zero = cv::v_setzero_f32();
-  const cv::v_int32x4 index = cv::v_setall_s32(plane_index);
-  for (; col + 4 <= end; col += 4) {
-    const cv::v_float32x4 vx = cv::v_load(x + col), vy = cv::v_load(y + col);
-    const cv::v_float32x4 t = numerator / (n0 * vx + n1 * vy + n2);
-    const cv::v_float32x4 a = a0 + t * (u0 * vx + u1 * vy + u2);
-    const cv::v_float32x4 b = b0 + t * (v0 * vx + v1 * vy + v2);
-    const cv::v_float32x4 prev = cv::v_load(best_t + col);
-    // Comparisons with NaN are false, so a ray parallel to the plane (t = inf or NaN) never
-    // hits; with t finite, a and b are finite and the min-of-margins test is exact.
-    const cv::v_float32x4 inside = cv::v_min(cv::v_min(a, width - a), cv::v_min(b, height - b)) >= zero;
-    const cv::v_float32x4 hit = (t > min_t) & (t < prev) & inside;
-    cv::v_store(best_t + col, cv::v_select(hit, t, prev));
-    cv::v_store(best_a + col, cv::v_select(hit, a, cv::v_load(best_a + col)));
-    cv::v_store(best_b + col, cv::v_select(hit, b, cv::v_load(best_b + col)));
-    cv::v_store(best_plane + col,
-                cv::v_select(cv::v_reinterpret_as_s32(hit), index, cv::v_load(best_plane + col)));
-  }
-#endif
-  for (; col < end; ++col) {
-    const float t = pc.numerator / (pc.n[0] * x[col] + pc.n[1] * y[col] + pc.n[2]);
-    const float a = pc.a0 + t * (pc.u[0] * x[col] + pc.u[1] * y[col] + pc.u[2]);
-    const float b = pc.b0 + t * (pc.v[0] * x[col] + pc.v[1] * y[col] + pc.v[2]);
-    if (t > kMinT && t < best_t[col] && a >= 0.0f && a <= pc.width && b >= 0.0f && b <= pc.height) {
-      best_t[col] = t;
-      best_a[col] = a;
-      best_b[col] = b;
-      best_plane[col] = plane_index;
-    }
-  }
-}
-
-// The rays of one image row and of its neighbour (the row below; above for the last row), for
-// the pixel footprints.
-struct RowRays {
-  const float *x, *y, *next_x, *next_y;
-  float next_sign;  // +1 when next is the row below
-  int width;
-};
-
-// Nearest hits along one row.
-struct RowHits {
-  std::vector<float> t, a, b;
-  std::vector<int> plane;  // -1: no hit
-  explicit RowHits(int width) : t(width), a(width), b(width), plane(width) {}
-};
-
-// z of a hit C + t R m in the depth frame: z_centre + t (r.m), m = (x, y, 1).
-struct DepthLine {
-  float z_centre, r[3];
-};
-
-void shadePixel(const std::vector<PlaneInCamera>& planes, const RowRays& rays, const RowHits& hits,
-                const DepthLine& line, int col, float* out, float* depth) {
-  const int p = hits.plane[col];
-  if (p < 0) {
-    out[col] = 0.0f;
-    if (depth) depth[col] = std::numeric_limits<float>::infinity();
-    return;
-  }
-  const PlaneInCamera& pc = planes[p];
-  const float* x = rays.x;
-  const float* y = rays.y;
-  const int next_col = col + 1 < rays.width ? col + 1 : col - 1;
-  const float col_sign = col + 1 < rays.width ? 1.0f : -1.0f;
-  const float footprint =
-      pixelFootprint(pc, hits.t[col], x[col], y[col], col_sign * (x[next_col] - x[col]),
-                     col_sign * (y[next_col] - y[col]), rays.next_sign * (rays.next_x[col] - x[col]),
-                     rays.next_sign * (rays.next_y[col] - y[col])) * pc.footprint_scale;
-  out[col] = pc.texture->sample(hits.a[col] * pc.inv_texel_u - pc.texel_offset,
-                                hits.b[col] * pc.inv_texel_v - pc.texel_offset, footprint);
-  if (depth) depth[col] = line.z_centre + hits.t[col] * (line.r[0] * x[col] + line.r[1] * y[col] + line.r[2]);
-}
-
-#if CV_SIMD128
-// Four pixels [col, col + 4) that all hit plane pc, none in the last column: pixelFootprint()
-// and MipTexture::sample() four at a time.
-void shadeGroup(const PlaneInCamera& pc, const RowRays& rays, const RowHits& hits, int col, float* out) {
-  using cv::v_float32x4;
-  const v_float32x4 x = cv::v_load(rays.x + col), y = cv::v_load(rays.y + col);
-  const v_float32x4 t = cv::v_load(hits.t.data() + col);
-  const v_float32x4 n0 = cv::v_setall_f32(pc.n[0]), n1 = cv::v_setall_f32(pc.n[1]);
-  const v_float32x4 inv_nm = cv::v_setall_f32(1.0f) / cv::v_fma(n0, x, cv::v_fma(n1, y, cv::v_setall_f32(pc.n[2])));
-  const auto extent2 = [&](const v_float32x4& d0, const v_float32x4& d1) {
-    const v_float32x4 k = cv::v_fma(n0, d0, n1 * d1) * inv_nm;
-    const v_float32x4 p0 = t * (d0 - x * k), p1 = t * (d1 - y * k), p2 = cv::v_setzero_f32() - t * k;
-    const v_float32x4 da = cv::v_fma(cv::v_setall_f32(pc.u[0]), p0,
-                                     cv::v_fma(cv::v_setall_f32(pc.u[1]), p1, cv::v_setall_f32(pc.u[2]) * p2));
-    const v_float32x4 db = cv::v_fma(cv::v_setall_f32(pc.v[0]), p0,
-                                     cv::v_fma(cv::v_setall_f32(pc.v[1]), p1, cv::v_setall_f32(pc.v[2]) * p2));
-    return cv::v_fma(da, da, db * db);
-  };
-  const v_float32x4 sign = cv::v_setall_f32(rays.next_sign);
-  const v_float32x4 across = extent2(cv::v_load(rays.x + col + 1) - x, cv::v_load(rays.y + col + 1) - y);
-  const v_float32x4 down = extent2(sign * (cv::v_load(rays.next_x + col) - x), sign * (cv::v_load(rays.next_y + col) - y));
-  const float scale2 = pc.footprint_scale * pc.footprint_scale;
-  const v_float32x4 footprint2 = cv::v_max(across, down) * cv::v_setall_f32(scale2);
-  // log2 of the footprint; NaN (level 0) unless it is above one texel.
-  const v_float32x4 log2_footprint = cv::v_select(footprint2 > cv::v_setall_f32(1.0f),
-                                                  fastLog2(footprint2) * cv::v_setall_f32(0.5f),
-                                                  cv::v_setzero_f32());
-  const v_float32x4 offset = cv::v_setall_f32(pc.texel_offset);
-  const v_float32x4 tx = cv::v_load(hits.a.data() + col) * cv::v_setall_f32(pc.inv_texel_u) - offset;
-  const v_float32x4 ty = cv::v_load(hits.b.data() + col) * cv::v_setall_f32(pc.inv_texel_v) - offset;
-  cv::v_store(out + col, pc.texture->sample4(tx, ty, log2_footprint));
-}
-
-void depthGroup(const RowRays& rays, const RowHits& hits, const DepthLine& line, int col, float* depth) {
-  const cv::v_float32x4 x = cv::v_load(rays.x + col), y = cv::v_load(rays.y + col);
-  const cv::v_float32x4 along = cv::v_fma(cv::v_setall_f32(line.r[0]), x,
-                                          cv::v_fma(cv::v_setall_f32(line.r[1]), y, cv::v_setall_f32(line.r[2])));
-  const cv::v_float32x4 z = cv::v_fma(cv::v_load(hits.t.data() + col), along, cv::v_setall_f32(line.z_centre));
-  const cv::v_float32x4 hit = cv::v_reinterpret_as_f32(cv::v_load(hits.plane.data() + col) >= cv::v_setzero_s32());
-  cv::v_store(depth + col, cv::v_select(hit, z, cv::v_setall_f32(std::numeric_limits<float>::infinity())));
-}
-#endif
-
-// Radiance (and depth) of one row from its nearest hits: groups of four pixels on one plane
-// are shaded together, the others (plane edges, misses, the last column) one by one.
-void shadeRow(const std::vector<PlaneInCamera>& planes, const RowRays& rays, const RowHits& hits,
-              const DepthLine& line, float* out, float* depth) {
-  int col = 0;
-#if CV_SIMD128
-  for (; col + 4 < rays.width; col += 4) {
-    const int p = hits.plane[col];
-    const bool one_plane =
-        p >= 0 && cv::v_check_all(cv::v_load(hits.plane.data() + col) == cv::v_setall_s32(p));
-    if (one_plane) {
-      shadeGroup(planes[p], rays, hits, col, out);
-      if (depth) depthGroup(rays, hits, line, col, depth);
-    } else {
-      for (int k = col; k < col + 4; ++k) shadePixel(planes, rays, hits, line, k, out, depth);
-    }
-  }
-#endif
-  for (; col < rays.width; ++col) shadePixel(planes, rays, hits, line, col, out, depth);
-}
-
 PlaneInCamera placeInCamera(const ScenePlane& plane, const Eigen::Vector3d& normal, const MipTexture& texture,
                             float inv_texel_u, float inv_texel_v, float texel_offset, const CameraRays& rays,
                             const Eigen::Isometry3d& world_from_camera) {
   const Eigen::Matrix3d R = world_from_camera.linear();
   const Eigen::Vector3d C = world_from_camera.translation();
-  PlaneInCamera pc;
+  PlaneInCamera placed;
+  scene_kernel::Plane& pc = placed.kernel;
   const Eigen::Vector3d n = R.transpose() * normal;
   const Eigen::Vector3d u = R.transpose() * plane.u_axis;
   const Eigen::Vector3d v = R.transpose() * plane.v_axis;
@@ -368,13 +193,13 @@ PlaneInCamera placeInCamera(const ScenePlane& plane, const Eigen::Vector3d& norm
   pc.b0 = static_cast<float>((C - plane.origin).dot(plane.v_axis));
   pc.width = static_cast<float>(plane.width_m);
   pc.height = static_cast<float>(plane.height_m);
-  planeRowSpans(plane, rays, world_from_camera.inverse(), &pc);
-  pc.texture = &texture;
+  pc.texture = texture.view();
   pc.inv_texel_u = inv_texel_u;
   pc.inv_texel_v = inv_texel_v;
   pc.texel_offset = texel_offset;
   pc.footprint_scale = std::max(inv_texel_u, inv_texel_v);
-  return pc;
+  planeRowSpans(plane, rays, world_from_camera.inverse(), &placed);
+  return placed;
 }
 
 }  // namespace
@@ -407,31 +232,37 @@ void SceneRenderer::render(const CameraRays& rays, const Eigen::Isometry3d& worl
   radiance->create(H, W, CV_32F);
   if (depth_z) depth_z->create(H, W, CV_32F);
   const std::vector<PlaneInCamera> planes = placePlanes(rays, world_from_camera, world_from_movers);
+  std::vector<scene_kernel::Plane> kernel_planes;
+  for (const PlaneInCamera& p : planes) kernel_planes.push_back(p.kernel);
   // Depth z of a hit C + t R m: e.(C + t R m) + d with (e, d) the z row of depth_from_world.
   const Eigen::Vector3d e = depth_from_world.linear().row(2).transpose();
   const Eigen::Vector3d rz = world_from_camera.linear().transpose() * e;  // z of the ray direction, per unit t
-  DepthLine line;
+  scene_kernel::DepthLine line;
   line.z_centre = static_cast<float>(e.dot(world_from_camera.translation()) + depth_from_world.translation().z());
   for (int k = 0; k < 3; ++k) line.r[k] = static_cast<float>(rz[k]);
+  const scene_kernel::Kernel& kernel = *kernel_;
 
   cv::parallel_for_(cv::Range(0, H), [&](const cv::Range& range) {
-    // Plane-major per row: each plane updates the row's nearest hits in one SIMD pass over its
-    // bounding box; the texture is then sampled once per pixel, for the nearest plane only.
-    RowHits hits(W);
+    // Plane-major per row: each plane updates the row's nearest hits over the columns that can
+    // see it; the texture is then sampled once per pixel, for the nearest plane only.
+    std::vector<float> t(W), a(W), b(W);
+    std::vector<int> plane(W);
+    const scene_kernel::RowHits hits{t.data(), a.data(), b.data(), plane.data()};
     for (int row = range.start; row < range.end; ++row) {
       // The neighbouring row's rays give the vertical pixel step (the previous one at the bottom).
       const int next_row = row + 1 < H ? row + 1 : row - 1;
-      const RowRays row_rays{rays.x.ptr<float>(row), rays.y.ptr<float>(row), rays.x.ptr<float>(next_row),
-                             rays.y.ptr<float>(next_row), row + 1 < H ? 1.0f : -1.0f, W};
-      std::fill(hits.t.begin(), hits.t.end(), std::numeric_limits<float>::infinity());
-      std::fill(hits.plane.begin(), hits.plane.end(), -1);
+      const scene_kernel::RowRays row_rays{rays.x.ptr<float>(row), rays.y.ptr<float>(row),
+                                           rays.x.ptr<float>(next_row), rays.y.ptr<float>(next_row),
+                                           row + 1 < H ? 1.0f : -1.0f, W};
+      std::fill(t.begin(), t.end(), std::numeric_limits<float>::infinity());
+      std::fill(plane.begin(), plane.end(), -1);
       for (int p = 0; p < static_cast<int>(planes.size()); ++p) {
         const PlaneInCamera& pc = planes[p];
-        if (pc.span_lo[row] >= pc.span_hi[row]) continue;
-        castRowSegment(pc, p, row_rays.x, row_rays.y, pc.span_lo[row], pc.span_hi[row], hits.t.data(),
-                       hits.a.data(), hits.b.data(), hits.plane.data());
+        if (pc.span_lo[row] < pc.span_hi[row])
+          kernel.cast(pc.kernel, p, row_rays, pc.span_lo[row], pc.span_hi[row], hits);
       }
-      shadeRow(planes, row_rays, hits, line, radiance->ptr<float>(row), depth_z ? depth_z->ptr<float>(row) : nullptr);
+      kernel.shade(kernel_planes.data(), row_rays, hits, line, radiance->ptr<float>(row),
+                   depth_z ? depth_z->ptr<float>(row) : nullptr);
     }
   });
 }

@@ -15,6 +15,7 @@
 #include "camera_rays.h"
 #include "embedded_calibration_stereo/core/sim/sim_rig.h"
 #include "mip_texture.h"
+#include "scene_kernel.h"
 
 namespace ecs {
 namespace sim {
@@ -35,6 +36,9 @@ class SceneRenderer {
               cv::Mat* radiance, cv::Mat* depth_z) const;
 
   size_t moverCount() const { return movers_.size(); }
+  // The row kernels render() uses (default: the widest this CPU runs); for comparing them.
+  void useKernel(const scene_kernel::Kernel& kernel) { kernel_ = &kernel; }
+  const scene_kernel::Kernel& kernel() const { return *kernel_; }
 
  private:
   struct TexturedPlane {
@@ -51,6 +55,7 @@ class SceneRenderer {
                                                 const std::vector<Eigen::Isometry3d>& world_from_movers) const;
   static TexturedPlane makeTexturedPlane(const ScenePlane& plane, const std::string& key);
   bool enabled_;
+  const scene_kernel::Kernel* kernel_ = &scene_kernel::bestKernel();
   std::vector<TexturedPlane> planes_, movers_;
 };
 

@@ -236,6 +236,25 @@ std::string SimRig::setDrift(const DriftRequest& request, double time_s) {
   return "";
 }
 
+std::vector<std::string> SimRig::sceneKernelNames() {
+  std::vector<std::string> names{sim::scene_kernel::baselineKernel().name};
+  if (std::string(sim::scene_kernel::bestKernel().name) != names[0]) names.push_back(sim::scene_kernel::bestKernel().name);
+  return names;
+}
+
+bool SimRig::useSceneKernel(const std::string& name) {
+  for (const sim::scene_kernel::Kernel* k : {&sim::scene_kernel::baselineKernel(), &sim::scene_kernel::bestKernel()}) {
+    if (name != k->name) continue;
+    std::lock_guard<std::mutex> lock(impl_->render_mutex);
+    impl_->scene.useKernel(*k);
+    for (CameraLayers& l : impl_->layers) l.valid = false;  // render again with it
+    return true;
+  }
+  return false;
+}
+
+std::string SimRig::sceneKernel() const { return impl_->scene.kernel().name; }
+
 StereoRig SimRig::truthAt(double time_s) const {
   DriftState snapshot;
   {

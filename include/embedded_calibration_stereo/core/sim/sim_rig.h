@@ -209,6 +209,14 @@ class SimRig {
   // frame to the next: frames rendered in the same order render the same images.
   SimFrame render(const SimRenderRequest& request) const;
 
+  // The scene renderer's row kernels: "baseline" (the build's own SIMD: SSE2 or NEON) always,
+  // "avx2" on x86-64 CPUs with AVX2 and FMA; by default the widest the CPU runs. They render
+  // the same images to float rounding; choosing one is for tests and benchmarks. Returns false
+  // (and keeps the kernel) for a name this build or CPU cannot run.
+  static std::vector<std::string> sceneKernelNames();
+  bool useSceneKernel(const std::string& name);
+  std::string sceneKernel() const;
+
  private:
   struct Impl;
   SimRigConfig config_;
