@@ -4,8 +4,9 @@
 // (ray maps and every layer rebuilt), and a thermal drift (the right camera's device layer
 // re-rendered every frame, as during the demo's thermal ramp).
 //
-// Usage: bench_sim_render [--kernel NAME] [config.yaml ...] [frames]
+// Usage: bench_sim_render [--kernel NAME] [--threads N] [config.yaml ...] [frames]
 //   --kernel: the scene renderer's row kernel (SimRig::sceneKernelNames(); default the widest).
+//   --threads: OpenCV's worker threads (cv::setNumThreads; default as OpenCV chooses).
 //   Without a path, $ECS_SOURCE_DIR/config/{sim_rig,drive_photo,handheld_photo}.yaml are used.
 #include <algorithm>
 #include <chrono>
@@ -153,6 +154,8 @@ int main(int argc, char** argv) {
     const std::string arg = argv[i];
     if (arg == "--kernel" && i + 1 < argc)
       kernel = argv[++i];
+    else if (arg == "--threads" && i + 1 < argc)
+      cv::setNumThreads(std::atoi(argv[++i]));
     else if (!arg.empty() && arg.find_first_not_of("0123456789") == std::string::npos)
       frames = std::max(10, std::atoi(arg.c_str()));
     else
@@ -162,7 +165,7 @@ int main(int argc, char** argv) {
     const char* src = std::getenv("ECS_SOURCE_DIR");
     if (!src) {
       std::fprintf(stderr,
-                   "usage: %s [--kernel NAME] [config.yaml ...] [frames]\n"
+                   "usage: %s [--kernel NAME] [--threads N] [config.yaml ...] [frames]\n"
                    "       (or set ECS_SOURCE_DIR to the package source directory)\n",
                    argv[0]);
       return 2;

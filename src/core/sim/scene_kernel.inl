@@ -131,12 +131,12 @@ VFloat bilinearAt(const Texture& tex, const VInt& offset, const VInt& stride, co
   const VInt first = offset + y0 * stride + x0;
   cv::v_store_aligned(top, first);
   cv::v_store_aligned(bottom, first + stride);
+  // Plain 64-bit copies, then a deinterleaving load: cheaper than gathers on the CPUs measured.
   alignas(32) float pairs[2 * kLanes];
   VFloat v00, v01, v10, v11;
   for (int half = 0; half < 2; ++half) {
     const int* index = half == 0 ? top : bottom;
-    cv::v_store_aligned(pairs, cv::vx_lut_pairs(tex.data, index));
-    cv::v_store_aligned(pairs + kLanes, cv::vx_lut_pairs(tex.data, index + kLanes / 2));
+    for (int lane = 0; lane < kLanes; ++lane) __builtin_memcpy(pairs + 2 * lane, tex.data + index[lane], 8);
     cv::v_load_deinterleave(pairs, half == 0 ? v00 : v10, half == 0 ? v01 : v11);
   }
   const VFloat upper = cv::v_fma(fx, v01 - v00, v00), lower = cv::v_fma(fx, v11 - v10, v10);
