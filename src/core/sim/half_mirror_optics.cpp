@@ -42,7 +42,8 @@ cv::Mat vignettingFactor(const CameraRays& rays, double strength) {
 }
 
 void applyDeviceOptics(const SimOpticsConfig& optics, const std::vector<VirtualBoard>& boards,
-                       const CameraRays& rays, const Eigen::Isometry3d& rig_from_camera, cv::Mat* device) {
+                       const CameraRays& rays, const Eigen::Isometry3d& rig_from_camera,
+                       const cv::Mat& device_vignetting, cv::Mat* device) {
   const double weight = ghostRelativeWeight(optics.ghost, optics.reflectance);
   if (weight > 0.0) {
     cv::Mat ghost;
@@ -52,8 +53,7 @@ void applyDeviceOptics(const SimOpticsConfig& optics, const std::vector<VirtualB
       cv::GaussianBlur(ghost, ghost, cv::Size(), optics.psf_sigma_px, 0, cv::BORDER_REPLICATE);
     cv::scaleAdd(ghost, weight, *device, *device);
   }
-  if (optics.vignetting.device > 0.0)
-    cv::multiply(*device, vignettingFactor(rays, optics.vignetting.device), *device);
+  if (!device_vignetting.empty()) cv::multiply(*device, device_vignetting, *device);
 }
 
 }  // namespace sim

@@ -32,10 +32,12 @@ Eigen::Isometry3d ghostCameraPose(const SimGhostConfig& ghost, const Eigen::Isom
 // cos(theta)^(4 * strength) per pixel (CV_32F), theta the angle of the pixel's ray to the axis.
 cv::Mat vignettingFactor(const CameraRays& rays, double strength);
 
-// Adds the ghost to `device` (blurred like it) and applies the device path's vignetting, in
-// place. Does nothing (not even touch the layer) when the optics are ideal.
+// Adds the ghost to `device` (blurred like it) and applies the device path's vignetting
+// (vignettingFactor(rays, optics.vignetting.device), which the caller keeps; empty when there is
+// none), in place. Does nothing (not even touch the layer) when the optics are ideal.
 void applyDeviceOptics(const SimOpticsConfig& optics, const std::vector<VirtualBoard>& boards,
-                       const CameraRays& rays, const Eigen::Isometry3d& rig_from_camera, cv::Mat* device);
+                       const CameraRays& rays, const Eigen::Isometry3d& rig_from_camera,
+                       const cv::Mat& device_vignetting, cv::Mat* device);
 
 }  // namespace sim
 }  // namespace ecs

@@ -19,6 +19,10 @@ namespace scene_kernel {
 namespace {
 
 constexpr float kMinT = 1e-6f;  // hits closer than this along the ray are not hits
+// Planes of a scene meet edge to edge (a wall and the floor): a ray on the seam must hit one of
+// them whatever the rounding, so each rectangle reaches this far (metres) past its edges; where
+// two overlap, the nearer hit wins as anywhere else.
+constexpr float kSeam = 1e-5f;
 const float kInfinity = __builtin_inff();
 
 float minf(float a, float b) { return a < b ? a : b; }
@@ -91,7 +95,7 @@ void castScalar(const Plane& pc, int index, const RowRays& rays, int col, const 
   const float t = pc.numerator / (pc.n[0] * x + pc.n[1] * y + pc.n[2]);
   const float a = pc.a0 + t * (pc.u[0] * x + pc.u[1] * y + pc.u[2]);
   const float b = pc.b0 + t * (pc.v[0] * x + pc.v[1] * y + pc.v[2]);
-  if (t > kMinT && t < hits.t[col] && a >= 0.0f && a <= pc.width && b >= 0.0f && b <= pc.height) {
+  if (t > kMinT && t < hits.t[col] && a >= -kSeam && a <= pc.width + kSeam && b >= -kSeam && b <= pc.height + kSeam) {
     hits.t[col] = t;
     hits.a[col] = a;
     hits.b[col] = b;
@@ -245,7 +249,8 @@ void castRow(const Plane& pc, int index, const RowRays& rays, int begin, int end
   const VFloat u0 = splat(pc.u[0]), u1 = splat(pc.u[1]), u2 = splat(pc.u[2]);
   const VFloat v0 = splat(pc.v[0]), v1 = splat(pc.v[1]), v2 = splat(pc.v[2]);
   const VFloat numerator = splat(pc.numerator), a0 = splat(pc.a0), b0 = splat(pc.b0);
-  const VFloat width = splat(pc.width), height = splat(pc.height), min_t = splat(kMinT), zero = cv::vx_setzero_f32();
+  const VFloat width = splat(pc.width + kSeam), height = splat(pc.height + kSeam), min_t = splat(kMinT);
+  const VFloat seam = splat(kSeam), zero = cv::vx_setzero_f32();
   const VInt index_v = cv::vx_setall_s32(index);
   for (; col + kLanes <= end; col += kLanes) {
     const VFloat x = cv::vx_load(rays.x + col), y = cv::vx_load(rays.y + col);
@@ -255,7 +260,7 @@ void castRow(const Plane& pc, int index, const RowRays& rays, int begin, int end
     const VFloat previous = cv::vx_load(hits.t + col);
     // Comparisons with NaN are false, so a ray parallel to the plane (t = inf or NaN) never
     // hits; with t finite, a and b are finite and the min-of-margins test is exact.
-    const VFloat inside = cv::v_min(cv::v_min(a, width - a), cv::v_min(b, height - b)) >= zero;
+    const VFloat inside = cv::v_min(cv::v_min(a + seam, width - a), cv::v_min(b + seam, height - b)) >= zero;
     const VFloat hit = (t > min_t) & (t < previous) & inside;
     cv::v_store(hits.t + col, cv::v_select(hit, t, previous));
     cv::v_store(hits.a + col, cv::v_select(hit, a, cv::vx_load(hits.a + col)));

@@ -75,7 +75,7 @@ struct CameraLayers {
   Eigen::Isometry3d rig_from_camera = Eigen::Isometry3d::Identity();
   std::vector<double> scene_key;  // poses the scene layer was rendered for (see ScenePoses)
   cv::Mat scene;     // CV_32F transmittance * scene radiance, grey levels
-  cv::Mat scene_u8;  // the same, saturated to 8 bit in the output encoding
+  cv::Mat scene_u8;  // the same, saturated to 8 bit in the output encoding (made when first needed)
   cv::Mat device;    // CV_32F device radiance, fraction of full scale
   cv::Mat depth;     // CV_32F z of the scene hit in the left optical frame (left camera only)
 };
@@ -132,9 +132,10 @@ struct SimRig::Impl {
   CameraLayers layers[2];
   sim::LightResponse light_response;  // the light's level over time (optics.light)
   sim::AutoExposure exposure;         // the gain of the next frame (optics.exposure)
-  // The scene path's vignetting per camera: fixed by the rays, applied to a scene layer that a
-  // moving head re-renders every frame. Empty until needed or after the rays change.
-  cv::Mat scene_vignetting[2];
+  // Per camera, fixed by the rays, applied to layers that a moving head (the scene) or a drift
+  // (the device) re-renders every frame: the scene path's transmittance times its vignetting,
+  // and the device path's vignetting (empty without). Empty until needed or after the rays change.
+  cv::Mat scene_factor[2], device_vignetting[2];
 
   void updateLayers(int index, const SimRigConfig& config, const std::vector<VirtualBoard>& boards,
                     const PinholeCamera& camera, const Eigen::Isometry3d& rig_from_camera,
@@ -152,7 +153,8 @@ void SimRig::Impl::updateLayers(int index, const SimRigConfig& config,
   if (!rays_valid[index] || !sim::sameIntrinsics(rays[index].camera, camera)) {
     rays[index] = sim::computeCameraRays(camera);
     rays_valid[index] = true;
-    scene_vignetting[index].release();
+    scene_factor[index].release();
+    device_vignetting[index].release();
   }
   // Fresh buffers each time: frames handed out earlier never alias the cache.
   CameraLayers fresh;
@@ -169,7 +171,6 @@ void SimRig::Impl::updateLayers(int index, const SimRigConfig& config,
     }
     fresh.scene *= 1.0 / static_cast<double>(samples);
   }
-  fresh.scene *= config.optics.transmittance;
   // The lens blurs the sum of both light paths; by linearity each layer is blurred alone.
   // A symmetric PSF moves no corner and no edge.
   const double sigma = config.optics.psf_sigma_px;
@@ -180,16 +181,20 @@ void SimRig::Impl::updateLayers(int index, const SimRigConfig& config,
     sim::renderDevice(boards, rays[index], rig_from_camera, config.optics.device_white,
                       config.optics.device_black, &fresh.device);
     if (sigma > 0) cv::GaussianBlur(fresh.device, fresh.device, cv::Size(), sigma, 0, cv::BORDER_REPLICATE);
-    sim::applyDeviceOptics(config.optics, boards, rays[index], rig_from_camera, &fresh.device);
+    if (config.optics.vignetting.device > 0.0 && device_vignetting[index].empty())
+      device_vignetting[index] = sim::vignettingFactor(rays[index], config.optics.vignetting.device);
+    sim::applyDeviceOptics(config.optics, boards, rays[index], rig_from_camera, device_vignetting[index],
+                           &fresh.device);
   }
+  // Transmittance and vignetting: one factor per pixel (a scalar factor commutes with the blur).
   if (config.optics.vignetting.scene > 0.0) {
-    if (scene_vignetting[index].empty())
-      scene_vignetting[index] = sim::vignettingFactor(rays[index], config.optics.vignetting.scene);
-    cv::multiply(fresh.scene, scene_vignetting[index], fresh.scene);
+    if (scene_factor[index].empty())
+      scene_factor[index] = sim::vignettingFactor(rays[index], config.optics.vignetting.scene) *
+                            config.optics.transmittance;
+    cv::multiply(fresh.scene, scene_factor[index], fresh.scene);
+  } else {
+    fresh.scene *= config.optics.transmittance;
   }
-  cv::Mat mono;
-  fresh.scene.convertTo(mono, CV_8U);
-  toEncoding(mono, config.encoding, &fresh.scene_u8);
   fresh.camera = camera;
   fresh.rig_from_camera = rig_from_camera;
   fresh.scene_key = std::move(scene_key);
@@ -364,7 +369,12 @@ SimFrame SimRig::render(const SimRenderRequest& request) const {
     sim::composeSensor(impl_->layers[i].scene, impl_->layers[i].device, sensor, seeds[i], kNoiseBandRows, &mono);
     toEncoding(mono, config_.encoding, images[i]);
     if (gain == 1.0) {
-      *scenes[i] = impl_->layers[i].scene_u8.clone();
+      CameraLayers& l = impl_->layers[i];
+      if (l.scene_u8.empty()) {  // once per scene layer: a still world reuses it
+        l.scene.convertTo(scene_mono, CV_8U);
+        toEncoding(scene_mono, config_.encoding, &l.scene_u8);
+      }
+      *scenes[i] = l.scene_u8.clone();
     } else {
       impl_->layers[i].scene.convertTo(scene_mono, CV_8U, gain);
       toEncoding(scene_mono, config_.encoding, scenes[i]);
