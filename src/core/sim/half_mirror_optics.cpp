@@ -1,5 +1,6 @@
 #include "half_mirror_optics.h"
 
+#include <algorithm>
 #include <cmath>
 #include <opencv2/imgproc.hpp>
 
@@ -41,19 +42,36 @@ cv::Mat vignettingFactor(const CameraRays& rays, double strength) {
   return factor;
 }
 
-void applyDeviceOptics(const SimOpticsConfig& optics, const std::vector<VirtualBoard>& boards,
-                       const CameraRays& rays, const Eigen::Isometry3d& rig_from_camera,
-                       const cv::Mat& device_vignetting, cv::Mat* device) {
-  const double weight = ghostRelativeWeight(optics.ghost, optics.reflectance);
-  if (weight > 0.0) {
-    cv::Mat ghost;
-    renderDevice(boards, rays, ghostCameraPose(optics.ghost, rig_from_camera), optics.device_white,
-                 optics.device_black, &ghost);
-    if (optics.psf_sigma_px > 0)
-      cv::GaussianBlur(ghost, ghost, cv::Size(), optics.psf_sigma_px, 0, cv::BORDER_REPLICATE);
-    cv::scaleAdd(ghost, weight, *device, *device);
-  }
+void renderGhost(const SimOpticsConfig& optics, const std::vector<VirtualBoard>& boards, const CameraRays& rays,
+                 const Eigen::Isometry3d& rig_from_camera, cv::Mat* ghost) {
+  ghost->release();
+  if (!(ghostRelativeWeight(optics.ghost, optics.reflectance) > 0.0)) return;
+  renderDevice(boards, rays, ghostCameraPose(optics.ghost, rig_from_camera), optics.device_white,
+               optics.device_black, ghost);
+  if (optics.psf_sigma_px > 0)
+    cv::GaussianBlur(*ghost, *ghost, cv::Size(), optics.psf_sigma_px, 0, cv::BORDER_REPLICATE);
+}
+
+void applyDeviceOptics(const SimOpticsConfig& optics, const cv::Mat& ghost, const cv::Mat& device_vignetting,
+                       cv::Mat* device) {
+  if (!ghost.empty()) cv::scaleAdd(ghost, ghostRelativeWeight(optics.ghost, optics.reflectance), *device, *device);
   if (!device_vignetting.empty()) cv::multiply(*device, device_vignetting, *device);
+}
+
+double deviceShiftPx(const std::vector<VirtualBoard>& boards, const PinholeCamera& camera,
+                     const Eigen::Isometry3d& rig_from_camera_a, const Eigen::Isometry3d& rig_from_camera_b) {
+  const Eigen::Isometry3d a_from_rig = rig_from_camera_a.inverse(), b_from_rig = rig_from_camera_b.inverse();
+  double shift = 0.0;
+  for (const VirtualBoard& board : boards) {
+    const int last = board.cornerCount() - 1;
+    for (int id : {0, board.cols - 1, last - (board.cols - 1), last}) {
+      const Eigen::Vector3d p = board.cornerInRig(id);
+      Eigen::Vector2d pa, pb;
+      if (!camera.project(a_from_rig * p, &pa) || !camera.project(b_from_rig * p, &pb)) return HUGE_VAL;
+      shift = std::max(shift, (pa - pb).norm());
+    }
+  }
+  return shift;
 }
 
 }  // namespace sim

@@ -32,12 +32,22 @@ Eigen::Isometry3d ghostCameraPose(const SimGhostConfig& ghost, const Eigen::Isom
 // cos(theta)^(4 * strength) per pixel (CV_32F), theta the angle of the pixel's ray to the axis.
 cv::Mat vignettingFactor(const CameraRays& rays, double strength);
 
-// Adds the ghost to `device` (blurred like it) and applies the device path's vignetting
-// (vignettingFactor(rays, optics.vignetting.device), which the caller keeps; empty when there is
-// none), in place. Does nothing (not even touch the layer) when the optics are ideal.
-void applyDeviceOptics(const SimOpticsConfig& optics, const std::vector<VirtualBoard>& boards,
-                       const CameraRays& rays, const Eigen::Isometry3d& rig_from_camera,
-                       const cv::Mat& device_vignetting, cv::Mat* device);
+// The ghost of the device (blurred like it, not yet weighted) as the camera at rig_from_camera
+// sees it through the plate; left empty when the optics have no ghost.
+void renderGhost(const SimOpticsConfig& optics, const std::vector<VirtualBoard>& boards, const CameraRays& rays,
+                 const Eigen::Isometry3d& rig_from_camera, cv::Mat* ghost);
+
+// Adds the ghost (renderGhost(); empty: none) at its relative weight to `device` and applies
+// the device path's vignetting (vignettingFactor(rays, optics.vignetting.device), which the
+// caller keeps; empty when there is none), in place. Does nothing when both are empty.
+void applyDeviceOptics(const SimOpticsConfig& optics, const cv::Mat& ghost, const cv::Mat& device_vignetting,
+                       cv::Mat* device);
+
+// The largest displacement in the image, pixels, of the boards' outer corners between the
+// camera at rig_from_camera_a and at rig_from_camera_b (a drift's step): how far a device layer
+// rendered at one pose is from the other.
+double deviceShiftPx(const std::vector<VirtualBoard>& boards, const PinholeCamera& camera,
+                     const Eigen::Isometry3d& rig_from_camera_a, const Eigen::Isometry3d& rig_from_camera_b);
 
 }  // namespace sim
 }  // namespace ecs

@@ -23,6 +23,10 @@ constexpr double kObservationMarginPx = 5.0;
 // cv::parallel_for_ splits the image.
 constexpr int kNoiseBandRows = 16;
 
+// How far (pixels) the device may have moved since its ghost was rendered before the ghost is
+// rendered again (SimRig::Impl::ghost).
+constexpr double kGhostReuseShiftPx = 0.1;
+
 // Limits of a drift request (a simulation of small real-world changes, not arbitrary poses).
 constexpr double kMinFocalScale = 0.5, kMaxFocalScale = 2.0;
 constexpr double kMaxRotationDeg = 10.0;
@@ -136,6 +140,12 @@ struct SimRig::Impl {
   // (the device) re-renders every frame: the scene path's transmittance times its vignetting,
   // and the device path's vignetting (empty without). Empty until needed or after the rays change.
   cv::Mat scene_factor[2], device_vignetting[2];
+  // The ghost layer per camera (renderGhost()) and the pose and intrinsics it was rendered for:
+  // at its weight (half a percent on a real head) a ghost that moved by kGhostReuseShiftPx is
+  // the same to a hundredth of a grey level, so a drift re-renders it only now and then.
+  cv::Mat ghost[2];
+  Eigen::Isometry3d ghost_pose[2];
+  PinholeCamera ghost_camera[2];
 
   void updateLayers(int index, const SimRigConfig& config, const std::vector<VirtualBoard>& boards,
                     const PinholeCamera& camera, const Eigen::Isometry3d& rig_from_camera,
@@ -155,6 +165,7 @@ void SimRig::Impl::updateLayers(int index, const SimRigConfig& config,
     rays_valid[index] = true;
     scene_factor[index].release();
     device_vignetting[index].release();
+    ghost[index].release();
   }
   // Fresh buffers each time: frames handed out earlier never alias the cache.
   CameraLayers fresh;
@@ -183,8 +194,14 @@ void SimRig::Impl::updateLayers(int index, const SimRigConfig& config,
     if (sigma > 0) cv::GaussianBlur(fresh.device, fresh.device, cv::Size(), sigma, 0, cv::BORDER_REPLICATE);
     if (config.optics.vignetting.device > 0.0 && device_vignetting[index].empty())
       device_vignetting[index] = sim::vignettingFactor(rays[index], config.optics.vignetting.device);
-    sim::applyDeviceOptics(config.optics, boards, rays[index], rig_from_camera, device_vignetting[index],
-                           &fresh.device);
+    const bool ghost_holds = !ghost[index].empty() && sim::sameIntrinsics(ghost_camera[index], camera) &&
+                             sim::deviceShiftPx(boards, camera, ghost_pose[index], rig_from_camera) < kGhostReuseShiftPx;
+    if (!ghost_holds) {
+      sim::renderGhost(config.optics, boards, rays[index], rig_from_camera, &ghost[index]);
+      ghost_pose[index] = rig_from_camera;
+      ghost_camera[index] = camera;
+    }
+    sim::applyDeviceOptics(config.optics, ghost[index], device_vignetting[index], &fresh.device);
   }
   // Transmittance and vignetting: one factor per pixel (a scalar factor commutes with the blur).
   if (config.optics.vignetting.scene > 0.0) {
