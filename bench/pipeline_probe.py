@@ -2,7 +2,11 @@
 """Measuring side of bench/pipeline (run by it, against a running master).
 
   live   --duration S --warmup S       frames per second and latency of /stereo/disparity while
-                                        the whole simulated head runs; also reads /diagnostics.
+         [--manager-pid PID]            the whole simulated head runs; also reads /diagnostics;
+         [--drift-at F]                 with a manager pid, its CPU time per frame (all threads)
+                                        and resident memory; with --drift-at, a 3 % zoom at that
+                                        fraction of the window (the head calibrates on demand),
+                                        and the light and the commits that followed.
 
 Prints one JSON object on stdout. (The replay of part 3 is bench/nodelets/replay_feeder.cpp.)
 
@@ -11,6 +15,7 @@ is read from the first bytes of the serialised message (Header: seq, stamp.secs,
 """
 import argparse
 import json
+import os
 import statistics
 import struct
 import threading
@@ -71,8 +76,58 @@ def numbers(reports, key):
     return out
 
 
+def process_cpu_s(pid):
+    """utime + stime of a process (all its threads), seconds."""
+    fields = open('/proc/%d/stat' % pid).read().rsplit(')', 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
+
+
+def process_memory_mb(pid):
+    """Resident memory now and at its peak, MB."""
+    values = {}
+    for line in open('/proc/%d/status' % pid):
+        key, _, rest = line.partition(':')
+        if key in ('VmRSS', 'VmHWM'):
+            values[key] = int(rest.split()[0]) / 1024.0
+    return values.get('VmRSS', float('nan')), values.get('VmHWM', float('nan'))
+
+
+class HeadEvents:
+    """Light-on frames (calibration_mode) and accepted calibrations (calibration/status)."""
+    def __init__(self):
+        from embedded_calibration_stereo.msg import CalibrationMode, CalibrationStatus
+        self.lock = threading.Lock()
+        self.modes = []     # (wall, light_on)
+        self.commits = []   # wall
+        rospy.Subscriber('/stereo/calibration_mode', CalibrationMode, self.mode, queue_size=100)
+        rospy.Subscriber('/stereo/calibration/status', CalibrationStatus, self.status, queue_size=10)
+
+    def mode(self, msg):
+        with self.lock:
+            self.modes.append((time.time(), msg.light_on))
+
+    def status(self, msg):
+        if msg.accepted:
+            with self.lock:
+                self.commits.append(time.time())
+
+    def since(self, start, end):
+        with self.lock:
+            modes = [m for m in self.modes if start <= m[0] <= end]
+            commits = [c for c in self.commits if start <= c <= end]
+        return modes, commits
+
+
+def zoom(scale):
+    from embedded_calibration_stereo.srv import SetRigDrift, SetRigDriftRequest
+    rospy.wait_for_service('/stereo/sim/set_drift', 10.0)
+    rospy.ServiceProxy('/stereo/sim/set_drift', SetRigDrift)(SetRigDriftRequest(focal_scale=scale))
+    return time.time()
+
+
 def live(args):
     rospy.init_node('bench_pipeline_probe', anonymous=True)
+    events = HeadEvents()
     arrivals = []  # (wall arrival, stamp ns)
     lock = threading.Lock()
 
@@ -89,8 +144,14 @@ def live(args):
     diagnostics.clear()
     start = time.time()
     load_start = open('/proc/loadavg').read().split()[0]
-    time.sleep(args.duration)
+    cpu_start = process_cpu_s(args.manager_pid) if args.manager_pid else None
+    drift_at = None
+    if args.drift_at is not None:
+        time.sleep(args.drift_at * args.duration)
+        drift_at = zoom(1.03)
+    time.sleep(max(0.0, start + args.duration - time.time()))
     end = time.time()
+    cpu_end = process_cpu_s(args.manager_pid) if args.manager_pid else None
     with lock:
         window = [a for a in arrivals if a[0] <= end]
     latencies = [a[0] - a[1] * 1e-9 for a in window]
@@ -113,8 +174,21 @@ def live(args):
         'driver_fps_median': statistics.median(numbers(driver, 'frame rate (fps)') or [float('nan')]),
         'input_copies': {name: (diagnostics.find('stereo/%s:' % name) or [{}])[-1].get('input copies', '?')
                          for name in ('separator', 'rectifier', 'disparity')},
+        'manager': None if cpu_start is None else {
+            'cpu_ms_per_disparity_frame': 1e3 * (cpu_end - cpu_start) / max(1, len(window)),
+            'cores_used': (cpu_end - cpu_start) / (end - start),
+            'rss_mb': process_memory_mb(args.manager_pid)[0],
+            'peak_rss_mb': process_memory_mb(args.manager_pid)[1],
+        },
         'loadavg_start': float(load_start),
         'loadavg_end': float(open('/proc/loadavg').read().split()[0]),
+    }
+    modes, commits = events.since(start, end)
+    result['light'] = {'frames': len(modes), 'lit': sum(1 for m in modes if m[1])}
+    result['drift'] = None if drift_at is None else {
+        'at_s': drift_at - start,
+        'first_commit_after_s': next((c - drift_at for c in commits if c > drift_at), None),
+        'commits': len(commits),
     }
     print(json.dumps(result))
 
@@ -125,6 +199,8 @@ def main():
     p = sub.add_parser('live')
     p.add_argument('--duration', type=float, default=20.0)
     p.add_argument('--warmup', type=float, default=10.0)
+    p.add_argument('--manager-pid', type=int, default=0)
+    p.add_argument('--drift-at', type=float, default=None)
     args = parser.parse_args(rospy.myargv()[1:])
     live(args)
 

@@ -22,9 +22,6 @@ class MipTexture {
   MipTexture() = default;
   // Builds levels from `level0` (CV_32F) until kMaxLevels or a side below 4 texels.
   explicit MipTexture(const cv::Mat& level0);
-  // Copies keep their own buffer and tables (a view points into this object).
-  MipTexture(const MipTexture&) = default;
-  MipTexture& operator=(const MipTexture&) = default;
 
   int levels() const { return levels_; }
   // A view of one level (no copy).
