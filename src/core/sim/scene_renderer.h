@@ -7,7 +7,8 @@
 // a far or grazing surface (the floor) would otherwise alias, and a frame re-rendered after a
 // zoom or a knock would not match the earlier frame resampled, as it does through a real lens.
 //
-// Threading: immutable after construction; render() may be called from any thread.
+// Threading: immutable after construction but for useKernel(), which must not run during a
+// render() (SimRig calls both under its render mutex); render() may be called from any thread.
 #include <Eigen/Geometry>
 #include <opencv2/core.hpp>
 #include <vector>
