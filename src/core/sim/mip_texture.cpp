@@ -1,7 +1,6 @@
 #include "mip_texture.h"
 
 #include <algorithm>
-#include <cmath>
 #include <opencv2/imgproc.hpp>
 
 namespace ecs {

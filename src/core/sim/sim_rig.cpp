@@ -79,7 +79,6 @@ struct CameraLayers {
   Eigen::Isometry3d rig_from_camera = Eigen::Isometry3d::Identity();
   std::vector<double> scene_key;  // poses the scene layer was rendered for (see ScenePoses)
   cv::Mat scene;     // CV_32F transmittance * scene radiance, grey levels
-  cv::Mat scene_u8;  // the same, saturated to 8 bit in the output encoding (made when first needed)
   cv::Mat device;    // CV_32F device radiance, fraction of full scale
   cv::Mat depth;     // CV_32F z of the scene hit in the left optical frame (left camera only)
 };
@@ -385,17 +384,8 @@ SimFrame SimRig::render(const SimRenderRequest& request) const {
     cv::Mat mono, scene_mono;  // fresh buffers: toEncoding() may share them with the frame
     sim::composeSensor(impl_->layers[i].scene, impl_->layers[i].device, sensor, seeds[i], kNoiseBandRows, &mono);
     toEncoding(mono, config_.encoding, images[i]);
-    if (gain == 1.0) {
-      CameraLayers& l = impl_->layers[i];
-      if (l.scene_u8.empty()) {  // once per scene layer: a still world reuses it
-        l.scene.convertTo(scene_mono, CV_8U);
-        toEncoding(scene_mono, config_.encoding, &l.scene_u8);
-      }
-      *scenes[i] = l.scene_u8.clone();
-    } else {
-      impl_->layers[i].scene.convertTo(scene_mono, CV_8U, gain);
-      toEncoding(scene_mono, config_.encoding, scenes[i]);
-    }
+    impl_->layers[i].scene.convertTo(scene_mono, CV_8U, gain);
+    toEncoding(scene_mono, config_.encoding, scenes[i]);
   }
   // Metered on the image the sensor delivered (both cameras share one exposure setting).
   if (optics.exposure.mode == "auto") impl_->exposure.meter(cv::mean(frame.left)[0]);
