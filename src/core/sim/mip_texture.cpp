@@ -17,25 +17,22 @@ MipTexture::MipTexture(const cv::Mat& level0) {
   data_.resize(total);
   levels_ = static_cast<int>(sizes.size());
   size_t offset = 0;
+  cv::Mat level = level0;
   for (int k = 0; k < levels_; ++k) {
     offset_[k] = static_cast<int>(offset);
     stride_[k] = sizes[k].width;
     max_x_[k] = sizes[k].width - 1.001f;
     max_y_[k] = sizes[k].height - 1.001f;
     scale_[k] = 1.0f / static_cast<float>(1 << k);
-    cv::Mat view(sizes[k], CV_32F, data_.data() + offset);
-    if (k == 0)
-      level0.copyTo(view);
-    else
-      cv::pyrDown(level(k - 1), view, sizes[k]);  // writes into the buffer: the size matches
+    if (k > 0) {
+      cv::Mat smaller;
+      cv::pyrDown(level, smaller, sizes[k]);
+      level = smaller;
+    }
+    cv::Mat view(sizes[k], CV_16U, data_.data() + offset);
+    level.convertTo(view, CV_16U, scene_kernel::kTexelScale);  // rounds and saturates; writes into the buffer
     offset += static_cast<size_t>(sizes[k].area());
   }
-}
-
-cv::Mat MipTexture::level(int k) const {
-  const int rows = (k + 1 < levels_ ? offset_[k + 1] - offset_[k] : static_cast<int>(data_.size()) - offset_[k]) /
-                   stride_[k];
-  return cv::Mat(rows, stride_[k], CV_32F, const_cast<float*>(data_.data()) + offset_[k]);
 }
 
 }  // namespace sim

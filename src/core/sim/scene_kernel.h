@@ -11,10 +11,12 @@ namespace sim {
 namespace scene_kernel {
 
 // A mip pyramid in one buffer (MipTexture::view()): level k's texel (i, j) at
-// data[offset[k] + j * stride[k] + i]; level-0 coordinates scale by scale[k] = 2^-k; a 2x2
-// neighbourhood stays inside level k for coordinates in [0, max_x[k]] x [0, max_y[k]].
+// data[offset[k] + j * stride[k] + i], in grey levels times kTexelScale; level-0 coordinates
+// scale by scale[k] = 2^-k; a 2x2 neighbourhood stays inside level k for coordinates in
+// [0, max_x[k]] x [0, max_y[k]].
+constexpr float kTexelScale = 256.0f;  // 16-bit texels: grey levels in [0, 256) to 1/512
 struct Texture {
-  const float* data;
+  const unsigned short* data;
   int levels;
   const int *offset, *stride;
   const float *max_x, *max_y, *scale;

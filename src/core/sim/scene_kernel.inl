@@ -35,9 +35,9 @@ float bilinear(const Texture& tex, int k, float x, float y) {
   y = minf(maxf(y * tex.scale[k], 0.0f), tex.max_y[k]);
   const int x0 = static_cast<int>(x), y0 = static_cast<int>(y);
   const float fx = x - x0, fy = y - y0;
-  const float* r0 = tex.data + tex.offset[k] + y0 * tex.stride[k] + x0;
-  const float* r1 = r0 + tex.stride[k];
-  return (1 - fy) * ((1 - fx) * r0[0] + fx * r0[1]) + fy * ((1 - fx) * r1[0] + fx * r1[1]);
+  const unsigned short* r0 = tex.data + tex.offset[k] + y0 * tex.stride[k] + x0;
+  const unsigned short* r1 = r0 + tex.stride[k];
+  return ((1 - fy) * ((1 - fx) * r0[0] + fx * r0[1]) + fy * ((1 - fx) * r1[0] + fx * r1[1])) * (1.0f / kTexelScale);
 }
 
 // Trilinear: the two levels around log2(footprint); level 0 alone when the footprint is not
@@ -126,8 +126,33 @@ VFloat fastLog2(const VFloat& v) {
   return cv::v_fma(p, m, exponent);
 }
 
+int pairAt(const Texture& tex, int index) {
+  int pair;
+  __builtin_memcpy(&pair, tex.data + index, 4);
+  return pair;
+}
+
+// The texel pairs (i, i + 1) at index[lane], as floats (in texel units).
+void loadPairs(const Texture& tex, const int* index, VFloat* left, VFloat* right) {
+  // Plain 32-bit loads inserted into a register (cheaper than gathers on the CPUs measured, and
+  // than a store and reload, which defeats store forwarding).
+#if CV_SIMD_WIDTH == 32
+  const VInt both(pairAt(tex, index[0]), pairAt(tex, index[1]), pairAt(tex, index[2]), pairAt(tex, index[3]),
+                  pairAt(tex, index[4]), pairAt(tex, index[5]), pairAt(tex, index[6]), pairAt(tex, index[7]));
+#elif CV_SIMD_WIDTH == 16
+  const VInt both(pairAt(tex, index[0]), pairAt(tex, index[1]), pairAt(tex, index[2]), pairAt(tex, index[3]));
+#else
+  alignas(64) int pairs[kLanes];
+  for (int lane = 0; lane < kLanes; ++lane) pairs[lane] = pairAt(tex, index[lane]);
+  const VInt both = cv::vx_load_aligned(pairs);
+#endif
+  *left = cv::v_cvt_f32(both & cv::vx_setall_s32(0xffff));  // little-endian: texel i is the low half
+  *right = cv::v_cvt_f32(cv::v_reinterpret_as_s32(cv::v_reinterpret_as_u32(both) >> 16));
+}
+
 // Bilinear samples at level coordinates (xs, ys), already clamped, on levels given by their
-// first texel and row stride per lane. Each texel row of a neighbourhood is one 64-bit pair.
+// first texel and row stride per lane, in texel units. Each texel row of a neighbourhood is one
+// 32-bit pair.
 VFloat bilinearAt(const Texture& tex, const VInt& offset, const VInt& stride, const VFloat& xs, const VFloat& ys) {
   const VInt x0 = cv::v_trunc(xs), y0 = cv::v_trunc(ys);
   const VFloat fx = xs - cv::v_cvt_f32(x0), fy = ys - cv::v_cvt_f32(y0);
@@ -135,14 +160,9 @@ VFloat bilinearAt(const Texture& tex, const VInt& offset, const VInt& stride, co
   const VInt first = offset + y0 * stride + x0;
   cv::v_store_aligned(top, first);
   cv::v_store_aligned(bottom, first + stride);
-  // Plain 64-bit copies, then a deinterleaving load: cheaper than gathers on the CPUs measured.
-  alignas(32) float pairs[2 * kLanes];
   VFloat v00, v01, v10, v11;
-  for (int half = 0; half < 2; ++half) {
-    const int* index = half == 0 ? top : bottom;
-    for (int lane = 0; lane < kLanes; ++lane) __builtin_memcpy(pairs + 2 * lane, tex.data + index[lane], 8);
-    cv::v_load_deinterleave(pairs, half == 0 ? v00 : v10, half == 0 ? v01 : v11);
-  }
+  loadPairs(tex, top, &v00, &v01);
+  loadPairs(tex, bottom, &v10, &v11);
   const VFloat upper = cv::v_fma(fx, v01 - v00, v00), lower = cv::v_fma(fx, v11 - v10, v10);
   return cv::v_fma(fy, lower - upper, upper);
 }
@@ -164,7 +184,7 @@ VFloat bilinearLevels(const Texture& tex, const VInt& l, const VFloat& x, const 
                     cv::v_min(cv::v_max(y * s, zero), cv::v_lut(tex.max_y, l)));
 }
 
-// trilinear() for every lane, given log2 of the footprints (<= 0 or NaN: level 0).
+// trilinear() for every lane, in texel units, given log2 of the footprints (<= 0 or NaN: level 0).
 VFloat trilinearV(const Texture& tex, const VFloat& x, const VFloat& y, const VFloat& log2_footprint) {
   const VFloat zero = cv::vx_setzero_f32();
   const VFloat level =
@@ -203,7 +223,8 @@ VFloat shadeAs(const Plane& pc, const RowRays& rays, const RowHits& hits, int co
       cv::v_select(footprint2 > splat(1.0f), fastLog2(footprint2) * splat(0.5f), cv::vx_setzero_f32());
   const VFloat offset = splat(pc.texel_offset);
   return trilinearV(pc.texture, cv::vx_load(hits.a + col) * splat(pc.inv_texel_u) - offset,
-                    cv::vx_load(hits.b + col) * splat(pc.inv_texel_v) - offset, log2_footprint);
+                    cv::vx_load(hits.b + col) * splat(pc.inv_texel_v) - offset, log2_footprint) *
+         splat(1.0f / kTexelScale);
 }
 
 // Pixels [col, col + kLanes): shaded once per plane among them (usually one, two at a plane's

@@ -4,16 +4,12 @@
 #include <cmath>
 #include <opencv2/core/hal/intrin.hpp>
 #include <opencv2/imgproc.hpp>
+#include <vector>
+
+#include "sensor_noise.h"
 
 namespace ecs {
 namespace sim {
-
-uint64_t mixSeed(uint64_t x) {
-  x += 0x9E3779B97F4A7C15ULL;
-  x = (x ^ (x >> 30)) * 0xBF58476D1CE4E5B9ULL;
-  x = (x ^ (x >> 27)) * 0x94D049BB133111EBULL;
-  return x ^ (x >> 31);
-}
 
 // --- LightResponse ---------------------------------------------------------------------
 
@@ -114,28 +110,41 @@ struct RowSignal {
 #endif
 };
 
+// One row of the sensor's image (out) and of the noise-free scene at the same gain (scene_out).
 void composeRow(const RowSignal& signal, const float* scene, const float* device, const float* normal, int width,
-                uchar* out) {
+                uchar* out, uchar* scene_out) {
   int x = 0;
 #if CV_SIMD128
+  const cv::v_float32x4 scene_gain = cv::v_setall_f32(signal.scene_gain);
   for (; x + 16 <= width; x += 16) {
-    const cv::v_int32x4 a = cv::v_round(signal.value4(scene + x, device + x, normal + x));
-    const cv::v_int32x4 b = cv::v_round(signal.value4(scene + x + 4, device + x + 4, normal + x + 4));
-    const cv::v_int32x4 c = cv::v_round(signal.value4(scene + x + 8, device + x + 8, normal + x + 8));
-    const cv::v_int32x4 d = cv::v_round(signal.value4(scene + x + 12, device + x + 12, normal + x + 12));
-    cv::v_store(out + x, cv::v_pack_u(cv::v_pack(a, b), cv::v_pack(c, d)));  // saturating, as convertTo
+    cv::v_int32x4 v[4], clean[4];
+    for (int k = 0; k < 4; ++k) {
+      v[k] = cv::v_round(signal.value4(scene + x + 4 * k, device + x + 4 * k, normal + x + 4 * k));
+      clean[k] = cv::v_round(cv::v_load(scene + x + 4 * k) * scene_gain);
+    }
+    // Saturating, as convertTo.
+    cv::v_store(out + x, cv::v_pack_u(cv::v_pack(v[0], v[1]), cv::v_pack(v[2], v[3])));
+    cv::v_store(scene_out + x, cv::v_pack_u(cv::v_pack(clean[0], clean[1]), cv::v_pack(clean[2], clean[3])));
   }
 #endif
-  for (; x < width; ++x) out[x] = cv::saturate_cast<uchar>(signal.value(scene[x], device[x], normal[x]));
+  for (; x < width; ++x) {
+    out[x] = cv::saturate_cast<uchar>(signal.value(scene[x], device[x], normal[x]));
+    scene_out[x] = cv::saturate_cast<uchar>(signal.scene_gain * scene[x]);
+  }
 }
 
 }  // namespace
 
-void composeSensor(const cv::Mat& scene, const cv::Mat& device, const SensorParams& p, uint64_t seed,
-                   int band_rows, cv::Mat* mono) {
-  CV_Assert(scene.type() == CV_32F && device.type() == CV_32F && scene.size() == device.size());
-  const int W = scene.cols, H = scene.rows;
-  mono->create(H, W, CV_8U);
+void composeSensor(const SensorParams& p, const SensorLayers* layers, int cameras, SensorImages* out) {
+  CV_Assert(cameras > 0);
+  const int W = layers[0].scene.cols, H = layers[0].scene.rows;
+  for (int c = 0; c < cameras; ++c) {
+    const SensorLayers& l = layers[c];
+    CV_Assert(l.scene.type() == CV_32F && l.device.type() == CV_32F && l.scene.size() == cv::Size(W, H) &&
+              l.device.size() == cv::Size(W, H));
+    out[c].image.create(H, W, CV_8U);
+    out[c].scene.create(H, W, CV_8U);
+  }
   const double e_per_dn = p.sensor.gain_e_per_dn;
   const double read_dn = p.sensor.read_noise_e / e_per_dn;
   const bool noisy = p.sensor.enabled || p.noise_sigma > 0;
@@ -143,21 +152,18 @@ void composeSensor(const cv::Mat& scene, const cv::Mat& device, const SensorPara
   const RowSignal signal{static_cast<float>(p.scene_gain), static_cast<float>(p.device_gain), p.sensor.enabled,
                          static_cast<float>(p.sensor.full_well_e / e_per_dn), static_cast<float>(1.0 / e_per_dn),
                          static_cast<float>(read_dn * read_dn), noisy ? static_cast<float>(p.noise_sigma) : 0.0f};
-  const int bands = (H + band_rows - 1) / band_rows;
-  cv::parallel_for_(cv::Range(0, bands), [&](const cv::Range& range) {
-    cv::Mat normal(band_rows, W, CV_32F, cv::Scalar(0));
-    for (int band = range.start; band < range.end; ++band) {
-      const cv::Range rows(band * band_rows, std::min(H, (band + 1) * band_rows));
-      if (noisy) {
-        cv::Mat n = normal.rowRange(0, rows.size());
-        cv::RNG rng(mixSeed(seed ^ mixSeed(static_cast<uint64_t>(band) + 1)));
-        rng.fill(n, cv::RNG::NORMAL, 0.0, 1.0);
-      }
-      for (int row = rows.start; row < rows.end; ++row)
-        composeRow(signal, scene.ptr<float>(row), device.ptr<float>(row), normal.ptr<float>(row - rows.start), W,
-                   mono->ptr<uchar>(row));
+  constexpr int kRowsPerStripe = 16;
+  // Every camera's rows in one parallel pass: one hand-off to the threads per frame.
+  cv::parallel_for_(cv::Range(0, cameras * H), [&](const cv::Range& rows) {
+    std::vector<float> normal(W, 0.0f);
+    for (int r = rows.start; r < rows.end; ++r) {
+      const int c = r / H, row = r % H;
+      const SensorLayers& l = layers[c];
+      if (noisy) fillNormalRow(l.seed, row, W, normal.data());
+      composeRow(signal, l.scene.ptr<float>(row), l.device.ptr<float>(row), normal.data(), W,
+                 out[c].image.ptr<uchar>(row), out[c].scene.ptr<uchar>(row));
     }
-  });
+  }, static_cast<double>(cameras * H) / kRowsPerStripe);
 }
 
 }  // namespace sim

@@ -56,22 +56,27 @@ class AutoExposure {
   double gain_;
 };
 
-// Noise and quantisation of one camera's frame: signal = scene_gain * scene +
+// Noise and quantisation of the cameras' frames: signal = scene_gain * scene +
 // device_gain * device (grey levels); with the sensor model the signal is clipped at the full
 // well and gets noise of sigma sqrt(read_e^2 + gain_e_per_dn * signal) / gain_e_per_dn,
-// otherwise Gaussian noise of noise_sigma; then rounded and saturated to 8 bit, in one pass per
-// row. The noise is drawn per band of `band_rows` rows from its own stream (seeded from `seed`
-// and the band), so it does not depend on how the image is split between threads.
+// otherwise Gaussian noise of noise_sigma; then rounded and saturated to 8 bit. The noise is
+// fillNormalRow(seed, row) (sensor_noise.h): it does not depend on how the image is split
+// between threads. Beside each image, the noise-free scene at scene_gain, rounded the same way.
 struct SensorParams {
   double scene_gain = 1.0, device_gain = 0.0;
   double noise_sigma = 0.0;  // without the sensor model
   SimSensorConfig sensor;
 };
-void composeSensor(const cv::Mat& scene, const cv::Mat& device, const SensorParams& params, uint64_t seed,
-                   int band_rows, cv::Mat* mono);
-
-// splitmix64 finaliser (the noise streams' seeding, as in sim_rig.cpp).
-uint64_t mixSeed(uint64_t x);
+struct SensorLayers {
+  cv::Mat scene, device;  // CV_32F grey levels, the same size for every camera
+  uint64_t seed;          // of the camera's noise
+};
+struct SensorImages {
+  cv::Mat image, scene;  // CV_8U: what the sensor delivers, and the scene without noise or device
+};
+// Every camera in one pass over the rows (one hand-off to the threads per frame). out[c]'s
+// images are cv::Mat::create()d: empty ones get fresh buffers.
+void composeSensor(const SensorParams& params, const SensorLayers* layers, int cameras, SensorImages* out);
 
 }  // namespace sim
 }  // namespace ecs

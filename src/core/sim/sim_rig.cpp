@@ -11,6 +11,7 @@
 #include "embedded_calibration_stereo/core/geometry/config_error.h"
 #include "scene_renderer.h"
 #include "sensor_model.h"
+#include "sensor_noise.h"
 
 namespace ecs {
 
@@ -18,10 +19,6 @@ namespace {
 
 // Corners closer than this to the image border are not reported (a detector cannot refine them).
 constexpr double kObservationMarginPx = 5.0;
-
-// Rows per noise band: each band has its own RNG stream so the noise does not depend on how
-// cv::parallel_for_ splits the image.
-constexpr int kNoiseBandRows = 16;
 
 // How far (pixels) the device may have moved since its ghost was rendered before the ghost is
 // rendered again (SimRig::Impl::ghost).
@@ -377,16 +374,14 @@ SimFrame SimRig::render(const SimRenderRequest& request) const {
   const uint64_t seed = sim::mixSeed(request.noise_seed);
   const uint64_t right_seed = sim::mixSeed(seed ^ 0x5bd1e995ULL);
   const sim::SensorParams sensor{gain, gain * device_gain, config_.noise_sigma, optics.sensor};
-  const uint64_t seeds[2] = {seed, right_seed};
-  cv::Mat* images[2] = {&frame.left, &frame.right};
-  cv::Mat* scenes[2] = {&frame.left_scene, &frame.right_scene};
-  for (int i = 0; i < 2; ++i) {
-    cv::Mat mono, scene_mono;  // fresh buffers: toEncoding() may share them with the frame
-    sim::composeSensor(impl_->layers[i].scene, impl_->layers[i].device, sensor, seeds[i], kNoiseBandRows, &mono);
-    toEncoding(mono, config_.encoding, images[i]);
-    impl_->layers[i].scene.convertTo(scene_mono, CV_8U, gain);
-    toEncoding(scene_mono, config_.encoding, scenes[i]);
-  }
+  const sim::SensorLayers layers[2] = {{impl_->layers[0].scene, impl_->layers[0].device, seed},
+                                       {impl_->layers[1].scene, impl_->layers[1].device, right_seed}};
+  sim::SensorImages sensed[2];  // fresh buffers: toEncoding() may share them with the frame
+  sim::composeSensor(sensor, layers, 2, sensed);
+  toEncoding(sensed[0].image, config_.encoding, &frame.left);
+  toEncoding(sensed[1].image, config_.encoding, &frame.right);
+  toEncoding(sensed[0].scene, config_.encoding, &frame.left_scene);
+  toEncoding(sensed[1].scene, config_.encoding, &frame.right_scene);
   // Metered on the image the sensor delivered (both cameras share one exposure setting).
   if (optics.exposure.mode == "auto") impl_->exposure.meter(cv::mean(frame.left)[0]);
   frame.left_depth = impl_->layers[0].depth.clone();
