@@ -439,8 +439,8 @@ double correlation(const cv::Mat& a, const cv::Mat& b) {
 }
 
 TEST(SimRig, SensorNoiseIsWhiteAcrossPixelsRowsAndFrames) {
-  // Each row's noise has streams of its own (sensor_noise.h): each row must be independent of
-  // its neighbours, of rows further away (16), and of the same row in another frame.
+  // The noise is drawn per band of rows from a stream of its own: each row must be independent
+  // of its neighbours, of the rows a band (16 rows) away, and of the same row in another frame.
   SimRigConfig config = defaultConfig();
   config.noise_sigma = 8.0;  // well above the rounding to 8 bit
   const SimRig rig(config);

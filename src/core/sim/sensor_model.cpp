@@ -6,10 +6,15 @@
 #include <opencv2/imgproc.hpp>
 #include <vector>
 
-#include "sensor_noise.h"
-
 namespace ecs {
 namespace sim {
+
+uint64_t mixSeed(uint64_t x) {
+  x += 0x9E3779B97F4A7C15ULL;
+  x = (x ^ (x >> 30)) * 0xBF58476D1CE4E5B9ULL;
+  x = (x ^ (x >> 27)) * 0x94D049BB133111EBULL;
+  return x ^ (x >> 31);
+}
 
 // --- LightResponse ---------------------------------------------------------------------
 
@@ -135,8 +140,8 @@ void composeRow(const RowSignal& signal, const float* scene, const float* device
 
 }  // namespace
 
-void composeSensor(const SensorParams& p, const SensorLayers* layers, int cameras, SensorImages* out) {
-  CV_Assert(cameras > 0);
+void composeSensor(const SensorParams& p, const SensorLayers* layers, int cameras, int band_rows, SensorImages* out) {
+  CV_Assert(cameras > 0 && band_rows > 0);
   const int W = layers[0].scene.cols, H = layers[0].scene.rows;
   for (int c = 0; c < cameras; ++c) {
     const SensorLayers& l = layers[c];
@@ -152,18 +157,24 @@ void composeSensor(const SensorParams& p, const SensorLayers* layers, int camera
   const RowSignal signal{static_cast<float>(p.scene_gain), static_cast<float>(p.device_gain), p.sensor.enabled,
                          static_cast<float>(p.sensor.full_well_e / e_per_dn), static_cast<float>(1.0 / e_per_dn),
                          static_cast<float>(read_dn * read_dn), noisy ? static_cast<float>(p.noise_sigma) : 0.0f};
-  constexpr int kRowsPerStripe = 16;
-  // Every camera's rows in one parallel pass: one hand-off to the threads per frame.
-  cv::parallel_for_(cv::Range(0, cameras * H), [&](const cv::Range& rows) {
-    std::vector<float> normal(W, 0.0f);
-    for (int r = rows.start; r < rows.end; ++r) {
-      const int c = r / H, row = r % H;
+  const int bands = (H + band_rows - 1) / band_rows;
+  // Every camera's bands in one parallel pass: one hand-off to the threads per frame.
+  cv::parallel_for_(cv::Range(0, cameras * bands), [&](const cv::Range& range) {
+    cv::Mat normal(band_rows, W, CV_32F, cv::Scalar(0));
+    for (int task = range.start; task < range.end; ++task) {
+      const int c = task / bands, band = task % bands;
       const SensorLayers& l = layers[c];
-      if (noisy) fillNormalRow(l.seed, row, W, normal.data());
-      composeRow(signal, l.scene.ptr<float>(row), l.device.ptr<float>(row), normal.data(), W,
-                 out[c].image.ptr<uchar>(row), out[c].scene.ptr<uchar>(row));
+      const cv::Range rows(band * band_rows, std::min(H, (band + 1) * band_rows));
+      if (noisy) {
+        cv::Mat n = normal.rowRange(0, rows.size());
+        cv::RNG rng(mixSeed(l.seed ^ mixSeed(static_cast<uint64_t>(band) + 1)));
+        rng.fill(n, cv::RNG::NORMAL, 0.0, 1.0);
+      }
+      for (int row = rows.start; row < rows.end; ++row)
+        composeRow(signal, l.scene.ptr<float>(row), l.device.ptr<float>(row), normal.ptr<float>(row - rows.start), W,
+                   out[c].image.ptr<uchar>(row), out[c].scene.ptr<uchar>(row));
     }
-  }, static_cast<double>(cameras * H) / kRowsPerStripe);
+  });
 }
 
 }  // namespace sim

@@ -60,8 +60,9 @@ class AutoExposure {
 // device_gain * device (grey levels); with the sensor model the signal is clipped at the full
 // well and gets noise of sigma sqrt(read_e^2 + gain_e_per_dn * signal) / gain_e_per_dn,
 // otherwise Gaussian noise of noise_sigma; then rounded and saturated to 8 bit. The noise is
-// fillNormalRow(seed, row) (sensor_noise.h): it does not depend on how the image is split
-// between threads. Beside each image, the noise-free scene at scene_gain, rounded the same way.
+// drawn per band of `band_rows` rows from its own stream (seeded from the camera's seed and the
+// band), so it does not depend on how the image is split between threads. Beside each image,
+// the noise-free scene at scene_gain, rounded the same way.
 struct SensorParams {
   double scene_gain = 1.0, device_gain = 0.0;
   double noise_sigma = 0.0;  // without the sensor model
@@ -76,7 +77,11 @@ struct SensorImages {
 };
 // Every camera in one pass over the rows (one hand-off to the threads per frame). out[c]'s
 // images are cv::Mat::create()d: empty ones get fresh buffers.
-void composeSensor(const SensorParams& params, const SensorLayers* layers, int cameras, SensorImages* out);
+void composeSensor(const SensorParams& params, const SensorLayers* layers, int cameras, int band_rows,
+                   SensorImages* out);
+
+// splitmix64 finaliser (the noise streams' seeding).
+uint64_t mixSeed(uint64_t x);
 
 }  // namespace sim
 }  // namespace ecs

@@ -11,7 +11,6 @@
 #include "embedded_calibration_stereo/core/geometry/config_error.h"
 #include "scene_renderer.h"
 #include "sensor_model.h"
-#include "sensor_noise.h"
 
 namespace ecs {
 
@@ -19,6 +18,10 @@ namespace {
 
 // Corners closer than this to the image border are not reported (a detector cannot refine them).
 constexpr double kObservationMarginPx = 5.0;
+
+// Rows per noise band: each band has its own RNG stream so the noise does not depend on how
+// cv::parallel_for_ splits the image.
+constexpr int kNoiseBandRows = 16;
 
 // How far (pixels) the device may have moved since its ghost was rendered before the ghost is
 // rendered again (SimRig::Impl::ghost).
@@ -377,7 +380,7 @@ SimFrame SimRig::render(const SimRenderRequest& request) const {
   const sim::SensorLayers layers[2] = {{impl_->layers[0].scene, impl_->layers[0].device, seed},
                                        {impl_->layers[1].scene, impl_->layers[1].device, right_seed}};
   sim::SensorImages sensed[2];  // fresh buffers: toEncoding() may share them with the frame
-  sim::composeSensor(sensor, layers, 2, sensed);
+  sim::composeSensor(sensor, layers, 2, kNoiseBandRows, sensed);
   toEncoding(sensed[0].image, config_.encoding, &frame.left);
   toEncoding(sensed[1].image, config_.encoding, &frame.right);
   toEncoding(sensed[0].scene, config_.encoding, &frame.left_scene);
