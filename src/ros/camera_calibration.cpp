@@ -1,5 +1,6 @@
 #include "embedded_calibration_stereo/ros/camera_calibration.h"
 
+#include <cmath>
 #include <cstdio>
 
 #include "embedded_calibration_stereo/core/geometry/config_error.h"
@@ -17,6 +18,18 @@ std::string resolve(const StereoCalibration::Camera& camera) {
 }
 
 const char* sideName(bool left) { return left ? "left" : "right"; }
+
+// Whether `info` keeps the rectification (R and P) of `in_force`, its camera's calibration in
+// force: a change of K and D alone (that camera's intrinsics) keeps the pair rectified; any
+// change of R or P moves the rectified pair, so the other camera must change with it.
+bool keepsRectification(const sensor_msgs::CameraInfo& info, const sensor_msgs::CameraInfo& in_force) {
+  constexpr double kRotationTolerance = 1e-9;  // round-off of a file; far below any calibration
+  for (size_t i = 0; i < info.R.size(); ++i)
+    if (!(std::abs(info.R[i] - in_force.R[i]) <= kRotationTolerance)) return false;
+  for (size_t i = 0; i < info.P.size(); ++i)
+    if (!(std::abs(info.P[i] - in_force.P[i]) <= kRectifiedPairTolerancePx)) return false;
+  return true;
+}
 
 }  // namespace
 
@@ -190,19 +203,24 @@ StereoCalibration::SetResult StereoCalibration::set(bool left, const sensor_msgs
   const auto pairWith = [&](const sensor_msgs::CameraInfo& o, const std::string& o_name) {
     return left ? checkRectifiedPair(info, name, o, o_name) : checkRectifiedPair(o, o_name, info, name);
   };
-  sensor_msgs::CameraInfo other_in_force;
+  sensor_msgs::CameraInfo own_in_force, other_in_force;
   {
     std::lock_guard<std::mutex> lock(state_mutex_);
+    own_in_force = left ? in_force_.left : in_force_.right;
     other_in_force = left ? in_force_.right : in_force_.left;
   }
 
-  // With the staged other camera (both calls are committed), else with the other camera in force.
+  // With the staged other camera (both calls are committed), else with the other camera in
+  // force, but only when this call keeps its camera's rectification: a new R or P (even cx' or
+  // Tx alone, which still "match") is half of a new rectified pair and waits for the other half.
   std::optional<sensor_msgs::CameraInfo> partner;
   uint32_t calls = 1;
   std::string mismatch;
   if (other && pairWith(other->info, "the staged " + other_name).empty()) {
     partner = other->info;
     calls = 2;
+  } else if (!keepsRectification(info, own_in_force)) {
+    mismatch = name + " changes R or P, the rectification shared by both cameras";
   } else {
     mismatch = pairWith(other_in_force, other_in_force_name);
     if (mismatch.empty()) partner = other_in_force;

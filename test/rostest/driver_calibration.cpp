@@ -4,6 +4,9 @@
 #include <sensor_msgs/SetCameraInfo.h>
 
 #include <fstream>
+#include <map>
+#include <set>
+#include <vector>
 
 #include "driver_test_utils.h"
 #include "embedded_calibration_stereo/CalibrationMode.h"
@@ -120,6 +123,65 @@ TEST(DriverCalibration, SetCameraInfoPersistsAtomicallyAndSurvivesAReload) {
   ASSERT_TRUE(manager.load(kName, params));
   ASSERT_TRUE(left.waitForCount(1, 20.0));
   EXPECT_NEAR(left.snapshot().back()->K[0], updated.K[0], 1e-9);
+  EXPECT_TRUE(manager.unload(kName));
+}
+
+// A new rectified pair arrives as two calls, left then right. One that changes only cx' (P[2])
+// or only Tx (P[3]) still forms a pair with the other camera in force, yet is half of a new
+// pair: it is staged until the other half arrives, and no frame ever carries one camera's new
+// half with the other's old one.
+TEST(DriverCalibration, APairChangesAtomicallyWhateverFieldsChange) {
+  ros::NodeHandle nh("/stereo");
+  const ecs_test::TempDir temp("ecs_driver_pair_atomic");
+  ASSERT_FALSE(temp.path.empty());
+  ecs_test::InProcessManager manager;
+  Collector<CalibrationMode> modes(nh, "calibration_mode", 1000);
+  Collector<CameraInfo> left(nh, "left/camera_info", 1000), right(nh, "right/camera_info", 1000);
+  ASSERT_TRUE(manager.load(kName, {{"backend", "sim"}, {"fps", 10.0},
+                                   {"left_camera_info_url", "file://" + temp.path + "/left.yaml"},
+                                   {"right_camera_info_url", "file://" + temp.path + "/right.yaml"}}));
+  ASSERT_TRUE(modes.waitForCount(2, 20.0));
+  ASSERT_TRUE(left.waitForCount(2, 5.0));
+  ASSERT_TRUE(right.waitForCount(2, 5.0));
+  const CameraInfo old_left = *left.snapshot().back(), old_right = *right.snapshot().back();
+  sensor_msgs::SetCameraInfo srv;
+  const auto framesLater = [&](size_t n) { return modes.waitForCount(modes.snapshot().size() + n, 5.0); };
+
+  // 1. cx' of both cameras 4 px larger.
+  CameraInfo new_left = old_left, new_right = old_right;
+  new_left.P[2] += 4.0;
+  new_right.P[2] += 4.0;
+  ASSERT_TRUE(callSet("left", new_left, &srv));
+  EXPECT_TRUE(srv.response.success) << srv.response.status_message;
+  EXPECT_EQ(srv.response.status_message.rfind("staged:", 0), 0u) << srv.response.status_message;
+  ASSERT_TRUE(framesLater(3));
+  EXPECT_EQ(left.snapshot().back()->P[2], old_left.P[2]) << "the left half of the new pair is in force alone";
+  ASSERT_TRUE(callSet("right", new_right, &srv));
+  EXPECT_TRUE(srv.response.success) << srv.response.status_message;
+  EXPECT_NE(srv.response.status_message.find("with the staged left"), std::string::npos)
+      << srv.response.status_message;
+  ASSERT_TRUE(left.waitFor([&](const auto& m) { return m.back()->P[2] == new_left.P[2]; }, 5.0));
+
+  // 2. Tx alone (the baseline 1 % longer), right first: staged until the left call, which itself
+  //    changes nothing.
+  CameraInfo longer = new_right;
+  longer.P[3] *= 1.01;
+  ASSERT_TRUE(callSet("right", longer, &srv));
+  EXPECT_EQ(srv.response.status_message.rfind("staged:", 0), 0u) << srv.response.status_message;
+  ASSERT_TRUE(framesLater(3));
+  EXPECT_EQ(right.snapshot().back()->P[3], new_right.P[3]) << "the new baseline is in force before its pair";
+  ASSERT_TRUE(callSet("left", new_left, &srv));
+  EXPECT_NE(srv.response.status_message.find("with the staged right"), std::string::npos)
+      << srv.response.status_message;
+  ASSERT_TRUE(right.waitFor([&](const auto& m) { return m.back()->P[3] == longer.P[3]; }, 5.0));
+  ASSERT_TRUE(framesLater(2));
+
+  // 3. Each epoch was published with one pair, and the pairs were the three above.
+  std::map<uint32_t, std::set<std::vector<double>>> pairs;
+  for (const auto& f : matchFrames(modes, left, right))
+    pairs[f.mode->calibration_epoch].insert({f.left->P[2], f.right->P[2], f.right->P[3]});
+  for (const auto& [epoch, seen] : pairs) EXPECT_EQ(seen.size(), 1u) << "epoch " << epoch << " mixed pairs";
+  EXPECT_EQ(pairs.size(), 3u) << "the old pair and the two new ones, each with an epoch of its own";
   EXPECT_TRUE(manager.unload(kName));
 }
 

@@ -5,10 +5,12 @@
 // - Validation: a calibration is refused with the reason when a consumer would drop it
 //   (stereo_input_check.h: finite K, R, P, D; positive focal lengths; R a rotation; the
 //   images' size; no binning or ROI) or when the OnlineCalibrator cannot model it (plumb_bob).
-// - Pairs: a set_camera_info for one camera whose P does not form a rectified pair with the
-//   other camera's (a stereo calibration sets left, then right) is staged: answered success
-//   with a status message starting "staged:", and committed together with the other camera's
-//   set_camera_info when that one matches it. A staged calibration that finds no match within
+// - Pairs: a set_camera_info for one camera that changes its R or P (any field: the rectified
+//   pair moves), or whose P does not form a rectified pair with the other camera's (a stereo
+//   calibration sets left, then right), is staged: answered success with a status message
+//   starting "staged:", and committed together with the other camera's set_camera_info when
+//   that one matches it. One that changes only K and D is committed at once with the other
+//   camera in force. A staged calibration that finds no match within
 //   `pair_timeout_s` is discarded with an error (problem()); so is every staged one when a set
 //   is refused. So the pair in force is always a consistent rectified pair.
 // - Persistence: every commit writes both cameras' files through CalibrationPairStore (a new
