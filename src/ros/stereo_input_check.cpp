@@ -86,6 +86,24 @@ std::string cameraInfoProblem(const sensor_msgs::CameraInfo& info) {
     return "P: not a projection matrix of a rectified camera (its rows 2 and 3 must be [0 fy' cy' Ty] and "
            "[0 0 1 0])";
 
+  // A lens's axis meets its sensor near the centre, and a rectified camera's principal point
+  // stays near its image: one far past the edges is a corrupt calibration (its depth would be
+  // empty), whatever else agrees with it.
+  const struct {
+    const char* field;
+    double value, size;
+  } points[] = {{"K: cx (K[2])", K[2], static_cast<double>(info.width)},
+                {"K: cy (K[5])", K[5], static_cast<double>(info.height)},
+                {"P: cx' (P[2])", P[2], static_cast<double>(info.width)},
+                {"P: cy' (P[6])", P[6], static_cast<double>(info.height)}};
+  for (const auto& p : points) {
+    const double margin = kPrincipalPointMargin * p.size;
+    if (!(p.value >= -margin && p.value <= p.size + margin))
+      return std::string(p.field) + " " + num(p.value) + " lies outside the image: a principal point lies within [" +
+             num(-margin) + ", " + num(p.size + margin) + "] (the image and " +
+             num(100 * kPrincipalPointMargin) + " % of its size beyond each edge)";
+  }
+
   if (info.binning_x > 1 || info.binning_y > 1)
     return "binning_x, binning_y: " + std::to_string(info.binning_x) + ", " + std::to_string(info.binning_y) +
            ": binned images are not supported (binning 0 or 1: this pipeline works at full resolution)";

@@ -121,6 +121,22 @@ std::vector<Case> refusedCases() {
       {"left binning 2 only", [](CameraInfo& l, CameraInfo&) { l.binning_x = 2; }, "left/camera_info: binning",
        Outcome::kAborted},
       {"NaN skew", [](CameraInfo& l, CameraInfo&) { l.K[1] = kNaN; }, "left/camera_info: K: K[1]", Outcome::kFinite},
+      // Off-image principal points, consistent between the cameras: image_geometry takes them,
+      // and the depth would be empty.
+      {"cy' of both 100000 px below the image",
+       [](CameraInfo& l, CameraInfo& r) {
+         l.P[6] += 100000;
+         r.P[6] += 100000;
+       },
+       "left/camera_info: P: cy' (P[6])", Outcome::kFinite},
+      {"cx' of both 5000 px right of the image",
+       [](CameraInfo& l, CameraInfo& r) {
+         l.P[2] += 5000;
+         r.P[2] += 5000;
+       },
+       "left/camera_info: P: cx' (P[2])", Outcome::kFinite},
+      {"right cx 5000 px left of the image", [](CameraInfo&, CameraInfo& r) { r.K[2] -= 5000; },
+       "right/camera_info: K: cx (K[2])", Outcome::kFinite},
       {"NaN in R", [](CameraInfo&, CameraInfo& r) { r.R[4] = kNaN; }, "right/camera_info: R: R[4]", Outcome::kFinite},
       {"NaN in P", [](CameraInfo& l, CameraInfo&) { l.P[2] = kNaN; }, "left/camera_info: P: P[2]", Outcome::kNonFinite},
       {"infinite Tx", [](CameraInfo&, CameraInfo& r) { r.P[3] = INFINITY; }, "right/camera_info: P: P[3]",
@@ -214,6 +230,25 @@ TEST(CameraInfoCheck, RefusedPairsAbortOrBreakImageGeometry) {
                                                  : "finite");
   }
   EXPECT_EQ(aborted, 7);
+}
+
+// The principal points' margin: a quarter of the image beyond each edge is accepted, beyond
+// it refused, for K and P alike.
+TEST(CameraInfoCheck, PrincipalPointsWithinTheMarginAreAccepted) {
+  for (const double fraction : {-0.24, 1.24, -0.26, 1.26}) {
+    const bool inside = fraction > -kPrincipalPointMargin && fraction < 1 + kPrincipalPointMargin;
+    for (const int index : {2, 5}) {
+      auto [left, right] = validPair();
+      left.K[index] = fraction * (index == 2 ? kWidth : kHeight);
+      EXPECT_EQ(consumerChecks(left, right).empty(), inside) << "K[" << index << "] at " << fraction;
+    }
+    for (const int index : {2, 6}) {
+      auto [left, right] = validPair();
+      left.P[index] = fraction * (index == 2 ? kWidth : kHeight);
+      right.P[index] = left.P[index];
+      EXPECT_EQ(consumerChecks(left, right).empty(), inside) << "P[" << index << "] at " << fraction;
+    }
+  }
 }
 
 // Round-off between the two P (a file written with fewer digits) is accepted; image_geometry

@@ -61,6 +61,9 @@ TEST(CalibrationRefusals, BadFieldsAreRefusedAndNothingIsPersisted) {
       {"R not a rotation", [](CameraInfo& i) { i.R[0] = 2.0; }, "R: not a rotation"},
       {"wrong size", [](CameraInfo& i) { i.width = 640; }, "640x480"},
       {"binning 1000", [](CameraInfo& i) { i.binning_x = i.binning_y = 1000; }, "binning"},
+      {"cy' far below", [](CameraInfo& i) { i.P[6] += 100000; }, "P[6]"},
+      {"cx' off the image", [](CameraInfo& i) { i.P[2] += 5000; }, "P[2]"},
+      {"cx off the image", [](CameraInfo& i) { i.K[2] += 5000; }, "K[2]"},
   };
   for (const auto& c : cases) {
     for (const std::string side : {"left", "right"}) {

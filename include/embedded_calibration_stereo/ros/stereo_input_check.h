@@ -25,6 +25,10 @@ namespace embedded_calibration_stereo {
 // below anything the matcher resolves, above the round-off of a calibration file.
 constexpr double kRectifiedPairTolerancePx = 1e-3;
 
+// How far past the image's edges a principal point (K's cx, cy and P's cx', cy') may lie, as a
+// fraction of the image's size: real lenses and rectifications stay well within it.
+constexpr double kPrincipalPointMargin = 0.25;
+
 // Both images have an encoding of `accepted`, the same encoding and the same size.
 std::string checkImagePair(const sensor_msgs::Image& left, const std::string& left_topic,
                            const sensor_msgs::Image& right, const std::string& right_topic,
@@ -34,8 +38,9 @@ std::string checkImagePair(const sensor_msgs::Image& left, const std::string& le
 // images'; a distortion model this pipeline rectifies (plumb_bob with 0, 4 or 5 coefficients,
 // rational_polynomial with 8; an empty model counts as plumb_bob) and finite coefficients;
 // K, R, P finite, K and P calibrated (not all zero) with positive focal lengths and last rows
-// [0 0 1] and [0 0 1 0]; R a rotation; binning 0 or 1 and the ROI empty or the full image
-// (this pipeline works on full-resolution images).
+// [0 0 1] and [0 0 1 0]; R a rotation; principal points within kPrincipalPointMargin of the
+// image; binning 0 or 1 and the ROI empty or the full image (this pipeline works on
+// full-resolution images).
 std::string checkCameraInfo(const sensor_msgs::CameraInfo& info, const std::string& info_topic, uint32_t width,
                             uint32_t height);
 // The same for the camera of `image`.
