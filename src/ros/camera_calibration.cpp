@@ -219,10 +219,10 @@ StereoCalibration::SetResult StereoCalibration::set(bool left, const sensor_msgs
   if (other && pairWith(other->info, "the staged " + other_name).empty()) {
     partner = other->info;
     calls = 2;
-  } else if (!keepsRectification(info, own_in_force)) {
-    mismatch = name + " changes R or P, the rectification shared by both cameras";
   } else {
     mismatch = pairWith(other_in_force, other_in_force_name);
+    if (mismatch.empty() && !keepsRectification(info, own_in_force))
+      mismatch = name + " changes R or P, the rectification shared by both cameras";
     if (mismatch.empty()) partner = other_in_force;
   }
   if (!partner) {

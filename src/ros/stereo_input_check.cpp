@@ -37,12 +37,8 @@ std::string nonFiniteText(const char* field, int index, double value) {
          " (every element must be finite)";
 }
 
-// The problem of one CameraInfo's fields (without the topic), or "".
-std::string cameraInfoProblem(const sensor_msgs::CameraInfo& info) {
+std::string distortionProblem(const sensor_msgs::CameraInfo& info) {
   namespace models = sensor_msgs::distortion_models;
-  if (info.width == 0 || info.height == 0)
-    return "width, height: the size " + sizeText(info.width, info.height) + " is empty";
-
   const std::string& model = info.distortion_model;
   const size_t nd = info.D.size();
   if (model.empty() || model == models::PLUMB_BOB) {
@@ -54,16 +50,20 @@ std::string cameraInfoProblem(const sensor_msgs::CameraInfo& info) {
     return "distortion_model: '" + model + "' is not supported (plumb_bob or rational_polynomial)";
   }
   if (const int i = firstNonFinite(info.D.data(), nd); i >= 0) return nonFiniteText("D", i, info.D[i]);
+  return "";
+}
 
-  const auto& K = info.K;
+std::string cameraMatrixProblem(const sensor_msgs::CameraInfo::_K_type& K) {
   if (allZero(K.data(), K.size())) return "K: uncalibrated camera (K is all zero)";
   if (const int i = firstNonFinite(K.data(), K.size()); i >= 0) return nonFiniteText("K", i, K[i]);
   if (!(K[0] > 0 && K[4] > 0))
     return "K: focal lengths must be > 0 (fx " + num(K[0]) + ", fy " + num(K[4]) + ")";
   if (K[3] != 0 || K[6] != 0 || K[7] != 0 || K[8] != 1)
     return "K: not a camera matrix (its rows 2 and 3 must be [0 fy cy] and [0 0 1])";
+  return "";
+}
 
-  const auto& R = info.R;
+std::string rotationProblem(const sensor_msgs::CameraInfo::_R_type& R) {
   if (allZero(R.data(), R.size())) return "R: uncalibrated camera (R is all zero)";
   if (const int i = firstNonFinite(R.data(), R.size()); i >= 0) return nonFiniteText("R", i, R[i]);
   double worst = 0;  // largest element of R R^T - I
@@ -76,8 +76,10 @@ std::string cameraInfoProblem(const sensor_msgs::CameraInfo& info) {
   const double det = R[0] * (R[4] * R[8] - R[5] * R[7]) - R[1] * (R[3] * R[8] - R[5] * R[6]) +
                      R[2] * (R[3] * R[7] - R[4] * R[6]);
   if (worst > 1e-5 || det < 0) return "R: not a rotation (R R^T - I up to " + num(worst) + ", det " + num(det) + ")";
+  return "";
+}
 
-  const auto& P = info.P;
+std::string projectionProblem(const sensor_msgs::CameraInfo::_P_type& P) {
   if (allZero(P.data(), P.size())) return "P: uncalibrated camera (P is all zero)";
   if (const int i = firstNonFinite(P.data(), P.size()); i >= 0) return nonFiniteText("P", i, P[i]);
   if (!(P[0] > 0 && P[5] > 0))
@@ -85,17 +87,20 @@ std::string cameraInfoProblem(const sensor_msgs::CameraInfo& info) {
   if (P[4] != 0 || P[8] != 0 || P[9] != 0 || P[10] != 1 || P[11] != 0)
     return "P: not a projection matrix of a rectified camera (its rows 2 and 3 must be [0 fy' cy' Ty] and "
            "[0 0 1 0])";
+  return "";
+}
 
-  // A lens's axis meets its sensor near the centre, and a rectified camera's principal point
-  // stays near its image: one far past the edges is a corrupt calibration (its depth would be
-  // empty), whatever else agrees with it.
+// A lens's axis meets its sensor near the centre, and a rectified camera's principal point
+// stays near its image: one far past the edges is a corrupt calibration (its depth would be
+// empty), whatever else agrees with it.
+std::string principalPointProblem(const sensor_msgs::CameraInfo& info) {
   const struct {
     const char* field;
     double value, size;
-  } points[] = {{"K: cx (K[2])", K[2], static_cast<double>(info.width)},
-                {"K: cy (K[5])", K[5], static_cast<double>(info.height)},
-                {"P: cx' (P[2])", P[2], static_cast<double>(info.width)},
-                {"P: cy' (P[6])", P[6], static_cast<double>(info.height)}};
+  } points[] = {{"K: cx (K[2])", info.K[2], static_cast<double>(info.width)},
+                {"K: cy (K[5])", info.K[5], static_cast<double>(info.height)},
+                {"P: cx' (P[2])", info.P[2], static_cast<double>(info.width)},
+                {"P: cy' (P[6])", info.P[6], static_cast<double>(info.height)}};
   for (const auto& p : points) {
     const double margin = kPrincipalPointMargin * p.size;
     if (!(p.value >= -margin && p.value <= p.size + margin))
@@ -103,7 +108,11 @@ std::string cameraInfoProblem(const sensor_msgs::CameraInfo& info) {
              num(-margin) + ", " + num(p.size + margin) + "] (the image and " +
              num(100 * kPrincipalPointMargin) + " % of its size beyond each edge)";
   }
+  return "";
+}
 
+// Binning and region of interest: this pipeline works at full resolution.
+std::string layoutProblem(const sensor_msgs::CameraInfo& info) {
   if (info.binning_x > 1 || info.binning_y > 1)
     return "binning_x, binning_y: " + std::to_string(info.binning_x) + ", " + std::to_string(info.binning_y) +
            ": binned images are not supported (binning 0 or 1: this pipeline works at full resolution)";
@@ -115,6 +124,20 @@ std::string cameraInfoProblem(const sensor_msgs::CameraInfo& info) {
            std::to_string(roi.y_offset) + ") is not the full " + sizeText(info.width, info.height) +
            " image (regions of interest are not supported)";
   return "";
+}
+
+// The problem of one CameraInfo's fields (without the topic), or "": the first of the checks
+// above, in the order of the fields.
+std::string cameraInfoProblem(const sensor_msgs::CameraInfo& info) {
+  if (info.width == 0 || info.height == 0)
+    return "width, height: the size " + sizeText(info.width, info.height) + " is empty";
+  std::string problem = distortionProblem(info);
+  if (problem.empty()) problem = cameraMatrixProblem(info.K);
+  if (problem.empty()) problem = rotationProblem(info.R);
+  if (problem.empty()) problem = projectionProblem(info.P);
+  if (problem.empty()) problem = principalPointProblem(info);
+  if (problem.empty()) problem = layoutProblem(info);
+  return problem;
 }
 
 }  // namespace

@@ -4,7 +4,6 @@
 #include <cmath>
 #include <opencv2/core/hal/intrin.hpp>
 #include <opencv2/imgproc.hpp>
-#include <vector>
 
 namespace ecs {
 namespace sim {
