@@ -8,7 +8,9 @@
 //    light-on frames taken with the calibration in force: the driver's verification flashes
 //    (verification_period_s) and its calibration bursts alike.
 // Each frame's light, epoch and calibration come from calibration_mode and camera_info on their
-// own subscriptions, so that a frame the image synchroniser drops hides neither.
+// own subscriptions, so that a frame the image synchroniser drops hides neither. A calibration_mode
+// counts (in the synchroniser and in the records) only for a frame whose left camera_info came,
+// once per stamp (frame_stamp_gate.h): rogue modes neither fill the queue nor fake a light.
 // It publishes calibration/health (CalibrationHealth) at every new calibration and after every
 // measurement, and the state on diagnostics (GOOD OK, DEGRADED WARN, BAD ERROR, no verdict yet
 // WARN). calibration_wanted tells an on-demand driver to calibrate: BAD, or DEGRADED until the
@@ -53,6 +55,8 @@
 #include "embedded_calibration_stereo/core/geometry/config_io.h"
 #include "embedded_calibration_stereo/ros/calibration_session.h"
 #include "embedded_calibration_stereo/ros/conversions.h"
+#include "embedded_calibration_stereo/ros/frame_stamp_gate.h"
+#include "embedded_calibration_stereo/ros/lazy_synced_input.h"
 #include "embedded_calibration_stereo/ros/parameter_reader.h"
 #include "embedded_calibration_stereo/ros/service_call.h"
 
@@ -202,16 +206,32 @@ class CalibrationHealthNodelet : public nodelet::Nodelet {
     right_sub_.subscribe(nh, "right/image_raw", params_.queue_size);
     right_info_sub_.subscribe(nh, "right/camera_info", params_.queue_size);
     mode_sub_.subscribe(nh, "calibration_mode", params_.queue_size);
+    gate_ = std::make_unique<FrameStampGate>(std::vector<std::string>(2, mode_sub_.getTopic()), getName());
+    mode_admit_ = std::make_unique<AdmissionFilter<CalibrationMode>>(
+        mode_sub_, [this](const ros::MessageEvent<CalibrationMode const>& event) {
+          return gate_->offer(kSyncedMode, event.getMessage()->header.stamp, event.getPublisherName(),
+                              [this, event] { mode_admit_->pass(event); }) == FrameStampGate::Verdict::kPass;
+        });
     sync_ = std::make_unique<message_filters::Synchronizer<Policy>>(Policy(params_.queue_size), left_sub_,
                                                                     left_info_sub_, right_sub_, right_info_sub_,
-                                                                    mode_sub_);
+                                                                    *mode_admit_);
     sync_->registerCallback(&CalibrationHealthNodelet::onFrame, this);
     // Every frame's light and epoch, and the calibration of every frame, on deeper queues than the
     // images': a frame the synchroniser drops (the images queue up under load) must not hide a
     // new calibration or the light of a verification frame.
-    mode_record_sub_ = nh.subscribe("calibration_mode", kKeptFrames, &CalibrationHealthNodelet::onMode, this);
-    left_info_record_sub_ = nh.subscribe<CameraInfo>(
-        "left/camera_info", kKeptFrames, [this](const CameraInfoConstPtr& info) { keep(&left_infos_, info); });
+    mode_record_sub_ = nh.subscribe<CalibrationMode>(
+        "calibration_mode", kKeptFrames,
+        boost::function<void(const ros::MessageEvent<CalibrationMode const>&)>(
+            [this](const ros::MessageEvent<CalibrationMode const>& event) {
+              const CalibrationModeConstPtr mode = event.getMessage();
+              if (gate_->offer(kRecordedMode, mode->header.stamp, event.getPublisherName(),
+                               [this, mode] { onMode(mode); }) == FrameStampGate::Verdict::kPass)
+                onMode(mode);
+            }));
+    left_info_record_sub_ = nh.subscribe<CameraInfo>("left/camera_info", kKeptFrames, [this](const CameraInfoConstPtr& info) {
+      keep(&left_infos_, info);
+      for (const FrameStampGate::Release& release : gate_->image(info->header.stamp)) release();
+    });
     right_info_record_sub_ = nh.subscribe<CameraInfo>(
         "right/camera_info", kKeptFrames, [this](const CameraInfoConstPtr& info) { keep(&right_infos_, info); });
     status_sub_ = nh.subscribe("calibration/status", 5, &CalibrationHealthNodelet::onStatus, this);
@@ -648,6 +668,9 @@ class CalibrationHealthNodelet : public nodelet::Nodelet {
   message_filters::Subscriber<Image> left_sub_, right_sub_;
   message_filters::Subscriber<CameraInfo> left_info_sub_, right_info_sub_;
   message_filters::Subscriber<CalibrationMode> mode_sub_;
+  std::unique_ptr<FrameStampGate> gate_;  // the frames are known by their left camera_info
+  static constexpr size_t kSyncedMode = 0, kRecordedMode = 1;
+  std::unique_ptr<AdmissionFilter<CalibrationMode>> mode_admit_;  // mode_sub_ -> mode_admit_ -> sync_
   std::unique_ptr<message_filters::Synchronizer<Policy>> sync_;
   ros::Subscriber observations_sub_, status_sub_, mode_record_sub_, left_info_record_sub_, right_info_record_sub_;
   ros::Publisher health_pub_, status_pub_;

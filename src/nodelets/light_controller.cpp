@@ -248,12 +248,15 @@ class LightControllerNodelet : public nodelet::Nodelet {
                                  right_info_sub_.getTopic()},
         readStampTolerance(pnh), "LightController", [this](const std::string& text) { NODELET_WARN("%s", text.c_str()); });
     const auto admit_image = [this](size_t index) {
-      return [this, index](const Image& image) {
+      return [this, index](const ros::MessageEvent<Image const>& event) {
+        const Image& image = *event.getMessage();
         return malformedImage(image).empty() && guard_->admit(index, image.header.stamp);
       };
     };
     const auto admit_info = [this](size_t index) {
-      return [this, index](const CameraInfo& info) { return guard_->admit(index, info.header.stamp); };
+      return [this, index](const ros::MessageEvent<CameraInfo const>& event) {
+        return guard_->admit(index, event.getMessage()->header.stamp);
+      };
     };
     left_admit_ = std::make_unique<AdmissionFilter<Image>>(left_sub_, admit_image(0));
     left_info_admit_ = std::make_unique<AdmissionFilter<CameraInfo>>(left_info_sub_, admit_info(1));

@@ -8,7 +8,10 @@
 // In front of the synchroniser, every message passes a StampGuard (stamp_guard.h: a message
 // stamped far from the other inputs is dropped with a warning, so that it never fills the
 // synchroniser's queue; tolerance: the private parameter stamp_tolerance_s), and every image a
-// check that its data can be read (malformedImage: dropped with a throttled error).
+// check that its data can be read (malformedImage: dropped with a throttled error). A
+// calibration_mode input joins the synchroniser only for a frame whose image has arrived (or
+// arrives soon after), once per stamp (frame_stamp_gate.h): a stream of modes at stamps no image
+// has cannot evict the live frames from the synchroniser's queue.
 //
 // Use: construct, pass connectCallback()/imageConnectCallback() to the outputs' advertise(),
 // watch() each output, then start().
@@ -41,6 +44,8 @@
 #include <utility>
 #include <vector>
 
+#include "embedded_calibration_stereo/CalibrationMode.h"
+#include "embedded_calibration_stereo/ros/frame_stamp_gate.h"
 #include "embedded_calibration_stereo/ros/stamp_guard.h"
 
 namespace embedded_calibration_stereo {
@@ -78,22 +83,29 @@ class LazySubscription {
   bool started_ = false, needed_ = false, subscribed_ = false;
 };
 
-// A message_filters stage that passes on the messages `admit` accepts (LazySyncedInput's guard).
+// A message_filters stage that passes on the messages `admit` accepts (LazySyncedInput's guard),
+// and later those it kept (pass()); `passed` hears of each message passed on by add().
 template <class M>
 class AdmissionFilter : public message_filters::SimpleFilter<M> {
  public:
-  using Admit = std::function<bool(const M&)>;
+  using Event = ros::MessageEvent<M const>;
+  using Admit = std::function<bool(const Event&)>;  // false: dropped, or kept for pass()
+  using Passed = std::function<void(const M&)>;
   template <class F>
-  AdmissionFilter(F& input, Admit admit) : admit_(std::move(admit)) {
+  AdmissionFilter(F& input, Admit admit, Passed passed = nullptr) : admit_(std::move(admit)), passed_(std::move(passed)) {
     connection_ = input.registerCallback(&AdmissionFilter::add, this);
   }
   ~AdmissionFilter() { connection_.disconnect(); }
+  void pass(const Event& event) { this->signalMessage(event); }
 
  private:
-  void add(const ros::MessageEvent<M const>& event) {
-    if (admit_(*event.getMessage())) this->signalMessage(event);
+  void add(const Event& event) {
+    if (!admit_(event)) return;
+    this->signalMessage(event);
+    if (passed_) passed_(*event.getMessage());
   }
   const Admit admit_;
+  const Passed passed_;
   message_filters::Connection connection_;
 };
 
@@ -122,6 +134,8 @@ class LazySyncedInput : public LazySubscription {
     for (size_t i = 0; i < kTopics; ++i) resolved_[i] = nh_.resolveName(topics_[i]);
     guard_ = std::make_unique<StampGuard>(std::vector<std::string>(resolved_.begin(), resolved_.end()),
                                           readStampTolerance(private_nh_), private_nh_.getNamespace());
+    gate_ = std::make_unique<FrameStampGate>(std::vector<std::string>(resolved_.begin(), resolved_.end()),
+                                             private_nh_.getNamespace());
     makeAdmissions(std::index_sequence_for<M...>());
     std::apply(
         [&](auto&... admissions) {
@@ -143,7 +157,7 @@ class LazySyncedInput : public LazySubscription {
   const std::string& topic(size_t i) const { return resolved_.at(i); }
   bool approximate() const { return approximate_ != nullptr; }
   // Messages dropped for their stamp, and images dropped as unreadable, since the start.
-  uint64_t droppedForStamp() const { return guard_->dropped(); }
+  uint64_t droppedForStamp() const { return guard_->dropped() + gate_->dropped(); }
   uint64_t droppedMalformed() const { return malformed_; }
 
  private:
@@ -156,18 +170,40 @@ class LazySyncedInput : public LazySubscription {
   // message_filters binds member functions: forwards to callback_.
   void onMessages(const boost::shared_ptr<const M>&... messages) { callback_(messages...); }
 
+  template <class T>
+  static constexpr bool kImage = std::is_same<T, sensor_msgs::Image>::value;
+  template <class T>
+  static constexpr bool kPerFrame = std::is_same<T, CalibrationMode>::value;  // matched to images by the gate
+
   template <size_t... I>
   void makeAdmissions(std::index_sequence<I...>) {
     admissions_ = std::make_tuple(std::make_unique<AdmissionFilter<M>>(
-        std::get<I>(filters_), [this](const M& message) { return admit(I, message); })...);
+        std::get<I>(filters_), [this](const ros::MessageEvent<M const>& event) { return admit<I>(event); },
+        [this](const M& message) { passed(message); })...);
   }
+  template <size_t I, class T>
+  bool admit(const ros::MessageEvent<T const>& event) {
+    const T& message = *event.getMessage();
+    if constexpr (kImage<T>) {
+      if (!readable(I, message)) return false;
+    }
+    if (!guard_->admit(I, message.header.stamp)) return false;
+    if constexpr (kPerFrame<T>) {
+      const auto verdict = gate_->offer(I, message.header.stamp, event.getPublisherName(),
+                                        [this, event] { std::get<I>(admissions_)->pass(event); });
+      return verdict == FrameStampGate::Verdict::kPass;
+    }
+    return true;
+  }
+  // After an image went on, the per-frame messages of its stamp follow it.
   template <class T>
-  bool admit(size_t index, const T& message) {
-    return guard_->admit(index, message.header.stamp);
+  void passed(const T& message) {
+    if constexpr (kImage<T>)
+      for (const FrameStampGate::Release& release : gate_->image(message.header.stamp)) release();
   }
-  bool admit(size_t index, const sensor_msgs::Image& image) {
+  bool readable(size_t index, const sensor_msgs::Image& image) {
     const std::string problem = malformedImage(image);
-    if (problem.empty()) return guard_->admit(index, image.header.stamp);
+    if (problem.empty()) return true;
     ++malformed_;
     const double now = std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
     double last = last_malformed_report_s_.load();
@@ -180,6 +216,7 @@ class LazySyncedInput : public LazySubscription {
   template <size_t... I>
   void subscribeAll(std::index_sequence<I...>) {
     guard_->reset();  // stamps from before an unsubscription are no reference
+    gate_->reset();
     (subscribeOne(std::get<I>(filters_), topics_[I]), ...);
   }
   template <size_t... I>
@@ -201,6 +238,7 @@ class LazySyncedInput : public LazySubscription {
   const int queue_size_;
   const Callback callback_;
   std::unique_ptr<StampGuard> guard_;
+  std::unique_ptr<FrameStampGate> gate_;
   std::atomic<uint64_t> malformed_{0};
   std::atomic<double> last_malformed_report_s_{-1e9};
   std::tuple<Filter<M>...> filters_;  // declared before the admissions and synchronisers: they outlive them
