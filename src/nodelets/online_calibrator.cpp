@@ -122,6 +122,7 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
       throw ecs::ConfigError("device_config", "'" + params_.device_config + "': " + e.what());
     }
     session_ = std::make_unique<CalibrationSession>(nh, params_, device);
+    paced_ = std::make_unique<ecs::PacedQueue<Job>>(params_.solve_pacing);
     guard_ = std::make_unique<StampGuard>(
         std::vector<std::string>{nh.resolveName("calibration_mode"), nh.resolveName("calibration/observations"),
                                  nh.resolveName("left/camera_info"), nh.resolveName("right/camera_info")},
@@ -181,6 +182,7 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
     for (Job& job : jobs_)
       if (job.result) job.result->set_value(rejectedStatus("calibrator shutting down"));
     jobs_.clear();
+    if (paced_) paced_->clear();
   }
 
   // Keeps the latest valid CameraInfo pair: a side that fails the consumers' checks, or that
@@ -458,9 +460,46 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
         if (job.result) job.result->set_value(rejectedStatus("calibrator shutting down"));
         return;
       }
-      jobs_.push_back(std::move(job));
+      if (job.result || job.commit_again) {
+        jobs_.push_back(std::move(job));
+      } else if (const std::optional<Job> dropped = paced_->push(std::move(job))) {
+        NODELET_WARN_THROTTLE(5.0,
+                              "OnlineCalibrator: %s dropped unsolved: more than %zu automatic solves waiting, "
+                              "which start at least %.1f s apart (parameters solve_queue_size, "
+                              "min_solve_interval_s); the newest are kept",
+                              dropped->window_observation ? "a window observation"
+                                                          : ("a window of " + std::to_string(dropped->frames.size()) +
+                                                             " frames").c_str(),
+                              paced_->options().capacity, paced_->options().min_interval_s);
+      }
     }
     cv_.notify_all();
+  }
+
+  static double steadyNow() {
+    return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
+  }
+
+  // Caller holds `lock` on mutex_: waits for the next job (requests and commits first, then the
+  // paced automatic solves when one may start); false when stopping.
+  bool nextJob(std::unique_lock<std::mutex>& lock, Job* job) {
+    while (!stopping_) {
+      if (!jobs_.empty()) {
+        *job = std::move(jobs_.front());
+        jobs_.pop_front();
+        return true;
+      }
+      const double now = steadyNow(), ready_in = paced_->readyIn(now);
+      if (ready_in == 0.0) {
+        *job = std::move(*paced_->pop(now));
+        return true;
+      }
+      if (ready_in < 0.0)
+        cv_.wait(lock);
+      else
+        cv_.wait_for(lock, std::chrono::duration<double>(ready_in));
+    }
+    return false;
   }
 
   void workerLoop() {
@@ -471,10 +510,7 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
       std::optional<double> health_problem_s;
       {
         std::unique_lock<std::mutex> lock(mutex_);
-        cv_.wait(lock, [this] { return stopping_ || !jobs_.empty(); });
-        if (stopping_) return;
-        job = std::move(jobs_.front());
-        jobs_.pop_front();
+        if (!nextJob(lock, &job)) return;
         left = left_info_;
         right = right_info_;
         epoch = epoch_;
@@ -839,7 +875,8 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
   // storeInfo: a pair set from outside the calibrator (a rollback, rosservice) goes there too.
   std::vector<double> in_force_tf_key_;
   std::atomic<uint32_t> epoch_{0};  // also read without mutex_ (statuses)
-  std::deque<Job> jobs_;
+  std::deque<Job> jobs_;                       // requests and commits again, first come first served
+  std::unique_ptr<ecs::PacedQueue<Job>> paced_;  // automatic solves (params_.solve_pacing)
   bool stopping_ = false;
   std::optional<CalibrationStatus> last_solve_;
   ros::WallTime last_solve_time_, last_commit_time_;

@@ -77,6 +77,8 @@ CalibratorParams loadCalibratorParams(const ros::NodeHandle& pnh, const std::str
   p.window_timeout_s = read.atLeast("window_timeout_s", p.window_timeout_s, 0.1);
   p.stamp_tolerance_s = readStampTolerance(pnh);
   non_negative("commit_retry_s", &p.commit_retry_s);
+  non_negative("min_solve_interval_s", &p.solve_pacing.min_interval_s);
+  p.solve_pacing.capacity = read.atLeast("solve_queue_size", static_cast<int>(p.solve_pacing.capacity), 1);
   p.commit = parseCommitTarget(read.get("commit", "driver"));
   p.rectification_alpha = read.get("rectification_alpha", p.rectification_alpha);
   if (!(p.rectification_alpha == -1.0 || (p.rectification_alpha >= 0.0 && p.rectification_alpha <= 1.0)))

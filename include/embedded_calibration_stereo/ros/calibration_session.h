@@ -17,6 +17,7 @@
 #include "embedded_calibration_stereo/CalibrationStatus.h"
 #include "embedded_calibration_stereo/core/calibration/bundle_adjuster.h"
 #include "embedded_calibration_stereo/core/calibration/calibration_filter.h"
+#include "embedded_calibration_stereo/core/calibration/paced_queue.h"
 #include "embedded_calibration_stereo/core/geometry/calibration_device.h"
 #include "embedded_calibration_stereo/core/geometry/observation.h"
 #include "embedded_calibration_stereo/core/calibration/quality_gate.h"
@@ -54,6 +55,9 @@ struct CalibratorParams {
   double window_timeout_s = 5.0;   // an automatic window with no settled frame added for this long ends (wall)
   double stamp_tolerance_s = 2.0;  // inputs stamped further from the others are dropped (stamp_guard.h)
   double commit_retry_s = 10.0;    // s between commits again of a calibration the driver could not store; 0: never
+  // Automatic solves (windows, window observations): min_solve_interval_s apart at the least,
+  // solve_queue_size waiting at most (the oldest dropped): paced_queue.h.
+  ecs::PacedQueueOptions solve_pacing;
   CommitTarget commit = CommitTarget::kDriver;
   // cv::stereoRectify's alpha for the committed CameraInfo R and P: 0 every rectified pixel
   // valid, 1 every raw pixel kept, -1 OpenCV's default scaling.
