@@ -22,9 +22,11 @@
 // it up to solve_boards_wait_s), or where device_config puts them for any other calibration. A
 // solve's cameras and board poses explain the boards together: against the nominal device, the
 // small errors a solve has in either look like a turn or a zoom of several times their effect on
-// depth. The first verification of a new calibration must find it GOOD; when it does not and the previous calibration was doing better (GOOD, or
-// a better state), the previous pair is sent back to the driver's left|right/set_camera_info
-// (rollback true), and calibration/health, calibration/status and the diagnostics say why.
+// depth. The first verification of a new calibration must find it GOOD; when it does not and the
+// newest calibration verified before it was doing better (GOOD, or a better state), that pair is
+// sent back to the driver's left|right/set_camera_info (rollback true; never a pair that was
+// replaced before its first verdict: rollback_policy.h), and calibration/health,
+// calibration/status and the diagnostics say why.
 #include <cv_bridge/cv_bridge.h>
 #include <diagnostic_updater/diagnostic_updater.h>
 #include <message_filters/subscriber.h>
@@ -51,6 +53,7 @@
 #include "embedded_calibration_stereo/CalibrationStatus.h"
 #include "embedded_calibration_stereo/StereoPatternObservation.h"
 #include "embedded_calibration_stereo/core/calibration/calibration_monitor.h"
+#include "embedded_calibration_stereo/core/calibration/rollback_policy.h"
 #include "embedded_calibration_stereo/core/geometry/config_error.h"
 #include "embedded_calibration_stereo/core/geometry/config_io.h"
 #include "embedded_calibration_stereo/ros/calibration_session.h"
@@ -146,16 +149,6 @@ bool sameIntrinsics(const std::vector<double>& intrinsics, const CameraInfo& inf
   for (size_t i = 0; i < info.D.size(); ++i)
     if (!near(intrinsics[4 + i], info.D[i])) return false;
   return true;
-}
-
-// Worse states rank higher; UNKNOWN ranks nowhere (nothing to compare).
-int rank(ecs::CalibrationHealth state) {
-  switch (state) {
-    case ecs::CalibrationHealth::kGood: return 0;
-    case ecs::CalibrationHealth::kDegraded: return 1;
-    case ecs::CalibrationHealth::kBad: return 2;
-    default: return -1;
-  }
 }
 
 }  // namespace
@@ -373,7 +366,7 @@ class CalibrationHealthNodelet : public nodelet::Nodelet {
     // A window taken before the health left GOOD confirms nothing about what it sees now.
     if (left_good_at_ && status->newest_frame < *left_good_at_) return;
     const ecs::HealthReport report = monitor_->report();
-    if (rank(report.state) <= 0) return;
+    if (ecs::healthRank(report.state) <= 0) return;
     confirmed_severity_ = severity(report);
   }
 
@@ -435,17 +428,12 @@ class CalibrationHealthNodelet : public nodelet::Nodelet {
     return worst;
   }
 
-  // A new epoch: the monitor starts again with it; the previous pair is kept for a restore.
+  // A new epoch: the monitor starts again with it; the newest verified pair (rollback_policy.h)
+  // is kept for a restore.
   void newCalibration(const CameraInfo& left, const CameraInfo& right, uint32_t epoch) {
-    const ecs::CalibrationHealth previous_state =
-        monitor_->hasCalibration() ? monitor_->report().state : ecs::CalibrationHealth::kUnknown;
     const bool is_restore = restored_ && carriesCalibration(left, restored_->first) &&
                             carriesCalibration(right, restored_->second);
-    if (in_force_ && !is_restore && params_.rollback && rank(previous_state) >= 0) {
-      under_test_ = UnderTest{epoch, *epoch_, *in_force_, previous_state};
-    } else {
-      under_test_.reset();
-    }
+    policy_.start(epoch, params_.rollback && !is_restore);
     if (is_restore) {
       restored_.reset();
       restored_epoch_ = epoch;  // the health reason says why until it has a verdict
@@ -480,19 +468,18 @@ class CalibrationHealthNodelet : public nodelet::Nodelet {
     }
   }
 
-  // After a verification: a new calibration under test is kept when GOOD or no worse than the
-  // previous one was, and restored otherwise.
+  // After a verification: a new calibration under test is kept when GOOD or no worse than its
+  // reference, and the reference restored otherwise (rollback_policy.h).
   void checkNewCalibration() {
-    if (!under_test_ || under_test_->epoch != *epoch_) return;
+    if (!epoch_ || !in_force_ || !policy_.testing(*epoch_)) return;
+    if (restore_.valid()) return;  // an earlier restore still running: the next verification decides
     const ecs::HealthReport report = monitor_->report();
-    if (rank(report.state) < 0) return;  // no verdict yet: the next verification decides
-    const UnderTest test = *under_test_;
-    under_test_.reset();
-    const bool worse = report.state != ecs::CalibrationHealth::kGood &&
-                       (test.previous_state == ecs::CalibrationHealth::kGood ||
-                        rank(report.state) > rank(test.previous_state));
-    if (!worse) {
-      NODELET_INFO("CalibrationHealth: the calibration of epoch %u verified %s%s%s", test.epoch,
+    const Rollback::Decision decision = policy_.decide(*epoch_, *in_force_, report.state);
+    if (decision.outcome == Rollback::Outcome::kUndecided) return;  // no verdict yet: the next verification decides
+    const uint32_t epoch = *epoch_;
+    const Rollback::Reference& previous = *decision.reference;
+    if (decision.outcome == Rollback::Outcome::kKept) {
+      NODELET_INFO("CalibrationHealth: the calibration of epoch %u verified %s%s%s", epoch,
                    ecs::toString(report.state), report.reason.empty() ? "" : ": ", report.reason.c_str());
       return;
     }
@@ -500,18 +487,14 @@ class CalibrationHealthNodelet : public nodelet::Nodelet {
     snprintf(text, sizeof(text),
              "the calibration of epoch %u verified %s (%s) where the previous one (epoch %u) was %s: restoring the "
              "previous one",
-             test.epoch, ecs::toString(report.state), report.reason.c_str(), test.previous_epoch,
-             ecs::toString(test.previous_state));
+             epoch, ecs::toString(report.state), report.reason.c_str(), previous.epoch,
+             ecs::toString(previous.state));
     last_restore_ = text;
     NODELET_WARN("CalibrationHealth: %s", text);
-    if (restore_.valid()) {  // a restore still running: this one waits for the next verification
-      last_restore_ += "; not restored yet, an earlier restore is still running";
-      return;
-    }
-    restored_ = test.previous;
+    restored_ = previous.calibration;
     const ros::NodeHandle nh = getNodeHandle();
     const double timeout_s = params_.service_timeout_s;
-    restore_ = std::async(std::launch::async, [nh, pair = test.previous, timeout_s]() -> std::string {
+    restore_ = std::async(std::launch::async, [nh, pair = previous.calibration, timeout_s]() -> std::string {
       for (const bool left : {true, false}) {
         sensor_msgs::SetCameraInfo srv;
         srv.request.camera_info = left ? pair.first : pair.second;
@@ -524,7 +507,7 @@ class CalibrationHealthNodelet : public nodelet::Nodelet {
     });
     CalibrationStatus status;
     status.header.stamp = ros::Time::now();
-    status.epoch = test.epoch;
+    status.epoch = epoch;
     status.accepted = false;
     status.reason = std::string("rolled back: ") + text;
     status_pub_.publish(status);
@@ -547,6 +530,7 @@ class CalibrationHealthNodelet : public nodelet::Nodelet {
 
   void publish(const ros::Time& stamp) {
     const ecs::HealthReport report = monitor_->report();
+    if (epoch_ && in_force_) policy_.observe(*epoch_, *in_force_, report.state);
     auto msg = boost::make_shared<CalibrationHealth>();
     msg->header.stamp = stamp;
     msg->epoch = epoch_.value_or(0);
@@ -565,7 +549,7 @@ class CalibrationHealthNodelet : public nodelet::Nodelet {
     msg->misalignment_age_s = report.epipolar_age_s;
     msg->verification_age_s = report.board_age_s;
     msg->reason = reasonOf(report);
-    const int level = rank(report.state);
+    const int level = ecs::healthRank(report.state);
     if (level == 0) confirmed_severity_.reset();  // GOOD again: a later change wants a window again
     if (level == 0) left_good_at_.reset();
     if (level > 0 && !left_good_at_) {
@@ -590,7 +574,7 @@ class CalibrationHealthNodelet : public nodelet::Nodelet {
 
   std::string reasonOf(const ecs::HealthReport& report) const {
     std::string reason = calibration_problem_.empty() ? report.reason : calibration_problem_;
-    if (under_test_) reason += (reason.empty() ? "" : "; ") + std::string("new calibration awaiting its verification");
+    if (epoch_ && policy_.testing(*epoch_)) reason += (reason.empty() ? "" : "; ") + std::string("new calibration awaiting its verification");
     // Until the restored calibration has a verdict of its own.
     const bool restoring = restored_ || (epoch_ == restored_epoch_ && report.state == ecs::CalibrationHealth::kUnknown);
     if (!last_restore_.empty() && restoring) reason += (reason.empty() ? "" : "; ") + last_restore_;
@@ -643,12 +627,7 @@ class CalibrationHealthNodelet : public nodelet::Nodelet {
     uint32_t epoch;
     bool lit;  // light on and settled
   };
-  // A new calibration waiting for its first verification.
-  struct UnderTest {
-    uint32_t epoch, previous_epoch;
-    std::pair<CameraInfo, CameraInfo> previous;
-    ecs::CalibrationHealth previous_state;
-  };
+  using Rollback = ecs::RollbackPolicy<std::pair<CameraInfo, CameraInfo>>;
 
   // Board poses of the calibrator's accepted solves, with the intrinsics they were solved with.
   struct SolvedBoards {
@@ -681,7 +660,7 @@ class CalibrationHealthNodelet : public nodelet::Nodelet {
   std::deque<CameraInfoConstPtr> left_infos_, right_infos_;  // the latest frames' calibrations
   std::optional<uint32_t> epoch_;
   std::optional<std::pair<CameraInfo, CameraInfo>> in_force_;
-  std::optional<UnderTest> under_test_;
+  Rollback policy_;  // which calibration is tested against which, and restored
   std::optional<std::pair<CameraInfo, CameraInfo>> restored_;  // sent back to the driver, not seen yet
   std::future<std::string> restore_;                           // the running restore: "" or why it failed
   std::optional<uint32_t> restored_epoch_;
