@@ -17,6 +17,7 @@
 #include "embedded_calibration_stereo/ros/parameter_reader.h"
 #include "embedded_calibration_stereo/ros/service_call.h"
 #include "embedded_calibration_stereo/ros/stamp_guard.h"
+#include "embedded_calibration_stereo/ros/stereo_input_check.h"
 
 namespace embedded_calibration_stereo {
 namespace {
@@ -298,6 +299,13 @@ CalibrationStatus CalibrationSession::solve(const std::vector<ecs::StereoObserva
     status.reason = std::string("not committed: ") + e.what();
     return status;
   }
+  // What every consumer checks (plausible principal points, P fitting K and R, distortion that
+  // does not fold over): a solve that fails it would be refused downstream, or leave depth empty.
+  if (const std::string problem = implausibleCandidate(infos); !problem.empty()) {
+    status.accepted = false;
+    status.reason = "not committed: the solve is not a plausible calibration: " + problem;
+    return status;
+  }
   const std::string commit_error = commit(infos, candidate.rig, *left_info);
   if (!commit_error.empty()) {
     status.accepted = false;
@@ -314,6 +322,13 @@ CalibrationStatus CalibrationSession::solve(const std::vector<ecs::StereoObserva
   in_force_predicted_px_ = predicted > 0.0 ? std::optional<double>(predicted) : std::nullopt;
   *committed = std::move(infos);
   return status;
+}
+
+std::string CalibrationSession::implausibleCandidate(const CommittedCalibration& infos) const {
+  std::string problem = checkCameraInfo(infos.left, "left", infos.left.width, infos.left.height);
+  if (problem.empty()) problem = checkCameraInfo(infos.right, "right", infos.right.width, infos.right.height);
+  if (problem.empty()) problem = checkRectifiedPair(infos.left, "left", infos.right, "right");
+  return problem;
 }
 
 std::string CalibrationSession::commitAgain(const UncommittedCalibration& calibration) {

@@ -111,6 +111,59 @@ std::string principalPointProblem(const sensor_msgs::CameraInfo& info) {
   return "";
 }
 
+// P must fit K and R: the rectified camera sees the raw camera's field at a similar scale, and
+// the raw image's centre lands near the rectified image. A P from another camera, or an R turned
+// far from the lens's axis, maps the image out of view (its depth would be empty).
+std::string rectificationProblem(const sensor_msgs::CameraInfo& info) {
+  const auto& K = info.K;
+  const auto& R = info.R;
+  const auto& P = info.P;
+  for (const auto& [field, scale] : {std::pair<const char*, double>{"fx'", P[0] / K[0]}, {"fy'", P[5] / K[4]}})
+    if (!(scale >= 1.0 / kRectifiedScaleLimit && scale <= kRectifiedScaleLimit))
+      return std::string("P: ") + field + " is " + num(scale) + " times K's (P must fit K: within a factor of " +
+             num(kRectifiedScaleLimit) + ")";
+  // The ray of the raw image's centre (the principal point: no distortion there), rotated by R.
+  const double x = R[2], y = R[5], z = R[8];
+  const double u = P[0] * x / z + P[2], v = P[5] * y / z + P[6];
+  const double mx = kPrincipalPointMargin * info.width, my = kPrincipalPointMargin * info.height;
+  if (!(z > 0 && u >= -mx && u <= info.width + mx && v >= -my && v <= info.height + my))
+    return "R, P: the raw image's centre lands at (" + num(u) + ", " + num(v) + ")" +
+           (z > 0 ? "" : " behind the rectified camera") + " of the rectified image, beyond " +
+           num(100 * kPrincipalPointMargin) + " % of its size past its edges (R and P do not fit K)";
+  return "";
+}
+
+// The lens's radial distortion must map the undistorted field onto the image without folding
+// over: the distorted radius grows with the true radius until it reaches the image's farthest
+// corner, within kDistortionFieldLimit times that corner's radius. Coefficients that fold
+// earlier rectify the corners from the wrong side of the fold (mirrored, smeared images).
+std::string distortionFieldProblem(const sensor_msgs::CameraInfo& info) {
+  const auto& D = info.D;
+  if (D.empty()) return "";
+  const bool rational = D.size() == 8;
+  const double k1 = D[0], k2 = D[1], k3 = D.size() > 4 ? D[4] : 0.0;
+  const double k4 = rational ? D[5] : 0.0, k5 = rational ? D[6] : 0.0, k6 = rational ? D[7] : 0.0;
+  const auto distorted = [&](double r) {
+    const double r2 = r * r;
+    return r * (1 + r2 * (k1 + r2 * (k2 + r2 * k3))) / (1 + r2 * (k4 + r2 * (k5 + r2 * k6)));
+  };
+  const double K0 = info.K[0], K4 = info.K[4], cx = info.K[2], cy = info.K[5];
+  const double corner = std::hypot(std::max(cx, info.width - cx) / K0, std::max(cy, info.height - cy) / K4);
+  constexpr int kSteps = 400;
+  const double step = kDistortionFieldLimit * corner / kSteps;
+  double previous = 0.0;
+  for (int i = 1; i <= kSteps; ++i) {
+    const double r = i * step, rd = distorted(r);
+    if (!(rd > previous))
+      return "D: the distortion folds over at radius " + num(r) + " (normalised), before the image's corners (at " +
+             num(corner) + "): the corners cannot be rectified";
+    if (rd >= corner) return "";
+    previous = rd;
+  }
+  return "D: the image's corners (radius " + num(corner) + ", normalised) come from beyond " +
+         num(kDistortionFieldLimit) + " times that radius: a field of view no lens of this pipeline has";
+}
+
 // Binning and region of interest: this pipeline works at full resolution.
 std::string layoutProblem(const sensor_msgs::CameraInfo& info) {
   if (info.binning_x > 1 || info.binning_y > 1)
@@ -136,6 +189,8 @@ std::string cameraInfoProblem(const sensor_msgs::CameraInfo& info) {
   if (problem.empty()) problem = rotationProblem(info.R);
   if (problem.empty()) problem = projectionProblem(info.P);
   if (problem.empty()) problem = principalPointProblem(info);
+  if (problem.empty()) problem = rectificationProblem(info);
+  if (problem.empty()) problem = distortionFieldProblem(info);
   if (problem.empty()) problem = layoutProblem(info);
   return problem;
 }

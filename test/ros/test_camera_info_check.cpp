@@ -135,6 +135,26 @@ std::vector<Case> refusedCases() {
          r.P[2] += 5000;
        },
        "left/camera_info: P: cx' (P[2])", Outcome::kFinite},
+      // P that does not fit K and R, and distortion that folds over: harmless to image_geometry,
+      // but the rectified images would be out of view or mirrored.
+      {"P of another camera (fx', fy' 3 times K's)",
+       [](CameraInfo& l, CameraInfo& r) {
+         for (CameraInfo* c : {&l, &r}) {
+           c->P[0] *= 3;
+           c->P[5] *= 3;
+         }
+         r.P[3] *= 3;
+       },
+       "left/camera_info: P: fx'", Outcome::kFinite},
+      {"R turned 60 degrees about y",
+       [](CameraInfo& l, CameraInfo&) {
+         const Eigen::Matrix3d turn = Eigen::AngleAxisd(M_PI / 3, Eigen::Vector3d::UnitY()).toRotationMatrix();
+         Eigen::Map<Eigen::Matrix<double, 3, 3, Eigen::RowMajor>> R(l.R.data());
+         R = (turn * R).eval();
+       },
+       "left/camera_info: R, P: the raw image's centre", Outcome::kFinite},
+      {"k1 -2 (folds over inside the image)", [](CameraInfo& l, CameraInfo&) { l.D[0] = -2.0; },
+       "left/camera_info: D: the distortion folds over", Outcome::kFinite},
       {"right cx 5000 px left of the image", [](CameraInfo&, CameraInfo& r) { r.K[2] -= 5000; },
        "right/camera_info: K: cx (K[2])", Outcome::kFinite},
       {"NaN in R", [](CameraInfo&, CameraInfo& r) { r.R[4] = kNaN; }, "right/camera_info: R: R[4]", Outcome::kFinite},
@@ -248,6 +268,48 @@ TEST(CameraInfoCheck, PrincipalPointsWithinTheMarginAreAccepted) {
       right.P[index] = left.P[index];
       EXPECT_EQ(consumerChecks(left, right).empty(), inside) << "P[" << index << "] at " << fraction;
     }
+  }
+}
+
+// Real lenses and rectifications pass: a strong barrel lens (k1 -0.35, k2 0.12, as wide-angle
+// machine-vision lenses), a rational model, rectifications with alpha 0 and 1 of a head toed in
+// by 5 degrees. The refusals start past the documented limits: R turned until the image's centre
+// leaves the margin, P scaled past kRectifiedScaleLimit.
+TEST(CameraInfoCheck, RealLensesAndRectificationsPassTheLimitsRefuse) {
+  {
+    auto [left, right] = validPair();
+    left.D = {-0.35, 0.12, 0.0, 0.0, -0.02};
+    EXPECT_EQ(consumerChecks(left, right), "") << "strong barrel";
+  }
+  for (const double alpha : {0.0, 1.0}) {
+    ecs::StereoRig rig;
+    for (ecs::PinholeCamera* c : {&rig.left, &rig.right}) {
+      c->width = kWidth;
+      c->height = kHeight;
+      c->fx = c->fy = 650.0;
+      c->cx = 376.0;
+      c->cy = 240.0;
+      c->dist = {{-0.2, 0.05, 0.0, 0.0, 0.0}};
+    }
+    rig.right_from_left.linear() = Eigen::AngleAxisd(5 * M_PI / 180, Eigen::Vector3d::UnitY()).toRotationMatrix();
+    rig.right_from_left.translation() = Eigen::Vector3d(-0.12, 0.0, 0.0);
+    auto pair = toStereoCameraInfo(rig, alpha);
+    pair.first.header.frame_id = pair.second.header.frame_id = "f";
+    EXPECT_EQ(consumerChecks(pair.first, pair.second), "") << "toed in 5 degrees, alpha " << alpha;
+  }
+  // The margins: scale 1.9 passes and 2.1 is refused; the centre's ray turned 30 degrees passes,
+  // 45 degrees (beyond the image and its margin at fx' 650) is refused.
+  for (const double scale : {1.9, 2.1}) {
+    auto [left, right] = validPair();
+    left.P[0] = scale * left.K[0];
+    EXPECT_EQ(checkCameraInfo(left, "l", kWidth, kHeight).empty(), scale < kRectifiedScaleLimit) << scale;
+  }
+  for (const double degrees : {30.0, 45.0}) {
+    auto [left, right] = validPair();
+    const Eigen::Matrix3d turn = Eigen::AngleAxisd(degrees * M_PI / 180, Eigen::Vector3d::UnitY()).toRotationMatrix();
+    Eigen::Map<Eigen::Matrix<double, 3, 3, Eigen::RowMajor>> R(left.R.data());
+    R = (turn * R).eval();
+    EXPECT_EQ(checkCameraInfo(left, "l", kWidth, kHeight).empty(), degrees < 40) << degrees;
   }
 }
 

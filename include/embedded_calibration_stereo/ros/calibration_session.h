@@ -161,6 +161,8 @@ class CalibrationSession {
   const std::vector<ecs::VirtualBoard>& boards() const { return boards_; }
 
  private:
+  // Why a pair fails the checks every consumer runs (stereo_input_check.h), or "".
+  std::string implausibleCandidate(const CommittedCalibration& infos) const;
   // Empty on success, otherwise why the commit failed. When only the right one was refused, a
   // left calibration the driver stored (a driver without pairs) is restored to `left_in_force`;
   // our driver only staged it ("staged: ..." answer) and has already dropped it.

@@ -34,12 +34,22 @@ std::string checkImagePair(const sensor_msgs::Image& left, const std::string& le
                            const sensor_msgs::Image& right, const std::string& right_topic,
                            const std::vector<std::string>& accepted);
 
+// A rectified camera's focal lengths (P) lie within this factor of the raw camera's (K): the
+// rectification's scaling (alpha) changes them by far less.
+constexpr double kRectifiedScaleLimit = 2.0;
+
+// The undistorted radius of the image's farthest corner lies within this factor of its distorted
+// radius (strong barrel lenses reach about 1.5).
+constexpr double kDistortionFieldLimit = 4.0;
+
 // One CameraInfo of a camera whose images are `width` x `height`: a positive size equal to the
 // images'; a distortion model this pipeline rectifies (plumb_bob with 0, 4 or 5 coefficients,
 // rational_polynomial with 8; an empty model counts as plumb_bob) and finite coefficients;
 // K, R, P finite, K and P calibrated (not all zero) with positive focal lengths and last rows
 // [0 0 1] and [0 0 1 0]; R a rotation; principal points within kPrincipalPointMargin of the
-// image; binning 0 or 1 and the ROI empty or the full image (this pipeline works on
+// image; P fitting K and R (focal lengths within kRectifiedScaleLimit of K's, the raw image's
+// centre rectified within the principal points' margin); a radial distortion that does not fold
+// over before the image's corners (kDistortionFieldLimit); binning 0 or 1 and the ROI empty or the full image (this pipeline works on
 // full-resolution images).
 std::string checkCameraInfo(const sensor_msgs::CameraInfo& info, const std::string& info_topic, uint32_t width,
                             uint32_t height);
