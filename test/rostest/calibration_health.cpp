@@ -19,6 +19,7 @@ using embedded_calibration_stereo::CalibrationMode;
 using embedded_calibration_stereo::CalibrationStatus;
 using embedded_calibration_stereo::carriesCalibration;
 using ecs_test::Collector;
+using ecs_test::latestPair;
 using sensor_msgs::CameraInfo;
 using Healths = std::vector<CalibrationHealth::ConstPtr>;
 
@@ -34,19 +35,6 @@ std::string lastHealth(Collector<CalibrationHealth>& health) {
   if (all.empty()) return "no calibration/health message";
   const auto& h = *all.back();
   return std::string("last health: epoch ") + std::to_string(h.epoch) + " " + stateName(h.state) + ": " + h.reason;
-}
-
-// The camera_info pair of one stamp (the newest one both sides have).
-bool latestPair(Collector<CameraInfo>& left, Collector<CameraInfo>& right, CameraInfo* l, CameraInfo* r) {
-  const auto lefts = left.snapshot(), rights = right.snapshot();
-  for (auto it = lefts.rbegin(); it != lefts.rend(); ++it)
-    for (const auto& candidate : rights)
-      if (candidate->header.stamp == (*it)->header.stamp) {
-        *l = **it;
-        *r = *candidate;
-        return true;
-      }
-  return false;
 }
 
 bool setCameraInfo(const std::string& service, const CameraInfo& info, std::string* message) {

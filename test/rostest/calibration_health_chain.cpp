@@ -22,6 +22,7 @@ using embedded_calibration_stereo::CalibrationHealth;
 using embedded_calibration_stereo::CalibrationStatus;
 using embedded_calibration_stereo::carriesCalibration;
 using ecs_test::Collector;
+using ecs_test::latestPair;
 using sensor_msgs::CameraInfo;
 using Healths = std::vector<CalibrationHealth::ConstPtr>;
 
@@ -32,18 +33,6 @@ std::string lastHealth(Collector<CalibrationHealth>& health) {
   if (all.empty()) return "no calibration/health message";
   const auto& h = *all.back();
   return "last health: epoch " + std::to_string(h.epoch) + " state " + std::to_string(h.state) + ": " + h.reason;
-}
-
-bool latestPair(Collector<CameraInfo>& left, Collector<CameraInfo>& right, CameraInfo* l, CameraInfo* r) {
-  const auto lefts = left.snapshot(), rights = right.snapshot();
-  for (auto it = lefts.rbegin(); it != lefts.rend(); ++it)
-    for (const auto& candidate : rights)
-      if (candidate->header.stamp == (*it)->header.stamp) {
-        *l = **it;
-        *r = *candidate;
-        return true;
-      }
-  return false;
 }
 
 void setPair(const std::pair<CameraInfo, CameraInfo>& pair) {

@@ -6,6 +6,7 @@
 #include <nodelet/loader.h>
 #include <ros/ros.h>
 #include <rosgraph_msgs/Log.h>
+#include <sensor_msgs/CameraInfo.h>
 
 #include <chrono>
 #include <condition_variable>
@@ -139,6 +140,20 @@ int runTestsWithFixture(int argc, char** argv, const char* node_name, int spinne
   const int result = RUN_ALL_TESTS();
   *fixture = nullptr;
   return result;
+}
+
+// The camera_info pair of one stamp (the newest one both sides have).
+inline bool latestPair(Collector<sensor_msgs::CameraInfo>& left, Collector<sensor_msgs::CameraInfo>& right,
+                       sensor_msgs::CameraInfo* l, sensor_msgs::CameraInfo* r) {
+  const auto lefts = left.snapshot(), rights = right.snapshot();
+  for (auto it = lefts.rbegin(); it != lefts.rend(); ++it)
+    for (const auto& candidate : rights)
+      if (candidate->header.stamp == (*it)->header.stamp) {
+        *l = **it;
+        *r = *candidate;
+        return true;
+      }
+  return false;
 }
 
 }  // namespace ecs_test
