@@ -476,10 +476,6 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
     cv_.notify_all();
   }
 
-  static double steadyNow() {
-    return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
-  }
-
   // Caller holds `lock` on mutex_: waits for the next job (requests and commits first, then the
   // paced automatic solves when one may start); false when stopping.
   bool nextJob(std::unique_lock<std::mutex>& lock, Job* job) {
@@ -489,7 +485,7 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
         jobs_.pop_front();
         return true;
       }
-      const double now = steadyNow(), ready_in = paced_->readyIn(now);
+      const double now = steadySeconds(), ready_in = paced_->readyIn(now);
       if (ready_in == 0.0) {
         *job = std::move(*paced_->pop(now));
         return true;

@@ -3,10 +3,11 @@
 #include <ros/console.h>
 
 #include <algorithm>
-#include <chrono>
 #include <cstdio>
 #include <iterator>
 #include <utility>
+
+#include "embedded_calibration_stereo/ros/stamp_guard.h"
 
 namespace embedded_calibration_stereo {
 
@@ -16,9 +17,7 @@ FrameStampGate::FrameStampGate(std::vector<std::string> topics, std::string owne
       owner_(std::move(owner)),
       held_per_input_(std::max<size_t>(1, held_per_input)),
       warn_(warn ? std::move(warn) : Warn([](const std::string& text) { ROS_WARN("%s", text.c_str()); })),
-      clock_(clock ? std::move(clock) : Clock([] {
-        return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
-      })),
+      clock_(clock ? std::move(clock) : Clock(steadySeconds)),
       inputs_(topics_.size()) {}
 
 bool FrameStampGate::behindImages(const ros::Time& stamp) const {

@@ -13,6 +13,10 @@
 
 namespace embedded_calibration_stereo {
 
+double steadySeconds() {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
+}
+
 double readStampTolerance(const ros::NodeHandle& private_nh) {
   return ParameterReader(private_nh).atLeast("stamp_tolerance_s", kDefaultStampToleranceS, 0.01);
 }
@@ -23,9 +27,7 @@ StampGuard::StampGuard(std::vector<std::string> topics, double tolerance_s, std:
       tolerance_s_(tolerance_s),
       owner_(std::move(owner)),
       warn_(warn ? std::move(warn) : Warn([](const std::string& text) { ROS_WARN("%s", text.c_str()); })),
-      clock_(clock ? std::move(clock) : Clock([] {
-        return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
-      })),
+      clock_(clock ? std::move(clock) : Clock(steadySeconds)),
       inputs_(topics_.size()) {}
 
 bool StampGuard::admit(size_t index, const ros::Time& stamp) {

@@ -205,7 +205,7 @@ class LazySyncedInput : public LazySubscription {
     const std::string problem = malformedImage(image);
     if (problem.empty()) return true;
     ++malformed_;
-    const double now = std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
+    const double now = steadySeconds();
     double last = last_malformed_report_s_.load();
     if (now - last >= StampGuard::kWarnPeriodS && last_malformed_report_s_.compare_exchange_strong(last, now))
       ROS_ERROR("%s: image dropped on %s: %s", private_nh_.getNamespace().c_str(), resolved_[index].c_str(),

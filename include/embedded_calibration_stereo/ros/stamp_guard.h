@@ -32,6 +32,9 @@ namespace embedded_calibration_stereo {
 // between a driver's outputs and the stages after it, well below a forged or stale stamp.
 constexpr double kDefaultStampToleranceS = 2.0;
 
+// Seconds of the steady (monotonic) clock: the default clock of the guards' wall-time rules.
+double steadySeconds();
+
 // Reads the private parameter stamp_tolerance_s (double, s, >= 0.01, default
 // kDefaultStampToleranceS); throws ecs::ConfigError naming it.
 double readStampTolerance(const ros::NodeHandle& private_nh);
