@@ -52,7 +52,10 @@
 #include "embedded_calibration_stereo/CalibrationMode.h"
 #include "embedded_calibration_stereo/CalibrationStatus.h"
 #include "embedded_calibration_stereo/StereoPatternObservation.h"
+#include "embedded_calibration_stereo/VerifiedCalibration.h"
+#include "embedded_calibration_stereo/DisparityCoverage.h"
 #include "embedded_calibration_stereo/core/calibration/calibration_monitor.h"
+#include "embedded_calibration_stereo/core/calibration/depth_coverage_watch.h"
 #include "embedded_calibration_stereo/core/calibration/rollback_policy.h"
 #include "embedded_calibration_stereo/core/geometry/config_error.h"
 #include "embedded_calibration_stereo/core/geometry/config_io.h"
@@ -62,6 +65,7 @@
 #include "embedded_calibration_stereo/ros/lazy_synced_input.h"
 #include "embedded_calibration_stereo/ros/parameter_reader.h"
 #include "embedded_calibration_stereo/ros/service_call.h"
+#include "embedded_calibration_stereo/ros/stereo_input_check.h"
 
 namespace embedded_calibration_stereo {
 
@@ -93,6 +97,7 @@ struct HealthParams {
   bool rollback = true;
   double service_timeout_s = 2.0;
   ecs::CalibrationMonitorOptions monitor;
+  ecs::DepthCoverageWatchOptions coverage;  // disparity_coverage of light-off frames
 };
 
 // Every parameter is read and checked here, once, at start.
@@ -127,6 +132,9 @@ HealthParams loadParams(const ros::NodeHandle& pnh, const std::string& default_d
   m.depth_frame_stride = 1;  // depth_every_n_frames strides before the images are converted
   const std::string problem = m.Check();
   if (!problem.empty()) throw ecs::ConfigError(problem.substr(0, problem.find(' ')), problem);
+  p.coverage.collapse_ratio = read.inRange("coverage_collapse_ratio", p.coverage.collapse_ratio, 0.01, 0.99);
+  p.coverage.history_s = read.inRange("coverage_history_s", p.coverage.history_s, 10.0, 3600.0);
+  p.coverage.min_history_s = std::min(p.coverage.min_history_s, p.coverage.history_s);
   return p;
 }
 
@@ -173,7 +181,8 @@ class CalibrationHealthNodelet : public nodelet::Nodelet {
       NODELET_FATAL("CalibrationHealth cannot start: %s", e.what());
       timer_.stop();
       for (ros::Subscriber* sub :
-           {&observations_sub_, &status_sub_, &mode_record_sub_, &left_info_record_sub_, &right_info_record_sub_})
+           {&observations_sub_, &status_sub_, &mode_record_sub_, &left_info_record_sub_, &right_info_record_sub_,
+            &coverage_sub_, &verified_sub_})
         sub->shutdown();
       throw;
     }
@@ -187,10 +196,12 @@ class CalibrationHealthNodelet : public nodelet::Nodelet {
     try {
       cv::FileStorage fs = ecs::openYaml(params_.device_config);
       boards_ = ecs::loadDevice(fs["device"], "device").virtualBoards();
+      if (!fs["rig"].empty()) nominal_ = ecs::loadStereoRig(fs["rig"], "rig");
     } catch (const std::exception& e) {
       throw ecs::ConfigError("device_config", "'" + params_.device_config + "': " + e.what());
     }
     monitor_ = std::make_unique<ecs::CalibrationMonitor>(params_.monitor);
+    coverage_ = std::make_unique<ecs::DepthCoverageWatch>(params_.coverage);
 
     health_pub_ = nh.advertise<CalibrationHealth>("calibration/health", 5);
     status_pub_ = nh.advertise<CalibrationStatus>("calibration/status", 1);
@@ -229,6 +240,8 @@ class CalibrationHealthNodelet : public nodelet::Nodelet {
         "right/camera_info", kKeptFrames, [this](const CameraInfoConstPtr& info) { keep(&right_infos_, info); });
     status_sub_ = nh.subscribe("calibration/status", 5, &CalibrationHealthNodelet::onStatus, this);
     observations_sub_ = nh.subscribe("calibration/observations", 30, &CalibrationHealthNodelet::onObservation, this);
+    coverage_sub_ = nh.subscribe("disparity_coverage", 5, &CalibrationHealthNodelet::onCoverage, this);
+    verified_sub_ = nh.subscribe("calibration/verified", 1, &CalibrationHealthNodelet::onVerified, this);
 
     diagnostics_ = std::make_unique<diagnostic_updater::Updater>(nh, pnh, getName());
     diagnostics_->setHardwareID("calibration_health");
@@ -264,7 +277,7 @@ class CalibrationHealthNodelet : public nodelet::Nodelet {
     collectRestore();
     stopWaitingForBoards();
     const ros::Time stamp = mode->header.stamp;
-    frames_.push_back({stamp, mode->calibration_epoch, mode->light_on && mode->settled});
+    frames_.push_back({stamp, mode->calibration_epoch, mode->light_on && mode->settled, !mode->light_on && mode->settled});
     if (frames_.size() > kKeptFrames) frames_.pop_front();
     if (epoch_ && *epoch_ == mode->calibration_epoch) return;
     const CameraInfoConstPtr left = at(left_infos_, stamp), right = at(right_infos_, stamp);
@@ -322,6 +335,27 @@ class CalibrationHealthNodelet : public nodelet::Nodelet {
     verify(msg);
   }
 
+  // The calibration the driver keeps as verified GOOD (latched): after a restart, the reference
+  // until a calibration of this run has a verdict; a calibration in force without a verdict yet
+  // (the one the driver started with) is tested against it.
+  void onVerified(const VerifiedCalibrationConstPtr& msg) {
+    policy_.seedEarlierRun(std::make_pair(msg->left, msg->right));
+    if (!params_.rollback || !epoch_ || !in_force_ || policy_.testing(*epoch_) || restored_epoch_ == epoch_) return;
+    const auto& reference = policy_.reference();
+    if (reference->epoch != Rollback::kEarlierRun) return;  // this run has verdicts of its own
+    if (carriesCalibration(in_force_->first, msg->left) && carriesCalibration(in_force_->second, msg->right)) return;
+    policy_.start(*epoch_, true);
+  }
+
+  // The valid fraction of a light-off frame's disparity (lit frames carry the boards' separation).
+  void onCoverage(const DisparityCoverageConstPtr& msg) {
+    for (const FrameSeen& frame : frames_) {
+      if (frame.stamp != msg->header.stamp) continue;
+      if (frame.dark && std::isfinite(msg->valid_fraction)) coverage_->add(msg->header.stamp.toSec(), msg->valid_fraction);
+      return;
+    }
+  }
+
   // A settled light-on frame of the calibration in force: the monitor checks it against the
   // boards.
   void verify(const StereoPatternObservationConstPtr& msg) {
@@ -365,7 +399,14 @@ class CalibrationHealthNodelet : public nodelet::Nodelet {
     if (!epoch_ || status->epoch != *epoch_ || !monitor_->hasCalibration()) return;
     // A window taken before the health left GOOD confirms nothing about what it sees now.
     if (left_good_at_ && status->newest_frame < *left_good_at_) return;
-    const ecs::HealthReport report = monitor_->report();
+    // The calibration holds by the boards: a collapse of depth since is the scene's.
+    if (coverage_->collapse()) {
+      NODELET_WARN("CalibrationHealth: %s, but the calibrator confirmed the calibration in force: taken as the "
+                   "scene's; watching depth from its level now",
+                   coverage_->collapse()->text().c_str());
+      coverage_->rebase();
+    }
+    const ecs::HealthReport report = effectiveReport();
     if (ecs::healthRank(report.state) <= 0) return;
     confirmed_severity_ = severity(report);
   }
@@ -416,6 +457,34 @@ class CalibrationHealthNodelet : public nodelet::Nodelet {
     verify(msg);
   }
 
+  // The monitor's report, worsened by what it cannot see: a calibration in force that is not
+  // plausible (BAD) and a collapse of depth's valid fraction (at least DEGRADED).
+  ecs::HealthReport effectiveReport() const {
+    ecs::HealthReport report = monitor_->report();
+    if (!implausible_.empty()) {
+      report.state = ecs::CalibrationHealth::kBad;
+      report.reason = implausible_;
+    } else if (const std::optional<ecs::CoverageCollapse> collapse = coverage_->collapse()) {
+      if (ecs::healthRank(report.state) < 1) report.state = ecs::CalibrationHealth::kDegraded;
+      report.reason += (report.reason.empty() ? "" : "; ") + collapse->text();
+    }
+    return report;
+  }
+
+  // Why the pair is not a plausible calibration (stereo_input_check.h, and focal lengths near
+  // device_config's cameras), or "".
+  std::string implausibility(const CameraInfo& left, const CameraInfo& right) const {
+    std::string problem = checkCameraInfo(left, left_info_record_sub_.getTopic(), left.width, left.height);
+    if (problem.empty()) problem = checkCameraInfo(right, right_info_record_sub_.getTopic(), right.width, right.height);
+    if (problem.empty())
+      problem = checkRectifiedPair(left, left_info_record_sub_.getTopic(), right, right_info_record_sub_.getTopic());
+    if (problem.empty() && nominal_)
+      problem = checkNominalFocal(left, left_info_record_sub_.getTopic(), nominal_->left.fx, nominal_->left.fy);
+    if (problem.empty() && nominal_)
+      problem = checkNominalFocal(right, right_info_record_sub_.getTopic(), nominal_->right.fx, nominal_->right.fy);
+    return problem;
+  }
+
   // The largest signal in units of its DEGRADED threshold (signals not measured count 0).
   double severity(const ecs::HealthReport& report) const {
     const ecs::CalibrationMonitorOptions& o = params_.monitor;
@@ -440,6 +509,11 @@ class CalibrationHealthNodelet : public nodelet::Nodelet {
     }
     epoch_ = epoch;
     in_force_ = std::make_pair(left, right);
+    implausible_ = implausibility(left, right);
+    if (!implausible_.empty()) {
+      implausible_ = "the calibration of epoch " + std::to_string(epoch) + " is not plausible: " + implausible_;
+      NODELET_ERROR("CalibrationHealth: %s", implausible_.c_str());
+    }
     confirmed_severity_.reset();
     left_good_at_.reset();
     ecs::StereoRig rig;
@@ -473,7 +547,7 @@ class CalibrationHealthNodelet : public nodelet::Nodelet {
   void checkNewCalibration() {
     if (!epoch_ || !in_force_ || !policy_.testing(*epoch_)) return;
     if (restore_.valid()) return;  // an earlier restore still running: the next verification decides
-    const ecs::HealthReport report = monitor_->report();
+    const ecs::HealthReport report = effectiveReport();
     const Rollback::Decision decision = policy_.decide(*epoch_, *in_force_, report.state);
     if (decision.outcome == Rollback::Outcome::kUndecided) return;  // no verdict yet: the next verification decides
     const uint32_t epoch = *epoch_;
@@ -483,11 +557,12 @@ class CalibrationHealthNodelet : public nodelet::Nodelet {
                    ecs::toString(report.state), report.reason.empty() ? "" : ": ", report.reason.c_str());
       return;
     }
+    const std::string previous_name = previous.epoch == Rollback::kEarlierRun
+                                          ? std::string("the one verified before the restart")
+                                          : "the previous one (epoch " + std::to_string(previous.epoch) + ")";
     char text[400];
-    snprintf(text, sizeof(text),
-             "the calibration of epoch %u verified %s (%s) where the previous one (epoch %u) was %s: restoring the "
-             "previous one",
-             epoch, ecs::toString(report.state), report.reason.c_str(), previous.epoch,
+    snprintf(text, sizeof(text), "the calibration of epoch %u verified %s (%s) where %s was %s: restoring the previous one",
+             epoch, ecs::toString(report.state), report.reason.c_str(), previous_name.c_str(),
              ecs::toString(previous.state));
     last_restore_ = text;
     NODELET_WARN("CalibrationHealth: %s", text);
@@ -529,7 +604,7 @@ class CalibrationHealthNodelet : public nodelet::Nodelet {
   }
 
   void publish(const ros::Time& stamp) {
-    const ecs::HealthReport report = monitor_->report();
+    const ecs::HealthReport report = effectiveReport();
     if (epoch_ && in_force_) policy_.observe(*epoch_, *in_force_, report.state);
     auto msg = boost::make_shared<CalibrationHealth>();
     msg->header.stamp = stamp;
@@ -583,7 +658,7 @@ class CalibrationHealthNodelet : public nodelet::Nodelet {
 
   void diagnose(diagnostic_updater::DiagnosticStatusWrapper& status) {
     using diagnostic_msgs::DiagnosticStatus;
-    const ecs::HealthReport report = monitor_->report();
+    const ecs::HealthReport report = effectiveReport();
     const std::string reason = reasonOf(report);
     if (!calibration_problem_.empty()) {
       status.summary(DiagnosticStatus::ERROR, calibration_problem_);
@@ -625,7 +700,8 @@ class CalibrationHealthNodelet : public nodelet::Nodelet {
   struct FrameSeen {
     ros::Time stamp;
     uint32_t epoch;
-    bool lit;  // light on and settled
+    bool lit;   // light on and settled
+    bool dark;  // light off and settled
   };
   using Rollback = ecs::RollbackPolicy<std::pair<CameraInfo, CameraInfo>>;
 
@@ -644,6 +720,9 @@ class CalibrationHealthNodelet : public nodelet::Nodelet {
   std::optional<ros::WallTime> waiting_for_boards_;   // a new calibration waits for its solve's boards until then
   StereoPatternObservationConstPtr deferred_;         // the verification that waits with it
   std::unique_ptr<ecs::CalibrationMonitor> monitor_;
+  std::unique_ptr<ecs::DepthCoverageWatch> coverage_;
+  std::optional<ecs::StereoRig> nominal_;  // device_config's cameras
+  std::string implausible_;                // why the calibration in force is not plausible, or ""
   message_filters::Subscriber<Image> left_sub_, right_sub_;
   message_filters::Subscriber<CameraInfo> left_info_sub_, right_info_sub_;
   message_filters::Subscriber<CalibrationMode> mode_sub_;
@@ -651,7 +730,8 @@ class CalibrationHealthNodelet : public nodelet::Nodelet {
   static constexpr size_t kSyncedMode = 0, kRecordedMode = 1;
   std::unique_ptr<AdmissionFilter<CalibrationMode>> mode_admit_;  // mode_sub_ -> mode_admit_ -> sync_
   std::unique_ptr<message_filters::Synchronizer<Policy>> sync_;
-  ros::Subscriber observations_sub_, status_sub_, mode_record_sub_, left_info_record_sub_, right_info_record_sub_;
+  ros::Subscriber observations_sub_, status_sub_, mode_record_sub_, left_info_record_sub_, right_info_record_sub_,
+      coverage_sub_, verified_sub_;
   ros::Publisher health_pub_, status_pub_;
   std::unique_ptr<diagnostic_updater::Updater> diagnostics_;
   ros::WallTimer timer_;

@@ -20,12 +20,15 @@
 #include <condition_variable>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <thread>
 
 #include "embedded_calibration_stereo/CalibrationHealth.h"
 #include "embedded_calibration_stereo/CalibrationMode.h"
 #include "embedded_calibration_stereo/SetRigDrift.h"
+#include "embedded_calibration_stereo/VerifiedCalibration.h"
 #include "embedded_calibration_stereo/core/geometry/config_error.h"
+#include "embedded_calibration_stereo/core/geometry/config_io.h"
 #include "embedded_calibration_stereo/core/calibration/light_schedule.h"
 #include "embedded_calibration_stereo/core/sim/sim_rig.h"
 #include "embedded_calibration_stereo/ros/camera_calibration.h"
@@ -111,8 +114,11 @@ class CameraDriverNodelet : public nodelet::Nodelet {
     right_set_info_srv_ = nh.advertiseService<sensor_msgs::SetCameraInfo::Request, sensor_msgs::SetCameraInfo::Response>(
         "right/set_camera_info", [this](auto& req, auto& res) { return setCameraInfo(false, req, res); });
     set_light_srv_ = nh.advertiseService("set_light", &CameraDriverNodelet::setLight, this);
-    if (params_.schedule.trigger == ecs::CalibrationTrigger::kOnDemand)
-      health_sub_ = nh.subscribe("calibration/health", 2, &CameraDriverNodelet::onHealth, this);
+    // The health's verdicts: on demand, when to calibrate; always, which calibration was verified
+    // GOOD (kept on disk, and latched on calibration/verified for a rollback after a restart).
+    verified_pub_ = nh.advertise<VerifiedCalibration>("calibration/verified", 1, true);
+    publishVerified();
+    health_sub_ = nh.subscribe("calibration/health", 2, &CameraDriverNodelet::onHealth, this);
     if (sim_) {
       gt_left_info_pub_ = nh.advertise<sensor_msgs::CameraInfo>("ground_truth/left/camera_info", 2);
       gt_right_info_pub_ = nh.advertise<sensor_msgs::CameraInfo>("ground_truth/right/camera_info", 2);
@@ -149,10 +155,19 @@ class CameraDriverNodelet : public nodelet::Nodelet {
       left_fallback.height = right_fallback.height = static_cast<uint32_t>(size.height);
     }
     const cv::Size size = source_->imageSize();
+    std::optional<ecs::StereoRig> nominal;
+    if (!params_.device_config.empty()) {
+      try {
+        cv::FileStorage fs = ecs::openYaml(params_.device_config);
+        if (!fs["rig"].empty()) nominal = ecs::loadStereoRig(fs["rig"], "rig");
+      } catch (const std::exception& e) {
+        throw ecs::ConfigError("device_config", "'" + params_.device_config + "': " + e.what());
+      }
+    }
     calibration_ = std::make_unique<StereoCalibration>(
         StereoCalibration::Camera{params_.left_camera_name, params_.left_camera_info_url, "left_camera_info_url"},
         StereoCalibration::Camera{params_.right_camera_name, params_.right_camera_info_url, "right_camera_info_url"},
-        static_cast<uint32_t>(size.width), static_cast<uint32_t>(size.height), params_.pair_timeout_s);
+        static_cast<uint32_t>(size.width), static_cast<uint32_t>(size.height), params_.pair_timeout_s, nominal);
     const std::string source = calibration_->load(left_fallback, right_fallback);
     const std::string problem = calibration_->problem();
     if (problem.empty())
@@ -351,8 +366,36 @@ class CameraDriverNodelet : public nodelet::Nodelet {
   // On demand: a calibration burst while the health nodelet wants one (the calibration is known
   // not to hold and the calibrator has not found it to be the best it can do).
   void onHealth(const CalibrationHealthConstPtr& health) {
-    std::lock_guard<std::mutex> lock(mutex_);
-    schedule_->demand(health->calibration_wanted);
+    if (params_.schedule.trigger == ecs::CalibrationTrigger::kOnDemand) {
+      std::lock_guard<std::mutex> lock(mutex_);
+      schedule_->demand(health->calibration_wanted);
+    }
+    // GOOD by a verification against the boards (not by the scene rows alone).
+    if (health->state != CalibrationHealth::GOOD || !(health->verification_age_s >= 0.0)) return;
+    if (verified_epoch_ == health->epoch) return;  // once per epoch (epochs only grow)
+    bool marked = false;
+    const std::string error = calibration_->markVerified(health->epoch, &marked);
+    if (!error.empty()) {
+      NODELET_ERROR_THROTTLE(10.0, "CameraDriver: verified calibration not marked: %s", error.c_str());
+      return;
+    }
+    verified_epoch_ = health->epoch;
+    if (!marked) return;
+    NODELET_INFO("CameraDriver: calibration of epoch %u verified GOOD, kept as such in '%s'", health->epoch,
+                 calibration_->store().directory().c_str());
+    publishVerified();
+  }
+
+  // The newest calibration verified GOOD on disk, latched; nothing while there is none.
+  void publishVerified() {
+    const std::optional<StereoCalibration::Verified> verified = calibration_->newestVerified();
+    if (!verified) return;
+    auto msg = boost::make_shared<VerifiedCalibration>();
+    msg->header.stamp = ros::Time::now();
+    msg->generation = verified->generation;
+    msg->left = verified->left;
+    msg->right = verified->right;
+    verified_pub_.publish(msg);
   }
 
   bool setDrift(SetRigDrift::Request& req, SetRigDrift::Response& res) {
@@ -381,7 +424,8 @@ class CameraDriverNodelet : public nodelet::Nodelet {
   std::unique_ptr<ecs::LightSchedule> schedule_;
 
   image_transport::CameraPublisher left_pub_, right_pub_;
-  ros::Publisher mode_pub_;
+  ros::Publisher mode_pub_, verified_pub_;
+  std::optional<uint32_t> verified_epoch_;  // the health's callback only: the last epoch marked (or not marked)
   ros::Publisher gt_left_info_pub_, gt_right_info_pub_, gt_observations_pub_;
   image_transport::Publisher gt_left_scene_pub_, gt_right_scene_pub_, gt_depth_pub_;
   ros::Publisher gt_head_pose_pub_, gt_tf_pub_;

@@ -2,7 +2,8 @@
 // of rectified stereo frames (left|right/image_rect with left|right/camera_info of the same
 // stamp), with stereo_image_proc's topic and parameter names. The matcher is the core's
 // DisparityComputer (sad, bm or sgbm), configured by dynamic_reconfigure (cfg/Disparity.cfg).
-// Lazy: the inputs are subscribed only while someone subscribes to an output.
+// Lazy: the inputs are subscribed only while someone subscribes to disparity or points2. With
+// each disparity computed, disparity_coverage (DisparityCoverage) says how much of it is valid.
 // Diagnostics (StageDiagnostics): rates, latency, algorithm and range, time per frame and input
 // copies (colour inputs are converted to mono8, a copy; mono8 inputs must be shared).
 #include <cv_bridge/cv_bridge.h>
@@ -21,6 +22,7 @@
 #include <mutex>
 
 #include "embedded_calibration_stereo/DisparityConfig.h"
+#include "embedded_calibration_stereo/DisparityCoverage.h"
 #include "embedded_calibration_stereo/core/depth/disparity.h"
 #include "embedded_calibration_stereo/ros/parameter_reader.h"
 #include "embedded_calibration_stereo/ros/stage_diagnostics.h"
@@ -136,6 +138,8 @@ class DisparityNodelet : public nodelet::Nodelet {
     const auto cb = input_->connectCallback();
     disparity_pub_ = nh.advertise<stereo_msgs::DisparityImage>("disparity", 1, cb, cb);
     points_pub_ = nh.advertise<sensor_msgs::PointCloud2>("points2", 1, cb, cb);
+    // Not watched: listening to the coverage alone does not start the matcher.
+    coverage_pub_ = nh.advertise<DisparityCoverage>("disparity_coverage", 5);
     input_->watch(disparity_pub_);
     input_->watch(points_pub_);
     input_->start();  // subscribes the inputs while someone listens to an output
@@ -196,6 +200,13 @@ class DisparityNodelet : public nodelet::Nodelet {
       computer_->compute(left_mono, right_mono, &disparity);
     } catch (const std::exception& e) {  // e.g. an image narrower than the disparity range
       return reportError(input_->leftImageTopic() + ": " + e.what());
+    }
+    if (coverage_pub_.getNumSubscribers() > 0) {
+      auto coverage = boost::make_shared<DisparityCoverage>();
+      coverage->header = left_info->header;
+      coverage->valid_fraction = static_cast<float>(cv::countNonZero(disparity == disparity)) /
+                                 static_cast<float>(disparity.total());  // NaN != NaN: invalid
+      coverage_pub_.publish(coverage);
     }
     sensor_msgs::PointCloud2Ptr cloud;
     if (points_pub_.getNumSubscribers() > 0) cloud = toPointCloud(disparity, model, left, *left_info);
@@ -279,7 +290,7 @@ class DisparityNodelet : public nodelet::Nodelet {
   }
 
   std::unique_ptr<StereoCameraInput> input_;  // created in onInit, before any callback
-  ros::Publisher disparity_pub_, points_pub_;
+  ros::Publisher disparity_pub_, points_pub_, coverage_pub_;
   boost::recursive_mutex reconfigure_mutex_;
   std::unique_ptr<dynamic_reconfigure::Server<DisparityConfig>> reconfigure_;
   ErrorThrottle errors_{5.0};

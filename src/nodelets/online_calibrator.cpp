@@ -115,13 +115,15 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
     const std::string package_path = ros::package::getPath("embedded_calibration_stereo");
     params_ = loadCalibratorParams(pnh, package_path.empty() ? "" : package_path + "/config/sim_rig.yaml");
     ecs::CalibrationDevice device;
+    std::optional<ecs::StereoRig> nominal;
     try {
       cv::FileStorage fs = ecs::openYaml(params_.device_config);
       device = ecs::loadDevice(fs["device"], "device");
+      if (!fs["rig"].empty()) nominal = ecs::loadStereoRig(fs["rig"], "rig");
     } catch (const std::exception& e) {
       throw ecs::ConfigError("device_config", "'" + params_.device_config + "': " + e.what());
     }
-    session_ = std::make_unique<CalibrationSession>(nh, params_, device);
+    session_ = std::make_unique<CalibrationSession>(nh, params_, device, nominal);
     paced_ = std::make_unique<ecs::PacedQueue<Job>>(params_.solve_pacing);
     guard_ = std::make_unique<StampGuard>(
         std::vector<std::string>{nh.resolveName("calibration_mode"), nh.resolveName("calibration/observations"),

@@ -286,6 +286,9 @@ CalibrationPairStore::Generation CalibrationPairStore::generation(unsigned numbe
   g.directory = directory_ + "/" + generationName(number);
   g.left_file = g.directory + "/left" + left_extension_;
   g.right_file = g.directory + "/right" + right_extension_;
+  g.verified_file = g.directory + "/verified";
+  struct stat st;
+  g.verified = ::stat(g.verified_file.c_str(), &st) == 0;
   return g;
 }
 
@@ -312,6 +315,14 @@ unsigned CalibrationPairStore::currentGeneration() const {
   if (n <= 0) return 0;
   target[n] = '\0';
   return generationNumber(target);
+}
+
+unsigned CalibrationPairStore::linkedGeneration() const {
+  return isOurLink(true) && isOurLink(false) ? currentGeneration() : 0;
+}
+
+void CalibrationPairStore::markVerified(unsigned number, const std::string& note) const {
+  ecs::writeFileAtomically(generation(number).verified_file, note + "\n");
 }
 
 std::string CalibrationPairStore::linkTarget(bool left) const {
@@ -407,8 +418,9 @@ unsigned CalibrationPairStore::commit(const sensor_msgs::CameraInfo& left, const
   makeCurrent(g.number);
   hook.stepDone();
 
-  // 3. Keep the new generation, the ones it replaced and, when neither of those is a valid
-  //    pair (the driver fell back from a broken one), the newest valid one before them.
+  // 3. Keep the new generation, the ones it replaced, the newest verified valid one and, when
+  //    neither of those it replaced is a valid pair (the driver fell back from a broken one), the
+  //    newest valid one before them.
   //    Leftovers of crashed commits (unfinished generations, temporary links) go too.
   std::set<unsigned> keep = {g.number, replaced, old_current};
   const auto valid = [&](unsigned number) { return number > 0 && is_valid && is_valid(generation(number)); };
@@ -418,6 +430,12 @@ unsigned CalibrationPairStore::commit(const sensor_msgs::CameraInfo& left, const
         keep.insert(older.number);
         break;
       }
+    }
+  }
+  for (const Generation& older : generations()) {  // the calibration a rollback goes back to
+    if (older.number < g.number && older.verified && (!is_valid || is_valid(older))) {
+      keep.insert(older.number);
+      break;
     }
   }
   for (const Generation& older : generations())

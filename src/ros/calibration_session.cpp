@@ -188,10 +188,12 @@ bool carriesCalibration(const sensor_msgs::CameraInfo& published, const sensor_m
          same(published.K, committed.K) && same(published.R, committed.R) && same(published.P, committed.P);
 }
 
-CalibrationSession::CalibrationSession(ros::NodeHandle nh, CalibratorParams params, ecs::CalibrationDevice device)
+CalibrationSession::CalibrationSession(ros::NodeHandle nh, CalibratorParams params, ecs::CalibrationDevice device,
+                                       std::optional<ecs::StereoRig> nominal)
     : nh_(std::move(nh)),
       params_(std::move(params)),
       device_(std::move(device)),
+      nominal_(std::move(nominal)),
       boards_(device_.virtualBoards()),
       adjuster_(params_.adjustment, params_.terms),
       gate_(params_.gate),
@@ -249,14 +251,17 @@ CalibrationStatus CalibrationSession::solve(const std::vector<ecs::StereoObserva
     for (size_t i = 0; i < changed.size(); ++i)
       prior_note_ += (i == 0 ? (prior_note_.empty() ? "changed: " : "; changed: ") : ", ") + changed[i];
   }
+  // An implausible calibration in force (an outside driver's) is never confirmed: the solve is
+  // judged on its own, as for an uncalibrated head.
+  const bool judge_in_force = have_in_force && implausibleCandidate({*left_info, *right_info}).empty();
   ecs::BundleAdjustmentSummary in_force_fit;
-  if (have_in_force && candidate.success)
+  if (judge_in_force && candidate.success)
     in_force_fit = ecs::evaluateFixedCalibration(in_force, frames, boards_, params_.adjustment, &device_);
   ecs::GateDecision decision;
   if (!candidate.success) {
     decision.reason = "solve failed: " + candidate.message;
   } else {
-    decision = gate_.evaluate(candidate, have_in_force ? &in_force_fit : nullptr, in_force_predicted_px_);
+    decision = gate_.evaluate(candidate, judge_in_force ? &in_force_fit : nullptr, in_force_predicted_px_);
     if (decision.refinement) prior_note_ += (prior_note_.empty() ? "" : "; ") + decision.reason.substr(10);
   }
   ecs::RectificationOptions rectification;  // as toStereoCameraInfo() commits it
@@ -328,6 +333,9 @@ std::string CalibrationSession::implausibleCandidate(const CommittedCalibration&
   std::string problem = checkCameraInfo(infos.left, "left", infos.left.width, infos.left.height);
   if (problem.empty()) problem = checkCameraInfo(infos.right, "right", infos.right.width, infos.right.height);
   if (problem.empty()) problem = checkRectifiedPair(infos.left, "left", infos.right, "right");
+  if (problem.empty() && nominal_) problem = checkNominalFocal(infos.left, "left", nominal_->left.fx, nominal_->left.fy);
+  if (problem.empty() && nominal_)
+    problem = checkNominalFocal(infos.right, "right", nominal_->right.fx, nominal_->right.fy);
   return problem;
 }
 

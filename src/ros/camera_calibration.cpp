@@ -34,21 +34,27 @@ bool keepsRectification(const sensor_msgs::CameraInfo& info, const sensor_msgs::
 }  // namespace
 
 StereoCalibration::StereoCalibration(const Camera& left, const Camera& right, uint32_t width, uint32_t height,
-                                     double pair_timeout_s)
+                                     double pair_timeout_s, std::optional<ecs::StereoRig> nominal)
     : left_camera_(left),
       right_camera_(right),
       width_(width),
       height_(height),
       pair_timeout_(pair_timeout_s),
+      nominal_(std::move(nominal)),
       store_(resolve(left), resolve(right), left.name, right.name) {
   if (store_.leftPath() == store_.rightPath())
     throw ecs::ConfigError(right.parameter, "resolves to '" + store_.rightPath() + "', the same file as " +
                                                 left.parameter + ": each camera needs its own file");
 }
 
-std::string StereoCalibration::checkOne(const sensor_msgs::CameraInfo& info, const std::string& name) const {
+std::string StereoCalibration::checkOne(bool left, const sensor_msgs::CameraInfo& info, const std::string& name) const {
   std::string problem = checkCameraInfo(info, name, width_, height_);
   if (!problem.empty()) return problem;
+  if (nominal_) {
+    const ecs::PinholeCamera& camera = left ? nominal_->left : nominal_->right;
+    problem = checkNominalFocal(info, name, camera.fx, camera.fy);
+    if (!problem.empty()) return problem;
+  }
   // The OnlineCalibrator models plumb_bob only: it would not read any other calibration back.
   ecs::PinholeCamera camera;
   std::string error;
@@ -58,8 +64,8 @@ std::string StereoCalibration::checkOne(const sensor_msgs::CameraInfo& info, con
 
 std::string StereoCalibration::checkPair(const sensor_msgs::CameraInfo& left, const std::string& left_name,
                                          const sensor_msgs::CameraInfo& right, const std::string& right_name) const {
-  std::string problem = checkOne(left, left_name);
-  if (problem.empty()) problem = checkOne(right, right_name);
+  std::string problem = checkOne(true, left, left_name);
+  if (problem.empty()) problem = checkOne(false, right, right_name);
   if (problem.empty()) problem = checkRectifiedPair(left, left_name, right, right_name);
   return problem;
 }
@@ -90,6 +96,7 @@ std::string StereoCalibration::load(const sensor_msgs::CameraInfo& left_fallback
 
   std::string problem, source;
   sensor_msgs::CameraInfo left = left_fallback, right = right_fallback;
+  unsigned generation = 0;
   if (states[0] == CalibrationFileState::kMissing && states[1] == CalibrationFileState::kMissing) {
     source = "no calibration files yet (" + paths[0] + ", " + paths[1] + ")";
   } else {
@@ -102,18 +109,24 @@ std::string StereoCalibration::load(const sensor_msgs::CameraInfo& left_fallback
     if (problem.empty()) {
       left = infos[0];
       right = infos[1];
+      generation = store_.linkedGeneration();
       source = "files '" + paths[0] + "' and '" + paths[1] + "'";
     } else {
-      // The previous calibration: the newest generation that is a valid pair.
+      // The previous calibration: the newest valid generation verified GOOD, else the newest
+      // valid one.
       source = "";
-      for (const auto& g : store_.generations()) {
-        sensor_msgs::CameraInfo gl, gr;
-        if (readGeneration(g, &gl, &gr).empty()) {
+      for (const bool verified_only : {true, false}) {
+        for (const auto& g : store_.generations()) {
+          sensor_msgs::CameraInfo gl, gr;
+          if ((verified_only && !g.verified) || !readGeneration(g, &gl, &gr).empty()) continue;
           left = gl;
           right = gr;
-          source = "generation " + std::to_string(g.number) + " in '" + store_.directory() + "'";
+          generation = g.number;
+          source = "generation " + std::to_string(g.number) + (g.verified ? " (verified GOOD)" : "") + " in '" +
+                   store_.directory() + "'";
           break;
         }
+        if (!source.empty()) break;
       }
       if (source.empty()) source = "the nominal calibration (no valid calibration found)";
       problem = "calibration files rejected: " + problem + "; running on " + source;
@@ -123,9 +136,39 @@ std::string StereoCalibration::load(const sensor_msgs::CameraInfo& left_fallback
   std::lock_guard<std::mutex> lock(state_mutex_);
   in_force_.left = left;
   in_force_.right = right;
+  in_force_.generation = generation;
   problem_ = problem;
   source_ = source;
   return source;
+}
+
+std::string StereoCalibration::markVerified(uint32_t epoch, bool* marked) {
+  if (marked) *marked = false;
+  std::lock_guard<std::mutex> write_lock(write_mutex_);  // no commit replaces the generation meanwhile
+  const InForce in_force = inForce();
+  if (in_force.epoch != epoch || in_force.generation == 0) return "";
+  for (const auto& existing : store_.generations()) {
+    if (existing.number != in_force.generation) continue;
+    if (existing.verified) return "";
+    try {
+      store_.markVerified(existing.number, "verified GOOD by the calibration health");
+    } catch (const std::exception& e) {
+      return e.what();
+    }
+    if (marked) *marked = true;
+    return "";
+  }
+  return "";
+}
+
+std::optional<StereoCalibration::Verified> StereoCalibration::newestVerified() const {
+  for (const auto& g : store_.generations()) {
+    Verified verified;
+    if (!g.verified || !readGeneration(g, &verified.left, &verified.right).empty()) continue;
+    verified.generation = g.number;
+    return verified;
+  }
+  return std::nullopt;
 }
 
 std::string StereoCalibration::discardStagedLocked(const std::string& why) {
@@ -181,6 +224,7 @@ std::string StereoCalibration::commitLocked(sensor_msgs::CameraInfo left, sensor
   in_force_.left = left;
   in_force_.right = right;
   in_force_.epoch += calls;
+  in_force_.generation = generation;
   problem_.clear();
   source_ = "set_camera_info, stored in " + *where;
   return "";
@@ -192,7 +236,7 @@ StereoCalibration::SetResult StereoCalibration::set(bool left, const sensor_msgs
   const std::string name = std::string(sideName(left)) + "/set_camera_info";
   const std::string other_name = std::string(sideName(!left)) + "/set_camera_info";
   const std::string other_in_force_name = std::string("the ") + sideName(!left) + " calibration in force";
-  const std::string problem = checkOne(info, name);
+  const std::string problem = checkOne(left, info, name);
   if (!problem.empty()) {
     result.message = "rejected: " + problem;
     result.discarded = discardStagedLocked("the " + name + " that followed it was rejected");

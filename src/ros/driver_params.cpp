@@ -42,6 +42,7 @@ DriverParams loadDriverParams(const ros::NodeHandle& private_nh, const std::stri
   p.right_camera_name = read.get("right_camera_name", p.right_camera_name);
   p.left_camera_info_url = read.get("left_camera_info_url", p.left_camera_info_url);
   p.right_camera_info_url = read.get("right_camera_info_url", p.right_camera_info_url);
+  p.device_config = read.get("device_config", p.device_config);
   p.pair_timeout_s = read.get("pair_timeout_s", p.pair_timeout_s);
   if (!(p.pair_timeout_s > 0.0) || p.pair_timeout_s > 3600.0)
     throw ecs::ConfigError("pair_timeout_s", "must be in (0, 3600] seconds");
@@ -58,6 +59,7 @@ DriverParams loadDriverParams(const ros::NodeHandle& private_nh, const std::stri
   if (p.backend == "sim") {
     p.sim_config = read.get("sim_config", default_sim_config);
     if (p.sim_config.empty()) throw ecs::ConfigError("sim_config", "missing");
+    if (p.device_config.empty()) p.device_config = p.sim_config;
   } else if (p.backend == "files") {
     p.files.dir = read.get("files_dir", "");
     p.files.left_glob = read.get("files_left_glob", p.files.left_glob);

@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <tuple>
 
 namespace embedded_calibration_stereo {
 
@@ -230,6 +231,19 @@ std::string checkCameraInfo(const sensor_msgs::CameraInfo& info, const std::stri
 std::string checkCameraInfo(const sensor_msgs::CameraInfo& info, const std::string& info_topic,
                             const sensor_msgs::Image& image) {
   return checkCameraInfo(info, info_topic, image.width, image.height);
+}
+
+std::string checkNominalFocal(const sensor_msgs::CameraInfo& info, const std::string& info_topic, double nominal_fx,
+                              double nominal_fy) {
+  for (const auto& [field, value, nominal] : {std::tuple<const char*, double, double>{"fx (K[0])", info.K[0], nominal_fx},
+                                              {"fy (K[4])", info.K[4], nominal_fy}}) {
+    const double ratio = value / nominal;
+    if (!(ratio >= 1.0 / kNominalFocalFactor && ratio <= kNominalFocalFactor))
+      return info_topic + ": K: " + field + " " + num(value) + " is " + num(ratio) +
+             " times the device's nominal " + num(nominal) + " (a calibration lies within a factor of " +
+             num(kNominalFocalFactor) + " of it)";
+  }
+  return "";
 }
 
 std::string checkRectifiedPair(const sensor_msgs::CameraInfo& left, const std::string& left_topic,

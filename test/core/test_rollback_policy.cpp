@@ -63,3 +63,27 @@ TEST(RollbackPolicy, NoVerdictNoDecisionAndRestoresAreNotTested) {
   EXPECT_FALSE(policy.start(3, false)) << "a restore is not tested";
   EXPECT_EQ(policy.decide(3, "A", CalibrationHealth::kBad).outcome, Outcome::kUndecided);
 }
+
+TEST(RollbackPolicy, AfterARestartTheCalibrationVerifiedBeforeIsTheReference) {
+  Policy policy;
+  // The driver starts with C (unverified, epoch 0); A was verified GOOD before the restart.
+  policy.start(0, true);
+  EXPECT_FALSE(policy.testing(0)) << "nothing to test against yet";
+  policy.seedEarlierRun("A");
+  ASSERT_TRUE(policy.reference());
+  EXPECT_EQ(policy.reference()->epoch, Policy::kEarlierRun);
+  ASSERT_EQ(policy.start(0, true)->calibration, "A");
+  const auto decision = policy.decide(0, "C", CalibrationHealth::kDegraded);
+  EXPECT_EQ(decision.outcome, Outcome::kRestore);
+  EXPECT_EQ(decision.reference->calibration, "A");
+  EXPECT_EQ(decision.reference->state, CalibrationHealth::kGood);
+}
+
+TEST(RollbackPolicy, AVerdictOfThisRunOutranksTheOneBeforeTheRestart) {
+  Policy policy;
+  policy.start(0, false);
+  policy.observe(0, "B", CalibrationHealth::kGood);
+  policy.seedEarlierRun("A");  // arrives late: this run has its own reference already
+  EXPECT_EQ(policy.reference()->calibration, "B");
+  EXPECT_EQ(policy.start(1, true)->calibration, "B");
+}

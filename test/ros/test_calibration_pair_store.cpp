@@ -267,6 +267,46 @@ TEST(StereoCalibrationLoad, OneCameraRecalibratedFallsBackToThePreviousGeneratio
   EXPECT_EQ(inForceFocal(c, false), 500.0);
 }
 
+// A calibration verified GOOD is marked on disk, kept through later commits, and is what runs
+// when the files are rejected at start-up (here a principal point far off the image, written
+// through the link), not the newer unverified generations.
+TEST(StereoCalibrationLoad, ARejectedFileFallsBackToTheNewestVerifiedGeneration) {
+  TempDir dir;
+  {
+    StereoCalibration c = makeCalibration(dir.path);
+    c.load(kNominal.first, kNominal.second);
+    bool marked = true;
+    EXPECT_EQ(c.markVerified(0, &marked), "");
+    EXPECT_FALSE(marked) << "the nominal pair in memory is no generation";
+    for (const double fx : {600.0, 610.0, 620.0, 630.0}) {
+      ASSERT_TRUE(c.set(true, pairWithFocal(fx).first).success);
+      ASSERT_TRUE(c.set(false, pairWithFocal(fx).second).success);
+      if (fx != 600.0) continue;
+      EXPECT_EQ(c.markVerified(c.inForce().epoch + 1, &marked), "");
+      EXPECT_FALSE(marked) << "an epoch not in force";
+      EXPECT_EQ(c.markVerified(c.inForce().epoch, &marked), "");
+      EXPECT_TRUE(marked);
+      EXPECT_EQ(c.markVerified(c.inForce().epoch, &marked), "");
+      EXPECT_FALSE(marked) << "marked once";
+    }
+    const auto verified = c.newestVerified();
+    ASSERT_TRUE(verified) << "the verified generation must survive three later commits";
+    EXPECT_EQ(verified->left.P[0], 600.0);
+  }
+  CameraInfo far = pairWithFocal(630).first;
+  far.P[6] += 100000;
+  std::string error;
+  ASSERT_TRUE(writeCalibrationFileAtomic(dir.path + "/far.yaml", "stereo_left", far, &error)) << error;
+  { std::ofstream(dir.path + "/stereo_left.yaml", std::ios::trunc) << fileBytes(dir.path + "/far.yaml"); }
+  StereoCalibration c = makeCalibration(dir.path);
+  c.load(kNominal.first, kNominal.second);
+  EXPECT_NE(c.problem().find("P[6]"), std::string::npos) << c.problem();
+  EXPECT_NE(c.problem().find("verified GOOD"), std::string::npos) << c.problem();
+  EXPECT_EQ(inForceFocal(c, true), 600.0) << "the newer valid generations (610, 620) were never verified";
+  EXPECT_EQ(inForceFocal(c, false), 600.0);
+  std::printf("  problem: %s\n", c.problem().c_str());
+}
+
 TEST(StereoCalibrationLoad, CorruptFilesWithoutAStoreRunOnTheNominalPair) {
   TempDir dir;
   { std::ofstream(dir.path + "/stereo_left.yaml") << "\x01\x02 not yaml {{{"; }

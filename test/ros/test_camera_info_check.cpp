@@ -313,6 +313,22 @@ TEST(CameraInfoCheck, RealLensesAndRectificationsPassTheLimitsRefuse) {
   }
 }
 
+// Focal lengths against the device's nominal ones: a unit 5 % off its drawing and a 3 % zoom
+// pass; 1.2x passes and 1.3x (or 1/1.3x) is refused, naming the field, the ratio and the limit.
+TEST(CameraInfoCheck, FocalLengthsNearTheNominalPassFarOnesAreRefused) {
+  const auto [left, right] = validPair();
+  const double fx = left.K[0], fy = left.K[4];
+  for (const double scale : {1.0, 1.05, 1 / 1.05, 1.2, 1 / 1.2})
+    EXPECT_EQ(checkNominalFocal(left, "l", fx / scale, fy / scale), "") << scale;
+  for (const double scale : {1.3, 1 / 1.3, 3.0}) {
+    const std::string problem = checkNominalFocal(left, "l", fx / scale, fy / scale);
+    EXPECT_NE(problem.find("l: K: fx (K[0])"), std::string::npos) << scale << ": " << problem;
+    EXPECT_NE(problem.find("1.25"), std::string::npos) << problem;
+  }
+  // fy alone far off.
+  EXPECT_NE(checkNominalFocal(left, "l", fx, fy / 1.4).find("fy (K[4])"), std::string::npos);
+}
+
 // Round-off between the two P (a file written with fewer digits) is accepted; image_geometry
 // compares exactly and aborts on it, which alignRectifiedPair prevents.
 TEST(CameraInfoCheck, RoundOffIsAcceptedAndAligned) {

@@ -64,6 +64,12 @@ TEST(CalibrationRefusals, BadFieldsAreRefusedAndNothingIsPersisted) {
       {"cy' far below", [](CameraInfo& i) { i.P[6] += 100000; }, "P[6]"},
       {"cx' off the image", [](CameraInfo& i) { i.P[2] += 5000; }, "P[2]"},
       {"cx off the image", [](CameraInfo& i) { i.K[2] += 5000; }, "K[2]"},
+      {"focal 1.3x nominal",
+       [](CameraInfo& i) {
+         for (const size_t k : {0, 4}) i.K[k] *= 1.3;
+         for (const size_t k : {0, 3, 5}) i.P[k] *= 1.3;
+       },
+       "fx (K[0]) "},
   };
   for (const auto& c : cases) {
     for (const std::string side : {"left", "right"}) {

@@ -7,10 +7,13 @@
 #include <cv_bridge/cv_bridge.h>
 #include <sensor_msgs/SetCameraInfo.h>
 
+#include <algorithm>
+
 #include <opencv2/calib3d.hpp>
 #include <opencv2/imgproc.hpp>
 
 #include "depth_test_utils.h"
+#include "embedded_calibration_stereo/DisparityCoverage.h"
 #include "driver_test_utils.h"
 
 using ecs_test::Collector;
@@ -53,6 +56,7 @@ void expectDisparityMatchesGroundTruth(const std::string& prefix, const std::str
   ros::NodeHandle nh;
   Collector<DisparityImage> disparity(nh, prefix + "disparity", 20);
   Collector<sensor_msgs::PointCloud2> points(nh, prefix + "points2", 20);
+  Collector<embedded_calibration_stereo::DisparityCoverage> coverages(nh, prefix + "disparity_coverage", 20);
   Collector<Image> depth(nh, "ground_truth/left/depth", 50);
   Collector<CameraInfo> left_info(nh, prefix + "left/" + info, 50), right_info(nh, prefix + "right/" + info, 50);
   // A disparity frame for which the depth and both CameraInfos of the same stamp arrived.
@@ -60,6 +64,7 @@ void expectDisparityMatchesGroundTruth(const std::string& prefix, const std::str
   Image::ConstPtr truth;
   CameraInfo::ConstPtr li, ri;
   sensor_msgs::PointCloud2::ConstPtr cloud;
+  embedded_calibration_stereo::DisparityCoverage::ConstPtr coverage;
   ASSERT_TRUE(disparity.waitFor(
       [&](const std::vector<DisparityImage::ConstPtr>& m) {
         for (const auto& d : m) {
@@ -67,7 +72,8 @@ void expectDisparityMatchesGroundTruth(const std::string& prefix, const std::str
           li = ecs_test::findByStamp(left_info.snapshot(), d->header.stamp);
           ri = ecs_test::findByStamp(right_info.snapshot(), d->header.stamp);
           cloud = ecs_test::findByStamp(points.snapshot(), d->header.stamp);
-          if (truth && li && ri && cloud) {
+          coverage = ecs_test::findByStamp(coverages.snapshot(), d->header.stamp);
+          if (truth && li && ri && cloud && coverage) {
             disp = d;
             return true;
           }
@@ -75,7 +81,15 @@ void expectDisparityMatchesGroundTruth(const std::string& prefix, const std::str
         return false;
       },
       20.0))
-      << "no disparity frame with matching ground truth, camera_info and points2";
+      << "no disparity frame with matching ground truth, camera_info, points2 and disparity_coverage";
+  // disparity_coverage: the fraction of the image's pixels with a disparity, counted here.
+  {
+    const float* d = reinterpret_cast<const float*>(disp->image.data.data());
+    const size_t n = disp->image.width * disp->image.height;
+    const size_t valid = std::count_if(d, d + n, [&](float v) { return v >= disp->min_disparity; });
+    EXPECT_NEAR(coverage->valid_fraction, double(valid) / n, 1e-6);
+    EXPECT_GT(coverage->valid_fraction, 0.5);
+  }
 
   image_geometry::StereoCameraModel model;
   ASSERT_TRUE(model.fromCameraInfo(li, ri));

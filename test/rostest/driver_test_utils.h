@@ -99,15 +99,16 @@ struct TempDir {
 
 constexpr const char* kDriverType = "embedded_calibration_stereo/CameraDriver";
 
-// Loads driver nodelets into this process (the test's own nodelet manager).
+// Loads driver nodelets (or others: `type`) into this process (the test's own nodelet manager).
 class InProcessManager {
  public:
   using Params = std::map<std::string, XmlRpc::XmlRpcValue>;
-  // Sets the private parameters of `name` and loads the driver; false when onInit failed.
-  bool load(const std::string& name, const Params& params) {
+  // Sets the private parameters of `name` and loads the nodelet; false when onInit failed.
+  bool load(const std::string& name, const Params& params, const std::string& type = kDriverType,
+            const ros::M_string& remappings = {}) {
     ros::param::del(name);
     for (const auto& p : params) ros::param::set(name + "/" + p.first, p.second);
-    return loader_.load(name, kDriverType, ros::M_string(), std::vector<std::string>());
+    return loader_.load(name, type, remappings, std::vector<std::string>());
   }
   bool unload(const std::string& name) { return loader_.unload(name); }
 

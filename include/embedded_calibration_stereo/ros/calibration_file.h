@@ -61,8 +61,11 @@ CalibrationFileState readCalibrationFileIfPresent(const std::string& path, senso
 // generation holding exact copies of what they showed, so that they show the same content at
 // every moment of that conversion too. Generation files take each URL file's extension
 // (.yaml, or .ini for the INI format).
-// commit() keeps the new generation, the one it replaces and the newest valid generation
-// before them (the previous calibration the driver falls back to), and deletes older ones.
+// A generation the calibration health verified GOOD carries a file `verified` (markVerified()):
+// the calibration a rollback or a rejected file falls back to, across restarts.
+// commit() keeps the new generation, the one it replaces, the newest valid generation before
+// them when neither of those is valid (the previous calibration the driver falls back to) and
+// the newest verified valid one, and deletes older ones.
 //
 // Test hook, inert unless set: with the environment variable ECS_TEST_CRASH_COMMIT_AT=k the
 // process kills itself (SIGKILL) right after the k-th durable step of a commit (steps 1-5
@@ -76,6 +79,8 @@ class CalibrationPairStore {
   struct Generation {
     unsigned number = 0;
     std::string directory, left_file, right_file;
+    std::string verified_file;  // present when the generation was verified GOOD
+    bool verified = false;      // verified_file exists
   };
 
   CalibrationPairStore(std::string left_path, std::string right_path, std::string left_camera_name,
@@ -89,6 +94,11 @@ class CalibrationPairStore {
   std::vector<Generation> generations() const;
   // The generation `current` points to; 0 when there is none.
   unsigned currentGeneration() const;
+  // The generation both URL files show: currentGeneration() when both are our links, else 0.
+  unsigned linkedGeneration() const;
+  // Marks generation `number` verified GOOD (its `verified` file, written atomically, holds
+  // `note`). Throws std::runtime_error naming the path and the system's reason.
+  void markVerified(unsigned number, const std::string& note) const;
 
   // Makes (left, right) the calibration of both URL files in one atomic step and returns the
   // new generation's number. `is_valid` tells which older generations can serve as a fallback.

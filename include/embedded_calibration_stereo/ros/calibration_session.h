@@ -126,8 +126,11 @@ struct UncommittedCalibration {
 // subscriber callback (the calibration in force at start-up), so the broadcaster is guarded.
 class CalibrationSession {
  public:
-  // `nh`: the head's namespace (the driver's services are looked up there).
-  CalibrationSession(ros::NodeHandle nh, CalibratorParams params, ecs::CalibrationDevice device);
+  // `nh`: the head's namespace (the driver's services are looked up there). `nominal`: the
+  // device description's cameras; a solve whose focal lengths lie far from theirs
+  // (checkNominalFocal) is not committed. None: no such check.
+  CalibrationSession(ros::NodeHandle nh, CalibratorParams params, ecs::CalibrationDevice device,
+                     std::optional<ecs::StereoRig> nominal = std::nullopt);
 
   // `left_info`/`right_info`: the calibration in force (null when none received yet);
   // `epoch`: its calibration_epoch. Commits unless `dry_run` or rejected. status.accepted is
@@ -161,7 +164,8 @@ class CalibrationSession {
   const std::vector<ecs::VirtualBoard>& boards() const { return boards_; }
 
  private:
-  // Why a pair fails the checks every consumer runs (stereo_input_check.h), or "".
+  // Why a pair fails the checks every consumer runs (stereo_input_check.h) or lies far from the
+  // nominal cameras, or "".
   std::string implausibleCandidate(const CommittedCalibration& infos) const;
   // Empty on success, otherwise why the commit failed. When only the right one was refused, a
   // left calibration the driver stored (a driver without pairs) is restored to `left_in_force`;
@@ -175,6 +179,7 @@ class CalibrationSession {
   ros::NodeHandle nh_;
   CalibratorParams params_;
   ecs::CalibrationDevice device_;
+  std::optional<ecs::StereoRig> nominal_;
   std::vector<ecs::VirtualBoard> boards_;
   ecs::BundleAdjuster adjuster_;
   ecs::QualityGate gate_;

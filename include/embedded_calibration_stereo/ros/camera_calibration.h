@@ -4,7 +4,8 @@
 //
 // - Validation: a calibration is refused with the reason when a consumer would drop it
 //   (stereo_input_check.h: finite K, R, P, D; positive focal lengths; R a rotation; the
-//   images' size; no binning or ROI) or when the OnlineCalibrator cannot model it (plumb_bob).
+//   images' size; no binning or ROI; principal points, P and distortion plausible; with a
+//   nominal rig, focal lengths near its own) or when the OnlineCalibrator cannot model it (plumb_bob).
 // - Pairs: a set_camera_info for one camera that changes its R or P (any field: the rectified
 //   pair moves), or whose P does not form a rectified pair with the other camera's (a stereo
 //   calibration sets left, then right), is staged: answered success with a status message
@@ -16,10 +17,13 @@
 // - Persistence: every commit writes both cameras' files through CalibrationPairStore (a new
 //   generation made current in one rename), then puts the pair in force with one epoch update:
 //   the capture thread reads pair and epoch from one snapshot (inForce()).
+// - Verified: markVerified() marks the generation in force verified GOOD on disk (the
+//   calibration health's verdict), once per epoch.
 // - Start-up: the URL files are used when both load and pass the checks as a pair; when either
 //   is corrupt, unreadable, missing beside an existing other one, or inconsistent, the newest
-//   valid generation of the store is used (the previous calibration), else the nominal
-//   calibration; problem() then says what was rejected and what runs instead.
+//   valid generation of the store that was verified GOOD is used, else the newest valid one (the
+//   previous calibration), else the nominal calibration; problem() then says what was rejected
+//   and what runs instead.
 //
 // Threading: set() and load() may run on any thread (serialised by write_mutex_, which is held
 // across disk writes); expireStaged() only tries that mutex (it skips while a commit runs);
@@ -32,6 +36,7 @@
 #include <optional>
 #include <string>
 
+#include "embedded_calibration_stereo/core/geometry/stereo_rig.h"
 #include "embedded_calibration_stereo/ros/calibration_file.h"
 
 namespace embedded_calibration_stereo {
@@ -46,8 +51,10 @@ class StereoCalibration {
 
   // Resolves both URLs. Throws ecs::ConfigError naming the URL parameter when a URL cannot be
   // resolved, or when both resolve to the same file. `width` x `height`: the cameras' images.
+  // `nominal`: the device description's cameras, whose focal lengths every calibration must be
+  // near (checkNominalFocal); none: no such check.
   StereoCalibration(const Camera& left, const Camera& right, uint32_t width, uint32_t height,
-                    double pair_timeout_s);
+                    double pair_timeout_s, std::optional<ecs::StereoRig> nominal = std::nullopt);
 
   // Loads the pair at start-up (see above); the fallbacks (the nominal calibration, or
   // uncalibrated messages carrying the image size) are used when there is no file at all or
@@ -69,9 +76,21 @@ class StereoCalibration {
 
   struct InForce {
     sensor_msgs::CameraInfo left, right;
-    uint32_t epoch = 0;  // accepted set_camera_info calls committed in this process
+    uint32_t epoch = 0;       // accepted set_camera_info calls committed in this process
+    unsigned generation = 0;  // the store's generation of the pair; 0: none (a fallback in memory)
   };
   InForce inForce() const;
+  // Marks the generation in force verified GOOD when `epoch` is still in force (a no-op when it
+  // is not, when it is no generation of the store, or when it is marked already). Returns "" or
+  // why the mark could not be written; *marked (optional) says whether it wrote one.
+  std::string markVerified(uint32_t epoch, bool* marked = nullptr);
+  struct Verified {
+    sensor_msgs::CameraInfo left, right;
+    unsigned generation = 0;
+  };
+  // The newest generation verified GOOD that is a valid pair; none when there is none.
+  std::optional<Verified> newestVerified() const;
+
   // The last calibration problem (start-up fallback, discarded staged calibration); "" after
   // a successful commit.
   std::string problem() const;
@@ -88,8 +107,9 @@ class StereoCalibration {
     Clock::time_point since;
   };
 
-  // "" when `info` can be put in force for one camera; `name` names it in the reason.
-  std::string checkOne(const sensor_msgs::CameraInfo& info, const std::string& name) const;
+  // "" when `info` can be put in force for the left (`left`) or right camera; `name` names it in
+  // the reason.
+  std::string checkOne(bool left, const sensor_msgs::CameraInfo& info, const std::string& name) const;
   // "" when the two form a valid pair, as loaded from the named files.
   std::string checkPair(const sensor_msgs::CameraInfo& left, const std::string& left_name,
                         const sensor_msgs::CameraInfo& right, const std::string& right_name) const;
@@ -106,6 +126,7 @@ class StereoCalibration {
   const Camera left_camera_, right_camera_;
   const uint32_t width_, height_;
   const std::chrono::duration<double> pair_timeout_;
+  const std::optional<ecs::StereoRig> nominal_;
   CalibrationPairStore store_;
 
   std::mutex write_mutex_;  // serialises load(), set() and expireStaged()

@@ -30,6 +30,9 @@ struct DriverParams {
   // camera's set_camera_info (a stereo calibration sets left, then right) before it is discarded.
   double pair_timeout_s = 10.0;
   std::string sim_config;               // path of sim_rig.yaml (sim backend)
+  // The device description (its `rig`: the nominal cameras); every calibration's focal lengths
+  // must lie near its (kNominalFocalFactor). Empty: sim_config with the sim backend, else none.
+  std::string device_config;
   ecs::LightScheduleConfig schedule;    // calibration_period_s, calibration_frames, settle_frames, trigger, ...
   FilesSourceParams files;
   V4l2SourceParams v4l2;

@@ -54,8 +54,19 @@ constexpr double kDistortionFieldLimit = 4.0;
 std::string checkCameraInfo(const sensor_msgs::CameraInfo& info, const std::string& info_topic, uint32_t width,
                             uint32_t height);
 // The same for the camera of `image`.
+
 std::string checkCameraInfo(const sensor_msgs::CameraInfo& info, const std::string& info_topic,
                             const sensor_msgs::Image& image);
+
+// A calibrated camera's focal lengths (K's fx, fy) lie within this factor of the device
+// description's nominal ones (device_config's cameras): lenses of one model differ by a few
+// percent, and a calibration a quarter away is another lens or a corrupt file.
+constexpr double kNominalFocalFactor = 1.25;
+
+// K's fx and fy of `info` within kNominalFocalFactor of `nominal_fx`, `nominal_fy` (a device
+// description's camera); "" when they are, or "<topic>: K: fx ...: <problem>".
+std::string checkNominalFocal(const sensor_msgs::CameraInfo& info, const std::string& info_topic, double nominal_fx,
+                              double nominal_fy);
 
 // Two CameraInfos, each passing checkCameraInfo, form a rectified stereo pair: same size, the
 // same fx', fy' and cy' in both P (within kRectifiedPairTolerancePx), the left P's Tx (P[3])

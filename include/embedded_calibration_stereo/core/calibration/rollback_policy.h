@@ -7,7 +7,8 @@
 // commits faster than verifications), the last one that passed before the chain. So a rollback
 // never restores a calibration nobody verified, nor one found worse.
 // A reference keeps the state of its latest verdict: under a rig that drifted, a new
-// calibration need only do better than the old one does now.
+// calibration need only do better than the old one does now. Until this run has a reference, the
+// calibration verified GOOD in an earlier run (kept on disk by the driver) is the reference.
 //
 // Threading: not thread-safe; the owner (the CalibrationHealth nodelet) uses it from one queue.
 #include <cstdint>
@@ -41,6 +42,16 @@ class RollbackPolicy {
     Outcome outcome = Outcome::kUndecided;
     std::optional<Reference> reference;  // kKept, kRestore: what it was tested against
   };
+
+  // The epoch of a reference from an earlier run.
+  static constexpr uint32_t kEarlierRun = UINT32_MAX;
+
+  // A calibration verified GOOD in an earlier run: the reference while this run has none.
+  void seedEarlierRun(const Calibration& calibration) {
+    if (!latest_) latest_ = Reference{kEarlierRun, calibration, CalibrationHealth::kGood};
+  }
+  // The calibration a new one would be tested against now, if any.
+  const std::optional<Reference>& reference() const { return latest_; }
 
   // A calibration comes into force as `epoch`; `test`: it must pass a test (rollback on, and not
   // a restore). Returns its reference when it is tested.
