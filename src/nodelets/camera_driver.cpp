@@ -37,6 +37,7 @@
 #include "embedded_calibration_stereo/ros/frame_source.h"
 #include "embedded_calibration_stereo/ros/head_pose_truth.h"
 #include "embedded_calibration_stereo/ros/light_backend.h"
+#include "embedded_calibration_stereo/ros/stereo_input_check.h"
 
 namespace embedded_calibration_stereo {
 
@@ -341,10 +342,12 @@ class CameraDriverNodelet : public nodelet::Nodelet {
     res.success = result.success;
     res.status_message = result.message;
     if (!result.discarded.empty()) NODELET_ERROR("CameraDriver: %s", result.discarded.c_str());
-    if (!result.success)
-      NODELET_ERROR("CameraDriver: %s set_camera_info refused, calibration unchanged: %s", side,
-                    result.message.c_str());
-    else
+    if (!result.success) {
+      // Throttled per message: a caller in a loop must not flood the log (each call is answered).
+      if (refusals_.shouldReport(result.message))
+        NODELET_ERROR("CameraDriver: %s set_camera_info refused, calibration unchanged: %s", side,
+                      result.message.c_str());
+    } else
       NODELET_INFO("CameraDriver: %s calibration %s, epoch %u", side, result.message.c_str(),
                    calibration_->inForce().epoch);
     return true;
@@ -425,6 +428,7 @@ class CameraDriverNodelet : public nodelet::Nodelet {
 
   image_transport::CameraPublisher left_pub_, right_pub_;
   ros::Publisher mode_pub_, verified_pub_;
+  ErrorThrottle refusals_{5.0};  // set_camera_info refusals, per message (thread-safe)
   std::optional<uint32_t> verified_epoch_;  // the health's callback only: the last epoch marked (or not marked)
   ros::Publisher gt_left_info_pub_, gt_right_info_pub_, gt_observations_pub_;
   image_transport::Publisher gt_left_scene_pub_, gt_right_scene_pub_, gt_depth_pub_;

@@ -58,6 +58,7 @@
 #include "embedded_calibration_stereo/ros/lazy_synced_input.h"
 #include "embedded_calibration_stereo/ros/light_backend.h"
 #include "embedded_calibration_stereo/ros/parameter_reader.h"
+#include "embedded_calibration_stereo/ros/stereo_input_check.h"
 #include "embedded_calibration_stereo/ros/tracker_teaching.h"
 
 namespace embedded_calibration_stereo {
@@ -501,8 +502,9 @@ class LightControllerNodelet : public nodelet::Nodelet {
     res.success = result.success;
     res.status_message = result.message;
     if (!result.success) {
-      NODELET_ERROR("LightController: %s set_camera_info failed, calibration unchanged: %s", side,
-                    result.message.c_str());
+      if (refusals_.shouldReport(result.message))  // per message: a caller in a loop must not flood the log
+        NODELET_ERROR("LightController: %s set_camera_info failed, calibration unchanged: %s", side,
+                      result.message.c_str());
       return true;
     }
     if (result.message.rfind("staged:", 0) == 0) {  // waits for the other camera: nothing written yet
@@ -605,6 +607,7 @@ class LightControllerNodelet : public nodelet::Nodelet {
   // calibration_store "file": both cameras' files, committed as one pair (made at the first
   // set_camera_info; callback-queue thread only).
   std::unique_ptr<StereoCalibration> calibration_;
+  ErrorThrottle refusals_{5.0};  // set_camera_info refusals, per message (thread-safe)
   // How long a calibration of one camera waits for the other camera's (as the CameraDriver's default).
   static constexpr double kPairTimeoutS = 10.0;
   cv::Mat masks_[2];

@@ -47,6 +47,7 @@
 #include "embedded_calibration_stereo/CalibrationHealth.h"
 #include "embedded_calibration_stereo/CalibrationMode.h"
 #include "embedded_calibration_stereo/Recalibrate.h"
+#include "embedded_calibration_stereo/core/calibration/repeated_observations.h"
 #include "embedded_calibration_stereo/core/geometry/config_error.h"
 #include "embedded_calibration_stereo/core/geometry/config_io.h"
 #include "embedded_calibration_stereo/ros/calibration_session.h"
@@ -301,7 +302,9 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
   // A whole window's observation (window_observations): solved at once when auto_calibrate. It
   // arrives seconds after its window, so it is neither matched with calibration_mode nor passed
   // through the stamp guard (which would hold it against the other inputs' newer stamps).
-  void onWindowObservation(const StereoPatternObservationConstPtr& msg) {
+  void onWindowObservation(const ros::MessageEvent<StereoPatternObservation const>& event) {
+    const StereoPatternObservationConstPtr msg = event.getMessage();
+    const std::string& publisher = event.getPublisherName();
     std::string why;
     std::optional<ecs::StereoObservation> valid = validObservation(*msg, &why);
     if (!valid) {
@@ -312,6 +315,13 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
     ecs::StereoObservation observation = std::move(*valid);
     {
       std::lock_guard<std::mutex> lock(mutex_);
+      if (repeated_windows_.repeats(observation)) {  // before the stamp: a copy must not move it on
+        NODELET_WARN_THROTTLE(5.0,
+                              "OnlineCalibrator: window observation dropped on %s (from %s): a copy of one seen "
+                              "before (the same corners and scene matches); it teaches nothing new",
+                              window_observations_sub_.getTopic().c_str(), publisher.c_str());
+        return;
+      }
       const ros::Time previous = last_window_observation_stamp_;
       if (!stampAfterPrevious(msg->header.stamp, &last_window_observation_stamp_)) {
         NODELET_WARN_THROTTLE(5.0,
@@ -855,6 +865,7 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
   bool awaiting_commit_ = false;  // the worker waits for the driver's frame of a commit
   ros::Time last_observation_stamp_;  // newest observation accepted (zero: none yet)
   ros::Time last_window_observation_stamp_;  // newest window observation accepted (zero: none yet)
+  ecs::RepeatedObservations repeated_windows_;  // the latest window observations' contents
   uint64_t window_observations_ = 0;         // accepted
   std::deque<std::pair<ros::Time, ecs::StereoObservation>> pending_;
   std::vector<ecs::StereoObservation> window_;
