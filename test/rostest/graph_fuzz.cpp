@@ -1,13 +1,19 @@
 // rostest: fuzzing the whole head (graph_fuzz.test). Beside the driver's own frames, this node
 // publishes copies of the graph's input messages with random fields corrupted, from a fixed
 // seed, for a bounded number of rounds and time, on every input topic:
-//   left|right/image_raw, calibration_mode (tracker, separator, calibrator),
-//   left|right/camera_info (rectifier, disparity, calibrator), calibration/observations
-//   (calibrator), left|right/image_scene (rectifier), left|right/image_rect (disparity).
+//   left|right/image_raw, calibration_mode (tracker, separator, health, calibrator),
+//   left|right/camera_info (rectifier, disparity, health, calibrator), calibration/observations
+//   (calibrator, health), calibration/window_observations (calibrator), left|right/image_scene
+//   (rectifier), left|right/image_rect (disparity), disparity_coverage (health),
+//   and the driver's left|right/set_camera_info.
 // A round publishes either one message on a random topic or a whole set of one consumer under
 // one stamp (so that corrupted sets pass the synchronisers and reach the nodelets' code):
-// images + mode, images + camera_info, mode + observations. Stamps: the driver's latest, near
-// it, far ahead, far behind, zero or the largest.
+// images + mode, images + camera_info, mode + observations; or a burst of calibration_mode
+// stamped ahead within the stamp tolerance; or a set_camera_info of the calibration in force
+// with a principal point moved (off the image, or cx' alone: half a pair), a focal length far
+// from the device's, or random corruptions. CameraInfos also get principal points far off the
+// image. Stamps: the driver's latest, near it, ahead within the tolerance, far ahead, far
+// behind, zero or the largest.
 // Before: a 3 % zoom is committed, so that calibration files exist. After: the manager still
 // runs and answers, disparity flows, the calibrator answers a request, and the calibration files
 // parse (camera_calibration_parsers) as a consistent stereo pair (one image size, one fx', fy'
@@ -18,6 +24,7 @@
 #include <sensor_msgs/Image.h>
 #include <stereo_msgs/DisparityImage.h>
 
+#include <atomic>
 #include <cmath>
 #include <cstdio>
 #include <limits>
@@ -25,9 +32,12 @@
 #include <random>
 #include <set>
 
+#include <sensor_msgs/SetCameraInfo.h>
+
 #include "driver_test_utils.h"
 #include "embedded_calibration_stereo/CalibrationMode.h"
 #include "embedded_calibration_stereo/CalibrationStatus.h"
+#include "embedded_calibration_stereo/DisparityCoverage.h"
 #include "embedded_calibration_stereo/Recalibrate.h"
 #include "embedded_calibration_stereo/SetRigDrift.h"
 #include "embedded_calibration_stereo/StereoPatternObservation.h"
@@ -102,12 +112,34 @@ class DisparityStamps {
   size_t count_ = 0;
 };
 
+// The driver's camera_info messages whose principal point lies off the image (none may).
+class OffImageCount {
+ public:
+  OffImageCount(ros::NodeHandle& nh, const std::string& topic)
+      : sub_(nh.subscribe(topic, 30, &OffImageCount::add, this)) {}
+  ~OffImageCount() { sub_.shutdown(); }
+  int count() const { return count_; }
+
+ private:
+  void add(const ros::MessageEvent<CameraInfo const>& event) {
+    if (event.getPublisherName() == ros::this_node::getName()) return;
+    const CameraInfo& c = *event.getMessage();
+    const auto inside = [](double v, double size) { return v >= 0.0 && v <= size; };
+    if (!inside(c.K[2], c.width) || !inside(c.K[5], c.height) || !inside(c.P[2], c.width) || !inside(c.P[6], c.height))
+      ++count_;
+  }
+  ros::Subscriber sub_;
+  std::atomic<int> count_{0};
+};
+
 struct Fixture {
   ros::NodeHandle nh;
+  OffImageCount off_image_left{nh, "left/camera_info"}, off_image_right{nh, "right/camera_info"};
   Latest<Image> left_raw{nh, "left/image_raw"}, right_raw{nh, "right/image_raw"};
   Latest<CameraInfo> left_info{nh, "left/camera_info"}, right_info{nh, "right/camera_info"};
   Latest<CalibrationMode> mode{nh, "calibration_mode"};
   Latest<StereoPatternObservation> observations{nh, "calibration/observations"};
+  Latest<StereoPatternObservation> windows{nh, "calibration/window_observations"};
   DisparityStamps disparity{nh};
   Collector<CalibrationStatus> status{nh, "calibration/status"};
   ros::Publisher pub_left_raw = nh.advertise<Image>("left/image_raw", 20);
@@ -120,6 +152,8 @@ struct Fixture {
   ros::Publisher pub_right_info = nh.advertise<CameraInfo>("right/camera_info", 20);
   ros::Publisher pub_mode = nh.advertise<CalibrationMode>("calibration_mode", 20);
   ros::Publisher pub_observations = nh.advertise<StereoPatternObservation>("calibration/observations", 20);
+  ros::Publisher pub_windows = nh.advertise<StereoPatternObservation>("calibration/window_observations", 20);
+  ros::Publisher pub_coverage = nh.advertise<embedded_calibration_stereo::DisparityCoverage>("disparity_coverage", 20);
 };
 
 Fixture* fixture = nullptr;
@@ -155,6 +189,7 @@ class Corrupter {
       case 3: return ros::Time(chance(0.5) ? std::numeric_limits<uint32_t>::max() : std::numeric_limits<int32_t>::max(), 0);
       case 4: return now + ros::Duration(std::uniform_real_distribution<double>(-0.5, 0.5)(rng_));
       case 5: return now;  // the stamp of a live frame
+      case 6: return now + ros::Duration(std::uniform_real_distribution<double>(0.5, 1.9)(rng_));  // within tolerance
       default: return now + ros::Duration(uniform(1, 3) * kFramePeriodS);
     }
   }
@@ -179,7 +214,15 @@ class Corrupter {
   }
 
   void corrupt(CameraInfo* m) {
-    switch (uniform(0, 9)) {
+    switch (uniform(0, 11)) {
+      case 10: {  // a principal point off the image, K's and P's alike (no pair check sees it)
+        const double shift = pick<double>({5000.0, -5000.0, 100000.0, 400.0});
+        const size_t k = chance(0.5) ? 2 : 5;
+        m->K[k] += shift;
+        m->P[k == 2 ? 2 : 6] += shift;
+        break;
+      }
+      case 11: m->P[2] += pick<double>({4.0, -30.0, 5000.0}); break;  // cx' alone
       case 0: m->K[static_cast<size_t>(uniform(0, 8))] = oddDouble(); break;
       case 1: m->P[static_cast<size_t>(uniform(0, 11))] = oddDouble(); break;
       case 2: m->R[static_cast<size_t>(uniform(0, 8))] = oddDouble(); break;
@@ -215,6 +258,12 @@ class Corrupter {
   }
 
   void corrupt(StereoPatternObservation* m) {
+    if (chance(0.15)) {  // the scene correspondences of a window observation
+      if (m->scene.empty() || chance(0.3)) m->scene.resize(pick<size_t>({0, 1, 5000}));
+      for (auto& match : m->scene)
+        if (chance(0.2)) (chance(0.5) ? match.left_u : match.right_v) = oddFloat();
+      return;
+    }
     auto& side = chance(0.5) ? m->left : m->right;
     if (side.empty() || chance(0.1)) {
       side.resize(pick<size_t>({0, 1, 6, 200}));
@@ -248,6 +297,11 @@ class Corrupter {
     }
   }
 
+  // A stamp 0.5-1.9 s after the driver's latest `now`: within the stamp tolerance (2 s).
+  ros::Time aheadWithinTolerance(const ros::Time& now) {
+    return now + ros::Duration(std::uniform_real_distribution<double>(0.5, 1.9)(rng_));
+  }
+
   // A copy of `base` under `stamp`, with 1-3 corruptions with probability `p`.
   template <class M>
   boost::shared_ptr<M> variant(const M& base, const ros::Time& stamp, double p) {
@@ -261,6 +315,76 @@ class Corrupter {
  private:
   std::mt19937 rng_;
 };
+
+// set_camera_info calls changing the calibration in force: a principal point far off the image
+// on both cameras alike (a consistent pair), or on one camera: cx' alone (half a pair), focal
+// lengths 1.3x the device's, or random corruptions. Returns the calls the driver put in force
+// at once (not staged).
+int callSetCameraInfo(Corrupter& fuzz, const CameraInfo& left_info, const CameraInfo& right_info) {
+  const int kind = fuzz.uniform(0, 3);
+  std::vector<std::pair<std::string, CameraInfo>> calls;
+  if (kind == 0) {
+    for (const bool left : {true, false}) {
+      CameraInfo c = left ? left_info : right_info;
+      c.K[5] += 100000;
+      c.P[6] += 100000;
+      calls.emplace_back(left ? "left/set_camera_info" : "right/set_camera_info", c);
+    }
+  } else {
+    const bool left = fuzz.chance(0.5);
+    CameraInfo c = left ? left_info : right_info;
+    if (kind == 1) {
+      c.P[2] += 4;
+    } else if (kind == 2) {
+      for (const size_t k : {0, 4}) c.K[k] *= 1.3;
+      for (const size_t k : {0, 3, 5}) c.P[k] *= 1.3;
+    } else {
+      for (int i = fuzz.uniform(1, 3); i > 0; --i) fuzz.corrupt(&c);
+    }
+    calls.emplace_back(left ? "left/set_camera_info" : "right/set_camera_info", c);
+  }
+  int in_force = 0;
+  for (const auto& [service, info] : calls) {
+    sensor_msgs::SetCameraInfo srv;
+    srv.request.camera_info = info;
+    if (ros::service::call(service, srv) && srv.response.success && srv.response.status_message.rfind("staged:", 0) != 0)
+      ++in_force;
+  }
+  return in_force;
+}
+
+// The inputs of a user or another node (rounds of group 10-13): a burst of calibration_mode
+// stamped ahead within the tolerance, a set_camera_info, a window observation (a copy or
+// corrupted), a disparity_coverage with odd values. Returns the messages sent.
+int outsideRound(Corrupter& fuzz, Fixture& f, int group, const ros::Time& stamp, const CalibrationMode& mode,
+                 const CameraInfo& left_info, const CameraInfo& right_info, const StereoPatternObservation& observations,
+                 int* accepted) {
+  if (group == 10) {
+    for (int i = 0; i < 5; ++i) {
+      CalibrationMode m = mode;
+      m.header.stamp = fuzz.aheadWithinTolerance(mode.header.stamp);
+      m.light_on = fuzz.chance(0.5);
+      m.settled = fuzz.chance(0.5);
+      f.pub_mode.publish(m);
+    }
+    return 5;
+  }
+  if (group == 11) {
+    *accepted += callSetCameraInfo(fuzz, left_info, right_info);
+    return 1;
+  }
+  if (group == 12) {
+    const auto window = f.windows.get();
+    f.pub_windows.publish(fuzz.variant(window ? *window : observations, stamp, 0.7));
+    return 1;
+  }
+  embedded_calibration_stereo::DisparityCoverage coverage;
+  coverage.header.stamp = stamp;
+  coverage.valid_fraction = static_cast<float>(
+      fuzz.pick<double>({std::numeric_limits<double>::quiet_NaN(), -1.0, 2.0, 0.0, 0.5, 1e30}));
+  f.pub_coverage.publish(coverage);
+  return 1;
+}
 
 bool sameValue(double a, double b) { return std::abs(a - b) <= 1e-6 * std::max(1.0, std::abs(b)); }
 
@@ -288,7 +412,7 @@ TEST(GraphFuzz, CorruptedInputsOnEveryTopicLeaveTheHeadRunningAndItsCalibrationC
   Corrupter fuzz(static_cast<unsigned>(seed));
   Fixture& f = *fixture;
   const ros::WallTime start = ros::WallTime::now();
-  int rounds = 0, messages = 0;
+  int rounds = 0, messages = 0, accepted = 0;
   for (; rounds < kRounds && (ros::WallTime::now() - start).toSec() < kFuzzSeconds; ++rounds) {
     const auto left_raw = f.left_raw.get(), right_raw = f.right_raw.get();
     const auto left_info = f.left_info.get(), right_info = f.right_info.get();
@@ -296,7 +420,7 @@ TEST(GraphFuzz, CorruptedInputsOnEveryTopicLeaveTheHeadRunningAndItsCalibrationC
     const auto observations = f.observations.get();
     ASSERT_TRUE(left_raw && right_raw && left_info && right_info && mode && observations);
     const ros::Time stamp = fuzz.stamp(mode->header.stamp);
-    const int group = fuzz.uniform(0, 9);
+    const int group = fuzz.uniform(0, 13);
     if (group <= 1) {  // tracker and separator: images + mode
       f.pub_left_raw.publish(fuzz.variant(*left_raw, stamp, 0.5));
       f.pub_right_raw.publish(fuzz.variant(*right_raw, stamp, 0.5));
@@ -315,6 +439,8 @@ TEST(GraphFuzz, CorruptedInputsOnEveryTopicLeaveTheHeadRunningAndItsCalibrationC
       f.pub_mode.publish(fuzz.variant(on, stamp, 0.2));
       f.pub_observations.publish(fuzz.variant(*observations, stamp, 0.8));
       messages += 2;
+    } else if (group >= 10) {  // a user's or another node's inputs
+      messages += outsideRound(fuzz, f, group, stamp, *mode, *left_info, *right_info, *observations, &accepted);
     } else {  // one message on one topic
       switch (fuzz.uniform(0, 9)) {
         case 0: f.pub_left_raw.publish(fuzz.variant(*left_raw, stamp, 1.0)); break;
@@ -330,8 +456,8 @@ TEST(GraphFuzz, CorruptedInputsOnEveryTopicLeaveTheHeadRunningAndItsCalibrationC
     }
     ros::WallDuration(kRoundPeriodS).sleep();  // pacing the publisher, not synchronisation
   }
-  std::printf("fuzz: %d rounds, %d messages in %.1f s (seed %u)\n", rounds, messages,
-              (ros::WallTime::now() - start).toSec(), static_cast<unsigned>(seed));
+  std::printf("fuzz: %d rounds, %d messages in %.1f s (seed %u); %d set_camera_info calls put in force at once\n",
+              rounds, messages, (ros::WallTime::now() - start).toSec(), static_cast<unsigned>(seed), accepted);
   ASSERT_TRUE(ecs_test::processRuns(manager)) << "the nodelet manager died";
 
   // The manager answers (its XML-RPC), disparity flows.
@@ -349,6 +475,8 @@ TEST(GraphFuzz, CorruptedInputsOnEveryTopicLeaveTheHeadRunningAndItsCalibrationC
               recalibrate.response.success ? "success" : "false", (ros::WallTime::now() - asked).toSec(),
               recalibrate.response.message.c_str());
   EXPECT_TRUE(ecs_test::processRuns(manager)) << "the nodelet manager died";
+  EXPECT_EQ(f.off_image_left.count() + f.off_image_right.count(), 0)
+      << "the driver published a calibration with a principal point off the image";
 
   // The calibration files: both parse and form one stereo pair, the one the driver publishes.
   std::string dir;
