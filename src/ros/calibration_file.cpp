@@ -178,6 +178,11 @@ class CrashHook {
   int step_ = 0;
 };
 
+void removeQuietly(const std::string& dir) {
+  std::error_code ignored;
+  std::filesystem::remove_all(dir, ignored);
+}
+
 }  // namespace
 
 bool resolveCalibrationUrl(const std::string& url, const std::string& camera_name,
@@ -350,6 +355,35 @@ void CalibrationPairStore::linkUrlFile(bool left) const {
   replaceWithSymlink(path, linkTarget(left));
 }
 
+void CalibrationPairStore::prune(unsigned newest, std::set<unsigned> keep,
+                                 const std::function<bool(const Generation&)>& is_valid) const {
+  const auto valid = [&](unsigned number) { return number > 0 && is_valid && is_valid(generation(number)); };
+  const bool replaced_valid = std::any_of(keep.begin(), keep.end(), [&](unsigned n) { return n != newest && valid(n); });
+  if (is_valid && !replaced_valid) {  // the previous calibration the driver falls back to
+    for (const Generation& older : generations()) {
+      if (older.number < newest && !keep.count(older.number) && is_valid(older)) {
+        keep.insert(older.number);
+        break;
+      }
+    }
+  }
+  for (const Generation& older : generations()) {  // the calibration a rollback goes back to
+    if (older.number < newest && older.verified && (!is_valid || is_valid(older))) {
+      keep.insert(older.number);
+      break;
+    }
+  }
+  for (const Generation& older : generations())
+    if (!keep.count(older.number)) removeQuietly(older.directory);
+  if (DIR* dir = ::opendir(directory_.c_str())) {
+    std::vector<std::string> stale;
+    while (const dirent* entry = ::readdir(dir))
+      if (std::string(entry->d_name).rfind("current.tmp.", 0) == 0) stale.push_back(directory_ + "/" + entry->d_name);
+    ::closedir(dir);
+    for (const std::string& path : stale) ::unlink(path.c_str());
+  }
+}
+
 unsigned CalibrationPairStore::commit(const sensor_msgs::CameraInfo& left, const sensor_msgs::CameraInfo& right,
                                       const std::function<bool(const Generation&)>& is_valid) {
   CrashHook hook;
@@ -363,10 +397,6 @@ unsigned CalibrationPairStore::commit(const sensor_msgs::CameraInfo& left, const
     if (::mkdir(g.directory.c_str(), 0755) != 0)
       throw std::runtime_error(errnoText("cannot create directory '" + g.directory + "'"));
     return g;
-  };
-  const auto removeQuietly = [](const std::string& dir) {
-    std::error_code ignored;
-    std::filesystem::remove_all(dir, ignored);
   };
 
   // 1. URL files that are not yet our links become links, their content unchanged: a
@@ -422,31 +452,7 @@ unsigned CalibrationPairStore::commit(const sensor_msgs::CameraInfo& left, const
   //    neither of those it replaced is a valid pair (the driver fell back from a broken one), the
   //    newest valid one before them.
   //    Leftovers of crashed commits (unfinished generations, temporary links) go too.
-  std::set<unsigned> keep = {g.number, replaced, old_current};
-  const auto valid = [&](unsigned number) { return number > 0 && is_valid && is_valid(generation(number)); };
-  if (is_valid && !valid(replaced) && !valid(old_current)) {
-    for (const Generation& older : generations()) {
-      if (older.number < g.number && !keep.count(older.number) && is_valid(older)) {
-        keep.insert(older.number);
-        break;
-      }
-    }
-  }
-  for (const Generation& older : generations()) {  // the calibration a rollback goes back to
-    if (older.number < g.number && older.verified && (!is_valid || is_valid(older))) {
-      keep.insert(older.number);
-      break;
-    }
-  }
-  for (const Generation& older : generations())
-    if (!keep.count(older.number)) removeQuietly(older.directory);
-  if (DIR* dir = ::opendir(directory_.c_str())) {
-    std::vector<std::string> stale;
-    while (const dirent* entry = ::readdir(dir))
-      if (std::string(entry->d_name).rfind("current.tmp.", 0) == 0) stale.push_back(directory_ + "/" + entry->d_name);
-    ::closedir(dir);
-    for (const std::string& path : stale) ::unlink(path.c_str());
-  }
+  prune(g.number, {g.number, replaced, old_current}, is_valid);
   hook.stepDone();
   return g.number;
 }

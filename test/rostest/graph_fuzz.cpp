@@ -390,6 +390,31 @@ bool sameValue(double a, double b) { return std::abs(a - b) <= 1e-6 * std::max(1
 
 }  // namespace
 
+// The calibration files in `dir`: both parse and form one stereo pair, the one the driver
+// publishes.
+void expectFilesArePublishedPair(Fixture& f, const std::string& dir) {
+  std::string left_name, right_name;
+  CameraInfo left, right;
+  ASSERT_TRUE(camera_calibration_parsers::readCalibration(dir + "/left.yaml", left_name, left));
+  ASSERT_TRUE(camera_calibration_parsers::readCalibration(dir + "/right.yaml", right_name, right));
+  EXPECT_EQ(left.width, right.width);
+  EXPECT_EQ(left.height, right.height);
+  EXPECT_TRUE(sameValue(left.P[0], right.P[0])) << "fx' " << left.P[0] << " vs " << right.P[0];
+  EXPECT_TRUE(sameValue(left.P[5], right.P[5])) << "fy' " << left.P[5] << " vs " << right.P[5];
+  EXPECT_TRUE(sameValue(left.P[6], right.P[6])) << "cy' " << left.P[6] << " vs " << right.P[6];
+  EXPECT_EQ(left.P[3], 0.0);
+  EXPECT_LT(right.P[3], 0.0) << "right Tx = -fx' * baseline";
+  for (const CameraInfo* info : {&left, &right})
+    for (double v : info->K) EXPECT_TRUE(std::isfinite(v));
+  // What the driver publishes now (this node published nothing since).
+  ASSERT_TRUE(f.disparity.waitForCount(f.disparity.count() + 2, 5.0));
+  const auto published_left = f.left_info.get(), published_right = f.right_info.get();
+  for (size_t i = 0; i < 12; ++i) {
+    EXPECT_TRUE(sameValue(published_left->P[i], left.P[i])) << "left P[" << i << "]";
+    EXPECT_TRUE(sameValue(published_right->P[i], right.P[i])) << "right P[" << i << "]";
+  }
+}
+
 TEST(GraphFuzz, Setup) {
   ASSERT_TRUE(ros::service::waitForService("calibration/recalibrate", 30000));
   ASSERT_TRUE(fixture->disparity.waitForCount(10, 40.0)) << "no disparity";
@@ -478,29 +503,9 @@ TEST(GraphFuzz, CorruptedInputsOnEveryTopicLeaveTheHeadRunningAndItsCalibrationC
   EXPECT_EQ(f.off_image_left.count() + f.off_image_right.count(), 0)
       << "the driver published a calibration with a principal point off the image";
 
-  // The calibration files: both parse and form one stereo pair, the one the driver publishes.
   std::string dir;
   ASSERT_TRUE(ros::param::get("~calibration_dir", dir));
-  std::string left_name, right_name;
-  CameraInfo left, right;
-  ASSERT_TRUE(camera_calibration_parsers::readCalibration(dir + "/left.yaml", left_name, left));
-  ASSERT_TRUE(camera_calibration_parsers::readCalibration(dir + "/right.yaml", right_name, right));
-  EXPECT_EQ(left.width, right.width);
-  EXPECT_EQ(left.height, right.height);
-  EXPECT_TRUE(sameValue(left.P[0], right.P[0])) << "fx' " << left.P[0] << " vs " << right.P[0];
-  EXPECT_TRUE(sameValue(left.P[5], right.P[5])) << "fy' " << left.P[5] << " vs " << right.P[5];
-  EXPECT_TRUE(sameValue(left.P[6], right.P[6])) << "cy' " << left.P[6] << " vs " << right.P[6];
-  EXPECT_EQ(left.P[3], 0.0);
-  EXPECT_LT(right.P[3], 0.0) << "right Tx = -fx' * baseline";
-  for (const CameraInfo* info : {&left, &right})
-    for (double v : info->K) EXPECT_TRUE(std::isfinite(v));
-  // What the driver publishes now (this node published nothing since).
-  ASSERT_TRUE(f.disparity.waitForCount(f.disparity.count() + 2, 5.0));
-  const auto published_left = f.left_info.get(), published_right = f.right_info.get();
-  for (size_t i = 0; i < 12; ++i) {
-    EXPECT_TRUE(sameValue(published_left->P[i], left.P[i])) << "left P[" << i << "]";
-    EXPECT_TRUE(sameValue(published_right->P[i], right.P[i])) << "right P[" << i << "]";
-  }
+  expectFilesArePublishedPair(f, dir);
 }
 
 int main(int argc, char** argv) {

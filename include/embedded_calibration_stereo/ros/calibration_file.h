@@ -16,6 +16,7 @@
 #include <sensor_msgs/CameraInfo.h>
 
 #include <functional>
+#include <set>
 #include <string>
 #include <vector>
 
@@ -113,6 +114,9 @@ class CalibrationPairStore {
   bool isOurLink(bool left) const;
   void makeCurrent(unsigned number) const;
   void linkUrlFile(bool left) const;
+  // Deletes the generations a commit of `newest` does not keep (see above) besides `keep`, and
+  // leftovers of crashed commits (temporary links).
+  void prune(unsigned newest, std::set<unsigned> keep, const std::function<bool(const Generation&)>& is_valid) const;
 
   std::string left_path_, right_path_;
   std::string left_camera_name_, right_camera_name_;
