@@ -537,9 +537,10 @@ def plot_errors(path, timeline, events, epochs, health_steps=()):
     ax.grid(True, axis="y", alpha=0.3)
     ax.legend(loc="center left", bbox_to_anchor=(1.01, 0.5), fontsize=8)
     axes[-1].set_xlabel("time since the first frame (s)")
-    fig.suptitle("Accuracy for depth of the published calibration: true (against the simulator's truth) "
-                 "and predicted by the calibrator (log scale, below 1e-3 drawn at 1e-3)", y=0.995)
-    fig.tight_layout()
+    fig.suptitle("Accuracy for depth of the published calibration\n"
+                 "true (against the simulator's truth) and predicted by the calibrator; log scale, "
+                 "below 1e-3 drawn at 1e-3", fontsize=11)
+    fig.tight_layout(rect=(0.0, 0.0, 1.0, 0.96))  # room for the two-line title
     fig.savefig(path, dpi=90)
     plt.close(fig)
     return True
@@ -673,7 +674,7 @@ def write_results(out, mon, timeline, script, epochs, duration, report_lines, bo
     with open(os.path.join(out, "drift_events.csv"), "w") as f:
         f.write("time_s,event\n" + "".join("%.2f,%s\n" % e for e in script.fired))
     plotted = timeline and plot_errors(os.path.join(out, "calibration_error.png"), timeline,
-                                       script.fired, epochs)
+                                       script.fired, epochs, health_steps)
     # Mean over the time images flowed, so start-up does not count against the rate.
     mean_fps = (frames - 1) / span if frames > 1 and span > 0 else 0.0
     status = latest.get("status")
