@@ -120,6 +120,16 @@ class CameraDriverNodelet : public nodelet::Nodelet {
     verified_pub_ = nh.advertise<VerifiedCalibration>("calibration/verified", 1, true);
     publishVerified();
     health_sub_ = nh.subscribe("calibration/health", 2, &CameraDriverNodelet::onHealth, this);
+    // A staged calibration of one camera alone, unmatched within pair_timeout_s, is committed
+    // here, off the capture thread (it writes to disk).
+    monocular_timer_ = nh.createWallTimer(ros::WallDuration(0.5), [this](const ros::WallTimerEvent&) {
+      for (const StereoCalibration::SetResult& result : calibration_->applyStagedMonocular()) {
+        if (result.success)
+          NODELET_INFO("CameraDriver: %s, epoch %u", result.message.c_str(), calibration_->inForce().epoch);
+        else
+          NODELET_ERROR("CameraDriver: %s", result.message.c_str());
+      }
+    });
     if (sim_) {
       gt_left_info_pub_ = nh.advertise<sensor_msgs::CameraInfo>("ground_truth/left/camera_info", 2);
       gt_right_info_pub_ = nh.advertise<sensor_msgs::CameraInfo>("ground_truth/right/camera_info", 2);
@@ -434,7 +444,8 @@ class CameraDriverNodelet : public nodelet::Nodelet {
   image_transport::Publisher gt_left_scene_pub_, gt_right_scene_pub_, gt_depth_pub_;
   ros::Publisher gt_head_pose_pub_, gt_tf_pub_;
   ros::ServiceServer left_set_info_srv_, right_set_info_srv_, set_light_srv_, set_drift_srv_;
-  ros::Subscriber health_sub_;  // calibration_trigger on_demand only
+  ros::Subscriber health_sub_;  // the health's verdicts (on demand: when to calibrate; always: verified)
+  ros::WallTimer monocular_timer_;  // commits a staged calibration of one camera alone
 
   // Capture thread only.
   std::unique_ptr<HeadPoseTruth> head_pose_;  // sim backend only

@@ -17,6 +17,7 @@
 #include <stereo_msgs/DisparityImage.h>
 
 #include <chrono>
+#include <cmath>
 #include <cstring>
 #include <memory>
 #include <mutex>
@@ -38,7 +39,8 @@ using sensor_msgs::Image;
 
 ecs::DisparityOptions toOptions(const DisparityConfig& c) {
   ecs::DisparityOptions o;
-  o.algorithm = c.algorithm;
+  // stereo_image_proc's stereo_algorithm, when set, wins (its parameter files carry it).
+  o.algorithm = c.stereo_algorithm == 0 ? "bm" : c.stereo_algorithm == 1 ? "sgbm" : c.algorithm;
   o.prefilter_size = c.prefilter_size;
   o.prefilter_cap = c.prefilter_cap;
   o.correlation_window_size = c.correlation_window_size;
@@ -48,8 +50,8 @@ ecs::DisparityOptions toOptions(const DisparityConfig& c) {
   o.texture_threshold = c.texture_threshold;
   o.speckle_size = c.speckle_size;
   o.speckle_range = c.speckle_range;
-  o.P1 = c.P1;
-  o.P2 = c.P2;
+  o.P1 = static_cast<int>(std::lround(c.P1));
+  o.P2 = static_cast<int>(std::lround(c.P2));
   o.disp12MaxDiff = c.disp12MaxDiff;
   o.sgbm_mode = c.fullDP ? "hh" : c.sgbm_mode;  // stereo_image_proc: fullDP = MODE_HH
   o.left_right_check = c.lr_check;

@@ -203,7 +203,7 @@ class SeparatorNodelet : public nodelet::Nodelet {
       input->watch(left_pub_);
       input->watch(right_pub_);
     }
-    teach_srv_ = nh.advertiseService("teach", &SeparatorNodelet::teachService, this);
+    teach_srv_ = pnh.advertiseService("teach", &SeparatorNodelet::teachService, this);  // private, as the tracker's
     diagnostics_ = std::make_unique<StageDiagnostics>(nh, pnh, "separator");
     diagnostics_->set("method", method);
     diagnostics_->set("template epoch", "none (not taught)");

@@ -31,6 +31,21 @@ bool keepsRectification(const sensor_msgs::CameraInfo& info, const sensor_msgs::
   return true;
 }
 
+// What a calibration of one camera alone looks like (camera_calibration's monocular calibrator):
+// no rectifying rotation (R the identity) and no baseline (Tx zero), where the camera in force
+// (`in_force`) has a rectifying R. The first half of a stereo calibration of a perfectly aligned
+// rig looks the same: such a call is staged like any other, and taken as monocular only when no
+// other camera's call completes it within the pair timeout.
+bool isMonocular(const sensor_msgs::CameraInfo& info, const sensor_msgs::CameraInfo& in_force) {
+  constexpr double kTolerance = 1e-9;
+  const auto identity = [&](const sensor_msgs::CameraInfo::_R_type& R) {
+    for (size_t i = 0; i < R.size(); ++i)
+      if (!(std::abs(R[i] - (i % 4 == 0 ? 1.0 : 0.0)) <= kTolerance)) return false;
+    return true;
+  };
+  return identity(info.R) && std::abs(info.P[3]) <= kTolerance && !identity(in_force.R);
+}
+
 }  // namespace
 
 StereoCalibration::StereoCalibration(const Camera& left, const Camera& right, uint32_t width, uint32_t height,
@@ -142,6 +157,63 @@ std::string StereoCalibration::load(const sensor_msgs::CameraInfo& left_fallback
   return source;
 }
 
+std::vector<StereoCalibration::SetResult> StereoCalibration::applyStagedMonocular() {
+  std::lock_guard<std::mutex> write_lock(write_mutex_);
+  std::vector<SetResult> results;
+  for (const bool left : {true, false}) {
+    std::optional<Staged>& staged = left ? staged_left_ : staged_right_;
+    if (!staged || !staged->monocular || Clock::now() - staged->since < pair_timeout_) continue;
+    const sensor_msgs::CameraInfo info = staged->info;
+    {
+      std::lock_guard<std::mutex> lock(state_mutex_);
+      staged.reset();
+    }
+    SetResult result = setMonocularLocked(left, info, inForce());
+    result.message = "staged " + std::string(sideName(left)) + " calibration, no " + sideName(!left) +
+                     "/set_camera_info within the pair timeout: " + result.message;
+    results.push_back(std::move(result));
+  }
+  return results;
+}
+
+StereoCalibration::SetResult StereoCalibration::setMonocularLocked(bool left, const sensor_msgs::CameraInfo& info,
+                                                                  const InForce& in_force) {
+  SetResult result;
+  const std::string name = std::string(sideName(left)) + "/set_camera_info";
+  ecs::StereoRig rig;
+  ecs::PinholeCamera camera;
+  std::string error;
+  if (!fromStereoCameraInfo(in_force.left, in_force.right, &rig, &error) || !fromCameraInfo(info, &camera, &error)) {
+    result.message = "rejected: " + name + ": a calibration of this camera alone (R the identity, Tx 0), and " + error;
+    return result;
+  }
+  (left ? rig.left : rig.right) = camera;
+  std::pair<sensor_msgs::CameraInfo, sensor_msgs::CameraInfo> pair;
+  try {
+    pair = toStereoCameraInfo(rig, kMonocularRectificationAlpha);
+  } catch (const std::invalid_argument& e) {
+    result.message = std::string("rejected: ") + name + ": its camera with the other one does not rectify: " + e.what();
+    return result;
+  }
+  const std::string problem = checkPair(pair.first, "left (rectified again)", pair.second, "right (rectified again)");
+  if (!problem.empty()) {
+    result.message = "rejected: " + name + ": " + problem;
+    return result;
+  }
+  std::string where;
+  error = commitLocked(pair.first, pair.second, 1, &where);
+  if (!error.empty()) {
+    result.message = "not stored: " + error;
+    setProblem("calibration not stored: " + error);
+    return result;
+  }
+  result.success = true;
+  result.message = "stored: a calibration of the " + std::string(sideName(left)) +
+                   " camera alone (R the identity, Tx 0): its K and D with the stereo extrinsics in force, both "
+                   "cameras rectified again, in " + where;
+  return result;
+}
+
 std::string StereoCalibration::markVerified(uint32_t epoch, bool* marked) {
   if (marked) *marked = false;
   std::lock_guard<std::mutex> write_lock(write_mutex_);  // no commit replaces the generation meanwhile
@@ -193,7 +265,7 @@ std::string StereoCalibration::expireStaged() {
   const auto now = Clock::now();
   std::lock_guard<std::mutex> lock(state_mutex_);
   for (auto* staged : {&staged_left_, &staged_right_}) {
-    if (!*staged || now - (*staged)->since < pair_timeout_) continue;
+    if (!*staged || (*staged)->monocular || now - (*staged)->since < pair_timeout_) continue;
     const bool left = staged == &staged_left_;
     char seconds[32];
     std::snprintf(seconds, sizeof(seconds), "%.1f", pair_timeout_.count());
@@ -270,13 +342,17 @@ StereoCalibration::SetResult StereoCalibration::set(bool left, const sensor_msgs
     if (mismatch.empty()) partner = other_in_force;
   }
   if (!partner) {
+    const bool monocular = isMonocular(info, own_in_force);
     std::lock_guard<std::mutex> lock(state_mutex_);
-    own = Staged{info, Clock::now()};
+    own = Staged{info, Clock::now(), monocular};
     char seconds[32];
     std::snprintf(seconds, sizeof(seconds), "%.1f", pair_timeout_.count());
     result.success = true;
     result.message = "staged: " + mismatch + "; waiting up to " + seconds + " s for " + other_name +
-                     " with a matching P, the calibration in force is unchanged until then";
+                     " with a matching P, the calibration in force is unchanged until then" +
+                     (monocular ? "; without one, it is taken as a calibration of this camera alone (R the identity, "
+                                  "Tx 0): its K and D with the stereo extrinsics in force"
+                                : "");
     return result;
   }
   std::string where;

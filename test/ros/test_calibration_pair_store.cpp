@@ -21,10 +21,12 @@
 #include <fstream>
 #include <limits>
 #include <sstream>
+#include <thread>
 
 #include "embedded_calibration_stereo/ros/calibration_file.h"
 #include "embedded_calibration_stereo/ros/camera_calibration.h"
 #include "embedded_calibration_stereo/ros/conversions.h"
+#include "embedded_calibration_stereo/ros/stereo_input_check.h"
 
 using namespace embedded_calibration_stereo;
 using sensor_msgs::CameraInfo;
@@ -464,4 +466,88 @@ TEST(StereoCalibrationSet, UnwritableFolderRefusesAndKeepsTheCalibration) {
   EXPECT_EQ(shownFocals(dir.path + "/stereo_left.yaml", dir.path + "/plain_file/stereo_right.yaml"),
             std::make_pair(-1.0, -1.0))
       << "the left file must not appear alone";
+}
+
+// camera_calibration's monocular calibrator on one camera of the head sends that camera's K and
+// D with R the identity and Tx 0. Staged like any call (the first half of a stereo calibration of
+// an aligned rig looks the same), it is put in force, once no other call completes it within the
+// pair timeout, with the stereo extrinsics it had (both cameras rectified again): never answered
+// success and dropped.
+TEST(StereoCalibrationSet, AMonocularCalibrationKeepsTheStereoExtrinsics) {
+  TempDir dir;
+  ecs::StereoRig rig;
+  for (ecs::PinholeCamera* c : {&rig.left, &rig.right}) {
+    c->width = kWidth;
+    c->height = kHeight;
+    c->fx = c->fy = 650.0;
+    c->cx = 376.0;
+    c->cy = 240.0;
+    c->dist = {{-0.25, 0.07, 0.0, 0.0, 0.0}};
+  }
+  rig.right_from_left.linear() = (Eigen::AngleAxisd(0.5 * M_PI / 180, Eigen::Vector3d::UnitY()) *
+                                  Eigen::AngleAxisd(0.3 * M_PI / 180, Eigen::Vector3d::UnitX()))
+                                     .toRotationMatrix();
+  rig.right_from_left.translation() = Eigen::Vector3d(-0.12, 0.001, -0.0005);
+  const auto in_force = toStereoCameraInfo(rig);
+  constexpr double kPairTimeoutS = 0.05;
+  StereoCalibration c = makeCalibration(dir.path, kPairTimeoutS);
+  c.load(in_force.first, in_force.second);
+
+  CameraInfo mono = in_force.first;  // the left camera calibrated alone
+  mono.K = {658.0, 0.0, 379.5, 0.0, 657.0, 236.0, 0.0, 0.0, 1.0};
+  mono.D = {-0.26, 0.08, 0.0005, -0.0003, 0.0};
+  mono.R = {1, 0, 0, 0, 1, 0, 0, 0, 1};
+  mono.P = {640.0, 0.0, 380.0, 0.0, 0.0, 640.0, 237.0, 0.0, 0.0, 0.0, 1.0, 0.0};
+  const StereoCalibration::SetResult staged = c.set(true, mono);
+  ASSERT_TRUE(staged.success) << staged.message;
+  EXPECT_EQ(staged.message.rfind("staged:", 0), 0u) << staged.message;
+  EXPECT_NE(staged.message.find("this camera alone"), std::string::npos) << staged.message;
+  EXPECT_TRUE(c.applyStagedMonocular().empty()) << "before the pair timeout";
+  std::this_thread::sleep_for(std::chrono::duration<double>(2 * kPairTimeoutS));  // the timeout itself
+  EXPECT_EQ(c.expireStaged(), "") << "the capture thread's expiry leaves it to applyStagedMonocular";
+  const auto results = c.applyStagedMonocular();
+  ASSERT_EQ(results.size(), 1u);
+  ASSERT_TRUE(results[0].success) << results[0].message;
+  EXPECT_NE(results[0].message.find("left camera alone"), std::string::npos) << results[0].message;
+
+  const StereoCalibration::InForce now = c.inForce();
+  EXPECT_EQ(now.left.K, mono.K);
+  EXPECT_EQ(now.left.D, mono.D);
+  EXPECT_EQ(now.right.K, in_force.second.K) << "the right camera's intrinsics stay";
+  EXPECT_EQ(now.right.D, in_force.second.D);
+  EXPECT_EQ(checkRectifiedPair(now.left, "l", now.right, "r"), "");
+  // The extrinsics of the new pair, by the rectification's definition: p_right = R2^T (R1 p_left
+  // + t), t = (Tx / fx', 0, 0).
+  using Matrix3 = Eigen::Matrix<double, 3, 3, Eigen::RowMajor>;
+  const Matrix3 R1(now.left.R.data()), R2(now.right.R.data());
+  const Eigen::Matrix3d rotation = R2.transpose() * R1;
+  const Eigen::Vector3d translation = R2.transpose() * Eigen::Vector3d(now.right.P[3] / now.right.P[0], 0.0, 0.0);
+  EXPECT_LT(Eigen::AngleAxisd(rotation * rig.right_from_left.linear().transpose()).angle(), 1e-9);
+  EXPECT_LT((translation - rig.right_from_left.translation()).norm(), 1e-9);
+}
+
+// The first half of a stereo calibration of an aligned rig looks monocular: its other half,
+// arriving in time, makes the pair.
+TEST(StereoCalibrationSet, AnAlignedStereoPairIsAPairNotTwoMonocularCalibrations) {
+  TempDir dir;
+  ecs::StereoRig rig;
+  for (ecs::PinholeCamera* c : {&rig.left, &rig.right}) {
+    c->width = kWidth;
+    c->height = kHeight;
+    c->fx = c->fy = 650.0;
+    c->cx = 376.0;
+    c->cy = 240.0;
+  }
+  rig.right_from_left.linear() = Eigen::AngleAxisd(0.5 * M_PI / 180, Eigen::Vector3d::UnitY()).toRotationMatrix();
+  rig.right_from_left.translation() = Eigen::Vector3d(-0.12, 0.0, 0.0);
+  const auto in_force = toStereoCameraInfo(rig);
+  StereoCalibration c = makeCalibration(dir.path);
+  c.load(in_force.first, in_force.second);
+  const auto aligned = pairWithFocal(600.0);  // no rotation: R the identity, left Tx 0
+  ASSERT_TRUE(c.set(true, aligned.first).success);
+  const StereoCalibration::SetResult result = c.set(false, aligned.second);
+  ASSERT_TRUE(result.success) << result.message;
+  EXPECT_NE(result.message.find("stored with the staged left"), std::string::npos) << result.message;
+  EXPECT_EQ(inForceFocal(c, true), 600.0);
+  EXPECT_EQ(inForceFocal(c, false), 600.0);
 }

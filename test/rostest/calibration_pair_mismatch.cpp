@@ -194,7 +194,7 @@ TEST(CalibrationPairMismatch, SetCameraInfoOfOneCameraNeverStopsDepth) {
 
   sensor_msgs::SetCameraInfo srv;
   srv.request.camera_info = left_before;
-  srv.request.camera_info.P[0] *= 1.03;  // what a mono calibration of the left camera gives
+  srv.request.camera_info.P[0] *= 1.03;  // a P of its own for the left camera, R kept: half of a new pair
   srv.request.camera_info.P[5] *= 1.03;
   ASSERT_TRUE(ros::service::call("left/set_camera_info", srv));
   std::printf("  left alone: success %d, %s\n", srv.response.success, srv.response.status_message.c_str());

@@ -258,7 +258,7 @@ TEST(ExternalDriver, ImagePublisherRunsTheHead) {
       30.0))
       << "no settled light-on frame of the covered scene\n" << head.logTail();
   std_srvs::Trigger teach;
-  ASSERT_TRUE(callService("/stereo/teach", &teach) && teach.response.success) << teach.response.message;
+  ASSERT_TRUE(callService("/stereo/separator/teach", &teach) && teach.response.success) << teach.response.message;
 
   // 5. After the zoom a calibration is committed and image_publisher publishes it.
   ASSERT_TRUE(statuses.waitFor(

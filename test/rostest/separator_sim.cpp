@@ -254,7 +254,7 @@ TEST(SeparatorTeachService, TeachesFromCoveredSceneFrames) {
       [&] { return left_pub.getNumSubscribers() && right_pub.getNumSubscribers() && mode_pub.getNumSubscribers(); },
       10.0));
   std_srvs::Trigger teach;
-  ASSERT_TRUE(ros::service::call("/hw/teach", teach));
+  ASSERT_TRUE(ros::service::call("/hw/separator/teach", teach));
   EXPECT_TRUE(teach.response.success) << teach.response.message;
 
   // Device: a 8 px checkerboard of 0 / 90 over 128x96; scene: a random texture in 20..150.
@@ -307,7 +307,7 @@ TEST(SeparatorLearn, LearnsTheDeviceImageFromLightWindowsWithAMovingScene) {
       [&] { return left_pub.getNumSubscribers() && right_pub.getNumSubscribers() && mode_pub.getNumSubscribers(); },
       10.0));
   std_srvs::Trigger teach;
-  ASSERT_TRUE(ros::service::call("/learn/teach", teach));
+  ASSERT_TRUE(ros::service::call("/learn/separator/teach", teach));
   EXPECT_FALSE(teach.response.success) << "learn mode has no teach: " << teach.response.message;
 
   const cv::Size size(256, 192);

@@ -268,7 +268,7 @@ TEST(SeparatorLaziness, SubscribesOnlyForAListenerOrATeach) {
       << "inputs still subscribed after the last listener left (" << lazyInputsSubscribed() << ")";
 
   std_srvs::Trigger teach;
-  ASSERT_TRUE(ros::service::call("/lazy/teach", teach));
+  ASSERT_TRUE(ros::service::call("/lazy/separator/teach", teach));
   EXPECT_TRUE(waitUntil([] { return lazyInputsSubscribed() == kLazyInputs.size(); }, 15.0))
       << "a teach without listener did not subscribe the inputs (" << lazyInputsSubscribed() << ")";
 }

@@ -11,7 +11,11 @@
 //   calibration sets left, then right), is staged: answered success with a status message
 //   starting "staged:", and committed together with the other camera's set_camera_info when
 //   that one matches it. One that changes only K and D is committed at once with the other
-//   camera in force. A staged calibration that finds no match within
+//   camera in force. A staged calibration that looks like one of its camera alone
+//   (camera_calibration's monocular calibrator: R the identity, Tx 0, where the camera in force
+//   has a rectifying R) and finds no match within the pair timeout changes that camera's K and
+//   D (applyStagedMonocular()): both cameras are rectified again (alpha 0) with the stereo
+//   extrinsics in force and committed together. A staged calibration that finds no match within
 //   `pair_timeout_s` is discarded with an error (problem()); so is every staged one when a set
 //   is refused. So the pair in force is always a consistent rectified pair.
 // - Persistence: every commit writes both cameras' files through CalibrationPairStore (a new
@@ -25,8 +29,8 @@
 //   previous calibration), else the nominal calibration; problem() then says what was rejected
 //   and what runs instead.
 //
-// Threading: set() and load() may run on any thread (serialised by write_mutex_, which is held
-// across disk writes); expireStaged() only tries that mutex (it skips while a commit runs);
+// Threading: set(), load() and applyStagedMonocular() may run on any thread (serialised by
+// write_mutex_, which is held across disk writes); expireStaged() only tries that mutex (it skips while a commit runs);
 // inForce(), problem(), source() and stagedText() take only state_mutex_. So the capture thread
 // never waits for a disk write.
 #include <sensor_msgs/CameraInfo.h>
@@ -35,6 +39,7 @@
 #include <mutex>
 #include <optional>
 #include <string>
+#include <vector>
 
 #include "embedded_calibration_stereo/core/geometry/stereo_rig.h"
 #include "embedded_calibration_stereo/ros/calibration_file.h"
@@ -70,9 +75,13 @@ class StereoCalibration {
   // set_camera_info of one camera.
   SetResult set(bool left, const sensor_msgs::CameraInfo& info);
 
-  // Discards a staged calibration older than the pair timeout; returns the error text, or "".
-  // Does nothing while a set() is writing (the next call catches up).
+  // Discards a staged calibration older than the pair timeout (but one of its camera alone);
+  // returns the error text, or "". Does nothing while a set() is writing (the next call catches
+  // up).
   std::string expireStaged();
+  // Commits each staged calibration of one camera alone older than the pair timeout (see
+  // above); returns what happened to each. Waits for a running commit: not for the capture thread.
+  std::vector<SetResult> applyStagedMonocular();
 
   struct InForce {
     sensor_msgs::CameraInfo left, right;
@@ -105,6 +114,7 @@ class StereoCalibration {
   struct Staged {
     sensor_msgs::CameraInfo info;
     Clock::time_point since;
+    bool monocular = false;  // looks like a calibration of its camera alone (isMonocular)
   };
 
   // "" when `info` can be put in force for the left (`left`) or right camera; `name` names it in
@@ -119,6 +129,9 @@ class StereoCalibration {
   // Caller holds write_mutex_. Writes the pair and puts it in force; "" or the reason.
   std::string commitLocked(sensor_msgs::CameraInfo left, sensor_msgs::CameraInfo right, uint32_t calls,
                            std::string* where);
+  // Caller holds write_mutex_. A monocular calibration of one camera: see the class comment.
+  SetResult setMonocularLocked(bool left, const sensor_msgs::CameraInfo& info, const InForce& in_force);
+  static constexpr double kMonocularRectificationAlpha = 0.0;  // the OnlineCalibrator's default
   // Caller holds write_mutex_. Drops staged calibrations; returns the text saying so, or "".
   std::string discardStagedLocked(const std::string& why);
   void setProblem(const std::string& problem);
