@@ -417,11 +417,6 @@ bool CalibrationMonitor::Impl::addVerification(double t, const StereoObservation
   std::vector<Corner> fit_corners;
   std::vector<double> sq_left, sq_right, sq_stereo;
 
-  auto findBoard = [&](int id) -> const VirtualBoard* {
-    for (const auto& b : boards)
-      if (b.virtual_id == id) return &b;
-    return nullptr;
-  };
   auto findCorners = [](const std::vector<BoardCorners>& list, int id) -> const BoardCorners* {
     for (const auto& b : list)
       if (b.board_id == id) return &b;
