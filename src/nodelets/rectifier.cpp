@@ -1,5 +1,7 @@
 // Rectifier nodelet: rectifies each stereo frame (left|right/image_scene with the CameraInfo of
-// the same stamp) into left|right/image_rect with stereo_image_proc's conventions, and publishes
+// the same stamp) with stereo_image_proc's conventions: left|right/image_rect mono8 and
+// left|right/image_rect_color in the input's encoding (the very same message for mono8 inputs;
+// colour inputs are rectified once, image_rect converted from it), and publishes
 // the rectification applied on left|right/camera_info_rect (the input K and D with the R and P
 // of the method: identical to camera_info for bouguet, the Fusiello R and P for fusiello; a
 // disparity node must read camera_info_rect when the method is fusiello).
@@ -22,6 +24,8 @@
 #include <memory>
 #include <mutex>
 #include <opencv2/calib3d.hpp>
+#include <opencv2/imgproc.hpp>
+#include <sensor_msgs/image_encodings.h>
 
 #include "embedded_calibration_stereo/CalibrationMode.h"
 #include "embedded_calibration_stereo/core/depth/rectification.h"
@@ -161,10 +165,12 @@ class RectifierNodelet : public nodelet::Nodelet {
     const auto info_cb = input_->connectCallback();
     left_pub_ = it.advertise("left/image_rect", 1, image_cb, image_cb);
     right_pub_ = it.advertise("right/image_rect", 1, image_cb, image_cb);
+    left_color_pub_ = it.advertise("left/image_rect_color", 1, image_cb, image_cb);
+    right_color_pub_ = it.advertise("right/image_rect_color", 1, image_cb, image_cb);
     left_info_pub_ = nh.advertise<CameraInfo>("left/camera_info_rect", 1, info_cb, info_cb);
     right_info_pub_ = nh.advertise<CameraInfo>("right/camera_info_rect", 1, info_cb, info_cb);
-    input_->watch(left_pub_);
-    input_->watch(right_pub_);
+    for (const image_transport::Publisher* pub : {&left_pub_, &right_pub_, &left_color_pub_, &right_color_pub_})
+      input_->watch(*pub);
     input_->watch(left_info_pub_);
     input_->watch(right_info_pub_);
     diagnostics_ = std::make_unique<StageDiagnostics>(nh, pnh, "rectifier");
@@ -268,13 +274,38 @@ class RectifierNodelet : public nodelet::Nodelet {
     OutputImage left_out = newImageLike(left), right_out = newImageLike(right);
     ecs::remapStereoPair(left_in->image, right_in->image, maps.left_map1, maps.left_map2,
                          maps.right_map1, maps.right_map2, &left_out.view, &right_out.view);
-    left_pub_.publish(left_out.msg);
-    right_pub_.publish(right_out.msg);
+    publishBoth(left_out, left_pub_, left_color_pub_);
+    publishBoth(right_out, right_pub_, right_color_pub_);
+  }
+
+  // image_rect (mono8) and image_rect_color (the input's encoding) of one rectified image: the
+  // same message when it is mono8, else a mono8 conversion made only while someone listens.
+  static void publishBoth(const OutputImage& rectified, const image_transport::Publisher& mono,
+                          const image_transport::Publisher& color) {
+    const std::string& encoding = rectified.msg->encoding;
+    if (encoding == sensor_msgs::image_encodings::MONO8) {
+      mono.publish(rectified.msg);
+      color.publish(rectified.msg);
+      return;
+    }
+    if (mono.getNumSubscribers() > 0) {
+      sensor_msgs::Image like;  // the header and size only
+      like.header = rectified.msg->header;
+      like.height = rectified.msg->height;
+      like.width = rectified.msg->width;
+      like.encoding = sensor_msgs::image_encodings::MONO8;
+      OutputImage grey = newImageLike(like);
+      const bool rgb = encoding == sensor_msgs::image_encodings::RGB8;
+      cv::cvtColor(rectified.view, grey.view, rgb ? cv::COLOR_RGB2GRAY : cv::COLOR_BGR2GRAY);
+      mono.publish(grey.msg);
+    }
+    color.publish(rectified.msg);
   }
 
   ecs::RectificationMethod method_ = ecs::RectificationMethod::kBouguet;
   std::unique_ptr<StereoCameraInput> input_;  // created in onInit, before any callback
-  image_transport::Publisher left_pub_, right_pub_;
+  image_transport::Publisher left_pub_, right_pub_;              // image_rect: mono8
+  image_transport::Publisher left_color_pub_, right_color_pub_;  // image_rect_color: the input's encoding
   ros::Publisher left_info_pub_, right_info_pub_;
   ErrorThrottle errors_{5.0};
   std::unique_ptr<StageDiagnostics> diagnostics_;  // created in onInit, before any callback
