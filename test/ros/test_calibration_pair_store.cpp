@@ -468,13 +468,9 @@ TEST(StereoCalibrationSet, UnwritableFolderRefusesAndKeepsTheCalibration) {
       << "the left file must not appear alone";
 }
 
-// camera_calibration's monocular calibrator on one camera of the head sends that camera's K and
-// D with R the identity and Tx 0. Staged like any call (the first half of a stereo calibration of
-// an aligned rig looks the same), it is put in force, once no other call completes it within the
-// pair timeout, with the stereo extrinsics it had (both cameras rectified again): never answered
-// success and dropped.
-TEST(StereoCalibrationSet, AMonocularCalibrationKeepsTheStereoExtrinsics) {
-  TempDir dir;
+// A rig of two 650 px cameras with radial distortion `k1`, the right one turned by 0.5 degrees
+// about y and 0.3 about x, 0.12 m apart: its rectification has an R of its own.
+ecs::StereoRig turnedRig(double k1) {
   ecs::StereoRig rig;
   for (ecs::PinholeCamera* c : {&rig.left, &rig.right}) {
     c->width = kWidth;
@@ -482,12 +478,23 @@ TEST(StereoCalibrationSet, AMonocularCalibrationKeepsTheStereoExtrinsics) {
     c->fx = c->fy = 650.0;
     c->cx = 376.0;
     c->cy = 240.0;
-    c->dist = {{-0.25, 0.07, 0.0, 0.0, 0.0}};
+    c->dist = {{k1, k1 == 0.0 ? 0.0 : 0.07, 0.0, 0.0, 0.0}};
   }
   rig.right_from_left.linear() = (Eigen::AngleAxisd(0.5 * M_PI / 180, Eigen::Vector3d::UnitY()) *
                                   Eigen::AngleAxisd(0.3 * M_PI / 180, Eigen::Vector3d::UnitX()))
                                      .toRotationMatrix();
   rig.right_from_left.translation() = Eigen::Vector3d(-0.12, 0.001, -0.0005);
+  return rig;
+}
+
+// camera_calibration's monocular calibrator on one camera of the head sends that camera's K and
+// D with R the identity and Tx 0. Staged like any call (the first half of a stereo calibration of
+// an aligned rig looks the same), it is put in force, once no other call completes it within the
+// pair timeout, with the stereo extrinsics it had (both cameras rectified again): never answered
+// success and dropped.
+TEST(StereoCalibrationSet, AMonocularCalibrationKeepsTheStereoExtrinsics) {
+  TempDir dir;
+  const ecs::StereoRig rig = turnedRig(-0.25);
   const auto in_force = toStereoCameraInfo(rig);
   constexpr double kPairTimeoutS = 0.05;
   StereoCalibration c = makeCalibration(dir.path, kPairTimeoutS);
@@ -530,17 +537,7 @@ TEST(StereoCalibrationSet, AMonocularCalibrationKeepsTheStereoExtrinsics) {
 // arriving in time, makes the pair.
 TEST(StereoCalibrationSet, AnAlignedStereoPairIsAPairNotTwoMonocularCalibrations) {
   TempDir dir;
-  ecs::StereoRig rig;
-  for (ecs::PinholeCamera* c : {&rig.left, &rig.right}) {
-    c->width = kWidth;
-    c->height = kHeight;
-    c->fx = c->fy = 650.0;
-    c->cx = 376.0;
-    c->cy = 240.0;
-  }
-  rig.right_from_left.linear() = Eigen::AngleAxisd(0.5 * M_PI / 180, Eigen::Vector3d::UnitY()).toRotationMatrix();
-  rig.right_from_left.translation() = Eigen::Vector3d(-0.12, 0.0, 0.0);
-  const auto in_force = toStereoCameraInfo(rig);
+  const auto in_force = toStereoCameraInfo(turnedRig(0.0));
   StereoCalibration c = makeCalibration(dir.path);
   c.load(in_force.first, in_force.second);
   const auto aligned = pairWithFocal(600.0);  // no rotation: R the identity, left Tx 0

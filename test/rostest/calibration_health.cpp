@@ -7,6 +7,7 @@
 #include <cmath>
 
 #include "driver_test_utils.h"
+#include "health_test_utils.h"
 #include "embedded_calibration_stereo/CalibrationHealth.h"
 #include "embedded_calibration_stereo/CalibrationMode.h"
 #include "embedded_calibration_stereo/CalibrationStatus.h"
@@ -19,23 +20,12 @@ using embedded_calibration_stereo::CalibrationMode;
 using embedded_calibration_stereo::CalibrationStatus;
 using embedded_calibration_stereo::carriesCalibration;
 using ecs_test::Collector;
+using ecs_test::lastHealth;
 using ecs_test::latestPair;
 using sensor_msgs::CameraInfo;
 using Healths = std::vector<CalibrationHealth::ConstPtr>;
 
 namespace {
-
-const char* stateName(uint8_t state) {
-  static const char* names[] = {"UNKNOWN", "GOOD", "DEGRADED", "BAD"};
-  return state < 4 ? names[state] : "?";
-}
-
-std::string lastHealth(Collector<CalibrationHealth>& health) {
-  const auto all = health.snapshot();
-  if (all.empty()) return "no calibration/health message";
-  const auto& h = *all.back();
-  return std::string("last health: epoch ") + std::to_string(h.epoch) + " " + stateName(h.state) + ": " + h.reason;
-}
 
 bool setCameraInfo(const std::string& service, const CameraInfo& info, std::string* message) {
   sensor_msgs::SetCameraInfo srv;
@@ -75,12 +65,7 @@ TEST(CalibrationHealth, GoodWrongCalibrationRolledBackKnockCalibratesOnDemand) {
   // 2. A wrong calibration through set_camera_info: the right camera tilted by 0.5 degrees.
   CameraInfo original_left, original_right;
   ASSERT_TRUE(latestPair(left, right, &original_left, &original_right));
-  ecs::StereoRig rig;
-  std::string error;
-  ASSERT_TRUE(embedded_calibration_stereo::fromStereoCameraInfo(original_left, original_right, &rig, &error)) << error;
-  rig.right_from_left.linear() =
-      Eigen::AngleAxisd(0.5 * M_PI / 180.0, Eigen::Vector3d::UnitX()).toRotationMatrix() * rig.right_from_left.linear();
-  const auto wrong = embedded_calibration_stereo::toStereoCameraInfo(rig);
+  const auto wrong = ecs_test::tilted(original_left, original_right, 0.5);
   std::string message;
   ASSERT_TRUE(setCameraInfo("left/set_camera_info", wrong.first, &message)) << message;
   ASSERT_TRUE(setCameraInfo("right/set_camera_info", wrong.second, &message)) << message;
@@ -155,7 +140,7 @@ TEST(CalibrationHealth, GoodWrongCalibrationRolledBackKnockCalibratesOnDemand) {
       [&](const Healths& m) { return !m.empty() && m.back()->state >= CalibrationHealth::DEGRADED; }, 4.0))
       << lastHealth(health);
   const CalibrationHealth knock = *health.snapshot().back();
-  std::printf("knock 0.2 deg about x: %s after %.2f s, misalignment %.3f px (%s)\n", stateName(knock.state),
+  std::printf("knock 0.2 deg about x: %s after %.2f s, misalignment %.3f px (%s)\n", ecs_test::healthStateName(knock.state),
               (ros::WallTime::now() - knocked).toSec(), knock.misalignment_px, knock.reason.c_str());
   EXPECT_EQ(knock.epoch, restored_epoch) << "a knock is no new calibration: nothing to roll back";
   // A calibration burst: more settled light-on frames in a row than a verification flash has.

@@ -13,6 +13,7 @@
 #include <cstdio>
 
 #include "driver_test_utils.h"
+#include "health_test_utils.h"
 #include "embedded_calibration_stereo/CalibrationHealth.h"
 #include "embedded_calibration_stereo/CalibrationStatus.h"
 #include "embedded_calibration_stereo/ros/calibration_session.h"
@@ -22,38 +23,14 @@ using embedded_calibration_stereo::CalibrationHealth;
 using embedded_calibration_stereo::CalibrationStatus;
 using embedded_calibration_stereo::carriesCalibration;
 using ecs_test::Collector;
+using ecs_test::lastHealth;
+using ecs_test::setPair;
+using ecs_test::tilted;
 using ecs_test::latestPair;
 using sensor_msgs::CameraInfo;
 using Healths = std::vector<CalibrationHealth::ConstPtr>;
 
 namespace {
-
-std::string lastHealth(Collector<CalibrationHealth>& health) {
-  const auto all = health.snapshot();
-  if (all.empty()) return "no calibration/health message";
-  const auto& h = *all.back();
-  return "last health: epoch " + std::to_string(h.epoch) + " state " + std::to_string(h.state) + ": " + h.reason;
-}
-
-void setPair(const std::pair<CameraInfo, CameraInfo>& pair) {
-  for (const bool left : {true, false}) {
-    sensor_msgs::SetCameraInfo srv;
-    srv.request.camera_info = left ? pair.first : pair.second;
-    const std::string service = left ? "left/set_camera_info" : "right/set_camera_info";
-    ASSERT_TRUE(ros::service::call(service, srv)) << service;
-    ASSERT_TRUE(srv.response.success) << service << ": " << srv.response.status_message;
-  }
-}
-
-std::pair<CameraInfo, CameraInfo> tilted(const CameraInfo& left, const CameraInfo& right, double degrees) {
-  ecs::StereoRig rig;
-  std::string error;
-  EXPECT_TRUE(embedded_calibration_stereo::fromStereoCameraInfo(left, right, &rig, &error)) << error;
-  rig.right_from_left.linear() =
-      Eigen::AngleAxisd(degrees * M_PI / 180.0, Eigen::Vector3d::UnitX()).toRotationMatrix() *
-      rig.right_from_left.linear();
-  return embedded_calibration_stereo::toStereoCameraInfo(rig);
-}
 
 }  // namespace
 

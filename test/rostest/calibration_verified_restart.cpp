@@ -7,6 +7,7 @@
 
 #include "calibration_test_utils.h"
 #include "driver_test_utils.h"
+#include "health_test_utils.h"
 #include "embedded_calibration_stereo/CalibrationHealth.h"
 #include "embedded_calibration_stereo/CalibrationMode.h"
 #include "embedded_calibration_stereo/CalibrationStatus.h"
@@ -21,29 +22,13 @@ using embedded_calibration_stereo::CalibrationStatus;
 using embedded_calibration_stereo::carriesCalibration;
 using embedded_calibration_stereo::VerifiedCalibration;
 using ecs_test::Collector;
+using ecs_test::lastHealth;
 using sensor_msgs::CameraInfo;
 using Pair = std::pair<CameraInfo, CameraInfo>;
 
 namespace {
 
 constexpr const char* kHealthType = "embedded_calibration_stereo/CalibrationHealth";
-
-std::string lastHealth(Collector<CalibrationHealth>& health) {
-  const auto all = health.snapshot();
-  if (all.empty()) return "no calibration/health message";
-  return "last health: epoch " + std::to_string(all.back()->epoch) + " state " + std::to_string(all.back()->state) +
-         ": " + all.back()->reason;
-}
-
-void setPair(const Pair& pair) {
-  for (const bool left : {true, false}) {
-    sensor_msgs::SetCameraInfo srv;
-    srv.request.camera_info = left ? pair.first : pair.second;
-    const std::string service = std::string("/stereo/") + (left ? "left" : "right") + "/set_camera_info";
-    ASSERT_TRUE(ros::service::call(service, srv)) << service;
-    ASSERT_TRUE(srv.response.success) << srv.response.status_message;
-  }
-}
 
 bool carries(const Pair& published, const Pair& expected) {
   return carriesCalibration(published.first, expected.first) && carriesCalibration(published.second, expected.second);
@@ -105,7 +90,7 @@ TEST(CalibrationVerifiedRestart, TheCalibrationVerifiedGoodIsKeptAcrossRestarts)
   ASSERT_TRUE(head.startHealth());
   ASSERT_TRUE(modes.waitForCount(2, 20.0));
   const Pair good = published(left, right);
-  setPair(good);
+  ecs_test::setPair(good, "/stereo/");
   ASSERT_TRUE(verified.waitFor(
       [&](const auto& m) { return !m.empty() && carries({m.back()->left, m.back()->right}, good); }, 30.0))
       << "the stored calibration was not marked verified: " << lastHealth(health);
@@ -114,13 +99,9 @@ TEST(CalibrationVerifiedRestart, TheCalibrationVerifiedGoodIsKeptAcrossRestarts)
 
   // 2. The health stops; a wrong calibration (right camera tilted 0.5 degrees) is committed.
   head.stopHealth();
-  ecs::StereoRig rig;
+  const Pair wrong = ecs_test::tilted(good.first, good.second, 0.5);
   std::string error;
-  ASSERT_TRUE(embedded_calibration_stereo::fromStereoCameraInfo(good.first, good.second, &rig, &error)) << error;
-  rig.right_from_left.linear() =
-      Eigen::AngleAxisd(0.5 * M_PI / 180.0, Eigen::Vector3d::UnitX()).toRotationMatrix() * rig.right_from_left.linear();
-  const Pair wrong = embedded_calibration_stereo::toStereoCameraInfo(rig);
-  setPair(wrong);
+  ecs_test::setPair(wrong, "/stereo/");
   ASSERT_TRUE(carries(published(left, right), wrong));
   head.stop();
 

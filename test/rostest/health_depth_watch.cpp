@@ -9,6 +9,7 @@
 #include <random>
 
 #include "driver_test_utils.h"
+#include "health_test_utils.h"
 #include "embedded_calibration_stereo/CalibrationHealth.h"
 #include "embedded_calibration_stereo/CalibrationMode.h"
 #include "embedded_calibration_stereo/DisparityCoverage.h"
@@ -18,19 +19,13 @@ using embedded_calibration_stereo::CalibrationHealth;
 using embedded_calibration_stereo::CalibrationMode;
 using embedded_calibration_stereo::DisparityCoverage;
 using ecs_test::Collector;
+using ecs_test::lastHealth;
 using ecs_test::latestPair;
 using sensor_msgs::CameraInfo;
 using Healths = std::vector<CalibrationHealth::ConstPtr>;
 using Modes = std::vector<CalibrationMode::ConstPtr>;
 
 namespace {
-
-std::string lastHealth(Collector<CalibrationHealth>& health) {
-  const auto all = health.snapshot();
-  if (all.empty()) return "no calibration/health message";
-  const auto& h = *all.back();
-  return "last health: epoch " + std::to_string(h.epoch) + " state " + std::to_string(h.state) + ": " + h.reason;
-}
 
 // Publishes, for every light-off frame of the driver, the valid fraction `level` (+-0.03), as
 // the Disparity nodelet would.
