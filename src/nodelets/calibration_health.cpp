@@ -395,7 +395,7 @@ class CalibrationHealthNodelet : public nodelet::Nodelet {
       if (solved_.size() > kKeptSolves) solved_.pop_front();
       if (waiting_for_boards_) useSolveBoards();
     }
-    if (status->accepted || status->reason.rfind(kInForceConfirmedReason, 0) != 0) return;
+    if (status->accepted || !status->in_force_confirmed) return;
     if (!epoch_ || status->epoch != *epoch_ || !monitor_->hasCalibration()) return;
     // A window taken before the health left GOOD confirms nothing about what it sees now.
     if (left_good_at_ && status->newest_frame < *left_good_at_) return;
@@ -565,6 +565,7 @@ class CalibrationHealthNodelet : public nodelet::Nodelet {
              epoch, ecs::toString(report.state), report.reason.c_str(), previous_name.c_str(),
              ecs::toString(previous.state));
     last_restore_ = text;
+    restore_failed_ = false;
     NODELET_WARN("CalibrationHealth: %s", text);
     restored_ = previous.calibration;
     const ros::NodeHandle nh = getNodeHandle();
@@ -599,6 +600,7 @@ class CalibrationHealthNodelet : public nodelet::Nodelet {
     } else {
       restored_.reset();
       last_restore_ += "; restore failed: " + error;
+      restore_failed_ = true;
       NODELET_ERROR("CalibrationHealth: restoring the previous calibration failed: %s", error.c_str());
     }
   }
@@ -662,7 +664,7 @@ class CalibrationHealthNodelet : public nodelet::Nodelet {
     const std::string reason = reasonOf(report);
     if (!calibration_problem_.empty()) {
       status.summary(DiagnosticStatus::ERROR, calibration_problem_);
-    } else if (!last_restore_.empty() && last_restore_.find("restore failed") != std::string::npos) {
+    } else if (restore_failed_) {
       status.summary(DiagnosticStatus::ERROR, last_restore_);
     } else {
       const int8_t level = report.state == ecs::CalibrationHealth::kGood       ? DiagnosticStatus::OK
@@ -755,6 +757,7 @@ class CalibrationHealthNodelet : public nodelet::Nodelet {
   int refinements_ = 0;  // refinements asked since the health last left GOOD
   std::optional<double> confirmed_severity_;  // severity() when the calibrator confirmed the calibration                     // the epoch of the restored calibration
   std::string calibration_problem_, last_restore_;
+  bool restore_failed_ = false;  // the last restore failed (its error is in last_restore_)
   uint64_t light_off_frames_ = 0, depth_frames_ = 0, verifications_ = 0, restores_ = 0;
   double depth_ms_ = 0.0;
 };

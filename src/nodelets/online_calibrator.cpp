@@ -734,7 +734,7 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
     submit(std::move(job));
     res.status = result.get();  // the solve and commit are bounded (service calls: callService)
     // A solve that fits no better than the calibration in force confirms it: nothing to change.
-    const bool confirmed = res.status.reason.rfind(kInForceConfirmedReason, 0) == 0;
+    const bool confirmed = res.status.in_force_confirmed;
     res.success = res.status.accepted || confirmed;
     // An accepted status has an empty reason only when committed to the driver.
     res.message = noted(res.status.accepted && res.status.reason.empty() ? "committed" : res.status.reason);

@@ -262,7 +262,7 @@ CalibrationStatus CalibrationSession::solve(const std::vector<ecs::StereoObserva
     decision.reason = "solve failed: " + candidate.message;
   } else {
     decision = gate_.evaluate(candidate, judge_in_force ? &in_force_fit : nullptr, in_force_predicted_px_);
-    if (decision.refinement) prior_note_ += (prior_note_.empty() ? "" : "; ") + decision.reason.substr(10);
+    if (decision.refinement) prior_note_ += (prior_note_.empty() ? "" : "; ") + decision.detail;
   }
   ecs::RectificationOptions rectification;  // as toStereoCameraInfo() commits it
   rectification.alpha = params_.rectification_alpha;
@@ -274,9 +274,9 @@ CalibrationStatus CalibrationSession::solve(const std::vector<ecs::StereoObserva
     std::snprintf(rms, sizeof(rms), " (RMS %.3f px; the new solve %.3f px, no better)", ecs::combinedRms(in_force_fit),
                   ecs::combinedRms(candidate));
     // The gate's words when the new solve fits better but changes too little to trust.
-    const bool small_change = decision.reason.rfind("rejected: change", 0) == 0;
     status.reason = kInForceConfirmedReason +
-                    (small_change ? " (" + decision.reason.substr(10) + ")" : std::string(rms));
+                    (decision.change_too_small ? " (" + decision.detail + ")" : std::string(rms));
+    status.in_force_confirmed = true;
   }
   // A solve the gate found sound is what the next window learns from, committed or not (a
   // calibration in force confirmed is still measured better by the solve that confirmed it).

@@ -309,7 +309,10 @@ TEST(QualityGateRules, AChangeWithinTheCandidatesUncertaintyIsRejectedWhenAsked)
     } else {
       EXPECT_TRUE(contains(d.reason, "within the new solve's uncertainty")) << d.reason;
       EXPECT_TRUE(d.in_force_confirmed) << d.reason;
+      EXPECT_TRUE(d.change_too_small) << d.reason;
+      EXPECT_EQ("rejected: " + d.detail, d.reason);
     }
+    EXPECT_EQ(d.change_too_small, !d.accepted) << "only the change's size decides here";
     // Not asked (the default): the RMS rule decides.
     EXPECT_TRUE(QualityGate(GateOptions{}).evaluate(candidate, &in_force).accepted);
   }

@@ -226,6 +226,9 @@ TEST(CalibratorRequests, Setup) {
   ASSERT_TRUE(fixture->modes.waitForCount(2, 20.0)) << "no calibration_mode from the driver";
   ASSERT_TRUE(fixture->left.waitForCount(1, 5.0));
   ASSERT_TRUE(fixture->right.waitForCount(1, 5.0));
+  // The calibration in force at start goes on /tf_static once the calibrator has its pair: before
+  // any "nothing went on /tf_static" below counts (it came late once, under load).
+  ASSERT_TRUE(fixture->tf_static.waitForCount(1, 10.0)) << "no /tf_static of the calibration in force";
   // A drifted rig: every window solved from here on would be accepted and committed (the
   // busy test below commits one), so that "nothing committed" is not vacuous.
   setDrift(1.05, 0.3);

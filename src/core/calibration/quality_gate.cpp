@@ -77,7 +77,17 @@ GateDecision QualityGate::evaluate(const BundleAdjustmentSummary& c, const Bundl
                                    std::optional<double> in_force_predicted_px) const {
   const GateOptions& o = options_;
   const auto reject = [](const std::string& why) {
-    return GateDecision{false, "rejected: " + why};
+    GateDecision d;
+    d.reason = "rejected: " + why;
+    d.detail = why;
+    return d;
+  };
+  const auto accept = [](const std::string& why) {
+    GateDecision d;
+    d.accepted = true;
+    d.reason = "accepted: " + why;
+    d.detail = why;
+    return d;
   };
   const std::string options_problem = o.Check();
   if (!options_problem.empty()) return reject("invalid gate options: " + options_problem);
@@ -111,10 +121,9 @@ GateDecision QualityGate::evaluate(const BundleAdjustmentSummary& c, const Bundl
 
   const double candidate_rms = combinedRms(c);
   if (!in_force_fit)
-    return {true, "accepted: first calibration, RMS " + fmt(candidate_rms) + " px"};
+    return accept("first calibration, RMS " + fmt(candidate_rms) + " px");
   if (!in_force_fit->success)
-    return {true, "accepted: calibration in force cannot explain the observations (" +
-                      in_force_fit->message + ")"};
+    return accept("calibration in force cannot explain the observations (" + in_force_fit->message + ")");
   const double in_force_rms = combinedRms(*in_force_fit);
   // A candidate that only confirms the calibration in force replaces it when clearly better
   // known (refine_ratio); otherwise `kept` stands.
@@ -123,15 +132,17 @@ GateDecision QualityGate::evaluate(const BundleAdjustmentSummary& c, const Bundl
       return kept;
     const double p = predictedPx(c);
     if (!(p > 0 && p < o.refine_ratio * *in_force_predicted_px)) return kept;
-    GateDecision refined{true, "accepted: refinement of the calibration in force, predicted error " + fmt(p) +
-                                   " px against " + fmt(*in_force_predicted_px) + " px"};
+    GateDecision refined = accept("refinement of the calibration in force, predicted error " + fmt(p) +
+                                  " px against " + fmt(*in_force_predicted_px) + " px");
     refined.refinement = true;
     refined.predicted_px = p;
     return refined;
   };
   // The significance of the change, when asked: "" when significant (or not asked), otherwise
-  // the rejection; *note describes the change for the acceptance.
+  // the rejection (within_uncertainty: the change lies within the new solve's uncertainty, not
+  // an evaluation that failed); note describes the change for the acceptance.
   std::string note;
+  bool within_uncertainty = false;
   const auto insignificant = [&]() -> std::string {
     if (!(o.min_change_in_predicted > 0)) return "";
     try {
@@ -141,6 +152,7 @@ GateDecision QualityGate::evaluate(const BundleAdjustmentSummary& c, const Bundl
       const double p = std::hypot(predicted.misalignment_px.rms, predicted.disparity_bias_px.rms);
       note = "; change for depth " + fmt(d) + " px, predicted error " + fmt(p) + " px";
       if (d > o.min_change_in_predicted * p) return "";
+      within_uncertainty = true;
       return "change from the calibration in force within the new solve's uncertainty: " + fmt(d) +
              " px (misalignment and disparity bias) vs " + fmt(o.min_change_in_predicted) + " x " + fmt(p) +
              " px predicted";
@@ -151,20 +163,20 @@ GateDecision QualityGate::evaluate(const BundleAdjustmentSummary& c, const Bundl
   if (in_force_rms > o.in_force_max_rms_px) {
     const std::string why = insignificant();
     if (!why.empty()) return reject(why);
-    return {true, "accepted: calibration in force no longer fits (RMS " + fmt(in_force_rms) +
-                      " px > " + fmt(o.in_force_max_rms_px) + " px), new RMS " +
-                      fmt(candidate_rms) + " px" + note};
+    return accept("calibration in force no longer fits (RMS " + fmt(in_force_rms) + " px > " +
+                  fmt(o.in_force_max_rms_px) + " px), new RMS " + fmt(candidate_rms) + " px" + note);
   }
   if (candidate_rms * (1.0 + o.min_rms_improvement_rel) <= in_force_rms) {
     const std::string why = insignificant();
     if (!why.empty()) {
       GateDecision kept = reject(why);
       // The observations do not tell the two apart: the calibration in force stands.
-      kept.in_force_confirmed = why.rfind("change", 0) == 0;
+      kept.change_too_small = within_uncertainty;
+      kept.in_force_confirmed = within_uncertainty;
       return refineOr(kept);
     }
-    return {true, "accepted: RMS " + fmt(candidate_rms) + " px vs " + fmt(in_force_rms) +
-                      " px for the calibration in force" + note};
+    return accept("RMS " + fmt(candidate_rms) + " px vs " + fmt(in_force_rms) + " px for the calibration in force" +
+                  note);
   }
   GateDecision kept = reject("no significant improvement: RMS " + fmt(candidate_rms) + " px vs " +
                              fmt(in_force_rms) + " px for the calibration in force (needs " +

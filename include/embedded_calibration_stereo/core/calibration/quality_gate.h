@@ -57,7 +57,11 @@ struct GateOptions {
 
 struct GateDecision {
   bool accepted = false;
-  std::string reason;  // why, in words, for CalibrationStatus.reason
+  std::string reason;  // why, in words, for CalibrationStatus.reason: "accepted: " or "rejected: " + detail
+  std::string detail;  // the reason without its verdict
+  // Rejected because the change from the calibration in force lies within the new solve's own
+  // uncertainty (GateOptions::min_change_in_predicted).
+  bool change_too_small = false;
   // Rejected only because the candidate fits no better (and not clearly worse) than the
   // calibration in force: the calibration in force is confirmed by these observations.
   bool in_force_confirmed = false;
