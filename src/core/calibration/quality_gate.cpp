@@ -73,22 +73,23 @@ double QualityGate::predictedPx(const BundleAdjustmentSummary& c) {
   }
 }
 
+namespace {
+
+GateDecision verdict(bool accepted, const std::string& why) {
+  GateDecision d;
+  d.accepted = accepted;
+  d.reason = (accepted ? "accepted: " : "rejected: ") + why;
+  d.detail = why;
+  return d;
+}
+
+}  // namespace
+
 GateDecision QualityGate::evaluate(const BundleAdjustmentSummary& c, const BundleAdjustmentSummary* in_force_fit,
                                    std::optional<double> in_force_predicted_px) const {
   const GateOptions& o = options_;
-  const auto reject = [](const std::string& why) {
-    GateDecision d;
-    d.reason = "rejected: " + why;
-    d.detail = why;
-    return d;
-  };
-  const auto accept = [](const std::string& why) {
-    GateDecision d;
-    d.accepted = true;
-    d.reason = "accepted: " + why;
-    d.detail = why;
-    return d;
-  };
+  const auto reject = [](const std::string& why) { return verdict(false, why); };
+  const auto accept = [](const std::string& why) { return verdict(true, why); };
   const std::string options_problem = o.Check();
   if (!options_problem.empty()) return reject("invalid gate options: " + options_problem);
   if (!c.success) return reject("no solution (" + c.message + ")");
