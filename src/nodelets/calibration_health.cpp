@@ -471,20 +471,6 @@ class CalibrationHealthNodelet : public nodelet::Nodelet {
     return report;
   }
 
-  // Why the pair is not a plausible calibration (stereo_input_check.h, and focal lengths near
-  // device_config's cameras), or "".
-  std::string implausibility(const CameraInfo& left, const CameraInfo& right) const {
-    std::string problem = checkCameraInfo(left, left_info_record_sub_.getTopic(), left.width, left.height);
-    if (problem.empty()) problem = checkCameraInfo(right, right_info_record_sub_.getTopic(), right.width, right.height);
-    if (problem.empty())
-      problem = checkRectifiedPair(left, left_info_record_sub_.getTopic(), right, right_info_record_sub_.getTopic());
-    if (problem.empty() && nominal_)
-      problem = checkNominalFocal(left, left_info_record_sub_.getTopic(), nominal_->left.fx, nominal_->left.fy);
-    if (problem.empty() && nominal_)
-      problem = checkNominalFocal(right, right_info_record_sub_.getTopic(), nominal_->right.fx, nominal_->right.fy);
-    return problem;
-  }
-
   // The largest signal in units of its DEGRADED threshold (signals not measured count 0).
   double severity(const ecs::HealthReport& report) const {
     const ecs::CalibrationMonitorOptions& o = params_.monitor;
@@ -509,7 +495,9 @@ class CalibrationHealthNodelet : public nodelet::Nodelet {
     }
     epoch_ = epoch;
     in_force_ = std::make_pair(left, right);
-    implausible_ = implausibility(left, right);
+    // Plausible as every consumer checks a CameraInfo, focal lengths near device_config's.
+    implausible_ = checkCalibrationPair(left, left_info_record_sub_.getTopic(), right,
+                                        right_info_record_sub_.getTopic(), nominal_);
     if (!implausible_.empty()) {
       implausible_ = "the calibration of epoch " + std::to_string(epoch) + " is not plausible: " + implausible_;
       NODELET_ERROR("CalibrationHealth: %s", implausible_.c_str());

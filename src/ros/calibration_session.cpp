@@ -330,13 +330,7 @@ CalibrationStatus CalibrationSession::solve(const std::vector<ecs::StereoObserva
 }
 
 std::string CalibrationSession::implausibleCandidate(const CommittedCalibration& infos) const {
-  std::string problem = checkCameraInfo(infos.left, "left", infos.left.width, infos.left.height);
-  if (problem.empty()) problem = checkCameraInfo(infos.right, "right", infos.right.width, infos.right.height);
-  if (problem.empty()) problem = checkRectifiedPair(infos.left, "left", infos.right, "right");
-  if (problem.empty() && nominal_) problem = checkNominalFocal(infos.left, "left", nominal_->left.fx, nominal_->left.fy);
-  if (problem.empty() && nominal_)
-    problem = checkNominalFocal(infos.right, "right", nominal_->right.fx, nominal_->right.fy);
-  return problem;
+  return checkCalibrationPair(infos.left, "left", infos.right, "right", nominal_);
 }
 
 std::string CalibrationSession::commitAgain(const UncommittedCalibration& calibration) {

@@ -246,6 +246,17 @@ std::string checkNominalFocal(const sensor_msgs::CameraInfo& info, const std::st
   return "";
 }
 
+std::string checkCalibrationPair(const sensor_msgs::CameraInfo& left, const std::string& left_topic,
+                                 const sensor_msgs::CameraInfo& right, const std::string& right_topic,
+                                 const std::optional<ecs::StereoRig>& nominal) {
+  std::string problem = checkCameraInfo(left, left_topic, left.width, left.height);
+  if (problem.empty()) problem = checkCameraInfo(right, right_topic, right.width, right.height);
+  if (problem.empty()) problem = checkRectifiedPair(left, left_topic, right, right_topic);
+  if (problem.empty() && nominal) problem = checkNominalFocal(left, left_topic, nominal->left.fx, nominal->left.fy);
+  if (problem.empty() && nominal) problem = checkNominalFocal(right, right_topic, nominal->right.fx, nominal->right.fy);
+  return problem;
+}
+
 std::string checkRectifiedPair(const sensor_msgs::CameraInfo& left, const std::string& left_topic,
                                const sensor_msgs::CameraInfo& right, const std::string& right_topic) {
   if (left.width != right.width || left.height != right.height)

@@ -14,8 +14,11 @@
 #include <sensor_msgs/CameraInfo.h>
 #include <sensor_msgs/Image.h>
 
+#include "embedded_calibration_stereo/core/geometry/stereo_rig.h"
+
 #include <map>
 #include <mutex>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -67,6 +70,14 @@ constexpr double kNominalFocalFactor = 1.25;
 // description's camera); "" when they are, or "<topic>: K: fx ...: <problem>".
 std::string checkNominalFocal(const sensor_msgs::CameraInfo& info, const std::string& info_topic, double nominal_fx,
                               double nominal_fy);
+
+// A calibration pair as a whole: each CameraInfo passes checkCameraInfo (with its own size), the
+// two form a rectified pair (checkRectifiedPair) and, with a `nominal` rig (a device
+// description's cameras), each camera's focal lengths lie near its nominal ones
+// (checkNominalFocal). "" or the first problem.
+std::string checkCalibrationPair(const sensor_msgs::CameraInfo& left, const std::string& left_topic,
+                                 const sensor_msgs::CameraInfo& right, const std::string& right_topic,
+                                 const std::optional<ecs::StereoRig>& nominal);
 
 // Two CameraInfos, each passing checkCameraInfo, form a rectified stereo pair: same size, the
 // same fx', fy' and cy' in both P (within kRectifiedPairTolerancePx), the left P's Tx (P[3])
