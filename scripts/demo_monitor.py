@@ -350,6 +350,14 @@ class Monitor:
         self.recent_scenes = {}
         self.recent_disparities = {}
         self.separated = None  # (raw, scene, disparity or None), one stamp
+        # Separation against the truth: each settled light-on frame's image_scene against the
+        # simulator's true scene of its stamp: (wall time, PSNR dB, passed through raw).
+        self.recent_truth_scenes = {}
+        self.separation = []
+        self.scored_stamps = set()
+        # The same for settled light-off frames (passed through): the noise floor of the score.
+        self.recent_light_off = {}
+        self.floor = []
         # calibration/health: frames (and lit frames) counted under the newest verdict, and
         # every change of state (wall time, message).
         self.health = None
@@ -372,6 +380,8 @@ class Monitor:
                              buff_size=2 ** 24),
             rospy.Subscriber(ns + "/left/image_scene", Image, self.on_scene, queue_size=4,
                              buff_size=2 ** 24),
+            rospy.Subscriber(ns + "/ground_truth/left/image_scene", Image, self.on_truth_scene, queue_size=4,
+                             buff_size=2 ** 24),
             sub("calibration/status", CalibrationStatus, "status"),
             rospy.Subscriber(ns + "/calibration/health", CalibrationHealth, self.on_health, queue_size=10),
         ]
@@ -390,6 +400,10 @@ class Monitor:
         """Called with self.lock held, for an image and the calibration_mode of its stamp."""
         if not mode.light_on:
             self.last_light_off_image = image
+            if mode.settled:
+                self.recent_light_off[image.header.stamp] = image
+                self.keep_last(self.recent_light_off)
+                self.score_floor(image.header.stamp)
         elif mode.settled:
             self.last_light_on_image = image
             self.recent_light_on[image.header.stamp] = image
@@ -401,6 +415,7 @@ class Monitor:
         newest settled light-on frame whose scene differs from it (the Separator separated it
         rather than passing it through), preferring one whose disparity arrived too."""
         raw, scene = self.recent_light_on.get(stamp), self.recent_scenes.get(stamp)
+        self.score_separation(stamp)
         if raw is None or scene is None or scene.data == raw.data:
             return
         disparity = self.recent_disparities.get(stamp)
@@ -408,6 +423,33 @@ class Monitor:
         if current is None or (stamp >= current[0].header.stamp and
                                (disparity is not None or current[2] is None)):
             self.separated = (raw, scene, disparity)
+
+    def score_separation(self, stamp):
+        """Called with self.lock held: scores a settled light-on frame's image_scene against the
+        true scene once both have arrived (the truth only scores, it never reaches the head)."""
+        raw, scene = self.recent_light_on.get(stamp), self.recent_scenes.get(stamp)
+        truth = self.recent_truth_scenes.get(stamp)
+        if raw is None or scene is None or truth is None or stamp in self.scored_stamps:
+            return
+        if scene.encoding != truth.encoding or len(scene.data) != len(truth.data):
+            return
+        self.scored_stamps.add(stamp)
+        self.separation.append((time.time(), psnr(scene.data, truth.data), scene.data == raw.data))
+
+    def score_floor(self, stamp):
+        """Called with self.lock held: a settled light-off frame against the true scene."""
+        raw, truth = self.recent_light_off.get(stamp), self.recent_truth_scenes.get(stamp)
+        if raw is None or truth is None or len(raw.data) != len(truth.data):
+            return
+        del self.recent_light_off[stamp]
+        self.floor.append(psnr(raw.data, truth.data))
+
+    def on_truth_scene(self, msg):
+        with self.lock:
+            self.recent_truth_scenes[msg.header.stamp] = msg
+            self.keep_last(self.recent_truth_scenes)
+            self.score_separation(msg.header.stamp)
+            self.score_floor(msg.header.stamp)
 
     def on_scene(self, msg):
         with self.lock:
@@ -546,6 +588,29 @@ def plot_errors(path, timeline, events, epochs, health_steps=()):
     return True
 
 
+def within_targets(errors, accuracy):
+    values = dict(accuracy, fx_pct=errors["fx_pct"], baseline_pct=errors["baseline_pct"])
+    return all(values[key] <= bound for key, (bound, _) in ACCURACY_BOUNDS.items())
+
+
+def cold_start_report(timeline, epochs, script):
+    """A cold start: the error the head started with (its nominal description against the
+    truth), its first commit and when it was first within the accuracy targets, before the first
+    drift event."""
+    first_event = script.fired[0][0] if script.fired else float("inf")
+    measured = [(t, e, a) for t, e, _, a, _ in timeline if a is not None and t < first_event]
+    if not measured:
+        return ["cold start: no accuracy measured before the first drift event"]
+    t0, e0, a0 = measured[0]
+    within = next((t for t, e, a in measured if within_targets(e, a)), None)
+    first_commit = next((t for t in epochs if t < first_event), None)
+    return ["cold start: started at depth error at 10 m %.2f %%, fx %.3f %%, baseline %.3f %%, misalignment "
+            "%.3f px; first commit at %s; within the accuracy targets from %s" % (
+                a0["depth_10m_pct"], e0["fx_pct"], e0["baseline_pct"], a0["misalignment_px"],
+                "%.1f s" % first_commit if first_commit is not None else "NONE before the first drift event",
+                "%.1f s" % within if within is not None else "NEVER before the first drift event")]
+
+
 def verdict(timeline, script, epochs, tool_problem=None):
     """Final errors against the accuracy targets; the calibration counts as 'after the drift' only if a
     commit came after the last drift event. Returns (lines, bounds_met)."""
@@ -620,6 +685,35 @@ def health_report(mon, script, health_steps, epochs, t0):
             name, te, left - te, after(burst), after(commit),
             after(back) if back is not None else "never"))
     return lines
+
+
+def psnr(a, b):
+    """PSNR (dB) of two 8-bit images' bytes."""
+    a = np.frombuffer(a, np.uint8).astype(np.float64)
+    b = np.frombuffer(b, np.uint8).astype(np.float64)
+    mse = float(np.mean((a - b) ** 2))
+    return 99.0 if mse == 0 else 10 * math.log10(255.0 ** 2 / mse)
+
+
+def separation_report(mon):
+    """How the Separator's scene compares with the simulator's true scene on the settled light-on
+    frames: before its first template (passed through raw) and from then on."""
+    scores = list(mon.separation)
+    if not scores:
+        return ["separation: no settled light-on frame was scored against the true scene"]
+    first = next((i for i, (_, _, raw) in enumerate(scores) if not raw), None)
+    if first is None:
+        return ["separation: none of the %d settled light-on frames scored was separated" % len(scores)]
+    after = [p for _, p, raw in scores[first:]]
+    raw_after = sum(1 for _, _, raw in scores[first:] if raw)
+    return ["separation: the scene of %d settled light-on frames against the true scene: %d passed through before "
+            "the first separated one (%.1f s after the first light-on frame scored); from then on PSNR min %.1f dB, "
+            "median %.1f dB, %.0f %% of them >= 35 dB, %d passed through" % (
+                len(scores), first, scores[first][0] - scores[0][0], min(after), float(np.median(after)),
+                100.0 * sum(1 for p in after if p >= 35.0) / len(after), raw_after)] + (
+        ["separation: the settled light-off frames themselves against the true scene (the score's floor: sensor "
+         "noise): PSNR median %.1f dB over %d frames" % (float(np.median(mon.floor)), len(mon.floor))]
+        if mon.floor else [])
 
 
 def write_results(out, mon, timeline, script, epochs, duration, report_lines, bounds_met, health_steps=()):
@@ -729,6 +823,8 @@ def main():
                         help="seconds of the zoom step (default: a third of the run); the thermal "
                              "rotation and the knock follow at fixed fractions of the run")
     parser.add_argument("--startup-timeout", type=float, default=120.0)
+    parser.add_argument("--cold-start", action="store_true",
+                        help="the head was given a nominal description off the truth: report its start")
     parser.add_argument("--accuracy-tool", default=shutil.which("stereo_accuracy"),
                         help="the stereo_accuracy executable (scripts/demo passes the built one)")
     args = parser.parse_args(rospy.myargv()[1:])
@@ -808,6 +904,9 @@ def main():
     tool.close()
     report_lines, bounds_met = verdict(timeline, script, epochs, tool.problem)
     report_lines += health_report(mon, script, health_steps, epochs, t0)
+    report_lines += separation_report(mon)
+    if args.cold_start:
+        report_lines += cold_start_report(timeline, epochs, script)
     summary, frames = write_results(args.out, mon, timeline, script, epochs, t, report_lines, bounds_met,
                                     health_steps)
     for line in summary + report_lines:

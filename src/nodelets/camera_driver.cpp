@@ -152,19 +152,12 @@ class CameraDriverNodelet : public nodelet::Nodelet {
     capture_thread_ = std::thread(&CameraDriverNodelet::captureLoop, this);
   }
 
-  // Loads the calibration pair; without a file, the sim's nominal rig (or an uncalibrated message
-  // carrying only the image size) is used in memory until the first set_camera_info. A rejected
-  // file does not stop the driver: it runs on the previous generation or the nominal calibration
-  // with an ERROR (log and diagnostics).
+  // Loads the calibration pair; without a file, the nominal cameras of device_config (the
+  // drawing, never the simulator's truth) or, without them, an uncalibrated message carrying only
+  // the image size, are used in memory until the first set_camera_info. A rejected file does not
+  // stop the driver: it runs on the previous generation or the nominal calibration with an ERROR
+  // (log and diagnostics).
   void loadCalibrations() {
-    sensor_msgs::CameraInfo left_fallback, right_fallback;
-    if (const auto rig = source_->nominalRig()) {
-      std::tie(left_fallback, right_fallback) = toStereoCameraInfo(*rig);
-    } else {
-      const cv::Size size = source_->imageSize();
-      left_fallback.width = right_fallback.width = static_cast<uint32_t>(size.width);
-      left_fallback.height = right_fallback.height = static_cast<uint32_t>(size.height);
-    }
     const cv::Size size = source_->imageSize();
     std::optional<ecs::StereoRig> nominal;
     if (!params_.device_config.empty()) {
@@ -174,6 +167,13 @@ class CameraDriverNodelet : public nodelet::Nodelet {
       } catch (const std::exception& e) {
         throw ecs::ConfigError("device_config", "'" + params_.device_config + "': " + e.what());
       }
+    }
+    sensor_msgs::CameraInfo left_fallback, right_fallback;
+    if (nominal && nominal->left.width == size.width && nominal->left.height == size.height) {
+      std::tie(left_fallback, right_fallback) = toStereoCameraInfo(*nominal);
+    } else {
+      left_fallback.width = right_fallback.width = static_cast<uint32_t>(size.width);
+      left_fallback.height = right_fallback.height = static_cast<uint32_t>(size.height);
     }
     calibration_ = std::make_unique<StereoCalibration>(
         StereoCalibration::Camera{params_.left_camera_name, params_.left_camera_info_url, "left_camera_info_url"},

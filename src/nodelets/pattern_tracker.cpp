@@ -5,15 +5,22 @@
 // and hands it to the core tracker as scene background at the first light-on frame after it.
 //
 // The tracker starts from a taught prior (param prior_file). Teaching (service ~teach, or
-// automatically when the file is missing and teach_on_start is true) runs the core BoardTeacher
-// on the next settled light-on frame with the latest settled light-off frame, writes the prior
-// atomically (temp file + rename) and starts tracking. A corrupt prior file leaves the nodelet
-// idle with an error naming the file until teaching runs. A prior taught but not written (a
-// full disk) is tracked with from memory and written again every kPriorRetryS until it is.
-// On the simulator, teach_from_ground_truth teaches on a light-on frame minus the simulator's
-// ground_truth/left|right/image_scene of the same stamp (the scene exactly as the sensor saw it):
-// the sim's stand-in for teaching with the scene covered or still, which a moving robot's
-// light-off frame (taken frames before, the head and the scene moving) is not.
+// automatically when the file is missing and teach_on_start is true) writes the prior
+// atomically (temp file + rename) and starts tracking. teach_from chooses what it teaches on:
+//  - burst (default): the next light burst, on the device image learned from its light pairs
+//    (core/tracker/window_teacher.h): its first kTeachLightOnFrames settled light-on frames with
+//    the settled light-off frame before it (or a shorter burst of at least 3 when it ends; a
+//    prior that misses boards so is taught again at the end of a burst, with light-off frames on
+//    both sides). No covered or still scene needed, so a moving head teaches itself. With
+//    window_tracking that burst is then tracked as any other;
+//  - light_off: the next settled light-on frame with the latest settled light-off frame (the
+//    scene cancels in their difference): the factory step, with the scene covered or still.
+// A corrupt prior file leaves the nodelet idle with an error naming the file until teaching
+// runs. A prior taught but not written (a full disk) is tracked with from memory and written
+// again every kPriorRetryS until it is.
+// For tests of other components only, teach_from_ground_truth teaches on a light-on frame minus
+// the simulator's ground_truth/left|right/image_scene of the same stamp. No product launch file
+// sets it (test/rostest/product_launch_truth.test checks).
 //
 // With window_tracking, it also tracks each light burst as a whole (core WindowTracker: the
 // device image learned from the burst's light pairs, free of the moving scene's pull that every
@@ -85,9 +92,10 @@ const char* toString(PriorState s) {
 //    The ground-truth scene subscribers (teach_from_ground_truth, while teaching waits) run there
 //    too. Tracking runs in frameCb (both cameras in parallel through cv::parallel_for_): it takes a
 //    fraction of a frame period, so it needs no thread of its own;
-//  - teaching (cv::findChessboardCornersSB: many frame periods long) runs on a std::async worker that receives
-//    copies of the frames and the device model and returns a TeachOutcome through teach_result_;
-//    frameCb collects it when ready. The destructor waits for it;
+//  - teaching (learning a burst's device image, cv::findChessboardCornersSB: many frame periods
+//    long) runs on a std::async worker that receives copies of the frames (or the burst's message
+//    pointers, never written) and the device model and returns a TeachOutcome through
+//    teach_result_; frameCb collects it when ready. The destructor waits for it;
 //  - window tracking (window_tracking; seconds per burst) runs on window_worker_ (started in
 //    onInit, joined in the destructor): frameCb collects a burst's message pointers (bursts_,
 //    callback queue only) and hands them over with the WindowTracker in force (a shared_ptr:
@@ -130,6 +138,7 @@ class PatternTrackerNodelet : public nodelet::Nodelet {
     prior_file_ = read.get("prior_file", defaultPatternPriorFile());
     device_config_ = read.get("device_config", package_path + "/config/sim_rig.yaml");
     const bool teach_on_start = read.get("teach_on_start", true);
+    teach_from_burst_ = read.choice("teach_from", "burst", {"burst", "light_off"}) == "burst";
     teach_from_truth_ = read.get("teach_from_ground_truth", false);
     const int queue_size = read.atLeast("queue_size", 10, 1);
     stale_background_level_ = read.atLeast("stale_background_level", ecs::TrackerOptions().stale_background_level, 0.0);
@@ -140,6 +149,7 @@ class PatternTrackerNodelet : public nodelet::Nodelet {
     } catch (const std::exception& e) {
       throw ecs::ConfigError("device_config", "'" + device_config_ + "': " + e.what());
     }
+    bursts_.emplace(window_options_.min_light_on_frames);  // window tracking and teaching from a burst
     loadPrior(teach_on_start);
 
     input_ = std::make_unique<FrameInput>(
@@ -158,7 +168,6 @@ class PatternTrackerNodelet : public nodelet::Nodelet {
     if (window_tracking_) {
       window_observations_pub_ = nh.advertise<StereoPatternObservation>("calibration/window_observations", 10, cb, cb);
       input_->watch(window_observations_pub_);
-      bursts_.emplace(window_options_.min_light_on_frames);
       window_worker_ = std::thread(&PatternTrackerNodelet::windowWorkerLoop, this);
     }
     updateNeed();
@@ -275,16 +284,16 @@ class PatternTrackerNodelet : public nodelet::Nodelet {
     teach_requested_ = true;
     updateNeed();
     res.success = true;
-    res.message = "teaching at the next settled light-on frame; prior file " + prior_file_;
+    res.message = std::string(teach_from_burst_ && !teach_from_truth_ ? "teaching at the end of the next light burst"
+                                                                      : "teaching at the next settled light-on frame") +
+                  "; prior file " + prior_file_;
     return true;
   }
 
   void frameCb(const ImageConstPtr& left, const ImageConstPtr& right, const CalibrationModeConstPtr& mode) {
     collectTeaching();
     if (!mode->settled) return;  // the light is changing: neither a scene nor a board frame
-    if (window_tracking_) {
-      if (auto ended = bursts_->add(left, right, mode->light_on)) endBurst(std::move(*ended));
-    }
+    if (auto ended = bursts_->add(left, right, mode->light_on)) endBurst(std::move(*ended));
     if (!mode->light_on) {
       light_off_left_ = left;  // zero-copy: keeps the shared messages alive
       light_off_right_ = right;
@@ -300,6 +309,12 @@ class PatternTrackerNodelet : public nodelet::Nodelet {
       if (!teach_requested_) return;
       NODELET_WARN_THROTTLE(5.0, "PatternTracker: teaching waits for ground_truth/left|right/image_scene of a "
                             "settled light-on frame (teach_from_ground_truth is set)");
+    } else if (teach_requested_ && teach_from_burst_) {
+      LightBurst now = bursts_->underWay();
+      if (!teach_at_burst_end_ && static_cast<int>(now.light_on.size()) >= kTeachLightOnFrames)
+        return startTeachingFromBurst(std::move(now));
+      NODELET_INFO_THROTTLE(30.0, "PatternTracker: teaching waits for a light burst of %d settled light-on frames on "
+                            "%s", kTeachLightOnFrames, input_->topic(0).c_str());
     } else if (teach_requested_) {
       // Teaching needs the scene to cancel: without a light-off frame most boards are missed.
       if (lightOffMatches(*left)) {
@@ -359,13 +374,40 @@ class PatternTrackerNodelet : public nodelet::Nodelet {
     right_frame.light_on = right.clone();
     left_frame.light_off = left_off.clone();
     right_frame.light_off = right_off.clone();
-    state_ = PriorState::kTeaching;
-    tracker_.reset();
-    window_tracker_.reset();
-    unwritten_prior_.reset();  // the new teaching's prior replaces it
+    beginTeaching();
     NODELET_INFO("PatternTracker: teaching from a light-on frame and the latest light-off frame (worker thread)");
     teach_result_ = std::async(std::launch::async, teachStereoPrior, left_frame, right_frame, order, device_,
                                prior_file_);
+  }
+
+  // Teaches on the device image learned from a burst's light pairs (worker thread): a burst
+  // under way (its light-on frames so far with the light-off frame before it) or one that ended.
+  void startTeachingFromBurst(LightBurst burst) {
+    teach_requested_ = false;
+    teach_at_burst_end_ = false;
+    beginTeaching();
+    partial_teach_ = !burst.light_off_after.first;
+    NODELET_INFO("PatternTracker: teaching on the device image learned from %zu light-on frames of a burst "
+                 "(worker thread)", burst.light_on.size());
+    teach_result_ = std::async(std::launch::async, [burst = std::move(burst), device = device_,
+                                                    path = prior_file_] {
+      TeachOutcome out;
+      try {
+        const ecs::WindowFrames left = windowFrames(burst, 0), right = windowFrames(burst, 1);
+        return teachStereoPriorFromBurst(left, right, device, path);
+      } catch (const std::exception& e) {  // an image cv_bridge cannot read
+        out.error = e.what();
+      }
+      return out;
+    });
+  }
+
+  void beginTeaching() {
+    state_ = PriorState::kTeaching;
+    tracker_.reset();
+    window_tracker_.reset();
+    taught_burst_.reset();
+    unwritten_prior_.reset();  // the new teaching's prior replaces it
   }
 
   void collectTeaching() {
@@ -393,6 +435,9 @@ class PatternTrackerNodelet : public nodelet::Nodelet {
               ros::WallDuration(kPriorRetryS), [this](const ros::WallTimerEvent&) { retryPriorWrite(); });
         }
         updateNeed();
+        teachAgainIfBoardsMissing(outcome.prior);
+        if (taught_burst_) endBurst(std::move(*taught_burst_));  // tracked with the prior it taught
+        taught_burst_.reset();
         return;
       } catch (const std::exception& e) {
         prior_error_ = e.what();
@@ -403,6 +448,20 @@ class PatternTrackerNodelet : public nodelet::Nodelet {
     state_ = PriorState::kTeachFailed;
     NODELET_ERROR("%s", idleMessage().c_str());
     updateNeed();
+  }
+
+  // A prior taught on a burst under way (one-sided light pairs: more scene left in the device
+  // image) that misses boards is taught again at the end of a burst, once; it is tracked with
+  // meanwhile.
+  void teachAgainIfBoardsMissing(const ecs::PatternPrior& prior) {
+    const bool partial = partial_teach_;
+    partial_teach_ = false;
+    const size_t boards = device_.device.virtualBoards().size();
+    if (!partial || (prior.cameras[0].boards.size() >= boards && prior.cameras[1].boards.size() >= boards)) return;
+    NODELET_INFO("PatternTracker: %zu + %zu of %zu boards taught on the first light-on frames of a burst; teaching "
+                 "again at the end of a burst", prior.cameras[0].boards.size(), prior.cameras[1].boards.size(), boards);
+    teach_requested_ = true;
+    teach_at_burst_end_ = true;
   }
 
   // Retry timer: writes the prior taught but not written yet; stops once written (or replaced
@@ -461,8 +520,24 @@ class PatternTrackerNodelet : public nodelet::Nodelet {
 
   // ---- window tracking (window_tracking)
 
-  // Callback queue: a burst ended (the first settled light-off frame after it).
+  // Callback queue: a burst ended (the first settled light-off frame after it). One that ends
+  // while teaching runs waits for the prior (it is usually the one taught on).
   void endBurst(EndedBurst ended) {
+    if (teach_requested_ && teach_from_burst_ && !teach_from_truth_ && ended.problem.empty()) {
+      startTeachingFromBurst(ended.burst);
+      if (window_tracking_) taught_burst_ = std::move(ended);  // tracked with the prior it teaches
+      return;
+    }
+    if (state_ == PriorState::kTeaching && window_tracking_ && ended.problem.empty()) {
+      taught_burst_ = std::move(ended);
+      return;
+    }
+    if (!window_tracking_) {
+      if (teach_requested_ && teach_from_burst_ && !teach_from_truth_)
+        NODELET_WARN_THROTTLE(5.0, "PatternTracker: cannot teach from the burst of %d light-on frames that ended: %s",
+                              ended.light_on_frames, ended.problem.c_str());
+      return;
+    }
     std::string problem = ended.problem;
     if (problem.empty() && !window_tracker_) problem = "no prior to track with yet";
     if (problem.empty()) {
@@ -525,16 +600,10 @@ class PatternTrackerNodelet : public nodelet::Nodelet {
     std::string error, scene_problem;
     try {
       ecs::WindowFrames frames[2];
-      // The images stay owned by their messages (job); rgb8 becomes BGR here, off the callback.
-      const auto image = [](const ImageConstPtr& m) {
-        cv::Mat mat = cv_bridge::toCvShare(m)->image;
-        if (m->encoding == "rgb8") cv::cvtColor(mat, mat, cv::COLOR_RGB2BGR);
-        return mat;
-      };
       for (int c = 0; c < 2; ++c) {
-        frames[c].light_off_before.push_back(image(job.light_off_before[c]));
-        frames[c].light_off_after.push_back(image(job.light_off_after[c]));
-        for (const ImageConstPtr& m : job.light_on[c]) frames[c].light_on.push_back(image(m));
+        frames[c].light_off_before.push_back(windowImage(job.light_off_before[c]));
+        frames[c].light_off_after.push_back(windowImage(job.light_off_after[c]));
+        for (const ImageConstPtr& m : job.light_on[c]) frames[c].light_on.push_back(windowImage(m));
       }
       const ecs::WindowTrack track = job.tracker->track(frames[0], frames[1], job.header.stamp.toSec());
       msg = toMsg(track.observation);
@@ -594,8 +663,9 @@ class PatternTrackerNodelet : public nodelet::Nodelet {
       case PriorState::kTeaching: status.summary(DiagnosticStatus::OK, "teaching"); break;
       case PriorState::kMissing:
         status.summary(teach_requested_ ? DiagnosticStatus::WARN : DiagnosticStatus::ERROR,
-                       teach_requested_ ? "prior missing: teaching at the next light-on window"
-                                        : "prior missing: idle until teaching");
+                       !teach_requested_   ? "prior missing: idle until teaching"
+                       : teach_from_burst_ ? "prior missing: teaching at the end of the next light burst"
+                                           : "prior missing: teaching at the next settled light-on frame");
         break;
       case PriorState::kCorrupt:
       case PriorState::kTeachFailed:
@@ -627,7 +697,14 @@ class PatternTrackerNodelet : public nodelet::Nodelet {
   }
 
   double stale_background_level_ = 0.0;  // parameter, see TrackerOptions
-  bool teach_from_truth_ = false;         // parameter teach_from_ground_truth
+  bool teach_from_truth_ = false;         // parameter teach_from_ground_truth (tests only)
+  bool teach_from_burst_ = true;          // parameter teach_from
+  // Teaching from a burst starts once it has this many settled light-on frames (or at its end):
+  // a forced recalibration holds the light on until it has observations.
+  static constexpr int kTeachLightOnFrames = 8;
+  std::optional<EndedBurst> taught_burst_;  // ended while teaching ran: tracked once taught (window tracking)
+  bool partial_teach_ = false;       // the teaching running is on a burst under way
+  bool teach_at_burst_end_ = false;  // teach again, at the end of a burst only
   static constexpr size_t kTruthQueue = 5;  // frames kept while matching light-on frames to the truth
   ros::Subscriber truth_scene_sub_[2];
   std::deque<ImageConstPtr> truth_scenes_[2];
@@ -660,7 +737,7 @@ class PatternTrackerNodelet : public nodelet::Nodelet {
   bool window_tracking_ = false;  // parameter
   ecs::WindowTrackerOptions window_options_;  // set in onInit
   std::shared_ptr<ecs::WindowTracker> window_tracker_;  // null without a prior; callback queue
-  std::optional<LightBurstCollector> bursts_;           // with window_tracking; callback queue
+  std::optional<LightBurstCollector> bursts_;           // set in onInit; callback queue
   ros::Publisher window_observations_pub_;
   std::thread window_worker_;
   std::mutex window_mutex_;  // guards everything below

@@ -10,24 +10,26 @@
 //    left|right/image_scene (zero-copy; depth never stops; a missing template is warned about);
 //  - light on and settled: the separated images, in new messages with the raw headers.
 //
-// Where I_C (the device image, only valid for the calibration it was taught under) comes from,
-// parameter device_template:
-//  - learn: learned during normal operation (core/depth/device_image_learner.h): each light
-//    window gives pairs (the last settled light-off frame before it with the first two settled
-//    light-on frames; the last two settled light-on frames with the first settled light-off frame
-//    after it); after each window the pairs of the current calibration epoch are learned on a
-//    worker thread, until the result is ready: it becomes the template of that epoch and learning
-//    stops until the next epoch (a run costs seconds of CPU). No covering, no truth.
-//    An epoch change starts a new set of pairs; the old template is not used meanwhile (frames
-//    pass unseparated, see reteach_on_epoch_change).
-//  - teach (default), on hardware: the `teach` service averages the next teach_frames light-on
-//    settled frames; the scene must be covered (or dark) meanwhile;
-//  - teach, simulator (teach_from_ground_truth): the scene cannot be covered, so I_C is the mean
-//    over teach_frames light-on settled frames of I_E - ground_truth image_scene of the same
-//    stamp, which is the device-only image. It is taught automatically at the first light-on
-//    frames and, with reteach_on_epoch_change, again whenever calibration_epoch differs from the
-//    template's (the device image moves with zoom); on hardware an epoch change is only warned
-//    about.
+// Where I_C (the device image) comes from, parameter device_template:
+//  - learn (default): learned from every light burst (at least 3 settled light-on frames between
+//    settled light-off frames; core/tracker/window_tracker.h learnWindowDevice): its
+//    learn_frames_per_end light-on frames nearest each end, paired with the light-off frame on
+//    their side, on a worker thread when the burst ends. No covering, no truth. Each burst's
+//    result replaces the template: bursts come when the calibration may have changed (zoom,
+//    focus and knocks move the device image), so the newest burst shows the device as it is now;
+//    a result whose reliably learned fraction of the image (DeviceLearnerOptions: enough inliers,
+//    a small standard error) is below learn_min_coverage is only taken while there is no
+//    template. Before the first template, the first learn_frames_per_end * 2 light-on frames
+//    of the burst under way are learned at once (paired with the light-off frame before it), so
+//    that the rest of the first burst is separated too. A new calibration does not stop the
+//    separation: the template stays in use until the next burst's replaces it.
+//  - teach, on hardware: the `teach` service averages the next teach_frames light-on settled
+//    frames; the scene must be covered (or dark) meanwhile (a factory step). A template taught
+//    under another calibration epoch is not used (reteach_on_epoch_change; teach again);
+//  - teach, for tests of other components only (teach_from_ground_truth): I_C is the mean over
+//    teach_frames light-on settled frames of I_E - ground_truth image_scene of the same stamp,
+//    taught at the first light-on frames and at each epoch change. No product launch file sets
+//    it.
 // Diagnostics (StageDiagnostics): rates, latency, mode (passthrough and why, or separating),
 // method, template source and epoch, the last learning result (learn) and input copies (must
 // stay 0).
@@ -38,6 +40,7 @@
 #include <ros/ros.h>
 #include <std_srvs/Trigger.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <deque>
@@ -49,9 +52,11 @@
 
 #include "embedded_calibration_stereo/CalibrationMode.h"
 #include "embedded_calibration_stereo/core/depth/device_image_learner.h"
+#include "embedded_calibration_stereo/core/tracker/window_tracker.h"
 #include "embedded_calibration_stereo/core/depth/separator.h"
 #include "embedded_calibration_stereo/core/geometry/config_error.h"
 #include "embedded_calibration_stereo/ros/lazy_synced_input.h"
+#include "embedded_calibration_stereo/ros/light_burst.h"
 #include "embedded_calibration_stereo/ros/output_image.h"
 #include "embedded_calibration_stereo/ros/parameter_reader.h"
 #include "embedded_calibration_stereo/ros/stage_diagnostics.h"
@@ -105,23 +110,44 @@ ecs::DeviceTemplate templateFrom(const cv::Mat& sum, int frames, uint32_t epoch)
   return templ;  // default alpha curve (alpha 1): paper_global_alpha without a taught curve
 }
 
-// A settled frame kept for learning: both images copied (the messages may be reused elsewhere).
-struct KeptFrame {
-  cv::Mat left, right;
-  ros::Time stamp;
-  uint32_t epoch = 0;
-};
-
-KeptFrame keep(const Image& left, const Image& right, uint32_t epoch) {
-  const auto view = [](const Image& m) { return cv_bridge::toCvShare(m, boost::shared_ptr<void>())->image.clone(); };
-  return {view(left), view(right), left.header.stamp, epoch};
-}
-
 // One learning run's result (both cameras), made on the worker thread.
 struct LearnResult {
   ecs::LearnedDevice left, right;
-  std::string error;  // non-empty: the run failed
+  int light_on_frames = 0;  // of the burst, used or not
+  bool whole_burst = true;  // false: the first frames of a burst under way
+  double stamp = 0.0;       // the burst's last light-on frame used
+  std::string error;        // non-empty: the run failed
 };
+
+// Learns both cameras' device images from a burst (worker thread): its per_end light-on frames
+// nearest each end when it ended, all of them while it is under way.
+LearnResult learnBurst(const LightBurst& burst, bool whole, int per_end, const ecs::DeviceLearnerOptions& options,
+                       uint32_t epoch) {
+  LearnResult result;
+  result.light_on_frames = static_cast<int>(burst.light_on.size());
+  result.whole_burst = whole;
+  result.stamp = burst.light_on.back().first->header.stamp.toSec();
+  try {
+    ecs::LearnedDevice learned[2];
+    std::string errors[2];
+    cv::parallel_for_(cv::Range(0, 2), [&](const cv::Range& range) {
+      for (int c = range.start; c < range.end; ++c) try {
+          ecs::WindowFrames frames = windowFrames(burst, c);
+          if (whole) frames = ecs::windowEnds(frames, per_end);
+          learned[c] = ecs::learnWindowDevice(frames, options);
+          learned[c].device_template.calibration_epoch = epoch;
+        } catch (const std::exception& e) {
+          errors[c] = (c ? "right: " : "left: ") + std::string(e.what());
+        }
+    });
+    result.error = errors[0].empty() ? errors[1] : errors[0];
+    result.left = std::move(learned[0]);
+    result.right = std::move(learned[1]);
+  } catch (const std::exception& e) {
+    result.error = e.what();
+  }
+  return result;
+}
 
 }  // namespace
 
@@ -131,12 +157,13 @@ struct LearnResult {
 // (un)subscribe under their own mutex; need() is called outside state_mutex_ (unsubscribing
 // waits for a callback of that subscription running on another thread). separator_ points to
 // an immutable StereoSeparator: frameCb takes its own reference and separates outside the lock
-// (both cameras in parallel, ecs::separateStereo). Published messages are never modified after publishing. diagnostics_
-// reports on a wall timer of the same queue and guards its own counters. With device_template
-// learn, the pair sets, kept frames and learning_ belong to the callback thread; a learning run
-// works on std::async's thread on a snapshot of the pairs (images never written after being
-// kept) and hands its result back through the future, which only the callback thread reads
-// (unloading waits for a run in progress: the future of std::async joins its thread).
+// (both cameras in parallel, ecs::separateStereo). Published messages are never modified after
+// publishing. diagnostics_ reports on a wall timer of the same queue and guards its own counters.
+// With device_template learn, the burst collector, the waiting burst, has_template_ and
+// learning_ belong to the callback thread; a learning run works on std::async's thread on a
+// burst's message pointers (messages are never written after publishing) and hands its result
+// back through the future, which only the callback thread reads (unloading waits for a run in
+// progress: the future of std::async joins its thread).
 class SeparatorNodelet : public nodelet::Nodelet {
  private:
   using FrameInput = LazySyncedInput<Image, Image, CalibrationMode>;
@@ -161,16 +188,14 @@ class SeparatorNodelet : public nodelet::Nodelet {
     } catch (const std::exception& e) {
       throw ecs::ConfigError("method", e.what());
     }
-    learn_ = read.choice("device_template", "teach", {"teach", "learn"}) == "learn";
+    teach_from_truth_ = read.get("teach_from_ground_truth", false);  // tests only: implies teach
+    learn_ = read.choice("device_template", teach_from_truth_ ? "teach" : "learn", {"teach", "learn"}) == "learn";
     teach_frames_ = read.atLeast("teach_frames", 8, 1);
-    teach_from_truth_ = read.get("teach_from_ground_truth", false);
     if (learn_ && teach_from_truth_)
       throw ecs::ConfigError("teach_from_ground_truth", "applies to device_template teach only, not learn");
-    learn_options_.min_pairs = read.inRange("learn_min_pairs", learn_options_.min_pairs, 2, 64);
-    learn_options_.max_pairs = read.inRange("learn_max_pairs", learn_options_.max_pairs, learn_options_.min_pairs, 64);
-    learn_options_.min_coverage = read.inRange("learn_min_coverage", learn_options_.min_coverage, 0.5, 1.0);
-    learn_left_ = ecs::LightPairSet(learn_options_.max_pairs);
-    learn_right_ = ecs::LightPairSet(learn_options_.max_pairs);
+    learn_frames_per_end_ = read.inRange("learn_frames_per_end", 4, 1, 30);
+    learn_options_ = ecs::windowLearnerOptions();
+    learn_options_.min_coverage = read.inRange("learn_min_coverage", 0.9, 0.5, 1.0);
     reteach_on_epoch_change_ = read.get("reteach_on_epoch_change", true);
     const int queue_size = read.atLeast("queue_size", 5, 1);
     const bool approximate = read.get("approximate_sync", false);
@@ -210,9 +235,9 @@ class SeparatorNodelet : public nodelet::Nodelet {
     diagnostics_->set("template source", learn_ ? "learn" : "teach");
     for (LazySubscription* input : inputs()) input->start();  // subscribed while someone listens
     if (learn_) {
-      NODELET_INFO("Separator: %s, device image learned from the light windows (at least %d light pairs), %s sync, "
-                   "queue %d",
-                   method.c_str(), learn_options_.min_pairs, approximate ? "approximate" : "exact", queue_size);
+      NODELET_INFO("Separator: %s, device image learned from each light burst (%d light-on frames of each end), "
+                   "%s sync, queue %d",
+                   method.c_str(), learn_frames_per_end_, approximate ? "approximate" : "exact", queue_size);
     } else {
       NODELET_INFO("Separator: %s, teach %d frames from %s, %s sync, queue %d", method.c_str(), teach_frames_,
                    teach_from_truth_ ? "ground truth (simulator)" : "the teach service (scene covered)",
@@ -274,12 +299,11 @@ class SeparatorNodelet : public nodelet::Nodelet {
                            : "separation not taught yet: republishing the raw light-on frames");
       return publishRaw(left, right, learn_ ? "learning" : "not taught");
     }
-    if (reteach_on_epoch_change_ && separator->epoch() != mode->calibration_epoch) {
+    if (!learn_ && reteach_on_epoch_change_ && separator->epoch() != mode->calibration_epoch) {
       reportWarning("template taught under calibration epoch " + std::to_string(separator->epoch()) +
                     ", frames are epoch " + std::to_string(mode->calibration_epoch) +
-                    (learn_                ? ": re-learning, republishing raw frames meanwhile"
-                     : teach_from_truth_ ? ": re-teaching, republishing raw frames meanwhile"
-                                         : ": call teach with the scene covered; republishing raw frames"));
+                    (teach_from_truth_ ? ": re-teaching, republishing raw frames meanwhile"
+                                       : ": call teach with the scene covered; republishing raw frames"));
       return publishRaw(left, right, "template of another epoch");
     }
     try {
@@ -351,82 +375,53 @@ class SeparatorNodelet : public nodelet::Nodelet {
     teach_ = TeachAccumulator();
   }
 
-  // device_template learn: collects light pairs around each light window and learns after it.
-  // Callback thread only.
+  // device_template learn: learns from each light burst (see the file comment). Callback thread.
   void learnFrom(const ImageConstPtr& left, const ImageConstPtr& right, const CalibrationMode& mode) {
     collectLearned();
     if (!mode.settled) return;
-    const uint32_t epoch = mode.calibration_epoch;
-    if (learned_epoch_ == epoch) return;  // learned: nothing more to collect until the next epoch
-    if (epoch != learn_left_.epoch()) {
-      if (learn_left_.size() > 0) NODELET_INFO("Separator: calibration epoch %u: learning the device image again", epoch);
-      learn_left_.reset(epoch);
-      learn_right_.reset(epoch);
+    if (std::optional<EndedBurst> ended = bursts_.add(left, right, mode.light_on)) {
+      if (!ended->problem.empty())
+        return reportWarning("cannot learn the device image from the burst of " +
+                             std::to_string(ended->light_on_frames) + " light-on frames that ended: " + ended->problem);
+      return startLearning(std::move(ended->burst), true, mode.calibration_epoch);
     }
-    // Pairs only within one epoch and a short time (the scene moves between the two frames).
-    const auto pairable = [&](const KeptFrame& f) {
-      return f.epoch == epoch && std::abs((left->header.stamp - f.stamp).toSec()) <= kMaxPairGapS;
-    };
-    try {
-      if (!mode.light_on) {
-        if (!recent_on_.empty()) {  // the first settled light-off frame after a window
-          const KeptFrame off = keep(*left, *right, epoch);
-          for (const KeptFrame& on : recent_on_)
-            if (pairable(on)) addPair(off, on);
-          recent_on_.clear();
-          last_off_ = off;
-          startLearning();
-        } else {
-          last_off_.reset();  // kept lazily: copied when the next frame turns out to be lit
-          last_off_msgs_ = {left, right, epoch};
-        }
-        settled_on_ = 0;
-        return;
-      }
-      if (!last_off_ && last_off_msgs_.left) last_off_ = keep(*last_off_msgs_.left, *last_off_msgs_.right, last_off_msgs_.epoch);
-      const KeptFrame on = keep(*left, *right, epoch);
-      if (++settled_on_ <= kPairsPerSwitch && last_off_ && pairable(*last_off_)) addPair(*last_off_, on);
-      recent_on_.push_back(on);
-      while (static_cast<int>(recent_on_.size()) > kPairsPerSwitch) recent_on_.pop_front();
-    } catch (const std::exception& e) {  // e.g. the image size changed: start over
-      reportError(std::string("cannot learn from this frame: ") + e.what());
-      learn_left_.reset(epoch);
-      learn_right_.reset(epoch);
-      recent_on_.clear();
-      last_off_.reset();
-    }
+    if (!mode.light_on || has_template_) return;
+    // No template yet: learn from the first frames of this burst so that its rest is separated.
+    LightBurst now = bursts_.underWay();
+    if (static_cast<int>(now.light_on.size()) == 2 * learn_frames_per_end_)
+      startLearning(std::move(now), false, mode.calibration_epoch);
   }
 
-  void addPair(const KeptFrame& off, const KeptFrame& on) {
-    learn_left_.add(off.left, on.left);
-    learn_right_.add(off.right, on.right);
-  }
-
-  // After a window: learns the current pairs on a worker thread (one run at a time).
-  void startLearning() {
-    if (learning_.valid() || learn_left_.size() < learn_options_.min_pairs) return;
-    const uint32_t epoch = learn_left_.epoch();
-    learning_ = std::async(std::launch::async, [options = learn_options_, left = learn_left_.snapshot(),
-                                                right = learn_right_.snapshot(), epoch] {
-      LearnResult result;
-      try {
-        result.left = ecs::learnDeviceImage(left, options, epoch);
-        result.right = ecs::learnDeviceImage(right, options, epoch);
-      } catch (const std::exception& e) {
-        result.error = e.what();
-      }
-      return result;
+  // One run at a time on a worker thread; a burst that ends meanwhile waits (the newest one).
+  void startLearning(LightBurst burst, bool whole, uint32_t epoch) {
+    if (learning_.valid()) {
+      if (whole) waiting_burst_ = PendingBurst{std::move(burst), epoch};
+      return;
+    }
+    learning_ = std::async(std::launch::async, [burst = std::move(burst), whole, per_end = learn_frames_per_end_,
+                                                options = learn_options_, epoch] {
+      return learnBurst(burst, whole, per_end, options, epoch);
     });
   }
 
-  // Takes a finished learning run's result; adopts its template when ready and of the current epoch.
+  // Takes a finished learning run's result and adopts its template (see the file comment).
   void collectLearned() {
     if (!learning_.valid() || learning_.wait_for(std::chrono::seconds(0)) != std::future_status::ready) return;
     const LearnResult result = learning_.get();
+    if (waiting_burst_) {
+      PendingBurst next = std::move(*waiting_burst_);
+      waiting_burst_.reset();
+      startLearning(std::move(next.burst), true, next.epoch);
+    }
     if (!result.error.empty()) return reportError("learning the device image failed: " + result.error);
-    const uint32_t epoch = result.left.device_template.calibration_epoch;
-    diagnostics_->set("learning", "left " + result.left.summary() + "; right " + result.right.summary());
-    if (!result.left.ready || !result.right.ready || epoch != learn_left_.epoch()) return;
+    const std::string summary = "left " + result.left.summary() + "; right " + result.right.summary();
+    diagnostics_->set("learning", summary);
+    if (has_template_ && std::min(result.left.coverage, result.right.coverage) < learn_options_.min_coverage) {
+      NODELET_INFO("Separator: the device image learned from the burst ending at %.3f s covers less than "
+                   "learn_min_coverage %.2f of the image reliably (%s): the template in use stays",
+                   result.stamp, learn_options_.min_coverage, summary.c_str());
+      return;
+    }
     std::shared_ptr<const StereoSeparator> learned;
     try {
       learned = std::make_shared<const StereoSeparator>(options_, result.left.device_template,
@@ -434,27 +429,20 @@ class SeparatorNodelet : public nodelet::Nodelet {
     } catch (const std::exception& e) {
       return reportError(std::string("learned device image unusable: ") + e.what());
     }
-    bool first;
     {
       std::lock_guard<std::mutex> lock(state_mutex_);
-      first = !separator_ || separator_->epoch() != epoch;
       separator_ = learned;
     }
-    learned_epoch_ = epoch;
-    learn_left_.reset(epoch);  // the pairs are no longer needed
-    learn_right_.reset(epoch);
-    recent_on_.clear();
-    last_off_.reset();
-    if (first)
-      NODELET_INFO("Separator: device image learned for calibration epoch %u (left %s; right %s)", epoch,
-                   result.left.summary().c_str(), result.right.summary().c_str());
-    diagnostics_->set("template epoch", std::to_string(epoch));
+    NODELET_INFO("Separator: device image learned from %s %d light-on frames of the burst ending at %.3f s (%s)",
+                 result.whole_burst ? "the" : "the first", result.light_on_frames, result.stamp, summary.c_str());
+    has_template_ = true;
+    diagnostics_->set("template epoch", std::to_string(learned->epoch()));
   }
 
   bool teachService(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& res) {
     if (learn_) {
       res.success = false;
-      res.message = "device_template is learn: the device image is learned from the light windows, no teach needed";
+      res.message = "device_template is learn: the device image is learned from the light bursts, no teach needed";
       return true;
     }
     {
@@ -484,20 +472,17 @@ class SeparatorNodelet : public nodelet::Nodelet {
   TeachAccumulator teach_;
 
   // device_template learn (callback thread only, see the class comment).
-  static constexpr int kPairsPerSwitch = 2;    // light-on frames paired with each light-off frame
-  static constexpr double kMaxPairGapS = 0.5;  // s between the frames of a pair
-  bool learn_ = false;
+  bool learn_ = true;
+  int learn_frames_per_end_ = 4;
   ecs::DeviceLearnerOptions learn_options_;
-  ecs::LightPairSet learn_left_, learn_right_;
-  struct OffMessages {
-    ImageConstPtr left, right;
+  LightBurstCollector bursts_{3};  // a burst: at least 3 settled light-on frames
+  struct PendingBurst {
+    LightBurst burst;
     uint32_t epoch = 0;
-  } last_off_msgs_;
-  std::optional<KeptFrame> last_off_;  // the last settled light-off frame, once copied
-  std::deque<KeptFrame> recent_on_;    // the last settled light-on frames of the window
-  int settled_on_ = 0;                 // settled light-on frames since the last light-off one
+  };
+  std::optional<PendingBurst> waiting_burst_;  // ended while a run was busy
   std::future<LearnResult> learning_;
-  std::optional<uint32_t> learned_epoch_;  // the epoch whose template was learned
+  bool has_template_ = false;  // a learned template is in use
 };
 
 }  // namespace embedded_calibration_stereo

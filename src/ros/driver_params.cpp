@@ -20,6 +20,7 @@ void readHealthSchedule(const ParameterReader& read, ecs::LightScheduleConfig* s
   schedule->trigger = trigger == "on_demand" ? ecs::CalibrationTrigger::kOnDemand : ecs::CalibrationTrigger::kPeriodic;
   schedule->min_interval_s = read.atLeast("min_calibration_interval_s", schedule->min_interval_s, 0.0);
   schedule->verification_period_s = read.atLeast("verification_period_s", schedule->verification_period_s, 0.0);
+  schedule->first_burst_delay_s = read.atLeast("first_burst_delay_s", 0.5, 0.0);
 }
 
 DriverParams loadDriverParams(const ros::NodeHandle& private_nh, const std::string& default_sim_config) {

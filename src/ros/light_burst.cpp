@@ -1,5 +1,8 @@
 #include "embedded_calibration_stereo/ros/light_burst.h"
 
+#include <cv_bridge/cv_bridge.h>
+#include <opencv2/imgproc.hpp>
+
 namespace embedded_calibration_stereo {
 
 namespace {
@@ -66,6 +69,29 @@ std::optional<EndedBurst> LightBurstCollector::add(const sensor_msgs::ImageConst
   }
   light_on_.clear();  // dropped: the messages need not be kept
   return std::nullopt;
+}
+
+cv::Mat windowImage(const sensor_msgs::ImageConstPtr& m) {
+  cv::Mat mat = cv_bridge::toCvShare(m)->image;
+  if (m->encoding == "rgb8") cv::cvtColor(mat, mat, cv::COLOR_RGB2BGR);
+  return mat;
+}
+
+ecs::WindowFrames windowFrames(const LightBurst& burst, int camera) {
+  const auto side = [camera](const StereoImages& pair) { return camera == 0 ? pair.first : pair.second; };
+  ecs::WindowFrames frames;
+  if (side(burst.light_off_before)) frames.light_off_before.push_back(windowImage(side(burst.light_off_before)));
+  if (side(burst.light_off_after)) frames.light_off_after.push_back(windowImage(side(burst.light_off_after)));
+  for (const StereoImages& on : burst.light_on) frames.light_on.push_back(windowImage(side(on)));
+  return frames;
+}
+
+LightBurst LightBurstCollector::underWay() const {
+  LightBurst burst;
+  if (!problem_.empty()) return burst;
+  burst.light_off_before = light_off_;
+  burst.light_on = light_on_;
+  return burst;
 }
 
 }  // namespace embedded_calibration_stereo

@@ -44,7 +44,6 @@ class SimFrameSource : public FrameSource {
     return true;
   }
 
-  std::optional<ecs::StereoRig> nominalRig() const override { return sim_->config().rig; }
   cv::Size imageSize() const override {
     return cv::Size(sim_->config().rig.left.width, sim_->config().rig.left.height);
   }

@@ -264,3 +264,28 @@ TEST(LightSchedule, VerifySoonFlashesAtTheNextFrameUnlessABurstVerifiesAlready) 
   EXPECT_EQ(f[0].length, 3);
   EXPECT_EQ(f[0].settled, 1);
 }
+
+// The first burst waits first_burst_delay_s of settled light-off frames (its device image is
+// learned against them), periodic or on demand; later bursts keep their own timing.
+TEST(LightSchedule, TheFirstBurstComesAfterTheDelayWithSettledLightOffFramesBeforeIt) {
+  const double fps = 15.0;
+  for (const auto trigger : {ecs::CalibrationTrigger::kPeriodic, ecs::CalibrationTrigger::kOnDemand}) {
+    ecs::LightScheduleConfig c = healthConfig(trigger, 4.0, 1.0, 0.0);
+    c.first_burst_delay_s = 0.5;
+    ecs::LightSchedule schedule(c);
+    schedule.demand(true);
+    const auto states = run(&schedule, 10.0, fps, static_cast<int>(6 * fps));
+    const auto bursts = runs(states);
+    ASSERT_GE(bursts.size(), 1u);
+    // The first frame at or after 0.5 s (0.5 s is 7.5 frame periods at 15 fps).
+    EXPECT_EQ(bursts[0].first, 8) << "the first burst 0.5 s after the first frame";
+    for (int i = 0; i < bursts[0].first; ++i) EXPECT_TRUE(!states[i].light_on && states[i].settled) << i;
+    if (trigger == ecs::CalibrationTrigger::kPeriodic) {
+      ASSERT_EQ(bursts.size(), 2u);
+      EXPECT_EQ(bursts[1].first, 68) << "then every period (4.5 s is 67.5 frame periods)";
+    }
+  }
+  ecs::LightScheduleConfig bad = config(1.0, 10, 2);
+  bad.first_burst_delay_s = -1.0;
+  EXPECT_NE(bad.validate().find("first_burst_delay_s"), std::string::npos);
+}

@@ -101,6 +101,23 @@ TEST(LightBurst, ConsecutiveBurstsEachStartFromTheLastLightOffFrameBeforeThem) {
   }
 }
 
+// The burst under way, as the Separator reads it to learn within a first burst: the light-off
+// frame before it and the light-on frames so far; nothing between bursts or for a burst that
+// will be dropped.
+TEST(LightBurst, TheBurstUnderWayHoldsItsFramesSoFar) {
+  ecsr::LightBurstCollector c(3);
+  const std::vector<Frame> frames = {frame(0, false), frame(1, true), frame(2, true)};
+  feed(&c, frames);
+  ecsr::LightBurst now = c.underWay();
+  EXPECT_EQ(now.light_off_before.first, frames[0].left);
+  ASSERT_EQ(now.light_on.size(), 2u);
+  EXPECT_EQ(now.light_on[1].second, frames[2].right);
+  feed(&c, {frame(3, true), frame(4, false)});
+  EXPECT_TRUE(c.underWay().light_on.empty()) << "between bursts";
+  feed(&c, {frame(5, true, 0, "mono16")});
+  EXPECT_TRUE(c.underWay().light_on.empty()) << "a burst that will be dropped";
+}
+
 // A commit during a burst (the calibration epoch changes) does not touch its images: kept whole.
 TEST(LightBurst, ABurstAcrossACommitIsKept) {
   ecsr::LightBurstCollector c(3);

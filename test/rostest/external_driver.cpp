@@ -216,7 +216,7 @@ TEST(ExternalDriver, ImagePublisherRunsTheHead) {
                               "prior_file:=" + dir.path + "/prior.yaml",
                               // The first window already commits (epoch 2) before the judged window,
                               // which comes before the zoom: the taught device image still holds.
-                              "reteach_on_epoch_change:=false"},
+                              "device_template:=teach", "reteach_on_epoch_change:=false"},
                              dir.path + "/head.log");
   ASSERT_TRUE(head.started());
 

@@ -7,12 +7,15 @@
 
 #include <atomic>
 #include <random>
+#include <string>
+#include <utility>
 
 #include "driver_test_utils.h"
 #include "health_test_utils.h"
 #include "embedded_calibration_stereo/CalibrationHealth.h"
 #include "embedded_calibration_stereo/CalibrationMode.h"
 #include "embedded_calibration_stereo/DisparityCoverage.h"
+#include "embedded_calibration_stereo/core/sim/sim_rig.h"
 #include "embedded_calibration_stereo/ros/conversions.h"
 
 using embedded_calibration_stereo::CalibrationHealth;
@@ -66,6 +69,17 @@ bool burstSince(const Modes& m, size_t from) {
   return false;
 }
 
+// Puts a calibration pair in force through the driver's set_camera_info services.
+void setCalibration(const std::pair<CameraInfo, CameraInfo>& pair) {
+  for (const auto& [service, info] : {std::make_pair("left/set_camera_info", pair.first),
+                                      std::make_pair("right/set_camera_info", pair.second)}) {
+    sensor_msgs::SetCameraInfo srv;
+    srv.request.camera_info = info;
+    ASSERT_TRUE(ros::service::call(service, srv));
+    ASSERT_TRUE(srv.response.success) << srv.response.status_message;
+  }
+}
+
 }  // namespace
 
 TEST(HealthDepthWatch, ACollapseOfDepthLeavesGoodAndAnImplausibleCalibrationIsBad) {
@@ -75,6 +89,13 @@ TEST(HealthDepthWatch, ACollapseOfDepthLeavesGoodAndAnImplausibleCalibrationIsBa
   Collector<CameraInfo> left(nh, "left/camera_info", 50), right(nh, "right/camera_info", 50);
   CoverageSource coverage(nh);
   ASSERT_TRUE(ros::service::waitForService("left/set_camera_info", 20000));
+
+  // 0. The driver's device description has no cameras, so it starts uncalibrated (it never
+  // publishes the simulator's truth): the simulated cameras are put in force, as a calibration.
+  ASSERT_TRUE(left.waitForCount(1, 20.0)) << "no left/camera_info";
+  EXPECT_EQ(left.snapshot().front()->K[0], 0.0) << "the driver published a calibration its device description has not";
+  const ecs::StereoRig truth = ecs::loadSimRigConfig(std::string(ECS_SOURCE_DIR) + "/config/sim_rig.yaml").rig;
+  setCalibration(embedded_calibration_stereo::toStereoCameraInfo(truth));
 
   // 1. GOOD, and still GOOD once the coverage history spans its 10 s.
   const auto good = [](const Healths& m) {
@@ -114,15 +135,8 @@ TEST(HealthDepthWatch, ACollapseOfDepthLeavesGoodAndAnImplausibleCalibrationIsBa
   ASSERT_TRUE(embedded_calibration_stereo::fromStereoCameraInfo(in_force_left, in_force_right, &rig, &error)) << error;
   rig.left = rig.left.withFocalScale(1.3);
   rig.right = rig.right.withFocalScale(1.3);
-  const auto zoomed = embedded_calibration_stereo::toStereoCameraInfo(rig);
   const uint32_t epoch_before = modes.snapshot().back()->calibration_epoch;
-  for (const auto& [service, info] : {std::make_pair("left/set_camera_info", zoomed.first),
-                                      std::make_pair("right/set_camera_info", zoomed.second)}) {
-    sensor_msgs::SetCameraInfo srv;
-    srv.request.camera_info = info;
-    ASSERT_TRUE(ros::service::call(service, srv));
-    ASSERT_TRUE(srv.response.success) << srv.response.status_message;
-  }
+  setCalibration(embedded_calibration_stereo::toStereoCameraInfo(rig));
   ASSERT_TRUE(health.waitFor(
       [&](const Healths& m) {
         return !m.empty() && m.back()->epoch != epoch_before && m.back()->state == CalibrationHealth::BAD &&

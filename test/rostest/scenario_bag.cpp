@@ -1,5 +1,5 @@
 // rostest: a scenario bag made by render_scenario_bag (20 s, a light window every 5 s) replays
-// through launch/replay.launch ground_truth:=true without errors.
+// through launch/replay.launch without errors.
 //
 // The test node renders the bag at test time (timed and printed), then starts replay.launch on
 // the rostest's master as a child roslaunch (ChildLaunch) and follows the replay to the bag's
@@ -104,7 +104,7 @@ TEST(ScenarioBag, ReplaysThroughTheGraphWithoutErrors) {
   Collector<CalibrationStatus> statuses(nh, "calibration/status");
   Collector<stereo_msgs::DisparityImage> disparity(nh, "disparity", 5);
   Collector<rosgraph_msgs::Clock> clock(nh, "/clock", 5000);
-  ChildLaunch replay({launchFile("replay.launch"), "bag:=" + bag_path, "ground_truth:=true",
+  ChildLaunch replay({launchFile("replay.launch"), "bag:=" + bag_path,
                       "prior_file:=" + dir.path + "/pattern_prior.yaml"},
                      dir.path + "/replay.log");
   ASSERT_TRUE(replay.started());

@@ -97,10 +97,12 @@ TEST(TrackerWindow, OneObservationPerBurstStampedWithItsLastLitFrameAndNoneForAF
   EXPECT_LE(rms, 0.05);
 
   // Per-frame observations as without window tracking: one for every settled light-on frame
-  // once the first window was tracked (the tracker was taught then), flashes included.
-  const ros::Time from = windows.snapshot().front()->header.stamp;
+  // once the tracker was taught (on the first burst: from its first per-frame observation on),
+  // flashes included.
   std::set<ros::Time> per_frame;
   for (const auto& o : observations.snapshot()) per_frame.insert(o->header.stamp);
+  ASSERT_FALSE(per_frame.empty()) << "no per-frame observation";
+  const ros::Time from = *per_frame.begin();
   size_t missing = 0, lit = 0;
   for (const auto& b : all)
     for (const ros::Time& t : b)

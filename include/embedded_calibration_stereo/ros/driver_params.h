@@ -41,7 +41,8 @@ struct DriverParams {
 };
 
 // The schedule's health parameters, shared by the CameraDriver and the LightController:
-// calibration_trigger (periodic | on_demand), min_calibration_interval_s, verification_period_s.
+// calibration_trigger (periodic | on_demand), min_calibration_interval_s, verification_period_s,
+// first_burst_delay_s.
 class ParameterReader;
 void readHealthSchedule(const ParameterReader& read, ecs::LightScheduleConfig* schedule);
 

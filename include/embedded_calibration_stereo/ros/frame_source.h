@@ -35,8 +35,6 @@ class FrameSource {
   // Returns false with the reason when no frame can be delivered (end of a non-looping
   // replay, device error).
   virtual bool grab(double time_s, StereoFrame* frame, std::string* error) = 0;
-  // A calibration to publish while no calibration file exists (the sim's nominal rig).
-  virtual std::optional<ecs::StereoRig> nominalRig() const { return std::nullopt; }
   // True when grab() fills StereoFrame::light_on (a recording): the driver then follows the
   // recorded light state instead of its schedule.
   virtual bool recordsLightState() const { return false; }

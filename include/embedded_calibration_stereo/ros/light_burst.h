@@ -1,8 +1,9 @@
 #pragma once
-// The frames of one light burst for the window tracker (the PatternTracker's window_tracking,
-// core/tracker/window_tracker.h): the burst's settled light-on frames and the settled light-off
-// frames around it, the last one before it and the first one after it (the learned device image
-// needs both), kept as the shared message pointers: no image is copied.
+// The frames of one light burst for learning its device image (the PatternTracker's window
+// tracking and teaching, the Separator's learning; core/tracker/window_tracker.h): the burst's
+// settled light-on frames and the settled light-off frames around it, the last one before it and
+// the first one after it (the learned device image needs both), kept as the shared message
+// pointers: no image is copied.
 //
 // Threads: not thread-safe (one owner: the tracker nodelet's callback queue).
 #include <sensor_msgs/Image.h>
@@ -12,6 +13,8 @@
 #include <string>
 #include <utility>
 #include <vector>
+
+#include "embedded_calibration_stereo/core/tracker/window_tracker.h"
 
 namespace embedded_calibration_stereo {
 
@@ -44,6 +47,9 @@ class LightBurstCollector {
   // the calibrator solves against what is in force when it solves.
   std::optional<EndedBurst> add(const sensor_msgs::ImageConstPtr& left, const sensor_msgs::ImageConstPtr& right,
                                 bool light_on);
+  // The burst under way: the light-off frame before it and its settled light-on frames so far
+  // (no light-on frame while none is under way, or when it will be dropped).
+  LightBurst underWay() const;
 
  private:
   const int min_light_on_frames_;
@@ -56,5 +62,14 @@ class LightBurstCollector {
 // Why a stereo frame cannot be tracked ("" when it can): left and right of different sizes or
 // encodings, or an encoding other than mono8, bgr8, rgb8.
 std::string stereoFormatProblem(const sensor_msgs::Image& left, const sensor_msgs::Image& right);
+
+// A burst's image as the core takes it: the message's pixels (the message owns them), rgb8
+// converted to BGR. Throws cv_bridge::Exception when the message cannot be read.
+cv::Mat windowImage(const sensor_msgs::ImageConstPtr& m);
+
+// One camera's frames of a burst (0 left, 1 right), through windowImage: keep the burst (its
+// messages) alive while they are used. A missing light-off frame (the burst under way has none
+// after it) is left out.
+ecs::WindowFrames windowFrames(const LightBurst& burst, int camera);
 
 }  // namespace embedded_calibration_stereo

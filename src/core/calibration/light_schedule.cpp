@@ -12,6 +12,7 @@ std::string LightScheduleConfig::validate() const {
   if (!std::isfinite(min_interval_s) || min_interval_s < 0.0) return "min_calibration_interval_s must be >= 0";
   if (!std::isfinite(verification_period_s) || verification_period_s < 0.0)
     return "verification_period_s must be >= 0";
+  if (!std::isfinite(first_burst_delay_s) || first_burst_delay_s < 0.0) return "first_burst_delay_s must be >= 0";
   return "";
 }
 
@@ -33,10 +34,11 @@ LightState LightSchedule::step(double time_s) {
   const bool on_demand = config_.trigger == CalibrationTrigger::kOnDemand;
   if (!started_) {
     started_ = true;
-    next_burst_s_ = time_s;
+    next_burst_s_ = time_s + config_.first_burst_delay_s;
     next_flash_s_ = time_s + config_.verification_period_s;
-    // The first burst at the first frame when there is a period; on demand, right away.
-    last_burst_end_s_ = time_s - config_.min_interval_s;
+    // The first burst first_burst_delay_s after the first frame when there is a period; on
+    // demand, as soon as demanded after that.
+    last_burst_end_s_ = time_s + config_.first_burst_delay_s - config_.min_interval_s;
   }
   if (config_.period_s > 0.0 && time_s >= next_burst_s_) {
     startBurst(time_s);

@@ -89,6 +89,23 @@ std::vector<cv::Point2f> reorder(const Detection& d, int sym) {
   return out;
 }
 
+// Paints over a board and its margin (2.5 squares beyond the outer corners); `corners` in the
+// coordinates of `image`.
+void paintOver(const std::vector<cv::Point2f>& corners, int cols, int rows, bool dark_fill, cv::Mat* image) {
+  const double spacing = meanSpacing(corners, cols, rows);
+  const cv::Point2f c = centroid(corners);
+  std::vector<cv::Point2f> hull;
+  cv::convexHull(corners, hull);
+  std::vector<cv::Point> grown;
+  for (const cv::Point2f& p : hull) {
+    const cv::Point2f dir = p - c;
+    const float len = std::max(1e-3f, static_cast<float>(cv::norm(dir)));
+    grown.emplace_back(p + dir * static_cast<float>(2.5 * spacing / len));
+  }
+  const double fill = dark_fill ? 0.0 : cv::mean(*image)[0];
+  cv::fillConvexPoly(*image, grown, cv::Scalar(fill));
+}
+
 // Searches one region repeatedly: each found board is painted over before the next search.
 void detectInRegion(const cv::Mat& image, cv::Rect roi, const std::vector<cv::Size>& sizes, bool dark_fill,
                     std::vector<Detection>* out) {
@@ -103,19 +120,7 @@ void detectInRegion(const cv::Mat& image, cv::Rect roi, const std::vector<cv::Si
       if (!cv::findChessboardCornersSB(patch, size, corners, flags)) continue;
       Detection d{size.width, size.height, corners};
       for (cv::Point2f& p : d.corners) p += cv::Point2f(static_cast<float>(roi.x), static_cast<float>(roi.y));
-      // Paint over the board and its margin (2 squares beyond the outer corners).
-      const double spacing = meanSpacing(corners, size.width, size.height);
-      const cv::Point2f c = centroid(corners);
-      std::vector<cv::Point2f> hull;
-      cv::convexHull(corners, hull);
-      std::vector<cv::Point> grown;
-      for (const cv::Point2f& p : hull) {
-        const cv::Point2f dir = p - c;
-        const float len = std::max(1e-3f, static_cast<float>(cv::norm(dir)));
-        grown.emplace_back(p + dir * static_cast<float>(2.5 * spacing / len));
-      }
-      const double fill = dark_fill ? 0.0 : cv::mean(patch)[0];
-      cv::fillConvexPoly(patch, grown, cv::Scalar(fill));
+      paintOver(corners, size.width, size.height, dark_fill, &patch);
       out->push_back(d);
       found_any = true;
     }
@@ -359,6 +364,46 @@ void learnBoard(const VirtualBoard& vb, const std::vector<std::vector<cv::Point2
   }
 }
 
+// A region around a board also holds parts of its neighbours, which can keep the detector from
+// the board itself: each board still missing is searched again in its region with every board
+// identified so far painted over. Returns whether anything new was found (added to *all).
+bool searchAgainForMissing(const cv::Mat& search, const std::vector<cv::Rect>& regions,
+                           const std::vector<cv::Size>& sizes, bool difference, const BoardLayout& layout,
+                           const std::vector<std::vector<cv::Point2f>>& identified, std::vector<Detection>* all) {
+  if (!layout.has_camera || regions.size() != layout.boards.size() || all->empty()) return false;
+  const auto missing = std::count_if(identified.begin(), identified.end(), [](const auto& c) { return c.empty(); });
+  if (missing == 0) return false;
+  cv::Mat painted = search.clone();
+  for (size_t i = 0; i < identified.size(); ++i)
+    if (!identified[i].empty())
+      paintOver(identified[i], layout.boards[i].cols, layout.boards[i].rows, difference, &painted);
+  const size_t before = all->size();
+  for (size_t i = 0; i < identified.size(); ++i)
+    if (identified[i].empty()) detectInRegion(painted, regions[i], sizes, difference, all);
+  return all->size() > before;
+}
+
+// Every board of the layout found in `search` (ordered corners by layout index; empty when not
+// found); *detected counts the distinct chessboards detected.
+std::vector<std::vector<cv::Point2f>> detectAndIdentify(const cv::Mat& search, bool difference,
+                                                        const BoardLayout& layout, const std::vector<cv::Size>& sizes,
+                                                        size_t* detected, std::vector<std::string>* notes) {
+  std::vector<Detection> all;
+  const std::vector<cv::Rect> regions = candidateRegions(search, difference, layout);
+  for (const cv::Rect& roi : regions) detectInRegion(search, roi, sizes, difference, &all);
+  std::vector<Detection> detections = unique(all);
+  std::vector<std::string> first_notes;
+  std::vector<std::vector<cv::Point2f>> identified = identify(detections, layout, &first_notes);
+  if (searchAgainForMissing(search, regions, sizes, difference, layout, identified, &all)) {
+    detections = unique(all);
+    identified = identify(detections, layout, notes);
+  } else {
+    notes->insert(notes->end(), first_notes.begin(), first_notes.end());
+  }
+  *detected = detections.size();
+  return identified;
+}
+
 }  // namespace
 
 TeachResult teachCamera(const std::vector<TeachFrame>& frames, const BoardLayout& layout,
@@ -389,11 +434,9 @@ TeachResult teachCamera(const std::vector<TeachFrame>& frames, const BoardLayout
     } else {
       search = on;  // only read below
     }
-    std::vector<Detection> all;
-    for (const cv::Rect& roi : candidateRegions(search, difference, layout))
-      detectInRegion(search, roi, sizes, difference, &all);
-    const std::vector<Detection> detections = unique(all);
-    std::vector<std::vector<cv::Point2f>> identified = identify(detections, layout, &result.notes);
+    size_t detected = 0;
+    std::vector<std::vector<cv::Point2f>> identified =
+        detectAndIdentify(search, difference, layout, sizes, &detected, &result.notes);
     // Polish on the detection image (SB's own corners are less accurate than cornerSubPix's).
     std::vector<BoardCorners> frame_result;
     for (size_t i = 0; i < identified.size(); ++i) {
@@ -415,7 +458,7 @@ TeachResult teachCamera(const std::vector<TeachFrame>& frames, const BoardLayout
       frame_result.push_back(bc);
     }
     std::ostringstream s;
-    s << camera_name << " frame " << f << ": " << detections.size() << " chessboards detected, "
+    s << camera_name << " frame " << f << ": " << detected << " chessboards detected, "
       << frame_result.size() << " of " << layout.boards.size() << " boards identified";
     result.notes.push_back(s.str());
     result.detections.push_back(frame_result);

@@ -84,6 +84,37 @@ DeviceLearnerOptions windowLearnerOptions() {
   return options;
 }
 
+LearnedDevice learnWindowDevice(const WindowFrames& f, const DeviceLearnerOptions& options) {
+  LightPairSet set(255);
+  const int n = static_cast<int>(f.light_on.size());
+  for (int i = 0; i < n; ++i) {
+    const bool first_half = 2 * i < n;
+    const bool before = (first_half && !f.light_off_before.empty()) || f.light_off_after.empty();
+    // Frames apart counted from the window's ends (the gap to the light-off frames is the same
+    // on both sides): only their order matters.
+    const int before_count = static_cast<int>(f.light_off_before.size());
+    if (before)
+      for (int j = 0; j < before_count; ++j) set.add(f.light_off_before[j], f.light_on[i], i + before_count - j);
+    else
+      for (int j = 0; j < static_cast<int>(f.light_off_after.size()); ++j)
+        set.add(f.light_off_after[j], f.light_on[i], n - i + j);
+  }
+  DeviceLearnerOptions learner = options;
+  learner.min_pairs = 2;
+  learner.max_pairs = std::max(learner.max_pairs, set.size());
+  return learnDeviceImage(set.snapshot(), learner, 0);
+}
+
+WindowFrames windowEnds(const WindowFrames& frames, int per_end) {
+  if (per_end < 1) throw std::invalid_argument("windowEnds: per_end must be >= 1");
+  WindowFrames ends = frames;
+  const int n = static_cast<int>(frames.light_on.size());
+  if (n <= 2 * per_end) return ends;
+  ends.light_on.assign(frames.light_on.begin(), frames.light_on.begin() + per_end);
+  ends.light_on.insert(ends.light_on.end(), frames.light_on.end() - per_end, frames.light_on.end());
+  return ends;
+}
+
 WindowTracker::WindowTracker(const PatternPrior& prior, const TrackerOptions& tracker_options,
                              const WindowTrackerOptions& options, std::optional<StereoRig> guide)
     : tracker_(prior, tracker_options), options_(options), guide_(std::move(guide)) {
@@ -109,25 +140,7 @@ WindowTrack WindowTracker::track(const WindowFrames& left, const WindowFrames& r
   cv::parallel_for_(cv::Range(0, 2), [&](const cv::Range& range) {
     for (int c = range.start; c < range.end; ++c) {
       try {
-        LightPairSet set(255);
-        const WindowFrames& f = *frames[c];
-        const int n = static_cast<int>(f.light_on.size());
-        for (int i = 0; i < n; ++i) {
-          const bool first_half = 2 * i < n;
-          const bool before = (first_half && !f.light_off_before.empty()) || f.light_off_after.empty();
-          // Frames apart counted from the window's ends (the gap to the light-off frames is the
-          // same on both sides): only their order matters.
-          const int before_count = static_cast<int>(f.light_off_before.size());
-          if (before)
-            for (int j = 0; j < before_count; ++j) set.add(f.light_off_before[j], f.light_on[i], i + before_count - j);
-          else
-            for (int j = 0; j < static_cast<int>(f.light_off_after.size()); ++j)
-              set.add(f.light_off_after[j], f.light_on[i], n - i + j);
-        }
-        DeviceLearnerOptions learner = options_.learner;
-        learner.min_pairs = 2;
-        learner.max_pairs = std::max(learner.max_pairs, set.size());
-        const LearnedDevice learned = learnDeviceImage(set.snapshot(), learner, 0);
+        const LearnedDevice learned = learnWindowDevice(*frames[c], options_.learner);
         cv::Mat device = learned.device_template.device;
         if (device.channels() == 3) cv::cvtColor(device, device, cv::COLOR_BGR2GRAY);
         result.device[c] = device;

@@ -6,11 +6,11 @@
 //  - during a calibration burst, for `settle_frames + calibration_frames` frames, so that each
 //    burst yields `calibration_frames` settled frames. Bursts start
 //      - trigger kPeriodic: every `period_s` seconds (0 = never; only on request), starting
-//        with the first frame;
+//        `first_burst_delay_s` after the first frame;
 //      - trigger kOnDemand: while demand(true) holds (the calibration is not healthy), at the
 //        earliest `min_interval_s` after the previous burst ended (a burst cut short by
 //        request(false): after it started), and as a safety net `period_s` after the previous
-//        burst (0 = no safety net), the first one at the first frame as with kPeriodic; or
+//        burst (0 = no safety net), the first one as with kPeriodic; or
 //  - during a verification flash, for `settle_frames + 1` frames (one settled light-on frame,
 //    for checking the calibration in force against the boards): every `verification_period_s`
 //    (0 = none) after the previous flash or burst, and at the next frame after verifySoon()
@@ -37,6 +37,9 @@ struct LightScheduleConfig {
   // to be tracked, solved and committed, however long the burst was.
   double min_interval_s = 0.0;
   double verification_period_s = 0.0;  // time between verification flashes; 0 = none
+  // Light-off time before the first burst: learning a burst's device image pairs its light-on
+  // frames with settled light-off frames before it (the drivers use 0.5 s).
+  double first_burst_delay_s = 0.0;
   // Empty when usable; otherwise a message naming the bad field.
   std::string validate() const;
 };

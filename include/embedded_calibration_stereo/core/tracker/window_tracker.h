@@ -69,6 +69,18 @@ struct WindowFrames {
   std::vector<cv::Mat> light_off_before, light_off_after, light_on;
 };
 
+// Learns one camera's device image I_C from its frames of one window (step 1 above): each
+// light-on frame paired with the light-off frames on its nearer side. `options`' readiness
+// fields are not used. Throws std::invalid_argument when the frames give fewer than 2 pairs or
+// differ in size or type.
+LearnedDevice learnWindowDevice(const WindowFrames& frames, const DeviceLearnerOptions& options);
+
+// The window with only its `per_end` light-on frames nearest each end (all of them when it has
+// no more than 2 * per_end), those that learnWindowDevice pairs with the light-off frames closest
+// in time: learning a whole burst's device image for a fraction of the cost, for uses that need
+// less than the tracker's precision (the Separator's template). per_end >= 1.
+WindowFrames windowEnds(const WindowFrames& frames, int per_end);
+
 struct WindowTrack {
   StereoObservation observation;  // corners of both cameras, stamped by the caller
   cv::Mat device[2];              // the learned I_C per camera (CV_32F, grey levels)
