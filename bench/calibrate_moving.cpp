@@ -30,7 +30,7 @@
 // to the window's frames.
 // The scene moves with the frame index (time = frame / fps), the noise seeds are the frame
 // index: two runs print the same figures. The prior is taught at t = 0 from light-on frames
-// minus the simulator's scene of the same frame (as the live tracker's teach_from_ground_truth).
+// minus the simulator's scene of the same frame (a bench of the calibration, not of teaching).
 // Exit code: 0, or 1 when a commit was worse than the calibration it replaced.
 #include <algorithm>
 #include <chrono>

@@ -16,7 +16,10 @@
 // With window_observations, the automatic windows come from the PatternTracker's
 // calibration/window_observations instead (one observation per light burst, tracked as a whole,
 // seconds after the burst): each one is solved as a window of one frame, and the windows of
-// per-frame observations are not; those still serve calibration/recalibrate.
+// per-frame observations are not. calibration/recalibrate then holds the light for a whole
+// burst (max_frames settled frames with boards by default) and solves the window observation
+// of that burst, as the automatic windows are solved; only when none comes within
+// kRequestWindowWaitS of the light going off are the burst's per-frame observations solved.
 // Each window is solved again with what the earlier ones taught (prior_from_earlier_windows);
 // a calibration/health verdict below GOOD since then (when a health nodelet runs) says the rig
 // changed: the stereo rotation and focal lengths then get no prior.
@@ -332,6 +335,11 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
         return;
       }
       ++window_observations_;
+      if (request_wants_window_ && msg->header.stamp > request_started_) {  // the request's burst
+        request_window_ = std::move(observation);
+        cv_.notify_all();
+        return;
+      }
     }
     if (!params_.auto_calibrate || (observation.left.empty() && observation.right.empty())) return;
     Job job;
@@ -681,6 +689,9 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
       request_frames_ = frames;
       window_.clear();
       if (!modes_.empty()) window_closed_at_ = modes_.back().stamp;  // only frames from now on
+      request_wants_window_ = params_.window_observations;
+      request_started_ = window_closed_at_;
+      request_window_.reset();
     }
     struct InFlight {  // cleared on every return
       OnlineCalibratorNodelet* self;
@@ -688,6 +699,7 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
         std::lock_guard<std::mutex> lock(self->mutex_);
         self->request_in_flight_ = false;
         self->request_active_ = false;
+        self->request_wants_window_ = false;
         self->request_caller_.clear();
       }
     } in_flight{this};
@@ -729,6 +741,7 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
                  frames, timeout_s);
       return answer(&res, false, noted(text));
     }
+    if (params_.window_observations) useTheBurstsWindowObservation(&job);
     job.result = std::make_shared<std::promise<CalibrationStatus>>();
     std::future<CalibrationStatus> result = job.result->get_future();
     submit(std::move(job));
@@ -776,6 +789,25 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
     if (!modes_.empty()) window_closed_at_ = modes_.back().stamp;
     request_active_ = false;
     return abandoned;
+  }
+
+  // Service thread, window observations: waits up to kRequestWindowWaitS for the window
+  // observation of the request's burst (the tracker tracks it as a whole after it ended) and
+  // solves it instead of the burst's per-frame observations.
+  void useTheBurstsWindowObservation(Job* job) {
+    std::unique_lock<std::mutex> lock(mutex_);
+    cv_.wait_for(lock, std::chrono::duration<double>(kRequestWindowWaitS),
+                 [this] { return stopping_ || request_window_.has_value(); });
+    request_wants_window_ = false;
+    if (!request_window_) {
+      NODELET_WARN("OnlineCalibrator: recalibrate: no window observation of the burst on %s within %.0f s; solving "
+                   "its %zu per-frame observations", window_observations_sub_.getTopic().c_str(), kRequestWindowWaitS,
+                   job->frames.size());
+      return;
+    }
+    job->frames = {std::move(*request_window_)};
+    job->window_observation = true;
+    request_window_.reset();
   }
 
   bool answer(Recalibrate::Response* res, bool success, const std::string& message) {
@@ -878,6 +910,11 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
   std::optional<UncommittedCalibration> uncommitted_;  // accepted, not stored by the driver: tried again
   bool commit_again_queued_ = false;
   size_t request_frames_ = 0;
+  // Window observations: the request waits for its burst's (stamped after request_started_).
+  static constexpr double kRequestWindowWaitS = 20.0;
+  bool request_wants_window_ = false;
+  ros::Time request_started_;
+  std::optional<ecs::StereoObservation> request_window_;
   sensor_msgs::CameraInfoConstPtr left_info_, right_info_;  // the latest valid pair (storeInfo)
   sensor_msgs::CameraInfoConstPtr latest_left_info_, latest_right_info_;  // the latest valid side
   // The rectification (left R, right R and P) of the pair in force last put on /tf_static by

@@ -15,11 +15,10 @@
 //    settled light-off frames; core/tracker/window_tracker.h learnWindowDevice): its
 //    learn_frames_per_end light-on frames nearest each end, paired with the light-off frame on
 //    their side, on a worker thread when the burst ends. No covering, no truth. Each burst's
-//    result replaces the template: bursts come when the calibration may have changed (zoom,
-//    focus and knocks move the device image), so the newest burst shows the device as it is now;
-//    a result whose reliably learned fraction of the image (DeviceLearnerOptions: enough inliers,
-//    a small standard error) is below learn_min_coverage is only taken while there is no
-//    template. Before the first template, the first learn_frames_per_end * 2 light-on frames
+//    result replaces the template in use when it separates the burst's middle light-on frames
+//    (not learned from) with less of the device left (core separationResidual): bursts come when
+//    the calibration may have changed (zoom, focus and knocks move the device image), and a
+//    template of the device as it was leaves its edges. Before the first template, the first learn_frames_per_end * 2 light-on frames
 //    of the burst under way are learned at once (paired with the light-off frame before it), so
 //    that the rest of the first burst is separated too. A new calibration does not stop the
 //    separation: the template stays in use until the next burst's replaces it.
@@ -113,16 +112,43 @@ ecs::DeviceTemplate templateFrom(const cv::Mat& sum, int frames, uint32_t epoch)
 // One learning run's result (both cameras), made on the worker thread.
 struct LearnResult {
   ecs::LearnedDevice left, right;
+  std::shared_ptr<const StereoSeparator> separator;  // built from them
+  // What the new template and the one in use leave of the device on the burst's middle frames
+  // (left + right; negative: not scored, no template in use).
+  double residual_new = -1.0, residual_in_use = -1.0;
   int light_on_frames = 0;  // of the burst, used or not
   bool whole_burst = true;  // false: the first frames of a burst under way
   double stamp = 0.0;       // the burst's last light-on frame used
   std::string error;        // non-empty: the run failed
 };
 
+// The light-on frames of one camera a template learned from the burst's ends did not see (at
+// most 3, evenly spaced; all of them for a burst no longer than its ends).
+std::vector<cv::Mat> middleFrames(const ecs::WindowFrames& frames, int per_end) {
+  const int n = static_cast<int>(frames.light_on.size());
+  if (n <= 2 * per_end) return frames.light_on;
+  std::vector<cv::Mat> middle;
+  const int first = per_end, count = n - 2 * per_end, step = std::max(1, count / 3);
+  for (int i = first; i < first + count && middle.size() < 3; i += step) middle.push_back(frames.light_on[i]);
+  return middle;
+}
+
+// Scores the new template and the one in use on the burst's middle frames (both cameras).
+void scoreTemplates(const LightBurst& burst, int per_end, const StereoSeparator& in_use, LearnResult* result) {
+  result->residual_new = result->residual_in_use = 0.0;
+  for (int c = 0; c < 2; ++c) {
+    const std::vector<cv::Mat> middle = middleFrames(windowFrames(burst, c), per_end);
+    result->residual_new += ecs::separationResidual(c ? result->separator->right : result->separator->left, middle);
+    result->residual_in_use += ecs::separationResidual(c ? in_use.right : in_use.left, middle);
+  }
+}
+
 // Learns both cameras' device images from a burst (worker thread): its per_end light-on frames
-// nearest each end when it ended, all of them while it is under way.
+// nearest each end when it ended, all of them while it is under way; scores the result against
+// the template in use (when there is one).
 LearnResult learnBurst(const LightBurst& burst, bool whole, int per_end, const ecs::DeviceLearnerOptions& options,
-                       uint32_t epoch) {
+                       const ecs::SeparatorOptions& separator_options,
+                       const std::shared_ptr<const StereoSeparator>& in_use, uint32_t epoch) {
   LearnResult result;
   result.light_on_frames = static_cast<int>(burst.light_on.size());
   result.whole_burst = whole;
@@ -141,8 +167,12 @@ LearnResult learnBurst(const LightBurst& burst, bool whole, int per_end, const e
         }
     });
     result.error = errors[0].empty() ? errors[1] : errors[0];
+    if (!result.error.empty()) return result;
     result.left = std::move(learned[0]);
     result.right = std::move(learned[1]);
+    result.separator = std::make_shared<const StereoSeparator>(separator_options, result.left.device_template,
+                                                               result.right.device_template);
+    if (in_use) scoreTemplates(burst, per_end, *in_use, &result);
   } catch (const std::exception& e) {
     result.error = e.what();
   }
@@ -195,7 +225,6 @@ class SeparatorNodelet : public nodelet::Nodelet {
       throw ecs::ConfigError("teach_from_ground_truth", "applies to device_template teach only, not learn");
     learn_frames_per_end_ = read.inRange("learn_frames_per_end", 4, 1, 30);
     learn_options_ = ecs::windowLearnerOptions();
-    learn_options_.min_coverage = read.inRange("learn_min_coverage", 0.9, 0.5, 1.0);
     reteach_on_epoch_change_ = read.get("reteach_on_epoch_change", true);
     const int queue_size = read.atLeast("queue_size", 5, 1);
     const bool approximate = read.get("approximate_sync", false);
@@ -388,7 +417,7 @@ class SeparatorNodelet : public nodelet::Nodelet {
     if (!mode.light_on || has_template_) return;
     // No template yet: learn from the first frames of this burst so that its rest is separated.
     LightBurst now = bursts_.underWay();
-    if (static_cast<int>(now.light_on.size()) == 2 * learn_frames_per_end_)
+    if (now.light_off_before.first && static_cast<int>(now.light_on.size()) == 2 * learn_frames_per_end_)
       startLearning(std::move(now), false, mode.calibration_epoch);
   }
 
@@ -398,9 +427,15 @@ class SeparatorNodelet : public nodelet::Nodelet {
       if (whole) waiting_burst_ = PendingBurst{std::move(burst), epoch};
       return;
     }
+    std::shared_ptr<const StereoSeparator> in_use;
+    {
+      std::lock_guard<std::mutex> lock(state_mutex_);
+      in_use = separator_;
+    }
     learning_ = std::async(std::launch::async, [burst = std::move(burst), whole, per_end = learn_frames_per_end_,
-                                                options = learn_options_, epoch] {
-      return learnBurst(burst, whole, per_end, options, epoch);
+                                                options = learn_options_, separator_options = options_, in_use,
+                                                epoch] {
+      return learnBurst(burst, whole, per_end, options, separator_options, in_use, epoch);
     });
   }
 
@@ -414,21 +449,20 @@ class SeparatorNodelet : public nodelet::Nodelet {
       startLearning(std::move(next.burst), true, next.epoch);
     }
     if (!result.error.empty()) return reportError("learning the device image failed: " + result.error);
-    const std::string summary = "left " + result.left.summary() + "; right " + result.right.summary();
+    std::string summary = "left " + result.left.summary() + "; right " + result.right.summary();
+    if (result.residual_in_use >= 0.0) {
+      char text[160];
+      std::snprintf(text, sizeof(text), "; device left on the burst's middle frames: %.1f, with the template in use %.1f",
+                    result.residual_new, result.residual_in_use);
+      summary += text;
+    }
     diagnostics_->set("learning", summary);
-    if (has_template_ && std::min(result.left.coverage, result.right.coverage) < learn_options_.min_coverage) {
-      NODELET_INFO("Separator: the device image learned from the burst ending at %.3f s covers less than "
-                   "learn_min_coverage %.2f of the image reliably (%s): the template in use stays",
-                   result.stamp, learn_options_.min_coverage, summary.c_str());
+    if (has_template_ && result.residual_in_use >= 0.0 && result.residual_new > result.residual_in_use) {
+      NODELET_INFO("Separator: the device image learned from the burst ending at %.3f s separates it worse than the "
+                   "template in use, which stays (%s)", result.stamp, summary.c_str());
       return;
     }
-    std::shared_ptr<const StereoSeparator> learned;
-    try {
-      learned = std::make_shared<const StereoSeparator>(options_, result.left.device_template,
-                                                        result.right.device_template);
-    } catch (const std::exception& e) {
-      return reportError(std::string("learned device image unusable: ") + e.what());
-    }
+    const std::shared_ptr<const StereoSeparator> learned = result.separator;
     {
       std::lock_guard<std::mutex> lock(state_mutex_);
       separator_ = learned;
@@ -475,7 +509,9 @@ class SeparatorNodelet : public nodelet::Nodelet {
   bool learn_ = true;
   int learn_frames_per_end_ = 4;
   ecs::DeviceLearnerOptions learn_options_;
-  LightBurstCollector bursts_{3};  // a burst: at least 3 settled light-on frames
+  // A burst: at least 3 settled light-on frames; one the Separator saw no light-off frame before
+  // (it subscribed during it) is learned from the light-off frame after it alone.
+  LightBurstCollector bursts_{3, false};
   struct PendingBurst {
     LightBurst burst;
     uint32_t epoch = 0;

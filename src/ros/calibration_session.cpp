@@ -118,7 +118,9 @@ BoundedRequest boundRecalibrateRequest(uint32_t frames, double timeout_s, const 
     r.refusal = text;
     return r;
   }
-  r.frames = frames > 0 ? frames : static_cast<size_t>(params.min_frames);
+  // By default a whole burst when bursts are tracked as a whole (the window observation is
+  // solved), else the fewest frames a window is solved with.
+  r.frames = frames > 0 ? frames : static_cast<size_t>(params.window_observations ? params.max_frames : params.min_frames);
   r.timeout_s = timeout_s > 0.0 ? timeout_s : std::min(kDefaultRequestTimeoutS, params.max_request_timeout_s);
   const auto add_note = [&r](const std::string& note) { r.note += (r.note.empty() ? "" : ", ") + note; };
   if (r.frames > static_cast<size_t>(params.max_frames)) {

@@ -36,6 +36,8 @@ std::optional<EndedBurst> LightBurstCollector::add(const sensor_msgs::ImageConst
       if (ended->problem.empty()) {
         if (const std::string p = stereoFormatProblem(*left, *right); !p.empty())
           ended->problem = "the light-off frame after it: " + p;
+        else if (light_on_.empty())
+          ended->problem = "none of its light-on frames was kept";
         else if (!sameFormat(*left, *light_on_.front().first))
           ended->problem = "its frames differ in size or encoding (" + describe(*light_on_.front().first) +
                            ", the light-off frame after it " + describe(*left) + ")";
@@ -52,7 +54,7 @@ std::optional<EndedBurst> LightBurstCollector::add(const sensor_msgs::ImageConst
   }
   if (frames_++ == 0) {
     if (!light_off_.first) {
-      problem_ = "no settled light-off frame before it";
+      if (need_light_off_before_) problem_ = "no settled light-off frame before it";
     } else if (const std::string p = stereoFormatProblem(*light_off_.first, *light_off_.second); !p.empty()) {
       problem_ = "the light-off frame before it: " + p;
     }
@@ -60,7 +62,7 @@ std::optional<EndedBurst> LightBurstCollector::add(const sensor_msgs::ImageConst
   if (!problem_.empty()) return std::nullopt;
   if (const std::string p = stereoFormatProblem(*left, *right); !p.empty()) {
     problem_ = "a light-on frame: " + p;
-  } else if (!sameFormat(*left, *light_off_.first)) {
+  } else if (light_off_.first && !sameFormat(*left, *light_off_.first)) {
     problem_ = "its frames differ in size or encoding (" + describe(*left) + ", the light-off frame before it " +
                describe(*light_off_.first) + ")";
   } else {

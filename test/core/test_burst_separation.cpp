@@ -16,6 +16,8 @@
 #include <string>
 #include <vector>
 
+#include <opencv2/imgproc.hpp>
+
 #include "embedded_calibration_stereo/core/depth/separator.h"
 #include "embedded_calibration_stereo/core/sim/sim_rig.h"
 #include "embedded_calibration_stereo/core/tracker/window_tracker.h"
@@ -115,6 +117,52 @@ TEST_F(BurstSeparation, TheEndsOfOneBurstSeparateTheSceneWithin35Decibels) {
   EXPECT_GE(early_in.min, 30.0);
   EXPECT_GT(early_in.min, raw.min + 15.0);
   EXPECT_LT(early_in.mean(), ends_in.mean()) << "one-sided pairs are expected to be worse";
+}
+
+// After a 5 % zoom, the template of a burst taken after it separates that burst's middle frames
+// with less of the device left (separationResidual) than the template taken before it, and the
+// other way round on frames before the zoom: the Separator keeps a new burst's template by this
+// score. The raw frames score higher than either.
+TEST_F(BurstSeparation, TheResidualPrefersTheTemplateOfTheDeviceAsItIs) {
+  SimRig zoomed(loadSimRigConfig(kConfig));
+  DriftRequest zoom;
+  zoom.focal_scale = 1.05;
+  ASSERT_TRUE(zoomed.setDrift(zoom, 0.0).empty());
+  std::vector<SimFrame> after;
+  for (int k = 0; k <= kLit + 1; ++k) {
+    const bool on = k >= 1 && k <= kLit;
+    after.push_back(zoomed.render((kFirst + k) / kFps, on ? 1.0 : 0.0, 100 + kFirst + k));
+  }
+  WindowFrames after_frames;
+  after_frames.light_off_before.push_back(after[0].left);
+  for (int k = 1; k <= kLit; ++k) after_frames.light_on.push_back(after[k].left);
+  after_frames.light_off_after.push_back(after[kLit + 1].left);
+  const ImageSeparator before_zoom(SeparatorOptions(),
+                                   learnWindowDevice(windowEnds(frames(0, kLit, true), 4), windowLearnerOptions())
+                                       .device_template);
+  const ImageSeparator after_zoom(SeparatorOptions(),
+                                  learnWindowDevice(windowEnds(after_frames, 4), windowLearnerOptions()).device_template);
+  // The middle frames, which the ends were not learned from.
+  std::vector<cv::Mat> middle_before, middle_after;
+  for (int k = 12; k <= 18; k += 3) {
+    middle_before.push_back(burst_[k].left);
+    middle_after.push_back(after[k].left);
+  }
+  const double on_after[2] = {separationResidual(before_zoom, middle_after), separationResidual(after_zoom, middle_after)};
+  const double on_before[2] = {separationResidual(before_zoom, middle_before),
+                               separationResidual(after_zoom, middle_before)};
+  cv::Mat raw_grey;
+  middle_after[0].convertTo(raw_grey, CV_32F);
+  cv::Mat smooth;
+  cv::blur(raw_grey, smooth, cv::Size(5, 5), cv::Point(-1, -1), cv::BORDER_REFLECT);
+  const cv::Mat fine = raw_grey - smooth;
+  const double raw = fine.dot(fine) / static_cast<double>(fine.total());
+  std::printf("  residual after the zoom: template before %.2f, after %.2f; before the zoom: before %.2f, after %.2f; "
+              "a raw frame %.2f (grey levels squared)\n",
+              on_after[0], on_after[1], on_before[0], on_before[1], raw);
+  EXPECT_LT(on_after[1], on_after[0]);
+  EXPECT_LT(on_before[0], on_before[1]);
+  EXPECT_LT(on_after[0], raw);
 }
 
 TEST(WindowEnds, KeepsTheLightOnFramesNearestEachEnd) {

@@ -98,11 +98,15 @@ TEST(WindowTeacher, TeachesOnAMovingHeadFromOneBurstWithANominalDescription) {
 
 // The sim driver's first burst as it renders it (sim_frame_source.cpp: scene time frame / fps,
 // the frame counter as noise seed, the light commanded on at 0.5 s for one unsettled and 30
-// settled frames), taught with the simulator's own description: every board of both cameras.
-// In the right camera's device image one board sits so near its neighbours that its search
-// region holds parts of them; it is only found once the boards found are painted over.
-TEST(WindowTeacher, TeachesEveryBoardOnTheSimDriversFirstBurst) {
-  SimRig sim(loadSimRigConfig(kConfig));
+// settled frames), taught with the simulator's own description: every board of both cameras at
+// the burst's end, on drive_photo and on handheld_photo (at most one missed on its first 8
+// frames). In some device images a board sits so near its
+// neighbours that its search region holds parts of them; it is only found once the boards found
+// are painted over and a tighter region is searched.
+class WindowTeacherScenario : public ::testing::TestWithParam<const char*> {};
+
+TEST_P(WindowTeacherScenario, TeachesEveryBoardOnTheSimDriversFirstBurst) {
+  SimRig sim(loadSimRigConfig(std::string(ECS_SOURCE_DIR) + "/config/" + GetParam() + ".yaml"));
   const int on_at = 15, off_at = on_at + 31;
   std::vector<SimFrame> frames;
   for (int i = 0; i <= off_at + 1; ++i) {
@@ -125,8 +129,8 @@ TEST(WindowTeacher, TeachesEveryBoardOnTheSimDriversFirstBurst) {
   b.left.light_off_after.push_back(frames[off_at + 1].left);
   b.right.light_off_after.push_back(frames[off_at + 1].right);
   const StereoRig& rig = sim.config().rig;
-  // At its end (a burst of fewer than 8 light-on frames is taught so) and on its first 8
-  // light-on frames (the nodelet teaches on those while the burst goes on).
+  // At its end (as the nodelet teaches again when the first frames missed a board) and on its
+  // first 8 light-on frames (the nodelet teaches on those while the burst goes on).
   const TeachResult left = teachCameraFromWindow(
       b.left, BoardLayout::device(sim.virtualBoards(), rig.left, Eigen::Isometry3d::Identity()), "left");
   const TeachResult right = teachCameraFromWindow(
@@ -136,12 +140,24 @@ TEST(WindowTeacher, TeachesEveryBoardOnTheSimDriversFirstBurst) {
       "left");
   const TeachResult right_first = teachCameraFromWindow(
       firstFrames(b.right, 8), BoardLayout::device(sim.virtualBoards(), rig.right, rig.right_from_left), "right");
-  for (const TeachResult* r : {&left, &right, &left_first, &right_first}) {
-    std::string notes;
-    for (const std::string& n : r->notes) notes += "\n  " + n;
-    EXPECT_EQ(r->prior.boards.size(), sim.virtualBoards().size()) << r->prior.name << notes;
+  const auto notes = [](const TeachResult& r) {
+    std::string text;
+    for (const std::string& n : r.notes) text += "\n  " + n;
+    return text;
+  };
+  // The burst's end (light-off frames on both sides): every board.
+  for (const TeachResult* r : {&left, &right})
+    EXPECT_EQ(r->prior.boards.size(), sim.virtualBoards().size()) << r->prior.name << notes(*r);
+  // Its first frames (one side only: more of the scene left in the device image) may miss a
+  // board, which the nodelet then teaches again at the burst's end.
+  for (const TeachResult* r : {&left_first, &right_first}) {
+    std::printf("  %s, %s, first 8 light-on frames: %zu of %zu boards\n", GetParam(), r->prior.name.c_str(),
+                r->prior.boards.size(), sim.virtualBoards().size());
+    EXPECT_GE(r->prior.boards.size() + 1, sim.virtualBoards().size()) << r->prior.name << notes(*r);
   }
 }
+
+INSTANTIATE_TEST_SUITE_P(Scenarios, WindowTeacherScenario, ::testing::Values("drive_photo", "handheld_photo"));
 
 TEST(WindowTeacher, DeviceImageBecomesAnEightBitGreyTeachingFrame) {
   cv::Mat device(1, 4, CV_32FC1);

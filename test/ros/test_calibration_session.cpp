@@ -224,6 +224,11 @@ TEST(BoundRecalibrateRequest, LimitsFramesAndTimeoutAndRefusesNonFiniteTimeouts)
   EXPECT_EQ(r.timeout_s, 10.0);
   r = ecsr::boundRecalibrateRequest(0, -4.0, params);
   EXPECT_EQ(r.timeout_s, 10.0);
+  // With window observations: a whole burst (max_frames) by default.
+  ecsr::CalibratorParams windows = params;
+  windows.window_observations = true;
+  EXPECT_EQ(ecsr::boundRecalibrateRequest(0, 0.0, windows).frames, 30u);
+  EXPECT_EQ(ecsr::boundRecalibrateRequest(12, 0.0, windows).frames, 12u);
   // The request: 4e9 frames, 1e9 s.
   r = ecsr::boundRecalibrateRequest(4000000000u, 1e9, params);
   EXPECT_EQ(r.refusal, "");

@@ -118,6 +118,23 @@ TEST(LightBurst, TheBurstUnderWayHoldsItsFramesSoFar) {
   EXPECT_TRUE(c.underWay().light_on.empty()) << "a burst that will be dropped";
 }
 
+// A collector that does not need the light-off frame before (the Separator's: it may subscribe
+// during a burst) keeps such a burst, with a null light_off_before; the default one drops it.
+TEST(LightBurst, ABurstWithoutALightOffFrameBeforeIsKeptWhenAllowed) {
+  const std::vector<Frame> frames = {frame(0, true), frame(1, true), frame(2, true), frame(3, false)};
+  ecsr::LightBurstCollector strict(3), lenient(3, false);
+  const auto dropped = feed(&strict, frames);
+  ASSERT_EQ(dropped.size(), 1u);
+  EXPECT_EQ(dropped[0].problem, "no settled light-off frame before it");
+  const auto kept = feed(&lenient, frames);
+  ASSERT_EQ(kept.size(), 1u);
+  EXPECT_EQ(kept[0].problem, "");
+  EXPECT_FALSE(kept[0].burst.light_off_before.first);
+  EXPECT_EQ(kept[0].burst.light_off_after.first, frames[3].left);
+  ASSERT_EQ(kept[0].burst.light_on.size(), 3u);
+  EXPECT_EQ(kept[0].burst.light_on[0].first, frames[0].left);
+}
+
 // A commit during a burst (the calibration epoch changes) does not touch its images: kept whole.
 TEST(LightBurst, ABurstAcrossACommitIsKept) {
   ecsr::LightBurstCollector c(3);

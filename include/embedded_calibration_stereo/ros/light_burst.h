@@ -36,13 +36,16 @@ struct EndedBurst {
 class LightBurstCollector {
  public:
   // A burst with fewer settled light-on frames (a verification flash) ends without a word.
-  explicit LightBurstCollector(int min_light_on_frames) : min_light_on_frames_(min_light_on_frames) {}
+  // `need_light_off_before` false: a burst that no settled light-off frame preceded (a subscriber
+  // that came in during it) is kept, with a null light_off_before.
+  explicit LightBurstCollector(int min_light_on_frames, bool need_light_off_before = true)
+      : min_light_on_frames_(min_light_on_frames), need_light_off_before_(need_light_off_before) {}
 
   // One settled frame (calibration_mode settled) with its light state. Returns the burst this
   // frame ends: at the first settled light-off frame after a burst of at least
   // min_light_on_frames light-on frames. Dropped (a problem): its frames (light-off ones
   // included) differ in size or encoding or have an encoding other than mono8, bgr8, rgb8, or no
-  // settled light-off frame preceded it. A new calibration coming into force during a burst does
+  // settled light-off frame preceded it (unless need_light_off_before is false). A new calibration coming into force during a burst does
   // not end it: the images do not depend on the calibration, only the corners' use does, and
   // the calibrator solves against what is in force when it solves.
   std::optional<EndedBurst> add(const sensor_msgs::ImageConstPtr& left, const sensor_msgs::ImageConstPtr& right,
@@ -53,6 +56,7 @@ class LightBurstCollector {
 
  private:
   const int min_light_on_frames_;
+  const bool need_light_off_before_;
   StereoImages light_off_;  // the latest settled light-off frame since the last burst
   std::vector<StereoImages> light_on_;
   int frames_ = 0;  // settled light-on frames of the burst under way, kept or not

@@ -8,6 +8,7 @@
 #include <sstream>
 #include <stdexcept>
 #include <utility>
+#include <vector>
 
 namespace ecs {
 
@@ -378,6 +379,22 @@ void ImageSeparator::separate(const cv::Mat& raw, cv::Mat* scene_out, double* al
     for (float a : alpha_tiles) sum += a;
     *alpha_out = sum / alpha_tiles.size();
   }
+}
+
+double separationResidual(const ImageSeparator& separator, const std::vector<cv::Mat>& light_on) {
+  double sum = 0.0;
+  size_t pixels = 0;
+  for (const cv::Mat& frame : light_on) {
+    cv::Mat scene, grey, smooth;
+    separator.separate(frame, &scene);
+    if (scene.channels() == 3) cv::cvtColor(scene, scene, cv::COLOR_BGR2GRAY);
+    scene.convertTo(grey, CV_32F);
+    cv::blur(grey, smooth, cv::Size(5, 5), cv::Point(-1, -1), cv::BORDER_REFLECT);
+    const cv::Mat fine = grey - smooth;
+    sum += fine.dot(fine);
+    pixels += fine.total();
+  }
+  return pixels ? sum / static_cast<double>(pixels) : 0.0;
 }
 
 void separateStereo(const ImageSeparator& left, const ImageSeparator& right,

@@ -365,8 +365,8 @@ void learnBoard(const VirtualBoard& vb, const std::vector<std::vector<cv::Point2
 }
 
 // A region around a board also holds parts of its neighbours, which can keep the detector from
-// the board itself: each board still missing is searched again in its region with every board
-// identified so far painted over. Returns whether anything new was found (added to *all).
+// the board itself: each board still missing is searched again in its region, and in tighter
+// ones, with every board identified so far painted over. Returns whether anything new was found (added to *all).
 bool searchAgainForMissing(const cv::Mat& search, const std::vector<cv::Rect>& regions,
                            const std::vector<cv::Size>& sizes, bool difference, const BoardLayout& layout,
                            const std::vector<std::vector<cv::Point2f>>& identified, std::vector<Detection>* all) {
@@ -378,8 +378,20 @@ bool searchAgainForMissing(const cv::Mat& search, const std::vector<cv::Rect>& r
     if (!identified[i].empty())
       paintOver(identified[i], layout.boards[i].cols, layout.boards[i].rows, difference, &painted);
   const size_t before = all->size();
-  for (size_t i = 0; i < identified.size(); ++i)
-    if (identified[i].empty()) detectInRegion(painted, regions[i], sizes, difference, all);
+  for (size_t i = 0; i < identified.size(); ++i) {
+    // The region itself, then tighter ones about its centre (the board fills about half of it):
+    // a region that still holds the edge of a neighbour may keep the detector off the board.
+    for (const double scale : {1.0, 0.8, 0.65}) {
+      if (!identified[i].empty()) break;
+      const cv::Rect& r = regions[i];
+      const cv::Size size(static_cast<int>(r.width * scale), static_cast<int>(r.height * scale));
+      const size_t found = all->size();
+      detectInRegion(painted, cv::Rect(r.x + (r.width - size.width) / 2, r.y + (r.height - size.height) / 2,
+                                       size.width, size.height),
+                     sizes, difference, all);
+      if (all->size() > found) break;
+    }
+  }
   return all->size() > before;
 }
 

@@ -151,6 +151,14 @@ class ImageSeparator {
   std::vector<float> column_weight_;
 };
 
+// What a separation leaves of the device: the mean square of the separated images' fine
+// structure (each minus its 5x5 box mean, grey levels squared) over light-on frames (as
+// separate() takes them). Every template sees the same scenes, so of two templates the one with
+// the lower score removed more of the device: a template of the device as it was before a zoom,
+// a focus change or a knock leaves its edges. Frames a template was learned from favour it (their
+// scene is in it, a little). Throws as separate() does; 0 for no frames.
+double separationResidual(const ImageSeparator& separator, const std::vector<cv::Mat>& light_on);
+
 // Separates both images of a stereo frame, one per thread (cv::parallel_for_).
 void separateStereo(const ImageSeparator& left, const ImageSeparator& right,
                     const cv::Mat& left_raw, const cv::Mat& right_raw, cv::Mat* left_scene,
