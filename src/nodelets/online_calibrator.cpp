@@ -677,22 +677,7 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
     const auto noted = [&bounded](std::string message) {
       return bounded.note.empty() ? message : message + " (" + bounded.note + ")";
     };
-    {
-      std::lock_guard<std::mutex> lock(mutex_);
-      // Answered at once (the second service thread): a queued request would switch the light
-      // and clear the window of the one running.
-      if (request_in_flight_)
-        return answer(&res, false, "busy: a recalibration is already running (requested by " + request_caller_ + ")");
-      request_in_flight_ = true;
-      request_caller_ = caller;
-      request_active_ = true;
-      request_frames_ = frames;
-      window_.clear();
-      if (!modes_.empty()) window_closed_at_ = modes_.back().stamp;  // only frames from now on
-      request_wants_window_ = params_.window_observations;
-      request_started_ = window_closed_at_;
-      request_window_.reset();
-    }
+    if (const std::string busy = claimRequest(caller, frames); !busy.empty()) return answer(&res, false, busy);
     struct InFlight {  // cleared on every return
       OnlineCalibratorNodelet* self;
       ~InFlight() {
@@ -752,6 +737,24 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
     // An accepted status has an empty reason only when committed to the driver.
     res.message = noted(res.status.accepted && res.status.reason.empty() ? "committed" : res.status.reason);
     return true;
+  }
+
+  // Service thread: starts a request's collection, or says why not (one runs already). Answered
+  // at once (the second service thread): a queued request would switch the light and clear the
+  // window of the one running.
+  std::string claimRequest(const std::string& caller, size_t frames) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (request_in_flight_) return "busy: a recalibration is already running (requested by " + request_caller_ + ")";
+    request_in_flight_ = true;
+    request_caller_ = caller;
+    request_active_ = true;
+    request_frames_ = frames;
+    window_.clear();
+    if (!modes_.empty()) window_closed_at_ = modes_.back().stamp;  // only frames from now on
+    request_wants_window_ = params_.window_observations;
+    request_started_ = window_closed_at_;
+    request_window_.reset();
+    return "";
   }
 
   // Service thread. Waits until the request's window has `frames` frames or `timeout_s` passed,

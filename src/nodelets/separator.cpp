@@ -1,8 +1,8 @@
 // Separator nodelet: removes the lit calibration device from calibration-mode frames so that
 // depth keeps running while the light is on (core/separator.h does the work).
 //
-// Lazy: the inputs are subscribed only while someone subscribes to left|right/image_scene or a
-// teach is running (lazy_synced_input.h).
+// Lazy: the inputs are subscribed only while someone subscribes to left|right/image_scene, a
+// teach is running or, with device_template learn, until the first template (lazy_synced_input.h).
 // Per stereo frame (left|right/image_raw and calibration_mode, ExactTime, or ApproximateTime with
 // approximate_sync):
 //  - light off, or light on but not settled (mixed frames), or no template taught for the
@@ -262,7 +262,10 @@ class SeparatorNodelet : public nodelet::Nodelet {
     diagnostics_->set("method", method);
     diagnostics_->set("template epoch", "none (not taught)");
     diagnostics_->set("template source", learn_ ? "learn" : "teach");
-    for (LazySubscription* input : inputs()) input->start();  // subscribed while someone listens
+    // Subscribed while someone listens; with learn, also until the first template, so that the
+    // first burst is seen from its start (before depth has a listener).
+    if (learn_) needInputsForTeach(true);
+    for (LazySubscription* input : inputs()) input->start();
     if (learn_) {
       NODELET_INFO("Separator: %s, device image learned from each light burst (%d light-on frames of each end), "
                    "%s sync, queue %d",
@@ -322,7 +325,7 @@ class SeparatorNodelet : public nodelet::Nodelet {
         startTeach(mode->calibration_epoch);
       teaching = teach_.active;
     }
-    needInputsForTeach(teaching);
+    needInputsForTeach(teaching || (learn_ && !has_template_));
     if (!separator) {
       reportWarning(learn_ ? "device image not learned yet: republishing the raw light-on frames"
                            : "separation not taught yet: republishing the raw light-on frames");
@@ -370,7 +373,7 @@ class SeparatorNodelet : public nodelet::Nodelet {
       if (teach_.active) addTeachFrame(*left, *right, left_truth.get(), right_truth.get(), mode->calibration_epoch);
       teaching = teach_.active;
     }
-    needInputsForTeach(teaching);
+    needInputsForTeach(teaching || (learn_ && !has_template_));
   }
 
   // Called with state_mutex_ held.
@@ -469,6 +472,7 @@ class SeparatorNodelet : public nodelet::Nodelet {
     }
     NODELET_INFO("Separator: device image learned from %s %d light-on frames of the burst ending at %.3f s (%s)",
                  result.whole_burst ? "the" : "the first", result.light_on_frames, result.stamp, summary.c_str());
+    if (!has_template_) needInputsForTeach(false);  // lazy again
     has_template_ = true;
     diagnostics_->set("template epoch", std::to_string(learned->epoch()));
   }

@@ -273,6 +273,21 @@ TEST(SeparatorLaziness, SubscribesOnlyForAListenerOrATeach) {
       << "a teach without listener did not subscribe the inputs (" << lazyInputsSubscribed() << ")";
 }
 
+// A learning Separator (device_template learn) with no listener subscribes its inputs until it
+// has learned its first template: the first burst must be seen from its start.
+TEST(SeparatorLaziness, ALearningSeparatorSubscribesUntilItsFirstTemplate) {
+  const std::vector<std::string> inputs = {"/learning/left/image_raw", "/learning/right/image_raw",
+                                           "/learning/calibration_mode"};
+  const auto subscribed = [&] {
+    size_t n = 0;
+    for (const std::string& topic : inputs) n += subscribersOf(topic).count(kManager);
+    return n;
+  };
+  EXPECT_TRUE(waitUntil([&] { return subscribed() == inputs.size(); }, 30.0))
+      << "a learning Separator without a template did not subscribe its inputs (" << subscribed() << " of "
+      << inputs.size() << ")";
+}
+
 namespace {
 
 template <class Parameter>
