@@ -284,7 +284,7 @@ class PatternTrackerNodelet : public nodelet::Nodelet {
     teach_requested_ = true;
     updateNeed();
     res.success = true;
-    res.message = std::string(teach_from_burst_ && !teach_from_truth_ ? "teaching at the end of the next light burst"
+    res.message = std::string(teach_from_burst_ && !teach_from_truth_ ? "teaching at the next light burst"
                                                                       : "teaching at the next settled light-on frame") +
                   "; prior file " + prior_file_;
     return true;
@@ -664,7 +664,7 @@ class PatternTrackerNodelet : public nodelet::Nodelet {
       case PriorState::kMissing:
         status.summary(teach_requested_ ? DiagnosticStatus::WARN : DiagnosticStatus::ERROR,
                        !teach_requested_   ? "prior missing: idle until teaching"
-                       : teach_from_burst_ ? "prior missing: teaching at the end of the next light burst"
+                       : teach_from_burst_ ? "prior missing: teaching at the next light burst"
                                            : "prior missing: teaching at the next settled light-on frame");
         break;
       case PriorState::kCorrupt:
