@@ -31,7 +31,6 @@ void LightSchedule::startBurst(double time_s) {
 }
 
 LightState LightSchedule::step(double time_s) {
-  const bool on_demand = config_.trigger == CalibrationTrigger::kOnDemand;
   if (!started_) {
     started_ = true;
     next_burst_s_ = time_s + config_.first_burst_delay_s;
@@ -40,6 +39,19 @@ LightState LightSchedule::step(double time_s) {
     // demand, as soon as demanded after that.
     last_burst_end_s_ = time_s + config_.first_burst_delay_s - config_.min_interval_s;
   }
+  startBurstIfDue(time_s);
+  startFlashIfDue(time_s);
+  const bool flash = burst_frames_left_ == 0 && flash_frames_left_ > 0;
+  const bool commanded_on = hold_on_ || burst_frames_left_ > 0 || flash;
+  if (burst_frames_left_ > 0 && --burst_frames_left_ == 0) last_burst_end_s_ = time_s;
+  if (flash) --flash_frames_left_;
+  LightState state = advance(commanded_on);
+  state.verification = flash && !hold_on_;
+  return state;
+}
+
+void LightSchedule::startBurstIfDue(double time_s) {
+  const bool on_demand = config_.trigger == CalibrationTrigger::kOnDemand;
   if (config_.period_s > 0.0 && time_s >= next_burst_s_) {
     startBurst(time_s);
     // Skip bursts missed while the driver was stalled instead of firing them back to back.
@@ -48,21 +60,19 @@ LightState LightSchedule::step(double time_s) {
     startBurst(time_s);
     if (config_.period_s > 0.0) next_burst_s_ = time_s + config_.period_s;  // the safety net restarts
   }
+}
+
+void LightSchedule::startFlashIfDue(double time_s) {
   // A burst, a hold or a flash still to reach its settled frame verifies already.
-  if (burst_frames_left_ > 0 || hold_on_ || flash_frames_left_ > 0) verify_soon_ = false;
-  if (config_.verification_period_s > 0.0 && burst_frames_left_ == 0 && flash_frames_left_ == 0 && !hold_on_ &&
-      (verify_soon_ || time_s >= next_flash_s_)) {
+  if (burst_frames_left_ > 0 || hold_on_ || flash_frames_left_ > 0) {
+    verify_soon_ = false;
+    return;
+  }
+  if (config_.verification_period_s > 0.0 && (verify_soon_ || time_s >= next_flash_s_)) {
     verify_soon_ = false;
     flash_frames_left_ = config_.settle_frames + 1;
     while (next_flash_s_ <= time_s) next_flash_s_ += config_.verification_period_s;
   }
-  const bool flash = burst_frames_left_ == 0 && flash_frames_left_ > 0;
-  const bool commanded_on = hold_on_ || burst_frames_left_ > 0 || flash;
-  if (burst_frames_left_ > 0 && --burst_frames_left_ == 0) last_burst_end_s_ = time_s;
-  if (flash) --flash_frames_left_;
-  LightState state = advance(commanded_on);
-  state.verification = flash && !hold_on_;
-  return state;
 }
 
 LightState LightSchedule::follow(bool light_on) { return advance(light_on); }

@@ -79,6 +79,9 @@ class LightSchedule {
  private:
   LightState advance(bool commanded_on);
   void startBurst(double time_s);
+  // step()'s decisions: a periodic or demanded burst; a verification flash.
+  void startBurstIfDue(double time_s);
+  void startFlashIfDue(double time_s);
 
   LightScheduleConfig config_;
   bool hold_on_ = false;
