@@ -184,9 +184,13 @@ TEST(DepthSim, EpochSwitchRectifiesEachFrameWithItsOwnCalibration) {
   const auto is_new = [&](const CameraInfo::ConstPtr& i) { return i && i->D[0] == new_k1; };
   ASSERT_TRUE(rect.waitFor(
       [&](const std::vector<Image::ConstPtr>& m) {
+        // Counted as below: the new calibration's image_rect whose raw image is at hand too.
         int n = 0;
         const auto infos = info.snapshot();
-        for (const auto& r : m) n += is_new(ecs_test::findByStamp(infos, r->header.stamp));
+        const auto raws = raw.snapshot();
+        for (const auto& r : m)
+          n += is_new(ecs_test::findByStamp(infos, r->header.stamp)) &&
+               ecs_test::findByStamp(raws, r->header.stamp) != nullptr;
         return n >= 3;
       },
       15.0))
