@@ -138,8 +138,9 @@ class PatternTrackerNodelet : public nodelet::Nodelet {
     prior_file_ = read.get("prior_file", defaultPatternPriorFile());
     device_config_ = read.get("device_config", package_path + "/config/sim_rig.yaml");
     const bool teach_on_start = read.get("teach_on_start", true);
-    teach_from_burst_ = read.choice("teach_from", "burst", {"burst", "light_off"}) == "burst";
     teach_from_truth_ = read.get("teach_from_ground_truth", false);
+    // The test-only truth teaching takes precedence over teach_from.
+    teach_from_burst_ = read.choice("teach_from", "burst", {"burst", "light_off"}) == "burst" && !teach_from_truth_;
     const int queue_size = read.atLeast("queue_size", 10, 1);
     stale_background_level_ = read.atLeast("stale_background_level", ecs::TrackerOptions().stale_background_level, 0.0);
     window_tracking_ = read.get("window_tracking", false);
@@ -284,7 +285,7 @@ class PatternTrackerNodelet : public nodelet::Nodelet {
     teach_requested_ = true;
     updateNeed();
     res.success = true;
-    res.message = std::string(teach_from_burst_ && !teach_from_truth_ ? "teaching at the next light burst"
+    res.message = std::string(teach_from_burst_ ? "teaching at the next light burst"
                                                                       : "teaching at the next settled light-on frame") +
                   "; prior file " + prior_file_;
     return true;
@@ -523,7 +524,7 @@ class PatternTrackerNodelet : public nodelet::Nodelet {
   // Callback queue: a burst ended (the first settled light-off frame after it). One that ends
   // while teaching runs waits for the prior (it is usually the one taught on).
   void endBurst(EndedBurst ended) {
-    if (teach_requested_ && teach_from_burst_ && !teach_from_truth_ && ended.problem.empty()) {
+    if (teach_requested_ && teach_from_burst_ && ended.problem.empty()) {
       startTeachingFromBurst(ended.burst);
       if (window_tracking_) taught_burst_ = std::move(ended);  // tracked with the prior it teaches
       return;
@@ -533,7 +534,7 @@ class PatternTrackerNodelet : public nodelet::Nodelet {
       return;
     }
     if (!window_tracking_) {
-      if (teach_requested_ && teach_from_burst_ && !teach_from_truth_)
+      if (teach_requested_ && teach_from_burst_)
         NODELET_WARN_THROTTLE(5.0, "PatternTracker: cannot teach from the burst of %d light-on frames that ended: %s",
                               ended.light_on_frames, ended.problem.c_str());
       return;
@@ -698,7 +699,7 @@ class PatternTrackerNodelet : public nodelet::Nodelet {
 
   double stale_background_level_ = 0.0;  // parameter, see TrackerOptions
   bool teach_from_truth_ = false;         // parameter teach_from_ground_truth (tests only)
-  bool teach_from_burst_ = true;          // parameter teach_from
+  bool teach_from_burst_ = true;          // parameter teach_from, false with teach_from_ground_truth
   // Teaching from a burst starts once it has this many settled light-on frames (or at its end):
   // a forced recalibration holds the light on until it has observations.
   static constexpr int kTeachLightOnFrames = 8;

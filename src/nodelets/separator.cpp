@@ -41,8 +41,6 @@
 
 #include <algorithm>
 #include <chrono>
-#include <cmath>
-#include <deque>
 #include <future>
 #include <memory>
 #include <mutex>

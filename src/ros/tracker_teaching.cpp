@@ -14,6 +14,12 @@ namespace embedded_calibration_stereo {
 
 namespace {
 
+// Creates the directories a file at `path` needs. Throws std::filesystem::filesystem_error.
+void createParentDirectories(const std::string& path) {
+  const std::filesystem::path target(path);
+  if (target.has_parent_path()) std::filesystem::create_directories(target.parent_path());
+}
+
 // Teaches both cameras concurrently with `teach(camera, layout, name)` (0 left, 1 right) and
 // writes the prior.
 template <typename TeachOne>
@@ -68,8 +74,7 @@ TeachOutcome teachStereoPriorFromBurst(const ecs::WindowFrames& left, const ecs:
         const std::string image_path = taughtOnImagePath(path, name);
         std::vector<uchar> png;
         try {
-          const std::filesystem::path target(image_path);
-          if (target.has_parent_path()) std::filesystem::create_directories(target.parent_path());
+          createParentDirectories(image_path);
           cv::imencode(".png", taught_on, png);
           ecs::writeFileAtomically(image_path, std::string(png.begin(), png.end()));
         } catch (const std::exception& e) {
@@ -82,8 +87,7 @@ TeachOutcome teachStereoPriorFromBurst(const ecs::WindowFrames& left, const ecs:
 
 std::string writeStereoPrior(const std::string& path, const ecs::PatternPrior& prior) {
   try {
-    const std::filesystem::path target(path);
-    if (target.has_parent_path()) std::filesystem::create_directories(target.parent_path());
+    createParentDirectories(path);
     ecs::writePatternPrior(path, prior);  // atomic
   } catch (const std::exception& e) {
     return e.what();
