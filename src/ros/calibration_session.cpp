@@ -87,6 +87,7 @@ CalibratorParams loadCalibratorParams(const ros::NodeHandle& pnh, const std::str
   p.terms.estimate_tangential = read.get("estimate_tangential", p.terms.estimate_tangential);
   p.terms.estimate_k3 = read.get("estimate_k3", p.terms.estimate_k3);
   non_negative("loss_scale_px", &p.adjustment.loss_scale_px);
+  p.adjustment.refine_board_placement = read.get("refine_board_placement", p.adjustment.refine_board_placement);
   p.adjustment.use_scene_matches = read.get("scene_constraints", p.adjustment.use_scene_matches);
   p.prior_from_earlier_windows = read.get("prior_from_earlier_windows", p.prior_from_earlier_windows);
   p.filter.change_probability = read.get("change_probability", p.filter.change_probability);

@@ -185,8 +185,9 @@ TEST(DeviceModel, NoisyFramesAreWithinTheReportedStddevsAndBelowTheFreePoseBound
     }
     EXPECT_LT(r.baseline_stddev_m, free.baseline_stddev_m);
     EXPECT_LT(r.rotation_stddev_deg, free.rotation_stddev_deg);
-    // The virtual boards are found to a fraction of a millimetre.
-    EXPECT_LT(virtualCornerError(r, s.device), frames == 1 ? 0.012 : 0.004);
+    // The virtual boards are found to about a centimetre from one frame (each board's placement
+    // is refined too), a few millimetres from ten.
+    EXPECT_LT(virtualCornerError(r, s.device), frames == 1 ? 0.015 : 0.005);
     std::cout << frames << " frame(s): sd (free-pose Cramer-Rao bound) left fx "
               << r.left_stddev.fx / r.rig.left.fx << " (" << free.left_stddev.fx / s.truth.left.fx << ") cx "
               << r.left_stddev.cx << " (" << free.left_stddev.cx << ") cy " << r.left_stddev.cy << " ("
@@ -366,6 +367,47 @@ TEST(DeviceModel, QualityGateAcceptsItAgainstADriftedCalibrationAndKeepsTheTruth
   const GateDecision kept = gate.evaluate(again, &truth_fit);
   EXPECT_FALSE(kept.accepted);
   EXPECT_NE(kept.reason.find("no significant improvement"), std::string::npos) << kept.reason;
+}
+
+// A nominal device whose boards are placed off the truth by the housing's tolerance (1 mm and
+// 0.3 deg per axis, as scripts/perturb_device.py sets up a cold start). With the placements
+// refined (the default), noise-free corners give back the cameras and the virtual boards
+// exactly; held, no camera explains the misplaced corners. With 0.05 px of corner noise,
+// refining them costs little against a device known exactly: the fx and baseline standard
+// deviations grow by less than a third.
+TEST(DeviceModel, BoardPlacementOffByItsToleranceIsRefined) {
+  const SimScenario s;
+  BundleAdjustmentOptions held = withoutPrior();
+  held.refine_board_placement = false;
+  for (uint64_t seed : {31, 32, 33}) {
+    const CalibrationDevice nominal = perturbBoardPlacement(s.nominal(seed), 0.001, 0.3, seed);
+    const auto frames = s.observe(10, 0.0, seed);
+    const BundleAdjustmentSummary r = solve(frames, nominal, s.drifted(), withoutPrior());
+    const BundleAdjustmentSummary h = solve(frames, nominal, s.drifted(), held);
+    ASSERT_TRUE(r.success && h.success) << r.message << " / " << h.message;
+    const RigErrors eh = compareRigs(h.rig, s.truth);
+    std::cout << "seed " << seed << ": placements refined, rms " << r.rms_left_px << " "
+              << r.rms_right_px << "; held, rms " << h.rms_left_px << " " << h.rms_right_px
+              << ", fx error " << eh.fx_rel[0] << " " << eh.fx_rel[1] << ", baseline "
+              << eh.baseline_rel << "\n";
+    EXPECT_LT(std::max(r.rms_left_px, r.rms_right_px), 1e-3);
+    EXPECT_GT(std::min(h.rms_left_px, h.rms_right_px), 0.1);
+    expectExact(r, s.truth);
+    ASSERT_TRUE(r.device.has_value());
+    EXPECT_LT(virtualCornerError(r, s.device), 1e-6);
+  }
+  const auto noisy = s.observe(10, 0.05, 37);
+  const BundleAdjustmentSummary refined =
+      solve(noisy, perturbBoardPlacement(s.nominal(37), 0.001, 0.3, 37), s.drifted());
+  BundleAdjustmentOptions exact_held;
+  exact_held.refine_board_placement = false;
+  const BundleAdjustmentSummary known = solve(noisy, s.nominal(37), s.drifted(), exact_held);
+  ASSERT_TRUE(refined.covariance_ok && known.covariance_ok);
+  std::cout << "0.05 px: fx sd " << refined.left_stddev.fx << " (placements known: "
+            << known.left_stddev.fx << "), baseline sd " << refined.baseline_stddev_m << " m ("
+            << known.baseline_stddev_m << " m)\n";
+  EXPECT_LT(refined.left_stddev.fx, 1.33 * known.left_stddev.fx);
+  EXPECT_LT(refined.baseline_stddev_m, 1.33 * known.baseline_stddev_m);
 }
 
 }  // namespace

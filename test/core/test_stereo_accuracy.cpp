@@ -6,7 +6,7 @@
 //     x is a misalignment of f' times the angle, a 1 % baseline error a 1 % depth error, a pan
 //     a disparity bias of f' times the angle). (b) The prediction from a covariance against
 //     Monte Carlo sampling of that covariance. (c) The calibrator's solve (device model, the
-//     sim's head, 0.2 px corner noise) over 20 trials: the reported standard deviations cover
+//     sim's head, 0.2 px corner noise) over 50 trials: the reported standard deviations cover
 //     the true errors, and the predicted misalignment and bias are those the truth shows.
 #include <gtest/gtest.h>
 
@@ -343,8 +343,10 @@ TEST(StereoAccuracy, PredictionIsTheMonteCarloExpectationOfTheCovariance) {
 
 // (c) The calibrator's solve: the rigid device model on the sim's head, the nominal device off
 // by manufacturing tolerances (1 mm, 0.5 deg), 0.2 px corner noise, 5 frames (the calibrator's
-// default window minimum) per trial, 20 trials.
-TEST(StereoAccuracyCalibrator, TrueErrorsMatchTheReportedCovarianceOverTwentyTrials) {
+// default window minimum) per trial, 50 trials: the ratio of an RMS over trials to its
+// prediction scatters by about 1/sqrt(2 n) for each parameter that dominates it, and the bias
+// and the far depth errors are dominated by few (over 20 trials one seed set gave 1.51).
+TEST(StereoAccuracyCalibrator, TrueErrorsMatchTheReportedCovarianceOverFiftyTrials) {
   const auto start = std::chrono::steady_clock::now();
   const StereoRig truth = simTruth();
   cv::FileStorage fs = openYaml(ECS_SOURCE_DIR "/config/sim_rig.yaml");
@@ -352,7 +354,7 @@ TEST(StereoAccuracyCalibrator, TrueErrorsMatchTheReportedCovarianceOverTwentyTri
   // ECS_ACCURACY_TRIALS: more trials for the figures in docs/figures.md (the test's bounds are
   // for 20).
   const char* trials_env = std::getenv("ECS_ACCURACY_TRIALS");
-  const int kTrials = trials_env ? std::max(1, std::atoi(trials_env)) : 20;
+  const int kTrials = trials_env ? std::max(1, std::atoi(trials_env)) : 50;
   int inside = 0, total = 0;
   double true_m2 = 0, true_b2 = 0, pred_m2 = 0, pred_b2 = 0, mahalanobis = 0;
   int free_parameters = 0;
@@ -418,7 +420,7 @@ TEST(StereoAccuracyCalibrator, TrueErrorsMatchTheReportedCovarianceOverTwentyTri
     std::printf("[ figures  ] depth error at %.0f m: true %.4f %%, predicted %.4f %%\n",
                 StereoAccuracyOptions().depths_m[d], std::sqrt(true_e2[d] / kTrials), std::sqrt(pred_e2[d] / kTrials));
   EXPECT_GE(static_cast<double>(inside) / total, 0.95) << inside << " of " << total;
-  // Chi-square with 20 x free degrees of freedom: its mean within 1 +- 0.35 with margin to spare.
+  // Chi-square with 50 x free degrees of freedom: its mean within 1 +- 0.35 with margin to spare.
   EXPECT_NEAR(mahalanobis / kTrials / free_parameters, 1.0, 0.35);
   EXPECT_LE(std::max(true_m / pred_m, pred_m / true_m), 1.5);
   EXPECT_LE(std::max(true_b / pred_b, pred_b / true_b), 1.5);

@@ -370,6 +370,7 @@ class AdjustmentRun {
     priors_.angle_tolerance_rad = options_.device_prior_angle_deg * M_PI / 180.0;
     priors_.position_tolerance_m = options_.device_prior_position_m;
     priors_.refine_planes = options_.refine_mirror_planes;
+    priors_.refine_placement = options_.refine_board_placement;
     const std::vector<VirtualBoard>& layout = *layout_;
     std::vector<BoardView>& views = valid_.views;
     if (device_mode_) {
@@ -436,10 +437,9 @@ class AdjustmentRun {
       const bool right = t.camera == CameraSide::kRight;
       double* camera = intrinsics_[right ? 1 : 0].data();
       if (device_mode_) {
-        r.blocks = device_blocks_->residualBlocks(board.copy_index, camera,
-                                                  right ? extrinsics_.data() : nullptr);
+        r.blocks = device_blocks_->residualBlocks(board, camera, right ? extrinsics_.data() : nullptr);
         r.cost = DeviceCornerReprojectionCost::Create(
-            device_blocks_->cornerInDevice(board.board_index, t.corner_id), t.mean, right,
+            device_blocks_->cornerInBoard(board.board_index, t.corner_id), t.mean, right,
             device_blocks_->planeCount(board.copy_index));
       } else {
         double* pose = pose_blocks_[pose_index_.at({t.frame, t.board})].data();

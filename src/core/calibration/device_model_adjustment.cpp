@@ -30,20 +30,35 @@ using PlaneManifold = ceres::ProductManifold<ceres::SphereManifold<3>, ceres::Eu
 using PoseManifold =
     ceres::ProductManifold<ceres::EigenQuaternionManifold, ceres::EuclideanManifold<3>>;
 
+using Planes = std::vector<std::vector<std::array<double, 4>>>;
+
+// A pose block's manifold and weak prior; constant when held.
+void addPosePrior(ceres::Problem* problem, std::array<double, 7>* pose,
+                  const std::array<double, 7>& nominal, const DeviceModelPriors& priors,
+                  bool hold, std::vector<ceres::ResidualBlockId>* ids) {
+  problem->SetManifold(pose->data(), new PoseManifold());
+  ids->push_back(problem->AddResidualBlock(
+      DevicePosePriorCost::Create(poseFromBlock(nominal), priors.angle_tolerance_rad,
+                                  priors.position_tolerance_m),
+      nullptr, pose->data()));
+  if (hold) problem->SetParameterBlockConstant(pose->data());
+}
+
 // Manifolds, priors and constant blocks of the device model in `problem`.
 std::vector<ceres::ResidualBlockId> addPriors(
     ceres::Problem* problem, std::array<double, 7>* pose, const std::array<double, 7>& nominal_pose,
-    std::vector<std::vector<std::array<double, 4>>>* planes,
-    const std::vector<std::vector<std::array<double, 4>>>& nominal_planes,
-    const DeviceModelPriors& priors, bool hold) {
+    std::vector<std::array<double, 7>>* placements,
+    const std::vector<std::array<double, 7>>& nominal_placements, Planes* planes,
+    const Planes& nominal_planes, const DeviceModelPriors& priors, bool hold) {
   std::vector<ceres::ResidualBlockId> ids;
   if (!problem->HasParameterBlock(pose->data())) return ids;
-  problem->SetManifold(pose->data(), new PoseManifold());
-  const Eigen::Isometry3d nominal = poseFromBlock(nominal_pose);
-  ids.push_back(problem->AddResidualBlock(
-      DevicePosePriorCost::Create(nominal, priors.angle_tolerance_rad, priors.position_tolerance_m),
-      nullptr, pose->data()));
-  if (hold) problem->SetParameterBlockConstant(pose->data());
+  addPosePrior(problem, pose, nominal_pose, priors, hold, &ids);
+  for (size_t b = 0; b < placements->size(); ++b) {
+    std::array<double, 7>* placement = &(*placements)[b];
+    if (problem->HasParameterBlock(placement->data()))
+      addPosePrior(problem, placement, nominal_placements[b], priors,
+                   hold || !priors.refine_placement, &ids);
+  }
   for (size_t c = 0; c < planes->size(); ++c)
     for (size_t i = 0; i < (*planes)[c].size(); ++i) {
       double* block = (*planes)[c][i].data();
@@ -64,6 +79,8 @@ std::vector<ceres::ResidualBlockId> addPriors(
 DeviceModelBlocks::DeviceModelBlocks(const CalibrationDevice& nominal) : nominal_(nominal) {
   nominal_pose_ = poseBlock(nominal.rig_from_device);
   pose_ = nominal_pose_;
+  for (const Chessboard& b : nominal.boards) nominal_placements_.push_back(poseBlock(b.device_from_board));
+  placements_ = nominal_placements_;
   for (const std::vector<MirrorPlane>& chain : nominal.copies) {
     std::vector<std::array<double, 4>> blocks;
     for (const MirrorPlane& m : chain) {
@@ -76,23 +93,23 @@ DeviceModelBlocks::DeviceModelBlocks(const CalibrationDevice& nominal) : nominal
   planes_ = nominal_planes_;
 }
 
-std::vector<double*> DeviceModelBlocks::residualBlocks(int copy, double* intrinsics,
-                                                       double* extrinsics) {
-  std::vector<double*> blocks{intrinsics, pose_.data()};
+std::vector<double*> DeviceModelBlocks::residualBlocks(const VirtualBoard& board,
+                                                       double* intrinsics, double* extrinsics) {
+  std::vector<double*> blocks{intrinsics, pose_.data(), placements_.at(board.board_index).data()};
   if (extrinsics) blocks.push_back(extrinsics);
-  for (std::array<double, 4>& p : planes_.at(copy)) blocks.push_back(p.data());
+  for (std::array<double, 4>& p : planes_.at(board.copy_index)) blocks.push_back(p.data());
   return blocks;
 }
 
-Eigen::Vector3d DeviceModelBlocks::cornerInDevice(int board_index, int corner_id) const {
-  const Chessboard& b = nominal_.boards.at(board_index);
-  return b.device_from_board * b.cornerInBoard(corner_id);
+Eigen::Vector3d DeviceModelBlocks::cornerInBoard(int board_index, int corner_id) const {
+  return nominal_.boards.at(board_index).cornerInBoard(corner_id);
 }
 
 std::vector<ceres::ResidualBlockId> DeviceModelBlocks::configure(ceres::Problem* problem,
                                                                  const DeviceModelPriors& priors,
                                                                  bool hold) {
-  return addPriors(problem, &pose_, nominal_pose_, &planes_, nominal_planes_, priors, hold);
+  return addPriors(problem, &pose_, nominal_pose_, &placements_, nominal_placements_, &planes_,
+                   nominal_planes_, priors, hold);
 }
 
 double DeviceModelBlocks::alignTo(const std::vector<VirtualBoard>& layout,
@@ -103,11 +120,11 @@ double DeviceModelBlocks::alignTo(const std::vector<VirtualBoard>& layout,
   for (const VirtualBoard& board : layout) {
     const auto found = rig_from_board.find(board.virtual_id);
     if (found == rig_from_board.end()) continue;
-    std::vector<double*> blocks{pose_.data()};
+    std::vector<double*> blocks{pose_.data(), placements_.at(board.board_index).data()};
     for (std::array<double, 4>& p : planes_.at(board.copy_index)) blocks.push_back(p.data());
     for (int id = 0; id < board.cornerCount(); ++id) {
       problem.AddResidualBlock(
-          DeviceCornerAlignmentCost::Create(cornerInDevice(board.board_index, id),
+          DeviceCornerAlignmentCost::Create(cornerInBoard(board.board_index, id),
                                             found->second * board.cornerInBoard(id),
                                             planeCount(board.copy_index)),
           nullptr, blocks);
@@ -116,7 +133,8 @@ double DeviceModelBlocks::alignTo(const std::vector<VirtualBoard>& layout,
   }
   if (corners == 0) return -1.0;
   const std::vector<ceres::ResidualBlockId> prior_ids =
-      addPriors(&problem, &pose_, nominal_pose_, &planes_, nominal_planes_, priors, false);
+      addPriors(&problem, &pose_, nominal_pose_, &placements_, nominal_placements_, &planes_,
+                nominal_planes_, priors, false);
   ceres::Solver::Options options;
   options.linear_solver_type = ceres::DENSE_QR;
   options.max_num_iterations = 50;
@@ -136,6 +154,7 @@ double DeviceModelBlocks::alignTo(const std::vector<VirtualBoard>& layout,
 CalibrationDevice DeviceModelBlocks::device() const {
   CalibrationDevice d = nominal_;
   d.rig_from_device = poseFromBlock(pose_);
+  for (size_t b = 0; b < placements_.size(); ++b) d.boards[b].device_from_board = poseFromBlock(placements_[b]);
   for (size_t c = 0; c < planes_.size(); ++c)
     for (size_t i = 0; i < planes_[c].size(); ++i) {
       const std::array<double, 4>& p = planes_[c][i];
@@ -147,6 +166,7 @@ CalibrationDevice DeviceModelBlocks::device() const {
 
 std::vector<double*> DeviceModelBlocks::allBlocks() {
   std::vector<double*> blocks{pose_.data()};
+  for (auto& placement : placements_) blocks.push_back(placement.data());
   for (auto& chain : planes_)
     for (auto& p : chain) blocks.push_back(p.data());
   return blocks;

@@ -147,6 +147,22 @@ CalibrationDevice perturbDevice(const CalibrationDevice& device, double position
   return out;
 }
 
+CalibrationDevice perturbBoardPlacement(const CalibrationDevice& device, double position_m,
+                                        double angle_deg, uint64_t seed) {
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> unit(-1.0, 1.0);
+  CalibrationDevice out = device;
+  for (Chessboard& b : out.boards) {
+    const Eigen::Vector3d turn(unit(rng), unit(rng), unit(rng));
+    const Eigen::Vector3d shift(unit(rng), unit(rng), unit(rng));
+    const Eigen::Vector3d rv = turn * angle_deg * M_PI / 180.0;
+    b.device_from_board.linear() =
+        Eigen::AngleAxisd(rv.norm(), rv.normalized()).toRotationMatrix() * b.device_from_board.linear();
+    b.device_from_board.translation() += shift * position_m;
+  }
+  return out;
+}
+
 RigErrors compareRigs(const StereoRig& estimate, const StereoRig& truth) {
   RigErrors e;
   const PinholeCamera* est[2] = {&estimate.left, &estimate.right};

@@ -11,12 +11,13 @@
 //
 // Board poses (BoardPoseMode): the embedded device is fixed to the left camera, so every
 // frame sees the same virtual boards and only the noise differs.
-// - kDeviceModel: the rigid device model. One rig_from_device for all frames, the known board
-//   layout (Chessboard::device_from_board, held) and the mirror planes of each copy
-//   (MirrorPlane, refined by default): a virtual corner is the physical corner placed by the
-//   device pose and reflected by its copy's chain of planes (device_model_cost.h). Needs
-//   CalibrationInput::device. Initialised from a kSharedAcrossFrames solve, to whose virtual
-//   boards the nominal device is aligned first (device_model_adjustment.h).
+// - kDeviceModel: the rigid device model. One rig_from_device for all frames, each board's
+//   placement in it (Chessboard::device_from_board) and the mirror planes of each copy
+//   (MirrorPlane), all refined by default: a virtual corner is a corner of its board's grid,
+//   placed by the board's placement and the device pose and reflected by its copy's chain of
+//   planes (device_model_cost.h). Needs CalibrationInput::device. Initialised from a
+//   kSharedAcrossFrames solve, to whose virtual boards the nominal device is aligned first
+//   (device_model_adjustment.h).
 // - kSharedAcrossFrames: ONE free pose per virtual board for all frames. The corners are
 //   grouped into tracks across frames and each track is one residual on its mean weighted by
 //   its length (corner_tracks.h) - exactly the least-squares problem over all observations at
@@ -107,6 +108,11 @@ struct BundleAdjustmentOptions {
   // only while the device is within them (a knock may move it further): set it knowingly.
   double device_prior_angle_deg = 50.0;
   double device_prior_position_m = 0.1;
+  // Device model: refine each board's placement in the device (Chessboard::device_from_board;
+  // otherwise held at the device's values). A device description from CAD is off by the
+  // housing's tolerance, which held placements turn into corner residuals no camera explains
+  // (device_model_adjustment.h).
+  bool refine_board_placement = true;
   // Scene constraints (the frames' StereoObservation::scene), used unless use_scene_matches is
   // false. Fewer usable matches than min_scene_matches: not used. Matches further from their
   // epipolar line than max_scene_residual_sigmas robust spreads at the solve without them are

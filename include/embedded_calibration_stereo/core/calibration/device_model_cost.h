@@ -1,14 +1,15 @@
 #pragma once
 // Ceres functors of the bundle adjuster's rigid device model (BoardPoseMode::kDeviceModel):
-// every virtual corner is the physical corner of the known device layout, placed in the rig by
-// ONE device pose and reflected by its copy's chain of mirror planes.
+// every virtual corner is a corner of its board's grid, placed in the device by the board's
+// placement, in the rig by ONE device pose and reflected by its copy's chain of mirror planes.
 //
 // Parameter blocks (all doubles):
 //   device_pose[7] = qx, qy, qz, qw (Eigen order, unit), tx, ty, tz: rig_from_device (metres)
+//   board_pose[7]  = the same for device_from_board: the board's placement in the housing
 //   plane[4]       = nx, ny, nz (unit), d: the mirror plane n . x = d in the rig frame
 // plus the intrinsics[9] and extrinsics[6] blocks of reprojection_cost.h.
-// The corner in the device frame (device_from_board * cornerInBoard) is a constant: the board
-// layout is known from manufacturing and held.
+// The corner in the board frame (Chessboard::cornerInBoard) is a constant: a printed board's
+// grid is exact; its placement is known to the manufacturing tolerance and may be refined.
 //
 // Threading: the functors are immutable after construction; Ceres may evaluate them from
 // several threads at once.
@@ -33,32 +34,43 @@ void reflectThroughPlane(const T* plane, T* p) {
   for (int i = 0; i < 3; ++i) p[i] -= s * plane[i];
 }
 
-// Device corner -> virtual corner in the rig frame: device pose, then the chain's planes in
-// order (device side first), as CalibrationDevice::virtualBoards() composes them.
+// A pose block applied to a point.
 template <typename T>
-Eigen::Matrix<T, 3, 1> virtualDeviceCornerInRig(const T* device_pose,
-                                                const Eigen::Vector3d& corner_in_device,
+Eigen::Matrix<T, 3, 1> transformByPose(const T* pose, const Eigen::Matrix<T, 3, 1>& p) {
+  const Eigen::Map<const Eigen::Quaternion<T>> rotation(pose);
+  const Eigen::Map<const Eigen::Matrix<T, 3, 1>> translation(pose + 4);
+  return rotation * p + translation;
+}
+
+// Board corner -> virtual corner in the rig frame: board placement, device pose, then the
+// chain's planes in order (device side first), as CalibrationDevice::virtualBoards() composes
+// them.
+template <typename T>
+Eigen::Matrix<T, 3, 1> virtualDeviceCornerInRig(const T* device_pose, const T* board_pose,
+                                                const Eigen::Vector3d& corner_in_board,
                                                 T const* const* planes, int plane_count) {
-  Eigen::Matrix<T, 3, 1> p = boardCornerInRig(device_pose, corner_in_device);
+  Eigen::Matrix<T, 3, 1> p =
+      transformByPose(device_pose, boardCornerInRig(board_pose, corner_in_board));
   for (int i = 0; i < plane_count; ++i) reflectThroughPlane(planes[i], p.data());
   return p;
 }
 
 // A corner of the device seen by one camera through one mirror copy.
-// Parameter blocks: intrinsics[9], device_pose[7], [extrinsics[6] for the right camera],
-// then plane[4] for each plane of the copy's chain.
+// Parameter blocks: intrinsics[9], device_pose[7], board_pose[7], [extrinsics[6] for the right
+// camera], then plane[4] for each plane of the copy's chain.
 class DeviceCornerReprojectionCost {
  public:
-  DeviceCornerReprojectionCost(const Eigen::Vector3d& corner_in_device,
+  DeviceCornerReprojectionCost(const Eigen::Vector3d& corner_in_board,
                                const Eigen::Vector2d& pixel, bool right_camera, int plane_count)
-      : corner_(corner_in_device), pixel_(pixel), right_(right_camera), planes_(plane_count) {}
+      : corner_(corner_in_board), pixel_(pixel), right_(right_camera), planes_(plane_count) {}
 
-  static ceres::CostFunction* Create(const Eigen::Vector3d& corner_in_device,
+  static ceres::CostFunction* Create(const Eigen::Vector3d& corner_in_board,
                                      const Eigen::Vector2d& pixel, bool right_camera,
                                      int plane_count) {
     auto* cost = new ceres::DynamicAutoDiffCostFunction<DeviceCornerReprojectionCost>(
-        new DeviceCornerReprojectionCost(corner_in_device, pixel, right_camera, plane_count));
+        new DeviceCornerReprojectionCost(corner_in_board, pixel, right_camera, plane_count));
     cost->AddParameterBlock(kIntrinsicsSize);
+    cost->AddParameterBlock(kDevicePoseSize);
     cost->AddParameterBlock(kDevicePoseSize);
     if (right_camera) cost->AddParameterBlock(kExtrinsicsSize);
     for (int i = 0; i < plane_count; ++i) cost->AddParameterBlock(kMirrorPlaneSize);
@@ -68,10 +80,10 @@ class DeviceCornerReprojectionCost {
 
   template <typename T>
   bool operator()(T const* const* blocks, T* residual) const {
-    const int first_plane = right_ ? 3 : 2;
+    const int first_plane = right_ ? 4 : 3;
     Eigen::Matrix<T, 3, 1> p =
-        virtualDeviceCornerInRig(blocks[1], corner_, blocks + first_plane, planes_);
-    if (right_) p = rightFromLeft(blocks[2], p);
+        virtualDeviceCornerInRig(blocks[1], blocks[2], corner_, blocks + first_plane, planes_);
+    if (right_) p = rightFromLeft(blocks[3], p);
     return pixelResidual(blocks[0], p, pixel_, residual);
   }
 
@@ -84,17 +96,18 @@ class DeviceCornerReprojectionCost {
 
 // Pre-alignment of the device model to virtual board poses estimated freely: the device
 // corner's virtual position minus the freely estimated one, in millimetres (3 residuals).
-// Parameter blocks: device_pose[7], then plane[4] for each plane of the chain.
+// Parameter blocks: device_pose[7], board_pose[7], then plane[4] for each plane of the chain.
 class DeviceCornerAlignmentCost {
  public:
-  DeviceCornerAlignmentCost(const Eigen::Vector3d& corner_in_device,
+  DeviceCornerAlignmentCost(const Eigen::Vector3d& corner_in_board,
                             const Eigen::Vector3d& target_in_rig, int plane_count)
-      : corner_(corner_in_device), target_(target_in_rig), planes_(plane_count) {}
+      : corner_(corner_in_board), target_(target_in_rig), planes_(plane_count) {}
 
-  static ceres::CostFunction* Create(const Eigen::Vector3d& corner_in_device,
+  static ceres::CostFunction* Create(const Eigen::Vector3d& corner_in_board,
                                      const Eigen::Vector3d& target_in_rig, int plane_count) {
     auto* cost = new ceres::DynamicAutoDiffCostFunction<DeviceCornerAlignmentCost>(
-        new DeviceCornerAlignmentCost(corner_in_device, target_in_rig, plane_count));
+        new DeviceCornerAlignmentCost(corner_in_board, target_in_rig, plane_count));
+    cost->AddParameterBlock(kDevicePoseSize);
     cost->AddParameterBlock(kDevicePoseSize);
     for (int i = 0; i < plane_count; ++i) cost->AddParameterBlock(kMirrorPlaneSize);
     cost->SetNumResiduals(3);
@@ -104,7 +117,7 @@ class DeviceCornerAlignmentCost {
   template <typename T>
   bool operator()(T const* const* blocks, T* residual) const {
     const Eigen::Matrix<T, 3, 1> p =
-        virtualDeviceCornerInRig(blocks[0], corner_, blocks + 1, planes_);
+        virtualDeviceCornerInRig(blocks[0], blocks[1], corner_, blocks + 2, planes_);
     for (int i = 0; i < 3; ++i) residual[i] = T(1000.0) * (p[i] - T(target_[i]));
     return true;
   }
@@ -115,8 +128,9 @@ class DeviceCornerAlignmentCost {
   int planes_;
 };
 
-// Weak prior of the device pose around its nominal value: small-angle rotation difference
-// over angle_tolerance_rad and translation difference over position_tolerance_m (6 residuals).
+// Prior of a pose block (the device pose, a board's placement) around its nominal value:
+// small-angle rotation difference over angle_tolerance_rad and translation difference over
+// position_tolerance_m (6 residuals).
 class DevicePosePriorCost {
  public:
   DevicePosePriorCost(const Eigen::Quaterniond& nominal_rotation,

@@ -64,6 +64,12 @@ StereoRig driftedRig(const StereoRig& truth, double focal_scale,
 CalibrationDevice perturbDevice(const CalibrationDevice& device, double position_m,
                                 double angle_deg, uint64_t seed);
 
+// Each board of `device` moved by a uniform offset within +-position_m per axis and turned by a
+// uniform rotation vector within +-angle_deg per axis (its placement in the housing off by a
+// manufacturing tolerance; the device pose and the mirror planes are kept). Seeded.
+CalibrationDevice perturbBoardPlacement(const CalibrationDevice& device, double position_m,
+                                        double angle_deg, uint64_t seed);
+
 // Scene correspondences of a corridor-like scene (StereoObservation::scene): `count` points
 // spread over the left image at inverse depths uniform between 1/22 m and 1/1.5 m, seen by both
 // cameras of `rig`, noisy by `noise_px` per coordinate; a share `wrong` of them are wrong
