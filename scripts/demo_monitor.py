@@ -870,10 +870,10 @@ def main():
             health_steps.append((th, change.state))
             print("[%5.1f s] HEALTH %s (epoch %d)%s" % (th, health_name(change), change.epoch,
                                                        ": " + change.reason if change.reason else ""), flush=True)
-        epoch = mode.calibration_epoch if mode else -1
-        if last_epoch is not None and epoch != last_epoch and (not epochs or t - epochs[-1] > 1.0):
+        epoch = mode.calibration_epoch if mode else None  # None until the first frame
+        if None not in (last_epoch, epoch) and epoch != last_epoch and (not epochs or t - epochs[-1] > 1.0):
             epochs.append(t)  # a commit changes the epoch twice (left, right): one mark
-        last_epoch = epoch
+        last_epoch = epoch if epoch is not None else last_epoch
         if status is not None and status is not last_status:
             last_status = status
             print("[%5.1f s] CALIBRATION epoch %d %s, rms %.3f/%.3f px, %d frames, %.0f ms%s" % (
@@ -889,7 +889,7 @@ def main():
             predicted = None
         accuracy = tool.evaluate(published, truth) if errors else None
         if errors:
-            timeline.append((t, errors, epoch, accuracy, predicted))
+            timeline.append((t, errors, -1 if epoch is None else epoch, accuracy, predicted))
         if t - last_print < 2.0:
             continue
         span = t - last_print
