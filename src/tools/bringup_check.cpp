@@ -95,7 +95,7 @@ struct Camera {
   std::string topic;
   cv::Size size;
   std::vector<ecs::BoardRegion> regions;
-  cv::Mat mask;
+  cv::Mat mask, surround;
   std::vector<double> stamps;
   std::vector<ecs::ImageLevels> levels;
 };
@@ -122,7 +122,7 @@ void readLevels(const rosbag::Bag& bag, Camera* left, Camera* right, const std::
     if (!image) continue;
     Camera* camera = m.getTopic() == left->topic ? left : right;
     camera->stamps.push_back(image->header.stamp.toSec());
-    camera->levels.push_back(ecs::measureImage(greyImage(image, *camera), camera->mask));
+    camera->levels.push_back(ecs::measureImage(greyImage(image, *camera), camera->mask, camera->surround));
   }
 }
 
@@ -139,6 +139,23 @@ std::vector<ecs::FrameMode> modesOfPairs(const std::map<double, ecs::FrameMode>&
     out.push_back(it != modes.end() && it->first <= t + tolerance ? it->second : ecs::FrameMode());
   }
   return out;
+}
+
+// One camera's board levels per stereo frame, the exposure's changes taken out; `scene_range`:
+// the lowest and highest scene level, how much the exposure changed.
+std::vector<double> pairLevels(const Camera& camera, const ecs::StampPairing& stamps, bool left,
+                               std::pair<double, double>* scene_range) {
+  std::vector<double> device, scene;
+  for (const auto& pair : stamps.pairs) {
+    const ecs::ImageLevels& l = camera.levels[left ? pair.first : pair.second];
+    device.push_back(l.device_level);
+    scene.push_back(l.scene_level);
+  }
+  if (!scene.empty()) {
+    const auto range = std::minmax_element(scene.begin(), scene.end());
+    *scene_range = {*range.first, *range.second};
+  }
+  return ecs::withoutExposureChanges(device, scene);
 }
 
 // Second pass: the mean lit image minus the mean unlit one of each camera.
@@ -179,16 +196,24 @@ void printLight(const ecs::LightTiming& t, bool has_modes) {
       std::printf("; left sees it at frame %d, right at %d", s.left_middle, s.right_middle);
     std::printf("\n");
   }
-  if (has_modes) std::printf("  settled frames not fully in their state: %d of %d\n", t.settled_wrong, t.settled_frames);
+  if (has_modes) {
+    std::printf("  settled frames not fully in their state: %d of %d", t.settled_wrong, t.settled_frames);
+    for (size_t i = 0; i < t.settled_wrong_frames.size() && i < 12; ++i)
+      std::printf("%s%d", i == 0 ? " (stereo frames " : ", ", t.settled_wrong_frames[i]);
+    std::printf("%s\n", t.settled_wrong_frames.empty() ? "" : t.settled_wrong_frames.size() > 12 ? ", ...)" : ")");
+  }
   else std::printf("  no calibration_mode in the bag: the light's timing from the images only\n");
 }
 
-void printReport(const ecs::BringupMeasurements& m) {
+void printReport(const ecs::BringupMeasurements& m, const std::pair<double, double>* scene_range) {
   const ecs::StampPairing& s = m.stamps;
   std::printf("Stamps: %zu stereo frames from %d left and %d right images, a frame every %.1f ms; right - left "
               "%.2f ms (median), at most %.2f ms apart\n",
               s.pairs.size(), s.left_frames, s.right_frames, 1e3 * s.frame_period_s, 1e3 * s.median_offset_s,
               1e3 * s.max_abs_offset_s);
+  std::printf("Exposure: the scene outside the boards from %.1f to %.1f grey levels (left), %.1f to %.1f (right); "
+              "the boards' levels are divided by its changes\n",
+              scene_range[0].first, scene_range[0].second, scene_range[1].first, scene_range[1].second);
   printLight(m.light, m.has_modes);
   std::printf("Frames fully lit in both cameras: %d; fully unlit: %d\n", m.lit_frames, m.unlit_frames);
   std::printf("Boards (contrast: lit white minus lit black square, grey levels; seen: the part of the board "
@@ -241,6 +266,7 @@ int run(const Options& o) {
     cameras[c].size = cv::Size(camera.width, camera.height);
     cameras[c].regions = ecs::projectBoardRegions(head.device, head.rig, c == 1);
     cameras[c].mask = ecs::boardOutlineMask(cameras[c].regions, cameras[c].size);
+    cameras[c].surround = ecs::boardOutlineMask(cameras[c].regions, cameras[c].size, true);
   }
   rosbag::Bag bag(o.bag, rosbag::bagmode::Read);
   std::map<double, ecs::FrameMode> modes;
@@ -253,11 +279,9 @@ int run(const Options& o) {
 
   ecs::BringupMeasurements m;
   m.stamps = ecs::pairStereoStamps(cameras[0].stamps, cameras[1].stamps);
-  std::vector<double> levels[2];
-  for (const auto& pair : m.stamps.pairs) {
-    levels[0].push_back(cameras[0].levels[pair.first].device_level);
-    levels[1].push_back(cameras[1].levels[pair.second].device_level);
-  }
+  std::pair<double, double> scene_range[2];
+  const std::vector<double> levels[2] = {pairLevels(cameras[0], m.stamps, true, &scene_range[0]),
+                                         pairLevels(cameras[1], m.stamps, false, &scene_range[1])};
   const std::vector<ecs::FrameMode> pair_modes = modesOfPairs(modes, cameras[0], m.stamps);
   m.has_modes = !pair_modes.empty();
   m.light = ecs::analyseLight(levels[0], levels[1], pair_modes, o.thresholds);
@@ -268,7 +292,7 @@ int run(const Options& o) {
     litMinusUnlit(bag, cameras, lit, unlit, difference);
     for (int c = 0; c < 2; ++c) m.boards[c] = ecs::measureBoards(difference[c], cameras[c].regions, o.thresholds);
   }
-  printReport(m);
+  printReport(m, scene_range);
   const ecs::BringupVerdict verdict = ecs::judgeBringup(m, o.thresholds);
   std::printf("Verdict: %s\n", verdict.ready ? "READY: nothing found that keeps this head from calibrating itself"
                                                : "NOT READY:");

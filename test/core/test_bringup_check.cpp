@@ -106,6 +106,51 @@ TEST(BringupLight, CamerasAFrameApartSeeEachSwitchInDifferentFrames) {
   EXPECT_EQ(t.switches[0].right_middle - t.switches[0].left_middle, 1);
 }
 
+// An auto-exposure answering the light: the gain falls while the light is on and recovers after,
+// scene and boards alike. Taken out, the settled frames are steady; left in, they are not.
+TEST(BringupLight, AnExposureFollowingTheLightIsTakenOut) {
+  const LightRun run = lightRun(-1);
+  std::vector<double> left, right, scene;
+  double gain = 1.0;
+  for (size_t k = 0; k < run.left.size(); ++k) {
+    gain += ((run.left[k] > 130.0 ? 0.6 : 1.0) - gain) / 4.0;  // toward its target, a quarter a frame
+    left.push_back(gain * run.left[k]);
+    right.push_back(gain * run.right[k]);
+    scene.push_back(gain * 90.0);
+  }
+  const ecs::BringupThresholds th;
+  EXPECT_GT(ecs::analyseLight(left, right, run.modes, th).settled_wrong, 0);
+  const ecs::LightTiming t = ecs::analyseLight(ecs::withoutExposureChanges(left, scene),
+                                               ecs::withoutExposureChanges(right, scene), run.modes, th);
+  EXPECT_EQ(t.settled_wrong, 0);
+  ASSERT_EQ(t.switches.size(), 4u);
+  EXPECT_EQ(t.switches[0].done_frame, 21);
+  const std::vector<double> corrected = ecs::withoutExposureChanges(left, scene);
+  const double unlit = corrected[10];
+  for (size_t k = 0; k < corrected.size(); ++k) {
+    if (run.left[k] == 80.0) {
+      EXPECT_NEAR(corrected[k], unlit, 1e-9) << "frame " << k;
+    }
+  }
+}
+
+// A light in time, and one settled frame in the middle of a burst brighter (the scene): the
+// verdict blames the scene or the exposure, not the light.
+TEST(BringupLight, ASettledFrameThatJumpsIsTheSceneNotTheLight) {
+  LightRun run = lightRun(-1);
+  run.left[30] += 30.0;
+  run.right[30] += 30.0;
+  ecs::BringupMeasurements m;
+  m.light = ecs::analyseLight(run.left, run.right, run.modes, ecs::BringupThresholds());
+  EXPECT_EQ(m.light.settled_wrong_frames, std::vector<int>{30});
+  m.has_modes = true;
+  m.lit_frames = m.unlit_frames = 10;
+  const ecs::BringupVerdict v = ecs::judgeBringup(m, ecs::BringupThresholds());
+  ASSERT_EQ(v.reasons.size(), 1u);
+  EXPECT_NE(v.reasons[0].find("the scene or the exposure changed"), std::string::npos) << v.reasons[0];
+  EXPECT_NE(v.reasons[0].find("first: stereo frame 30"), std::string::npos) << v.reasons[0];
+}
+
 TEST(BringupLight, NoStepIsNoLight) {
   std::vector<double> left(60), right(60);
   for (int k = 0; k < 60; ++k) left[k] = 100.0 + (k % 3), right[k] = 90.0 - (k % 2);
@@ -123,9 +168,13 @@ TEST(BringupImage, ClippedPixelsAreCountedInsideTheMaskOnly) {
   grey(cv::Rect(0, 0, 10, 10)).setTo(255);                  // 100 clipped inside
   grey(cv::Rect(0, 10, 5, 10)).setTo(0);                    // 50 clipped at zero inside
   grey(cv::Rect(60, 0, 20, 20)).setTo(255);                 // outside: not counted
-  const ecs::ImageLevels l = ecs::measureImage(grey, mask);
+  cv::Mat surround = cv::Mat::zeros(grey.size(), CV_8UC1);
+  surround(cv::Rect(0, 0, 60, 100)).setTo(255);
+  grey(cv::Rect(90, 0, 10, 100)).setTo(20);                 // outside the surround: 400 at 255, 1000 at 20
+  const ecs::ImageLevels l = ecs::measureImage(grey, mask, surround);
   EXPECT_NEAR(l.clipped_fraction, 150.0 / 5000.0, 1e-12);
   EXPECT_NEAR(l.device_level, (100 * 255.0 + 4850 * 120.0) / 5000.0, 1e-9);
+  EXPECT_NEAR(l.scene_level, (400 * 255.0 + 1000 * 20.0 + 2600 * 120.0) / 4000.0, 1e-9);
 }
 
 class BringupBoards : public ::testing::Test {

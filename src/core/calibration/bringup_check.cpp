@@ -95,7 +95,12 @@ std::vector<BoardRegion> projectBoardRegions(const CalibrationDevice& device, co
       outline_ok = project(b, g.first, g.second, &p) && outline_ok;
       region.outline.push_back(p);
     }
-    if (!outline_ok) region.outline.clear();
+    for (const auto& g : {std::make_pair(c0 - 2, r0 - 2), std::make_pair(c1 + 2, r0 - 2),
+                          std::make_pair(c1 + 2, r1 + 2), std::make_pair(c0 - 2, r1 + 2)}) {
+      outline_ok = project(b, g.first, g.second, &p) && outline_ok;
+      region.surround.push_back(p);
+    }
+    if (!outline_ok) region.outline.clear(), region.surround.clear();
     for (double r = r0; r + 2.0 <= r1; r += 2.0) {
       for (double c = c0; c + 2.0 <= c1; c += 2.0) {
         std::vector<cv::Point2f> block(4);
@@ -109,19 +114,21 @@ std::vector<BoardRegion> projectBoardRegions(const CalibrationDevice& device, co
   return regions;
 }
 
-cv::Mat boardOutlineMask(const std::vector<BoardRegion>& regions, cv::Size size) {
+cv::Mat boardOutlineMask(const std::vector<BoardRegion>& regions, cv::Size size, bool surround) {
   cv::Mat mask = cv::Mat::zeros(size, CV_8UC1);
   for (const BoardRegion& region : regions) {
-    if (region.outline.size() != 4) continue;
+    const std::vector<cv::Point2f>& corners = surround ? region.surround : region.outline;
+    if (corners.size() != 4) continue;
     std::vector<cv::Point> polygon;
-    for (const cv::Point2f& p : region.outline) polygon.emplace_back(cvRound(p.x), cvRound(p.y));
+    for (const cv::Point2f& p : corners) polygon.emplace_back(cvRound(p.x), cvRound(p.y));
     cv::fillConvexPoly(mask, polygon, cv::Scalar(255));
   }
   return mask;
 }
 
-ImageLevels measureImage(const cv::Mat& grey, const cv::Mat& mask) {
+ImageLevels measureImage(const cv::Mat& grey, const cv::Mat& mask, const cv::Mat& surround) {
   CV_Assert(grey.type() == CV_8UC1 && mask.type() == CV_8UC1 && grey.size() == mask.size());
+  CV_Assert(surround.type() == CV_8UC1 && surround.size() == mask.size());
   ImageLevels out;
   const int inside = cv::countNonZero(mask);
   if (inside == 0) return out;
@@ -129,6 +136,17 @@ ImageLevels measureImage(const cv::Mat& grey, const cv::Mat& mask) {
   cv::Mat clipped = (grey == 0) | (grey == 255);
   clipped &= mask;
   out.clipped_fraction = static_cast<double>(cv::countNonZero(clipped)) / inside;
+  if (cv::countNonZero(surround) < surround.rows * surround.cols) out.scene_level = cv::mean(grey, ~surround)[0];
+  return out;
+}
+
+std::vector<double> withoutExposureChanges(const std::vector<double>& device_level,
+                                           const std::vector<double>& scene_level) {
+  CV_Assert(device_level.size() == scene_level.size());
+  const double reference = median(scene_level);
+  std::vector<double> out;
+  for (size_t k = 0; k < device_level.size(); ++k)
+    out.push_back(scene_level[k] > 0.0 ? device_level[k] * reference / scene_level[k] : device_level[k]);
   return out;
 }
 
@@ -181,11 +199,18 @@ std::vector<std::pair<int, bool>> crossings(const std::vector<double>& f) {
   return out;
 }
 
-// How far the light is into the state `rise` (1: fully there) in the camera lagging behind.
-double progress(const LightTiming& t, int k, bool rise, bool lagging) {
-  const double l = rise ? t.left_fraction[k] : 1.0 - t.left_fraction[k];
-  const double r = rise ? t.right_fraction[k] : 1.0 - t.right_fraction[k];
-  return lagging ? std::min(l, r) : std::max(l, r);
+// Whether a camera's frame k shows what the frames next to it show (the median of f over
+// [from, to), clipped to the frames there are), within `tolerance` of the light's step: the light
+// is not changing between them.
+bool steady(const std::vector<double>& f, int k, int from, int to, double tolerance) {
+  std::vector<double> around;
+  for (int j = std::max(0, from); j < std::min(static_cast<int>(f.size()), to); ++j)
+    if (j != k) around.push_back(f[j]);
+  return around.empty() || std::abs(f[k] - median(around)) <= tolerance;
+}
+
+bool steadyBoth(const LightTiming& t, int k, int from, int to, double tolerance) {
+  return steady(t.left_fraction, k, from, to, tolerance) && steady(t.right_fraction, k, from, to, tolerance);
 }
 
 // The driver's command of a switch: the change of its mode to the new state nearest the image's
@@ -214,14 +239,39 @@ LightSwitch describeSwitch(const LightTiming& t, int left_k, int right_k, bool r
   s.left_middle = left_k;
   s.right_middle = right_k;
   const int n = static_cast<int>(t.left_fraction.size());
+  // The change starts after the last frame that equals the frames before it, and is done at the
+  // first frame that equals the frames after it (a scene or an exposure drifting slowly is no
+  // change).
+  const double tolerance = 1.0 - full;
   int k = std::min(left_k, right_k);
-  while (k > 0 && progress(t, k - 1, rise, false) > 1.0 - full) --k;
+  while (k > 0 && !steadyBoth(t, k - 1, k - 4, k - 1, tolerance)) --k;
   s.change_frame = k;
   k = std::max(left_k, right_k);
-  while (k < n && progress(t, k, rise, true) < full) ++k;
+  while (k < n && !steadyBoth(t, k, k + 1, k + 4, tolerance)) ++k;
   s.done_frame = k;
   findModeTimes(modes, after, &s);
   return s;
+}
+
+// A settled frame must show its mode's state in both cameras and equal the settled frames of the
+// same state around it (4 frames either side): otherwise the light was still changing.
+bool settledFrameRight(const LightTiming& t, const std::vector<FrameMode>& modes, int k, double tolerance) {
+  const bool on = modes[k].light_on;
+  const double lo = std::min(t.left_fraction[k], t.right_fraction[k]);
+  const double hi = std::max(t.left_fraction[k], t.right_fraction[k]);
+  if (on ? lo < 0.5 : hi >= 0.5) return false;
+  std::vector<double> left, right;
+  int from = k, to = k + 1;  // the frames of the same state around k, at most 4 either side
+  while (from > 0 && k - from < 4 && modes[from - 1].known && modes[from - 1].light_on == on) --from;
+  while (to < static_cast<int>(modes.size()) && to - k <= 4 && modes[to].known && modes[to].light_on == on) ++to;
+  for (int j = from; j < to; ++j) {
+    if (j == k || !modes[j].settled) continue;
+    left.push_back(t.left_fraction[j]);
+    right.push_back(t.right_fraction[j]);
+  }
+  if (left.empty()) return true;
+  return std::abs(t.left_fraction[k] - median(left)) <= tolerance &&
+         std::abs(t.right_fraction[k] - median(right)) <= tolerance;
 }
 
 }  // namespace
@@ -250,13 +300,12 @@ LightTiming analyseLight(const std::vector<double>& left_level, const std::vecto
     t.switches.push_back(describeSwitch(t, lx.first, best, lx.second, thresholds.full_fraction, modes, after));
     if (best != lx.first) ++t.split_switches;
   }
-  const double full = thresholds.full_fraction;
-  for (size_t k = 0; k < modes.size(); ++k) {
+  for (int k = 0; k < static_cast<int>(modes.size()); ++k) {
     if (!modes[k].known || !modes[k].settled) continue;
     ++t.settled_frames;
-    const double lo = std::min(t.left_fraction[k], t.right_fraction[k]);
-    const double hi = std::max(t.left_fraction[k], t.right_fraction[k]);
-    if (modes[k].light_on ? lo < full : hi > 1.0 - full) ++t.settled_wrong;
+    if (settledFrameRight(t, modes, k, 1.0 - thresholds.full_fraction)) continue;
+    ++t.settled_wrong;
+    t.settled_wrong_frames.push_back(k);
   }
   return t;
 }
@@ -347,7 +396,7 @@ Lags lags(const LightTiming& t, bool rise) {
   return out;
 }
 
-void judgeLight(const BringupMeasurements& m, std::vector<std::string>* reasons) {
+void judgeLight(const BringupMeasurements& m, double tolerance, std::vector<std::string>* reasons) {
   const LightTiming& t = m.light;
   if (!t.switched) {
     reasons->push_back(format("the light never switched: the boards' brightness steps by %.1f (left) and %.1f "
@@ -363,6 +412,15 @@ void judgeLight(const BringupMeasurements& m, std::vector<std::string>* reasons)
                               t.split_switches, static_cast<double>(t.switches.size())));
   if (t.settled_wrong == 0) return;
   const Lags on = lags(t, true), off = lags(t, false);
+  if (on.to_done <= on.to_settled && off.to_done <= off.to_settled) {
+    // The light is in time: what moves the settled frames is the exposure or the scene.
+    reasons->push_back(format("%.0f of %.0f frames the driver marks settled differ from the settled frames around "
+                              "them by more than %.0f %% of the light's step (first: stereo frame %.0f), though the "
+                              "light is fully on (off) before frames count as settled: the scene or the exposure "
+                              "changed (keep the head and the scene still; clipped boards do not follow the exposure)",
+                              t.settled_wrong, t.settled_frames, 100.0 * tolerance, t.settled_wrong_frames.front()));
+    return;
+  }
   reasons->push_back(format("%.0f of %.0f frames the driver marks settled show the light still changing: the "
                             "light starts to change %.0f frames after its command and is fully on %.0f frames "
                             "after it,",
@@ -410,7 +468,7 @@ void judgeClipping(const BringupMeasurements& m, const BringupThresholds& th, st
 BringupVerdict judgeBringup(const BringupMeasurements& m, const BringupThresholds& thresholds) {
   BringupVerdict verdict;
   judgeStamps(m, thresholds, &verdict.reasons);
-  judgeLight(m, &verdict.reasons);
+  judgeLight(m, 1.0 - thresholds.full_fraction, &verdict.reasons);
   if (m.light.switched && m.lit_frames > 0 && m.unlit_frames > 0) {
     judgeBoards(m, thresholds, &verdict.reasons);
     judgeClipping(m, thresholds, &verdict.reasons);

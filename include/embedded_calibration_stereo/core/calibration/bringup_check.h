@@ -49,23 +49,31 @@ StampPairing pairStereoStamps(const std::vector<double>& left, const std::vector
 // --- Where the boards appear ------------------------------------------------------------------
 struct BoardRegion {
   int board_id = 0;                            // the virtual board's id (observations' board_id)
-  std::vector<cv::Point2f> outline;            // the board with its one-square margin, pixels
+  std::vector<cv::Point2f> outline;            // the board's squares, pixels
+  std::vector<cv::Point2f> surround;           // two squares wider: its white margin and the blur
   std::vector<std::vector<cv::Point2f>> blocks;  // blocks of 2x2 squares inside the corner grid
   double inside_fraction = 0.0;                // of its corners projected inside the image
 };
 // Every virtual board of `device` as one camera of `rig` should see it (raw pixels).
 std::vector<BoardRegion> projectBoardRegions(const CalibrationDevice& device, const StereoRig& rig,
                                              bool right_camera);
-// The union of the outlines (CV_8UC1, 255 inside) in an image of `size`.
-cv::Mat boardOutlineMask(const std::vector<BoardRegion>& regions, cv::Size size);
+// The union of the outlines (or of the surrounds) (CV_8UC1, 255 inside) in an image of `size`.
+cv::Mat boardOutlineMask(const std::vector<BoardRegion>& regions, cv::Size size, bool surround = false);
 
 // --- Per image ---------------------------------------------------------------------------------
 struct ImageLevels {
   double device_level = 0.0;      // mean grey level inside the boards' outlines
   double clipped_fraction = 0.0;  // of those pixels at 0 or 255
+  double scene_level = 0.0;       // mean grey level outside the surrounds: the scene alone
 };
-// `grey`: CV_8UC1; `mask`: boardOutlineMask of the same size.
-ImageLevels measureImage(const cv::Mat& grey, const cv::Mat& mask);
+// `grey`: CV_8UC1; `mask`, `surround`: boardOutlineMask of the same size (outlines, surrounds).
+ImageLevels measureImage(const cv::Mat& grey, const cv::Mat& mask, const cv::Mat& surround);
+
+// The boards' levels with the exposure's changes taken out (an auto-exposure answering the
+// light): each level scaled by the median of the scene's levels over its frame's scene level.
+// For a still head: a moving scene's own changes would be taken for the exposure's.
+std::vector<double> withoutExposureChanges(const std::vector<double>& device_level,
+                                           const std::vector<double>& scene_level);
 
 // --- The light ---------------------------------------------------------------------------------
 // What the driver said of a frame (calibration_mode); known false without it.
@@ -90,6 +98,7 @@ struct LightTiming {
   std::vector<double> left_fraction, right_fraction;  // per stereo frame: 0 unlit .. 1 lit
   std::vector<LightSwitch> switches;
   int settled_wrong = 0;    // settled frames not fully in their mode's state (either camera)
+  std::vector<int> settled_wrong_frames;  // which (stereo frames), in order
   int settled_frames = 0;   // settled frames with a mode
   int split_switches = 0;   // switches the two cameras see in different stereo frames
 };
