@@ -6,6 +6,8 @@
 // What is checked, and why each matters:
 // - Left/right stamps: every stereo frame must pair a left and a right image exposed together;
 //   the graph pairs them by stamp, and the calibration assumes the two exposures see one world.
+// - The exposure: the boards' brightness is divided by the scene's changes outside them, so that
+//   an auto-exposure answering the light is not taken for the light.
 // - The light's timing: frames taken while the light changes must never be used; the driver
 //   marks the frames after a switch unsettled for as many frames as it is told, so the light must
 //   be fully on (off) by then, and both cameras must see each switch in the same stereo frame.
