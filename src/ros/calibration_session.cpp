@@ -87,7 +87,11 @@ CalibratorParams loadCalibratorParams(const ros::NodeHandle& pnh, const std::str
   p.terms.estimate_tangential = read.get("estimate_tangential", p.terms.estimate_tangential);
   p.terms.estimate_k3 = read.get("estimate_k3", p.terms.estimate_k3);
   non_negative("loss_scale_px", &p.adjustment.loss_scale_px);
-  p.adjustment.refine_board_placement = read.get("refine_board_placement", p.adjustment.refine_board_placement);
+  const std::string placement = read.get("board_placement", std::string("tested"));
+  if (placement == "held") p.adjustment.board_placement = ecs::BoardPlacement::kHeld;
+  else if (placement == "refined") p.adjustment.board_placement = ecs::BoardPlacement::kRefined;
+  else if (placement == "tested") p.adjustment.board_placement = ecs::BoardPlacement::kTested;
+  else throw ecs::ConfigError("board_placement", "must be held, refined or tested, got '" + placement + "'");
   p.adjustment.use_scene_matches = read.get("scene_constraints", p.adjustment.use_scene_matches);
   p.prior_from_earlier_windows = read.get("prior_from_earlier_windows", p.prior_from_earlier_windows);
   p.filter.change_probability = read.get("change_probability", p.filter.change_probability);

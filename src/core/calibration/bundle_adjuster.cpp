@@ -13,6 +13,7 @@
 #include <memory>
 #include <set>
 
+#include "embedded_calibration_stereo/core/calibration/calibration_filter.h"
 #include "embedded_calibration_stereo/core/calibration/calibration_initializer.h"
 #include "embedded_calibration_stereo/core/calibration/corner_tracks.h"
 #include "embedded_calibration_stereo/core/calibration/device_model_adjustment.h"
@@ -37,6 +38,8 @@ std::string BundleAdjustmentOptions::Check() const {
   if (!(max_track_deviation_px > 0)) return "max_track_deviation_px must be > 0";
   if (!(device_prior_angle_deg > 0) || !(device_prior_position_m > 0))
     return "device prior tolerances must be > 0";
+  if (!(placement_test_probability > 0 && placement_test_probability < 1))
+    return "placement_test_probability must be in (0, 1)";
   if (min_scene_matches < 1) return "min_scene_matches must be >= 1";
   if (!(max_scene_residual_sigmas > 0) || !(scene_loss_sigmas > 0) || !(min_scene_sigma_px > 0))
     return "max_scene_residual_sigmas, scene_loss_sigmas and min_scene_sigma_px must be > 0";
@@ -370,7 +373,8 @@ class AdjustmentRun {
     priors_.angle_tolerance_rad = options_.device_prior_angle_deg * M_PI / 180.0;
     priors_.position_tolerance_m = options_.device_prior_position_m;
     priors_.refine_planes = options_.refine_mirror_planes;
-    priors_.refine_placement = options_.refine_board_placement;
+    priors_.refine_placement = options_.board_placement == BoardPlacement::kRefined;
+    out_.board_placement_refined = device_mode_ && priors_.refine_placement;
     const std::vector<VirtualBoard>& layout = *layout_;
     std::vector<BoardView>& views = valid_.views;
     if (device_mode_) {
@@ -640,6 +644,8 @@ class AdjustmentRun {
     }
     const double data_cost = std::max(0.0, ceres_summary_.final_cost - prior_cost - scene_cost);
     sigma2_ = dof_ > 0 ? (2.0 * data_cost + scatter_sq_) / dof_ : 0.0;
+    out_.corner_sq_px2 = 2.0 * data_cost + scatter_sq_;
+    out_.residual_dof = dof_;
     out_.residual_sigma_px = std::sqrt(sigma2_);
     const int tracks = static_cast<int>(residuals_.size());
     const int mean_dof = 2 * tracks - free_parameters_;
@@ -792,8 +798,28 @@ BundleAdjuster::BundleAdjuster(BundleAdjustmentOptions options, BundleAdjustment
     : options_(std::move(options)), config_(std::move(config)) {}
 
 BundleAdjustmentSummary BundleAdjuster::Solve(const CalibrationInput& input) const {
-  AdjustmentRun run(options_, config_, input);
-  return run.run();
+  const bool device_model = options_.board_pose_mode == BoardPoseMode::kDeviceModel ||
+                            (options_.board_pose_mode == BoardPoseMode::kAuto && input.device);
+  if (options_.board_placement != BoardPlacement::kTested || !device_model)
+    return AdjustmentRun(options_, config_, input).run();
+  BundleAdjustmentOptions held_options = options_, refined_options = options_;
+  held_options.board_placement = BoardPlacement::kHeld;
+  refined_options.board_placement = BoardPlacement::kRefined;
+  BundleAdjustmentSummary held = AdjustmentRun(held_options, config_, input).run();
+  BundleAdjustmentSummary refined = AdjustmentRun(refined_options, config_, input).run();
+  if (!refined.success) return held;
+  if (!held.success) return refined;
+  // Nested models: with the placements right, the held solve's extra cost over the residual
+  // variance is chi-square with the extra parameters' count (the refined solve has more).
+  const int extra = held.residual_dof - refined.residual_dof;
+  const double variance = refined.residual_dof > 0 ? refined.corner_sq_px2 / refined.residual_dof : 0.0;
+  const double statistic = variance > 0 ? (held.corner_sq_px2 - refined.corner_sq_px2) / variance : 0.0;
+  const double limit = extra > 0 ? chiSquareQuantile(options_.placement_test_probability, extra) : 0.0;
+  BundleAdjustmentSummary& chosen = extra > 0 && statistic > limit ? refined : held;
+  chosen.placement_test_statistic = statistic;
+  chosen.placement_test_limit = limit;
+  chosen.solve_ms = held.solve_ms + refined.solve_ms;
+  return std::move(chosen);
 }
 
 BundleAdjustmentSummary evaluateFixedCalibration(const StereoRig& rig,

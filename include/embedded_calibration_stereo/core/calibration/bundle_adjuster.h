@@ -72,6 +72,11 @@ namespace ecs {
 
 enum class BoardPoseMode { kAuto, kDeviceModel, kSharedAcrossFrames, kPerFrame };
 enum class RobustLoss { kNone, kHuber, kCauchy };
+// The boards' placement in the device (device model only): held at the device's values, refined
+// from the corners, or tested: solved both ways, refined only when the held placements fit
+// clearly worse than chance allows (a likelihood-ratio test: the corners' cost difference over
+// their residual variance against chi-square with the refined parameters' count).
+enum class BoardPlacement { kHeld, kRefined, kTested };
 enum class InitializationMode {
   kAuto,         // the calibration in force when given, otherwise Zhang
   kFromInForce,  // requires the calibration in force
@@ -108,11 +113,14 @@ struct BundleAdjustmentOptions {
   // only while the device is within them (a knock may move it further): set it knowingly.
   double device_prior_angle_deg = 50.0;
   double device_prior_position_m = 0.1;
-  // Device model: refine each board's placement in the device (Chessboard::device_from_board;
-  // otherwise held at the device's values). A device description from CAD is off by the
-  // housing's tolerance, which held placements turn into corner residuals no camera explains
-  // (device_model_adjustment.h).
-  bool refine_board_placement = true;
+  // Device model: each board's placement in the device (Chessboard::device_from_board). A
+  // device description from CAD is off by the housing's tolerance, which held placements turn
+  // into corner residuals no camera explains (device_model_adjustment.h); refined placements
+  // widen the cameras' uncertainty a little (more parameters). kTested takes the refined solve
+  // only when the held one fits worse beyond placement_test_probability of chance, at twice the
+  // cost of one solve.
+  BoardPlacement board_placement = BoardPlacement::kTested;
+  double placement_test_probability = 1e-3;
   // Scene constraints (the frames' StereoObservation::scene), used unless use_scene_matches is
   // false. Fewer usable matches than min_scene_matches: not used. Matches further from their
   // epipolar line than max_scene_residual_sigmas robust spreads at the solve without them are
@@ -210,6 +218,14 @@ struct BundleAdjustmentSummary {
   double rms_left_px = 0, rms_right_px = 0;
   double epipolar_rms_px = 0;    // right corners to the epipolar lines of the left ones
   double residual_sigma_px = 0;  // sqrt(2 cost / (residuals - parameters))
+  // The corners' squared residuals (the robust cost's, px^2, within-track scatter included) and
+  // their degrees of freedom (residuals - parameters): what nested solves are compared by.
+  double corner_sq_px2 = 0;
+  int residual_dof = 0;
+  // Device model: the boards' placements were refined; with BoardPlacement::kTested, the test's
+  // statistic (the held solve's extra cost over the residual variance) and its limit.
+  bool board_placement_refined = false;
+  double placement_test_statistic = 0, placement_test_limit = 0;
   int frames_used = 0;
   int corners_used = 0;  // left + right
   int corners_left = 0, corners_right = 0;
