@@ -258,6 +258,12 @@ CalibrationStatus CalibrationSession::solve(const std::vector<ecs::StereoObserva
     for (size_t i = 0; i < changed.size(); ++i)
       prior_note_ += (i == 0 ? (prior_note_.empty() ? "changed: " : "; changed: ") : ", ") + changed[i];
   }
+  if (candidate.board_placement_refined) {
+    char note[120];
+    std::snprintf(note, sizeof(note), "board placements refined (held, they fit worse: %.0f > %.0f)",
+                  candidate.placement_test_statistic, candidate.placement_test_limit);
+    prior_note_ += (prior_note_.empty() ? "" : "; ") + std::string(note);
+  }
   // An implausible calibration in force (an outside driver's) is never confirmed: the solve is
   // judged on its own, as for an uncalibrated head.
   const bool judge_in_force = have_in_force && implausibleCandidate({*left_info, *right_info}).empty();
