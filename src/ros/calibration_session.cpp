@@ -224,13 +224,6 @@ CalibrationStatus CalibrationSession::solve(const std::vector<ecs::StereoObserva
   ecs::StereoRig in_force;
   std::string error;
   const bool have_in_force = fromStereoCameraInfo(*left_info, *right_info, &in_force, &error);
-  ecs::CalibrationInput input;
-  input.frames = &frames;
-  input.device = &device_;
-  input.image_width = static_cast<int>(left_info->width);
-  input.image_height = static_cast<int>(left_info->height);
-  if (have_in_force) input.in_force = in_force;  // otherwise an uncalibrated head: Zhang start
-
   // What earlier windows taught holds only under the calibration it was learned with.
   if (filter_in_force_ && !(carriesCalibration(*left_info, filter_in_force_->first) &&
                             carriesCalibration(*right_info, filter_in_force_->second))) {
@@ -238,6 +231,49 @@ CalibrationStatus CalibrationSession::solve(const std::vector<ecs::StereoObserva
     filter_in_force_.reset();
     in_force_predicted_px_.reset();
   }
+  const ecs::BundleAdjustmentSummary candidate =
+      solveWindow(frames, *left_info, have_in_force ? &in_force : nullptr, health_problem_s);
+  // An implausible calibration in force (an outside driver's) is never confirmed: the solve is
+  // judged on its own, as for an uncalibrated head.
+  const bool judge_in_force = have_in_force && implausibleCandidate({*left_info, *right_info}).empty();
+  ecs::BundleAdjustmentSummary in_force_fit;
+  if (judge_in_force && candidate.success)
+    in_force_fit = ecs::evaluateFixedCalibration(in_force, frames, boards_, params_.adjustment, &device_);
+  ecs::GateDecision decision;
+  if (!candidate.success) {
+    decision.reason = "solve failed: " + candidate.message;
+  } else {
+    decision = gate_.evaluate(candidate, judge_in_force ? &in_force_fit : nullptr, in_force_predicted_px_);
+    if (decision.refinement) prior_note_ += (prior_note_.empty() ? "" : "; ") + decision.detail;
+  }
+  CalibrationStatus status = statusOf(candidate, decision, in_force_fit, epoch, frames);
+  // A solve the gate found sound is what the next window learns from, committed or not (a
+  // calibration in force confirmed is still measured better by the solve that confirmed it).
+  const bool learn = !dry_run && candidate.covariance_ok && (decision.accepted || decision.in_force_confirmed);
+  if (learn) {
+    filter_.setState(candidate.rig, candidate.rig_covariance, frames.empty() ? 0.0 : frames.back().stamp);
+    filter_in_force_.emplace(*left_info, *right_info);
+  }
+  if (!decision.accepted || dry_run) {
+    if (decision.accepted) status.reason = "dry run: acceptable, not committed";
+    return status;
+  }
+  commitAccepted(candidate, learn, *left_info, *right_info, &status, committed, uncommitted);
+  return status;
+}
+
+// The window's solve: on its own, then again with what earlier windows taught about the
+// parameter groups it does not contradict (prior_note_ says which).
+ecs::BundleAdjustmentSummary CalibrationSession::solveWindow(const std::vector<ecs::StereoObservation>& frames,
+                                                             const sensor_msgs::CameraInfo& left_info,
+                                                             const ecs::StereoRig* in_force,
+                                                             std::optional<double> health_problem_s) {
+  ecs::CalibrationInput input;
+  input.frames = &frames;
+  input.device = &device_;
+  input.image_width = static_cast<int>(left_info.width);
+  input.image_height = static_cast<int>(left_info.height);
+  if (in_force) input.in_force = *in_force;  // otherwise an uncalibrated head: Zhang start
   ecs::BundleAdjustmentSummary candidate = adjuster_.Solve(input);
   const double stamp = frames.empty() ? 0.0 : frames.back().stamp;
   prior_note_.clear();
@@ -264,19 +300,14 @@ CalibrationStatus CalibrationSession::solve(const std::vector<ecs::StereoObserva
                   candidate.placement_test_statistic, candidate.placement_test_limit);
     prior_note_ += (prior_note_.empty() ? "" : "; ") + std::string(note);
   }
-  // An implausible calibration in force (an outside driver's) is never confirmed: the solve is
-  // judged on its own, as for an uncalibrated head.
-  const bool judge_in_force = have_in_force && implausibleCandidate({*left_info, *right_info}).empty();
-  ecs::BundleAdjustmentSummary in_force_fit;
-  if (judge_in_force && candidate.success)
-    in_force_fit = ecs::evaluateFixedCalibration(in_force, frames, boards_, params_.adjustment, &device_);
-  ecs::GateDecision decision;
-  if (!candidate.success) {
-    decision.reason = "solve failed: " + candidate.message;
-  } else {
-    decision = gate_.evaluate(candidate, judge_in_force ? &in_force_fit : nullptr, in_force_predicted_px_);
-    if (decision.refinement) prior_note_ += (prior_note_.empty() ? "" : "; ") + decision.detail;
-  }
+  return candidate;
+}
+
+// The status of a judged solve, in the words a user reads.
+CalibrationStatus CalibrationSession::statusOf(const ecs::BundleAdjustmentSummary& candidate,
+                                               const ecs::GateDecision& decision,
+                                               const ecs::BundleAdjustmentSummary& in_force_fit, uint32_t epoch,
+                                               const std::vector<ecs::StereoObservation>& frames) const {
   ecs::RectificationOptions rectification;  // as toStereoCameraInfo() commits it
   rectification.alpha = params_.rectification_alpha;
   CalibrationStatus status = makeStatus(candidate, decision, rectification);
@@ -291,55 +322,53 @@ CalibrationStatus CalibrationSession::solve(const std::vector<ecs::StereoObserva
                     (decision.change_too_small ? " (" + decision.detail + ")" : std::string(rms));
     status.in_force_confirmed = true;
   }
-  // A solve the gate found sound is what the next window learns from, committed or not (a
-  // calibration in force confirmed is still measured better by the solve that confirmed it).
-  const bool learn = !dry_run && candidate.covariance_ok && (decision.accepted || decision.in_force_confirmed);
-  if (learn) {
-    filter_.setState(candidate.rig, candidate.rig_covariance, stamp);
-    filter_in_force_.emplace(*left_info, *right_info);
-  }
-  if (!decision.accepted || dry_run) {
-    if (decision.accepted) status.reason = "dry run: acceptable, not committed";
-    return status;
-  }
+  return status;
+}
+
+// An accepted solve to the driver (or, for a replay, to /tf_static only); `status` says what
+// became of it.
+void CalibrationSession::commitAccepted(const ecs::BundleAdjustmentSummary& candidate, bool learned,
+                                        const sensor_msgs::CameraInfo& left_info,
+                                        const sensor_msgs::CameraInfo& right_info, CalibrationStatus* status,
+                                        std::optional<CommittedCalibration>* committed,
+                                        std::optional<UncommittedCalibration>* uncommitted) {
   if (params_.commit == CommitTarget::kNone) {
     // A replay has no driver to commit to: announce the accepted geometry on /tf_static only,
     // and say in the status that no camera_info changed (the epoch in force stays `epoch`).
     broadcastTransform(candidate.rig);
-    status.reason = kAcceptedNotCommittedReason;
-    return status;
+    status->reason = kAcceptedNotCommittedReason;
+    return;
   }
   CommittedCalibration infos;
   try {
     std::tie(infos.left, infos.right) = toStereoCameraInfo(candidate.rig, params_.rectification_alpha);
   } catch (const std::invalid_argument& e) {  // a rig that cannot be rectified is not committed
-    status.accepted = false;
-    status.reason = std::string("not committed: ") + e.what();
-    return status;
+    status->accepted = false;
+    status->reason = std::string("not committed: ") + e.what();
+    return;
   }
   // What every consumer checks (plausible principal points, P fitting K and R, distortion that
   // does not fold over): a solve that fails it would be refused downstream, or leave depth empty.
   if (const std::string problem = implausibleCandidate(infos); !problem.empty()) {
-    status.accepted = false;
-    status.reason = "not committed: the solve is not a plausible calibration: " + problem;
-    return status;
+    status->accepted = false;
+    status->reason = "not committed: the solve is not a plausible calibration: " + problem;
+    return;
   }
-  const std::string commit_error = commit(infos, candidate.rig, *left_info);
+  const std::string commit_error = commit(infos, candidate.rig, left_info);
   if (!commit_error.empty()) {
-    status.accepted = false;
-    status.reason = "not committed: " + commit_error;
+    status->accepted = false;
+    status->reason = "not committed: " + commit_error;
     if (uncommitted)
-      *uncommitted = UncommittedCalibration{infos, candidate.rig, *left_info, *right_info, status,
+      *uncommitted = UncommittedCalibration{infos, candidate.rig, left_info, right_info, *status,
                                             ecs::QualityGate::predictedPx(candidate)};
-    return status;
+    return;
   }
   // status.epoch stays `epoch`: how far the driver moves its epoch per set_camera_info is the
   // driver's business, so the caller reads the new epoch from the driver's frames.
-  if (learn) filter_in_force_.emplace(infos.left, infos.right);
+  if (learned) filter_in_force_.emplace(infos.left, infos.right);
   const double predicted = ecs::QualityGate::predictedPx(candidate);
   in_force_predicted_px_ = predicted > 0.0 ? std::optional<double>(predicted) : std::nullopt;
   *committed = std::move(infos);
-  return status;
 }
 
 std::string CalibrationSession::implausibleCandidate(const CommittedCalibration& infos) const {

@@ -19,6 +19,7 @@
 #include <sensor_msgs/CameraInfo.h>
 #include <std_srvs/SetBool.h>
 
+#include <algorithm>
 #include <atomic>
 #include <cmath>
 #include <condition_variable>
@@ -431,7 +432,12 @@ TEST(CalibratorBounds, AnAutomaticWindowThatStopsGrowingEndsWithAReason) {
   // The light held on by the driver's own set_light: the window fills to max_frames and then
   // receives nothing more; it never closes by the light going off.
   ASSERT_TRUE(lightOffFor(2, 5.0));
-  const size_t statuses_before = fixture->status.snapshot().size();
+  // The window's status is the first whose newest frame came after the light went on (a solve
+  // of an earlier test may still publish its status meanwhile).
+  const ros::Time light_on = ros::Time::now();
+  const auto window_status = [&light_on](const auto& statuses) {
+    return std::find_if(statuses.begin(), statuses.end(), [&](const auto& s) { return s->newest_frame > light_on; });
+  };
   std_srvs::SetBool on;
   on.request.data = true;
   ASSERT_TRUE(ros::service::call("set_light", on) && on.response.success);
@@ -439,14 +445,16 @@ TEST(CalibratorBounds, AnAutomaticWindowThatStopsGrowingEndsWithAReason) {
   // max_frames at 15 fps, then window_timeout_s (5 s), with a margin.
   const bool ended = ecs_test::waitForLog(fixture->log, {"calibration window ended", "window_timeout_s", "solving"},
                                           kMaxFrames / 15.0 + 5.0 + 5.0, &found);
-  const bool solved = fixture->status.waitForCount(statuses_before + 1, 5.0);
+  const bool solved = fixture->status.waitFor(
+      [&](const auto& statuses) { return window_status(statuses) != statuses.end(); }, 5.0);
   std_srvs::SetBool off;
   off.request.data = false;
   ASSERT_TRUE(ros::service::call("set_light", off) && off.response.success);
   ASSERT_TRUE(ended) << "the window never ended with the light held on";
   std::printf("logged: %s\n", found.c_str());
   ASSERT_TRUE(solved);
-  EXPECT_EQ(fixture->status.snapshot()[statuses_before]->frames_used, static_cast<uint32_t>(kMaxFrames));
+  const auto statuses = fixture->status.snapshot();
+  EXPECT_EQ((*window_status(statuses))->frames_used, static_cast<uint32_t>(kMaxFrames));
   EXPECT_TRUE(lightOffFor(5, 5.0));
 }
 

@@ -167,6 +167,16 @@ class CalibrationSession {
   // Why a pair fails the checks every consumer runs (stereo_input_check.h) or lies far from the
   // nominal cameras, or "".
   std::string implausibleCandidate(const CommittedCalibration& infos) const;
+  ecs::BundleAdjustmentSummary solveWindow(const std::vector<ecs::StereoObservation>& frames,
+                                           const sensor_msgs::CameraInfo& left_info, const ecs::StereoRig* in_force,
+                                           std::optional<double> health_problem_s);
+  CalibrationStatus statusOf(const ecs::BundleAdjustmentSummary& candidate, const ecs::GateDecision& decision,
+                             const ecs::BundleAdjustmentSummary& in_force_fit, uint32_t epoch,
+                             const std::vector<ecs::StereoObservation>& frames) const;
+  void commitAccepted(const ecs::BundleAdjustmentSummary& candidate, bool learned,
+                      const sensor_msgs::CameraInfo& left_info, const sensor_msgs::CameraInfo& right_info,
+                      CalibrationStatus* status, std::optional<CommittedCalibration>* committed,
+                      std::optional<UncommittedCalibration>* uncommitted);
   // Empty on success, otherwise why the commit failed. When only the right one was refused, a
   // left calibration the driver stored (a driver without pairs) is restored to `left_in_force`;
   // our driver only staged it ("staged: ..." answer) and has already dropped it.
