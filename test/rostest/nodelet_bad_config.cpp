@@ -80,7 +80,8 @@ TEST(NodeletGoodConfig, EveryNodeletStarts) {
   const std::map<std::string, Params> good = {
       {"CameraDriver", {{"fps", 30}, {"settle_frames", 2}, {"right_in_left_frame", true}}},
       {"PatternTracker", {{"queue_size", 3}, {"teach_on_start", false}}},
-      {"OnlineCalibrator", {{"min_frames", 5}, {"max_rms_px", 2}, {"min_boards_per_camera", 1}, {"commit", "none"}}},
+      {"OnlineCalibrator",
+       {{"min_frames", 5}, {"max_rms_px", 2}, {"min_boards_per_camera", 1}, {"commit", "none"}, {"board_placement", "held"}}},
       {"Separator", {{"queue_size", 1}, {"teach_frames", 1}, {"approximate_sync", true}, {"method", "regional_alpha"},
                      {"teach_from_ground_truth", false}, {"device_template", "learn"}, {"learn_frames_per_end", 4}}},
       {"Rectifier", {{"queue_size", 1}, {"approximate_sync", true}, {"rectification_method", "fusiello"}}},
@@ -133,6 +134,8 @@ INSTANTIATE_TEST_SUITE_P(
         BadConfig{"OnlineCalibrator", "CalibratorMaxRmsText", "max_rms_px", "big", "must be a number"},
         BadConfig{"OnlineCalibrator", "CalibratorMinBoardsRange", "min_boards_per_camera", 0, "must be >= 1"},
         BadConfig{"OnlineCalibrator", "CalibratorCommitChoice", "commit", "bag", "'bag'"},
+        BadConfig{"OnlineCalibrator", "CalibratorBoardPlacementChoice", "board_placement", "free",
+                  "held, refined or tested, got 'free'"},
         BadConfig{"Separator", "SeparatorQueueSizeText", "queue_size", "five", "must be an integer"},
         BadConfig{"Separator", "SeparatorTeachFramesRange", "teach_frames", 0, "must be >= 1"},
         BadConfig{"Separator", "SeparatorApproximateSyncText", "approximate_sync", "yes", "must be true or false"},
