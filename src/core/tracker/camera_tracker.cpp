@@ -379,6 +379,45 @@ BoardCorners CameraTracker::trackBoard(const cv::Mat& gray, int index, bool on_d
   return out;
 }
 
+// One attempt at one board (trackBoardOnce): what its numbered steps share.
+struct CameraTracker::BoardAttempt {
+  BoardAttempt(const cv::Mat& image, const BoardPrior& prior, const std::vector<cv::Point2f>& board_offsets)
+      : gray(image), board(prior), offsets(board_offsets), n(prior.cornerCount()), pos(n), candidate(n, 0) {}
+  const cv::Mat& gray;
+  const BoardPrior& board;
+  const std::vector<cv::Point2f>& offsets;
+  const int n;
+  double square = 0.0;      // square side (px) at the predicted pose
+  int window = 0;           // cornerSubPix half-window (px)
+  double max_residual = 0;  // board model's residual gate (px)
+  float margin = 0.0f;      // corners closer to the edge are not refined
+  int needed = 0;           // corners a board needs
+  float min_contrast = 0.0f;
+  double max_shift = 0.0;   // a refined corner's largest move from its prediction (px)
+  cv::Matx33d h;            // the board model: grid -> pixel, minus offsets
+  cv::Matx33d recentred;    // the model after re-centring (step 1)
+  std::vector<int> todo;    // corners to refine next
+  std::vector<cv::Point2f> pos;
+  std::vector<char> candidate;
+  std::vector<int> accepted;
+  bool fitted = false, refine_done = false;
+
+  bool inside(const cv::Point2f& p) const {
+    return p.x >= margin && p.y >= margin && p.x <= gray.cols - 1 - margin && p.y <= gray.rows - 1 - margin;
+  }
+  cv::Point2f predicted(const cv::Matx33d& model, int id) const {
+    const cv::Point2f g = gridPoint(id, board.cols);
+    return applyHomography(model, g.x, g.y) + offsets[id];
+  }
+  // The corners not yet accepted whose prediction lies inside the image.
+  void predictTodo() {
+    todo.clear();
+    for (int id = 0; id < n; ++id)
+      if (!candidate[id] && inside(predicted(h, id))) todo.push_back(id);
+  }
+  bool refined() const { return fitted && static_cast<int>(accepted.size()) >= needed; }
+};
+
 BoardCorners CameraTracker::trackBoardOnce(const cv::Mat& gray, int index, bool on_difference, bool align,
                                            bool wide) {
   CV_Assert(gray.type() == CV_8UC1);
@@ -389,20 +428,17 @@ BoardCorners CameraTracker::trackBoardOnce(const cv::Mat& gray, int index, bool 
   stats.board_id = board.board_id;
   BoardCorners out;
   out.board_id = board.board_id;
-  const int n = board.cornerCount();
 
-  cv::Matx33d h =
-      state.valid ? state.homography : tracker::homographyFromOuter(board, board.meanOuterCorners());
-  const std::vector<cv::Point2f>& offsets = state.offsets;
-  const double square = squareSizePx(h, board);
-  const int window = options_.window_radius_px > 0 ? options_.window_radius_px
-                     : on_difference
-                         // Scene removed: a window of 0.6 square averages the residual better.
-                         ? std::min(7, std::max(2, static_cast<int>(std::lround(0.6 * square))))
-                         // Scene present: keep its texture out of the window.
-                         : std::min(5, std::max(2, static_cast<int>(std::lround(0.4 * square))));
-  const double max_residual =
-      on_difference ? options_.max_residual_px : options_.max_residual_no_background_px;
+  BoardAttempt a(gray, board, state.offsets);
+  a.h = state.valid ? state.homography : tracker::homographyFromOuter(board, board.meanOuterCorners());
+  a.square = squareSizePx(a.h, board);
+  a.window = options_.window_radius_px > 0 ? options_.window_radius_px
+             : on_difference
+                 // Scene removed: a window of 0.6 square averages the residual better.
+                 ? std::min(7, std::max(2, static_cast<int>(std::lround(0.6 * a.square))))
+                 // Scene present: keep its texture out of the window.
+                 : std::min(5, std::max(2, static_cast<int>(std::lround(0.4 * a.square))));
+  a.max_residual = on_difference ? options_.max_residual_px : options_.max_residual_no_background_px;
 
   // 1. Re-centre on the expected pattern.
   // Steady state: a small search around the last position, accepted when the pattern is as
@@ -412,273 +448,274 @@ BoardCorners CameraTracker::trackBoardOnce(const cv::Mat& gray, int index, bool 
   if (!wide && state.valid && state.last_score > 0) {
     // The score is flat while the boxes stay inside their squares, so the score at the last
     // position tells whether the board is still within the refinement's reach.
-    centre = recentre(gray, h, board, offsets, square, 0.0, 1);
+    centre = recentre(gray, a.h, board, a.offsets, a.square, 0.0, 1);
     settled = centre.score >= 0.85 * state.last_score;
   }
   stats.wide_search = !settled;
   if (!settled)
-    centre = recentre(gray, h, board, offsets, square, options_.search_radius_px,
+    centre = recentre(gray, a.h, board, a.offsets, a.square, options_.search_radius_px,
                       options_.search_radius_px > 4 ? 2 : 1);
   stats.pattern_score = centre.score;
   stats.recentre_shift = centre.shift;
   if (centre.score < options_.min_pattern_score) return out;
-  h = cv::Matx33d(1, 0, centre.shift.x, 0, 1, centre.shift.y, 0, 0, 1) * h;
-  const cv::Matx33d recentred = h;
+  a.h = cv::Matx33d(1, 0, centre.shift.x, 0, 1, centre.shift.y, 0, 0, 1) * a.h;
+  a.recentred = a.h;
 
   // Corners whose refinement window (and saddle samples) stay inside the image.
-  const float margin = static_cast<float>(window + 2);
-  auto insideImage = [&](const cv::Point2f& p) {
-    return p.x >= margin && p.y >= margin && p.x <= gray.cols - 1 - margin && p.y <= gray.rows - 1 - margin;
-  };
-  std::vector<int> todo;
-  for (int id = 0; id < n; ++id) {
-    const cv::Point2f g = gridPoint(id, board.cols);
-    if (insideImage(applyHomography(h, g.x, g.y) + offsets[id])) todo.push_back(id);
-  }
-  stats.predicted = static_cast<int>(todo.size());
-  const int needed = std::max(options_.min_board_corners,
-                              static_cast<int>(std::ceil(options_.min_board_fraction * stats.predicted)));
-  if (stats.predicted < needed) return out;
+  a.margin = static_cast<float>(a.window + 2);
+  a.predictTodo();
+  stats.predicted = static_cast<int>(a.todo.size());
+  a.needed = std::max(options_.min_board_corners,
+                      static_cast<int>(std::ceil(options_.min_board_fraction * stats.predicted)));
+  if (stats.predicted < a.needed) return out;
+  a.min_contrast = static_cast<float>(std::max(options_.min_contrast, options_.relative_contrast * board.contrast));
+  a.max_shift = options_.max_refine_shift * a.window;
 
-  const float min_contrast =
-      static_cast<float>(std::max(options_.min_contrast, options_.relative_contrast * board.contrast));
-  const double max_shift = options_.max_refine_shift * window;
-  const cv::TermCriteria criteria(cv::TermCriteria::EPS + cv::TermCriteria::COUNT, 10, 0.01);
-
-  std::vector<cv::Point2f> pos(n);
-  std::vector<char> candidate(n, 0);
-  std::vector<int> accepted;
-  bool fitted = false;
-  bool refine_done = false;
-  // Steps 2-5 (refinement, saddle test, re-fit).
-  const auto refine = [&]() {
-    refine_done = true;
-    // Box means for the saddle test (an integral image of the board's region: built only here,
-    // since the steady state on a raw image skips the refinement).
-    const int saddle_box = std::max(1, static_cast<int>(std::lround(0.12 * square)));
-    const int reach = static_cast<int>(std::ceil(0.6 * square)) + saddle_box + window + 2;
-    float umin = 1e9f, vmin = 1e9f, umax = -1e9f, vmax = -1e9f;
-    for (const cv::Point2f& g : board.outerGridPoints()) {
-      const cv::Point2f p = applyHomography(h, g.x, g.y);
-      umin = std::min(umin, p.x);
-      vmin = std::min(vmin, p.y);
-      umax = std::max(umax, p.x);
-      vmax = std::max(vmax, p.y);
-    }
-    const BoxSampler saddle_sampler(
-        gray,
-        cv::Rect(static_cast<int>(umin) - reach, static_cast<int>(vmin) - reach,
-                 static_cast<int>(umax - umin) + 2 * reach, static_cast<int>(vmax - vmin) + 2 * reach),
-        saddle_box);
-    for (int iteration = 0; iteration < options_.max_iterations && !todo.empty(); ++iteration) {
-      // 2. Predict and refine.
-      std::vector<cv::Point2f> points;
-      for (int id : todo) {
-        const cv::Point2f g = gridPoint(id, board.cols);
-        points.push_back(applyHomography(h, g.x, g.y) + offsets[id]);
-      }
-      const std::vector<cv::Point2f> predicted = points;
-      cv::cornerSubPix(gray, points, cv::Size(window, window), cv::Size(-1, -1), criteria);
-      // 3. Saddle test: the expected polarity with enough contrast.
-      int fresh = 0;
-      for (size_t k = 0; k < todo.size(); ++k) {
-        const int id = todo[k];
-        if (!insideImage(points[k]) || cv::norm(points[k] - predicted[k]) > max_shift) continue;
-        const cv::Point2f g = gridPoint(id, board.cols);
-        cv::Point2f ac, ar;
-        tracker::gridAxes(h, g.x, g.y, &ac, &ar);
-        const int bright =
-            ((static_cast<int>(g.x) + static_cast<int>(g.y)) & 1) == 0 ? board.sign : -board.sign;
-        if (tracker::saddleContrast(saddle_sampler, points[k], ac, ar, bright) < min_contrast) continue;
-        pos[id] = points[k];
-        candidate[id] = 1;
-        ++fresh;
-      }
-      if (fresh == 0 && fitted) break;
-      // 4. Re-fit the board model to every candidate; keep the consistent ones.
-      std::vector<int> ids;
-      for (int id = 0; id < n; ++id)
-        if (candidate[id]) ids.push_back(id);
-      cv::Matx33d refit;
-      std::vector<int> inliers;
-      if (!fitBoardModel(board, ids, pos, offsets, max_residual, &refit, &inliers)) break;
-      h = refit;
-      fitted = true;
-      accepted = inliers;
-      std::fill(candidate.begin(), candidate.end(), 0);
-      for (int id : accepted) candidate[id] = 1;
-      // 5. Retry the rest from the re-fitted model.
-      todo.clear();
-      for (int id = 0; id < n; ++id) {
-        if (candidate[id]) continue;
-        const cv::Point2f g = gridPoint(id, board.cols);
-        if (insideImage(applyHomography(h, g.x, g.y) + offsets[id])) todo.push_back(id);
-      }
-    }
-  };
   const bool align_board = align && !on_difference && options_.whole_board_alignment &&
                            !(*templates_)[2 * index].empty();
   // Steady state on a raw image: the board was aligned last frame and the pattern is still there
   // at its last position, so the alignment starts from last frame's (the refinement, there only
   // to find a start and to verify it, is skipped unless that fails).
   const bool steady = align_board && settled && state.align_valid;
-  if (!steady) refine();
-  bool refined = fitted && static_cast<int>(accepted.size()) >= needed;
-  if (!refined && !align_board) return out;
+  if (!steady) refineCorners(a);
+  if (!a.refined() && !align_board) return out;
 
-  // Without a background: align the whole board; its corners replace the refined ones. Its
-  // geometry is verified either by the refined corners (when enough passed the saddle test, they
-  // must agree with it) or, when the scene hides too many saddles for that (a dim board over a
-  // textured scene), by the re-centring: the alignment starts from the re-centred prediction and
-  // must stay within a fraction of a square of it, so no square can slip.
+  // Without a background: align the whole board; its corners replace the refined ones.
   if (align_board) {
-    const tracker::AlignmentTemplate& tmpl = (*templates_)[2 * index];
-    const bool was_aligned = state.align_valid;
-    state.align_valid = false;
-    bool aligned = false;
-    // In steady state from last frame's alignment; then from the refined corners when there are
-    // enough, else (or when that fails) from the re-centred prediction.
-    for (int attempt = steady ? -1 : refined ? 0 : 1; attempt < 2 && !aligned; ++attempt) {
-      if (attempt == 0) {
-        if (!refine_done) refine();
-        refined = fitted && static_cast<int>(accepted.size()) >= needed;
-        if (!refined) continue;
-      }
-      const bool from_last = attempt == -1, from_refined = attempt == 0;
-      std::vector<int> ref_ids;
-      std::vector<cv::Point2f> ref_pos;
-      if (from_last) {
-        for (int id = 0; id < n; ++id) {
-          const cv::Point2f c = tmpl.corners[id];
-          const cv::Point2f p = applyHomography(state.align_a, c.x, c.y);
-          if (!insideImage(p)) continue;
-          ref_ids.push_back(id);
-          ref_pos.push_back(p);
-        }
-      } else if (from_refined) {
-        ref_ids = accepted;
-        for (int id : accepted) ref_pos.push_back(pos[id]);
-      } else {
-        for (int id = 0; id < n; ++id) {
-          const cv::Point2f g = gridPoint(id, board.cols);
-          const cv::Point2f p = applyHomography(recentred, g.x, g.y) + offsets[id];
-          if (!insideImage(p)) continue;
-          ref_ids.push_back(id);
-          ref_pos.push_back(p);
-        }
-      }
-      // How far the aligned corners may be from where the attempt started: the refined corners
-      // agree to within the residual gate; a board re-centred (or still in place) is within a
-      // fraction of a square, so no square can slip.
-      const double agree_px = from_refined ? max_residual : from_last ? 0.25 * square : 0.35 * square;
-      const auto rmsTo = [&](const cv::Matx33d& a) {
-        double sq = 0;
-        for (size_t k = 0; k < ref_ids.size(); ++k) {
-          const cv::Point2f c = tmpl.corners[ref_ids[k]];
-          sq += std::pow(cv::norm(applyHomography(a, c.x, c.y) - ref_pos[k]), 2);
-        }
-        return std::sqrt(sq / std::max<size_t>(1, ref_ids.size()));
-      };
-      tracker::AlignmentResult start;
-      // Start from the last frame's alignment while the board stays where it was (its corners
-      // agree with this frame's refined ones): one step then usually suffices.
-      const bool warm = from_last || (from_refined && was_aligned && rmsTo(state.align_a) <= max_residual);
-      if (warm) {
-        start.a = state.align_a;
-        start.contrast = state.align_contrast;
-        start.huber = state.align_huber;
-        start.levels = state.align_levels;
-      }
-      bool started = warm || tracker::fitAlignmentStart(tmpl, ref_ids, ref_pos, &start.a);
-      if (started && !warm && !from_refined) {
-        // From a prediction (within a few pixels): first on the blurred image with the coarse
-        // template, whose edges reach that far.
-        const tracker::AlignmentTemplate& coarse = (*templates_)[2 * index + 1];
-        cv::Mat blurred;
-        const double blur = std::min(kCoarseBlurPx - 0.5, options_.alignment_blur_px);
-        cv::GaussianBlur(gray, blurred, cv::Size(), std::sqrt(kCoarseBlurPx * kCoarseBlurPx - blur * blur));
-        const tracker::AlignmentResult c = tracker::alignBoard(coarse, blurred, start, false, 6);
-        started = c.ok;
-        if (c.ok) start.a = c.a;
-      }
-      if (!started) continue;
-      const tracker::AlignmentResult fit = tracker::alignBoard(tmpl, gray, start, warm, warm ? 3 : 6);
-      // The board's contrast in this frame (bright minus dark, as teaching measured it): present,
-      // and not far below the taught one (a light-off frame has none).
-      if (!fit.ok || 2.0 * fit.contrast < std::max(options_.min_contrast, 0.1 * board.contrast)) continue;
-      if (rmsTo(fit.a) > agree_px) continue;
-      // From last frame's position only when the fit settled there: a board that moved by more
-      // than the fine template's reach is found again from its refined corners.
-      // A template off the edges also sees much less of the pattern's contrast than last frame.
-      if (from_last && (!fit.converged || fit.contrast < 0.7 * state.align_contrast)) continue;
-      // Every corner inside the image where the pattern is there around its aligned position:
-      // the contrast fitted on its own samples is at least half the board's (what an occluder or
-      // a light-off region lacks; an averaged measure, unlike a saddle test, which a scene brighter
-      // than the pattern defeats).
-      std::vector<int> kept;
-      for (int id = 0; id < n; ++id) {
-        const cv::Point2f c = tmpl.corners[id];
-        const cv::Point2f p = applyHomography(fit.a, c.x, c.y);
-        if (!insideImage(p) || !(fit.corner_contrast[id] >= kCornerContrast)) continue;
-        pos[id] = p;
-        kept.push_back(id);
-      }
-      if (static_cast<int>(kept.size()) < needed) continue;
-      aligned = true;
-      accepted = kept;
-      std::vector<cv::Point2f> grid, image;
-      for (int id : accepted) {
-        grid.push_back(gridPoint(id, board.cols));
-        image.push_back(pos[id] - offsets[id]);
-      }
-      cv::Matx33d refit;
-      if (tracker::fitHomographyLeastSquares(grid, image, &refit)) h = refit;
-      state.align_valid = true;
-      state.align_a = fit.a;
-      state.align_contrast = fit.contrast;
-      state.align_huber = fit.huber;
-      state.align_levels = fit.levels;
-    }
-    stats.aligned = aligned;
+    stats.aligned = alignWholeBoard(a, index, steady);
     // Refined corners alone are not trusted on a raw image: the scene can pull one by more than
     // a pixel. A board that does not align gives nothing this frame.
-    if (!aligned) return out;
+    if (!stats.aligned) return out;
   }
+  acceptBoard(a, index, centre.score, &out);
+  return out;
+}
 
-  std::sort(accepted.begin(), accepted.end());
+// Steps 2-5: predict and refine the corners, keep those that pass the saddle test, re-fit the
+// board model to them, and retry the rest from the re-fitted model.
+void CameraTracker::refineCorners(BoardAttempt& a) const {
+  a.refine_done = true;
+  const BoardPrior& board = a.board;
+  const cv::TermCriteria criteria(cv::TermCriteria::EPS + cv::TermCriteria::COUNT, 10, 0.01);
+  // Box means for the saddle test (an integral image of the board's region: built only here,
+  // since the steady state on a raw image skips the refinement).
+  const int saddle_box = std::max(1, static_cast<int>(std::lround(0.12 * a.square)));
+  const int reach = static_cast<int>(std::ceil(0.6 * a.square)) + saddle_box + a.window + 2;
+  float umin = 1e9f, vmin = 1e9f, umax = -1e9f, vmax = -1e9f;
+  for (const cv::Point2f& g : board.outerGridPoints()) {
+    const cv::Point2f p = applyHomography(a.h, g.x, g.y);
+    umin = std::min(umin, p.x);
+    vmin = std::min(vmin, p.y);
+    umax = std::max(umax, p.x);
+    vmax = std::max(vmax, p.y);
+  }
+  const BoxSampler saddle_sampler(
+      a.gray,
+      cv::Rect(static_cast<int>(umin) - reach, static_cast<int>(vmin) - reach,
+               static_cast<int>(umax - umin) + 2 * reach, static_cast<int>(vmax - vmin) + 2 * reach),
+      saddle_box);
+  for (int iteration = 0; iteration < options_.max_iterations && !a.todo.empty(); ++iteration) {
+    // 2. Predict and refine.
+    std::vector<cv::Point2f> points;
+    for (int id : a.todo) points.push_back(a.predicted(a.h, id));
+    const std::vector<cv::Point2f> predicted = points;
+    cv::cornerSubPix(a.gray, points, cv::Size(a.window, a.window), cv::Size(-1, -1), criteria);
+    // 3. Saddle test: the expected polarity with enough contrast.
+    int fresh = 0;
+    for (size_t k = 0; k < a.todo.size(); ++k) {
+      const int id = a.todo[k];
+      if (!a.inside(points[k]) || cv::norm(points[k] - predicted[k]) > a.max_shift) continue;
+      const cv::Point2f g = gridPoint(id, board.cols);
+      cv::Point2f ac, ar;
+      tracker::gridAxes(a.h, g.x, g.y, &ac, &ar);
+      const int bright = ((static_cast<int>(g.x) + static_cast<int>(g.y)) & 1) == 0 ? board.sign : -board.sign;
+      if (tracker::saddleContrast(saddle_sampler, points[k], ac, ar, bright) < a.min_contrast) continue;
+      a.pos[id] = points[k];
+      a.candidate[id] = 1;
+      ++fresh;
+    }
+    if (fresh == 0 && a.fitted) break;
+    // 4. Re-fit the board model to every candidate; keep the consistent ones.
+    std::vector<int> ids;
+    for (int id = 0; id < a.n; ++id)
+      if (a.candidate[id]) ids.push_back(id);
+    cv::Matx33d refit;
+    std::vector<int> inliers;
+    if (!fitBoardModel(board, ids, a.pos, a.offsets, a.max_residual, &refit, &inliers)) break;
+    a.h = refit;
+    a.fitted = true;
+    a.accepted = inliers;
+    std::fill(a.candidate.begin(), a.candidate.end(), 0);
+    for (int id : a.accepted) a.candidate[id] = 1;
+    // 5. Retry the rest from the re-fitted model.
+    a.predictTodo();
+  }
+}
+
+// Step 6, without a background: the whole board aligned to its taught template; its corners
+// replace the refined ones. Its geometry is verified either by the refined corners (when enough
+// passed the saddle test, they must agree with it) or, when the scene hides too many saddles for
+// that (a dim board over a textured scene), by the re-centring: the alignment starts from the
+// re-centred prediction and must stay within a fraction of a square of it, so no square can slip.
+// In steady state it starts from last frame's alignment; then from the refined corners when
+// there are enough, else (or when that fails) from the re-centred prediction.
+bool CameraTracker::alignWholeBoard(BoardAttempt& a, int index, bool steady) {
+  BoardState& state = states_[index];
+  const bool was_aligned = state.align_valid;
+  state.align_valid = false;
+  for (int attempt = steady ? -1 : a.refined() ? 0 : 1; attempt < 2; ++attempt) {
+    if (attempt == 0) {
+      if (!a.refine_done) refineCorners(a);
+      if (!a.refined()) continue;
+    }
+    if (alignFrom(a, index, attempt, was_aligned)) return true;
+  }
+  return false;
+}
+
+// The corners an alignment start is checked against: the template's corners under last frame's
+// alignment (`last`), or the re-centred prediction (`last` null); those inside the image.
+void CameraTracker::referenceCorners(const BoardAttempt& a, const tracker::AlignmentTemplate& tmpl,
+                                     const cv::Matx33d* last, std::vector<int>* ids,
+                                     std::vector<cv::Point2f>* positions) {
+  for (int id = 0; id < a.n; ++id) {
+    const cv::Point2f c = tmpl.corners[id];
+    const cv::Point2f p = last ? applyHomography(*last, c.x, c.y) : a.predicted(a.recentred, id);
+    if (!a.inside(p)) continue;
+    ids->push_back(id);
+    positions->push_back(p);
+  }
+}
+
+// The aligned board's corners that are inside the image and where the pattern is there around
+// them: the contrast fitted on their own samples is at least half the board's (what an occluder
+// or a light-off region lacks; an averaged measure, unlike a saddle test, which a scene brighter
+// than the pattern defeats). Enough of them replace the accepted corners and re-fit the model.
+bool CameraTracker::keepAligned(BoardAttempt& a, const tracker::AlignmentTemplate& tmpl,
+                                const tracker::AlignmentResult& fit) {
+  std::vector<int> kept;
+  for (int id = 0; id < a.n; ++id) {
+    const cv::Point2f c = tmpl.corners[id];
+    const cv::Point2f p = applyHomography(fit.a, c.x, c.y);
+    if (!a.inside(p) || !(fit.corner_contrast[id] >= kCornerContrast)) continue;
+    a.pos[id] = p;
+    kept.push_back(id);
+  }
+  if (static_cast<int>(kept.size()) < a.needed) return false;
+  a.accepted = kept;
+  std::vector<cv::Point2f> grid, image;
+  for (int id : a.accepted) {
+    grid.push_back(gridPoint(id, a.board.cols));
+    image.push_back(a.pos[id] - a.offsets[id]);
+  }
+  cv::Matx33d refit;
+  if (tracker::fitHomographyLeastSquares(grid, image, &refit)) a.h = refit;
+  return true;
+}
+
+// One start of the whole-board alignment: -1 last frame's alignment, 0 the refined corners,
+// 1 the re-centred prediction. True when the board aligned; its corners are then accepted.
+bool CameraTracker::alignFrom(BoardAttempt& a, int index, int attempt, bool was_aligned) {
+  const tracker::AlignmentTemplate& tmpl = (*templates_)[2 * index];
+  BoardState& state = states_[index];
+  const bool from_last = attempt == -1, from_refined = attempt == 0;
+  std::vector<int> ref_ids;
+  std::vector<cv::Point2f> ref_pos;
+  if (from_refined) {
+    ref_ids = a.accepted;
+    for (int id : a.accepted) ref_pos.push_back(a.pos[id]);
+  } else {
+    referenceCorners(a, tmpl, from_last ? &state.align_a : nullptr, &ref_ids, &ref_pos);
+  }
+  // How far the aligned corners may be from where the attempt started: the refined corners
+  // agree to within the residual gate; a board re-centred (or still in place) is within a
+  // fraction of a square, so no square can slip.
+  const double agree_px = from_refined ? a.max_residual : from_last ? 0.25 * a.square : 0.35 * a.square;
+  const auto rmsTo = [&](const cv::Matx33d& model) {
+    double sq = 0;
+    for (size_t k = 0; k < ref_ids.size(); ++k) {
+      const cv::Point2f c = tmpl.corners[ref_ids[k]];
+      sq += std::pow(cv::norm(applyHomography(model, c.x, c.y) - ref_pos[k]), 2);
+    }
+    return std::sqrt(sq / std::max<size_t>(1, ref_ids.size()));
+  };
+  tracker::AlignmentResult start;
+  // Start from the last frame's alignment while the board stays where it was (its corners
+  // agree with this frame's refined ones): one step then usually suffices.
+  const bool warm = from_last || (from_refined && was_aligned && rmsTo(state.align_a) <= a.max_residual);
+  if (warm) {
+    start.a = state.align_a;
+    start.contrast = state.align_contrast;
+    start.huber = state.align_huber;
+    start.levels = state.align_levels;
+  }
+  bool started = warm || tracker::fitAlignmentStart(tmpl, ref_ids, ref_pos, &start.a);
+  if (started && !warm && !from_refined) {
+    // From a prediction (within a few pixels): first on the blurred image with the coarse
+    // template, whose edges reach that far.
+    const tracker::AlignmentTemplate& coarse = (*templates_)[2 * index + 1];
+    cv::Mat blurred;
+    const double blur = std::min(kCoarseBlurPx - 0.5, options_.alignment_blur_px);
+    cv::GaussianBlur(a.gray, blurred, cv::Size(), std::sqrt(kCoarseBlurPx * kCoarseBlurPx - blur * blur));
+    const tracker::AlignmentResult c = tracker::alignBoard(coarse, blurred, start, false, 6);
+    started = c.ok;
+    if (c.ok) start.a = c.a;
+  }
+  if (!started) return false;
+  const tracker::AlignmentResult fit = tracker::alignBoard(tmpl, a.gray, start, warm, warm ? 3 : 6);
+  // The board's contrast in this frame (bright minus dark, as teaching measured it): present,
+  // and not far below the taught one (a light-off frame has none).
+  if (!fit.ok || 2.0 * fit.contrast < std::max(options_.min_contrast, 0.1 * a.board.contrast)) return false;
+  if (rmsTo(fit.a) > agree_px) return false;
+  // From last frame's position only when the fit settled there: a board that moved by more
+  // than the fine template's reach is found again from its refined corners.
+  // A template off the edges also sees much less of the pattern's contrast than last frame.
+  if (from_last && (!fit.converged || fit.contrast < 0.7 * state.align_contrast)) return false;
+  if (!keepAligned(a, tmpl, fit)) return false;
+  state.align_valid = true;
+  state.align_a = fit.a;
+  state.align_contrast = fit.contrast;
+  state.align_huber = fit.huber;
+  state.align_levels = fit.levels;
+  return true;
+}
+
+// Step 7: the accepted corners out; the board's state (model, offsets, score) and statistics,
+// with the tracked outer corners' deviation from the prior's mean and modes.
+void CameraTracker::acceptBoard(BoardAttempt& a, int index, double score, BoardCorners* out) {
+  BoardState& state = states_[index];
+  BoardTrackStats& stats = stats_[index];
+  const BoardPrior& board = a.board;
+  std::sort(a.accepted.begin(), a.accepted.end());
   double sq = 0;
-  for (int id : accepted) {
+  for (int id : a.accepted) {
     const cv::Point2f g = gridPoint(id, board.cols);
-    const cv::Point2f residual = pos[id] - offsets[id] - applyHomography(h, g.x, g.y);
+    const cv::Point2f residual = a.pos[id] - state.offsets[id] - applyHomography(a.h, g.x, g.y);
     sq += residual.dot(residual);
-    out.corner_ids.push_back(id);
-    out.u.push_back(pos[id].x);
-    out.v.push_back(pos[id].y);
+    out->corner_ids.push_back(id);
+    out->u.push_back(a.pos[id].x);
+    out->v.push_back(a.pos[id].y);
     // Follow slow changes of the distortion pattern (the board moving in the image).
     state.offsets[id] += static_cast<float>(options_.offset_update_rate) * residual;
   }
-  state.homography = h;
+  state.homography = a.h;
   state.valid = true;
-  state.last_score = centre.score;
-  stats.found = static_cast<int>(accepted.size());
-  stats.rms_residual_px = std::sqrt(sq / accepted.size());
-
-  // Deviation of the tracked outer corners from the prior's mean + modes.
-  if (!board.outer_mean.empty()) {
-    cv::Mat x(1, 8, CV_64F);
-    const std::vector<cv::Point2f> grid = board.outerGridPoints();
-    const int outer_ids[4] = {0, board.cols - 1, n - 1, n - board.cols};
-    for (int i = 0; i < 4; ++i) {
-      const cv::Point2f p = applyHomography(h, grid[i].x, grid[i].y) + state.offsets[outer_ids[i]];
-      x.at<double>(0, 2 * i) = p.x;
-      x.at<double>(0, 2 * i + 1) = p.y;
-    }
-    cv::Mat d = x - board.outer_mean;
-    for (int m = 0; m < board.outer_modes.rows; ++m)
-      d -= d.dot(board.outer_modes.row(m)) * board.outer_modes.row(m);
-    stats.prior_deviation_px = std::sqrt(d.dot(d) / 4.0);
+  state.last_score = score;
+  stats.found = static_cast<int>(a.accepted.size());
+  stats.rms_residual_px = std::sqrt(sq / a.accepted.size());
+  if (board.outer_mean.empty()) return;
+  cv::Mat x(1, 8, CV_64F);
+  const std::vector<cv::Point2f> grid = board.outerGridPoints();
+  const int n = a.n;
+  const int outer_ids[4] = {0, board.cols - 1, n - 1, n - board.cols};
+  for (int i = 0; i < 4; ++i) {
+    const cv::Point2f p = applyHomography(a.h, grid[i].x, grid[i].y) + state.offsets[outer_ids[i]];
+    x.at<double>(0, 2 * i) = p.x;
+    x.at<double>(0, 2 * i + 1) = p.y;
   }
-  return out;
+  cv::Mat d = x - board.outer_mean;
+  for (int m = 0; m < board.outer_modes.rows; ++m) d -= d.dot(board.outer_modes.row(m)) * board.outer_modes.row(m);
+  stats.prior_deviation_px = std::sqrt(d.dot(d) / 4.0);
 }
 
 }  // namespace ecs

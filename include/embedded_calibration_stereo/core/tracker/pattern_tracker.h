@@ -51,6 +51,7 @@
 namespace ecs {
 namespace tracker {
 struct AlignmentTemplate;
+struct AlignmentResult;
 }
 }  // namespace ecs
 
@@ -177,6 +178,16 @@ class CameraTracker {
   std::vector<BoardCorners> trackAll(const cv::Mat& gray, bool on_difference, bool align);
   // wide: skip the quick steady-state check, search the whole re-centring window.
   BoardCorners trackBoardOnce(const cv::Mat& gray, int index, bool on_difference, bool align, bool wide);
+  // trackBoardOnce's steps (camera_tracker.cpp), on what one attempt at one board shares.
+  struct BoardAttempt;
+  void refineCorners(BoardAttempt& a) const;
+  bool alignWholeBoard(BoardAttempt& a, int index, bool steady);
+  bool alignFrom(BoardAttempt& a, int index, int attempt, bool was_aligned);
+  static void referenceCorners(const BoardAttempt& a, const tracker::AlignmentTemplate& tmpl,
+                               const cv::Matx33d* last, std::vector<int>* ids, std::vector<cv::Point2f>* positions);
+  static bool keepAligned(BoardAttempt& a, const tracker::AlignmentTemplate& tmpl,
+                          const tracker::AlignmentResult& fit);
+  void acceptBoard(BoardAttempt& a, int index, double score, BoardCorners* out);
 
   CameraPrior prior_;
   TrackerOptions options_;
