@@ -174,9 +174,11 @@ struct CornerResidual {
 // keeps pointers into the blocks, so it is neither copied nor moved.
 class AdjustmentRun {
  public:
+  // `free_start` (device model): the free shared-pose solve of another run of the same input
+  // (the held and refined board placements start alike), instead of solving it again.
   AdjustmentRun(const BundleAdjustmentOptions& options, const BundleAdjustmentConfig& config,
-                const CalibrationInput& input)
-      : options_(options), config_(config), input_(input), problem_(problemOptions()) {}
+                const CalibrationInput& input, const BundleAdjustmentSummary* free_start = nullptr)
+      : options_(options), config_(config), input_(input), free_start_(free_start), problem_(problemOptions()) {}
   AdjustmentRun(const AdjustmentRun&) = delete;
   AdjustmentRun& operator=(const AdjustmentRun&) = delete;
 
@@ -195,6 +197,8 @@ class AdjustmentRun {
     out_.solve_ms = msSince(start_);
     return out_;
   }
+  // The device model's free shared-pose start, once run() has made it (null otherwise).
+  const BundleAdjustmentSummary* freeStart() const { return free_solve_ ? &*free_solve_ : nullptr; }
 
  private:
   static ceres::Problem::Options problemOptions() {
@@ -339,7 +343,7 @@ class AdjustmentRun {
       free_input.device = nullptr;
       free_input.image_width = width_;
       free_input.image_height = height_;
-      free_solve_ = BundleAdjuster(free_options, config_).Solve(free_input);
+      free_solve_ = free_start_ ? *free_start_ : BundleAdjuster(free_options, config_).Solve(free_input);
       if (!free_solve_->success)
         return fail("device model: the free-pose solve that starts it failed: " +
                     free_solve_->message);
@@ -741,6 +745,7 @@ class AdjustmentRun {
   const BundleAdjustmentOptions& options_;
   const BundleAdjustmentConfig& config_;
   const CalibrationInput& input_;
+  const BundleAdjustmentSummary* free_start_ = nullptr;
   const Clock::time_point start_ = Clock::now();
   BundleAdjustmentSummary out_;
 
@@ -805,8 +810,9 @@ BundleAdjustmentSummary BundleAdjuster::Solve(const CalibrationInput& input) con
   BundleAdjustmentOptions held_options = options_, refined_options = options_;
   held_options.board_placement = BoardPlacement::kHeld;
   refined_options.board_placement = BoardPlacement::kRefined;
-  BundleAdjustmentSummary held = AdjustmentRun(held_options, config_, input).run();
-  BundleAdjustmentSummary refined = AdjustmentRun(refined_options, config_, input).run();
+  AdjustmentRun held_run(held_options, config_, input);
+  BundleAdjustmentSummary held = held_run.run();
+  BundleAdjustmentSummary refined = AdjustmentRun(refined_options, config_, input, held_run.freeStart()).run();
   if (!refined.success) return held;
   if (!held.success) return refined;
   // Nested models: with the placements right, the held solve's extra cost over the residual
