@@ -911,7 +911,6 @@ def main():
                                     health_steps)
     for line in summary + report_lines:
         print("demo: " + line, flush=True)
-    print("demo: results in %s" % args.out, flush=True)
     return 0 if frames > 0 else 1
 
 
