@@ -167,6 +167,12 @@ struct CornerResidual {
   const CornerTrack* track = nullptr;  // the observations this residual stands for
 };
 
+// kAuto resolved: the device model when the device is given, otherwise shared free poses.
+BoardPoseMode resolvedMode(BoardPoseMode mode, const CalibrationInput& input) {
+  if (mode != BoardPoseMode::kAuto) return mode;
+  return input.device ? BoardPoseMode::kDeviceModel : BoardPoseMode::kSharedAcrossFrames;
+}
+
 // One Solve() call, in the stages of COLMAP's bundle adjuster: check the inputs, start the
 // cameras, set up the parameter blocks, add the residuals, hold blocks and set manifolds, run
 // Ceres, then the residual statistics (robust loss, outliers), the covariance and the summary.
@@ -226,9 +232,7 @@ class AdjustmentRun {
     if (!problem_text.empty()) return fail("invalid config: " + problem_text);
     if (!input_.frames || (!input_.boards && !input_.device))
       return fail("no observations or no board layout given");
-    mode_ = options_.board_pose_mode;
-    if (mode_ == BoardPoseMode::kAuto)
-      mode_ = input_.device ? BoardPoseMode::kDeviceModel : BoardPoseMode::kSharedAcrossFrames;
+    mode_ = resolvedMode(options_.board_pose_mode, input_);
     device_mode_ = mode_ == BoardPoseMode::kDeviceModel;
     shared_ = mode_ != BoardPoseMode::kPerFrame;
     if (device_mode_ && !input_.device) return fail("the device model needs the device");
@@ -243,7 +247,20 @@ class AdjustmentRun {
                        : mode_ == BoardPoseMode::kPerFrame ? "per-frame free poses"
                                                            : "shared free poses";
 
-    // Image size: given, or that of the calibration in force; both must agree.
+    if (!resolveImageSize()) return false;
+    ObservationValidationOptions vo;
+    vo.image_width = width_;
+    vo.image_height = height_;
+    vo.min_corners_per_board = options_.min_corners_per_board;
+    vo.max_outside_image_px = options_.max_outside_image_px;
+    valid_ = validateObservations(*input_.frames, *layout_, vo);
+    out_.dropped = std::move(valid_.dropped);
+    if (valid_.views.empty()) return fail("no usable board observation");
+    return true;
+  }
+
+  // Image size: given, or that of the calibration in force; both must agree.
+  bool resolveImageSize() {
     width_ = input_.image_width, height_ = input_.image_height;
     if (input_.in_force) {
       const StereoRig& f = *input_.in_force;
@@ -258,15 +275,6 @@ class AdjustmentRun {
                     "x" + std::to_string(f.left.height) + ")");
     }
     if (width_ <= 0 || height_ <= 0) return fail("image size unknown or invalid");
-
-    ObservationValidationOptions vo;
-    vo.image_width = width_;
-    vo.image_height = height_;
-    vo.min_corners_per_board = options_.min_corners_per_board;
-    vo.max_outside_image_px = options_.max_outside_image_px;
-    valid_ = validateObservations(*input_.frames, *layout_, vo);
-    out_.dropped = std::move(valid_.dropped);
-    if (valid_.views.empty()) return fail("no usable board observation");
     return true;
   }
 
@@ -803,9 +811,8 @@ BundleAdjuster::BundleAdjuster(BundleAdjustmentOptions options, BundleAdjustment
     : options_(std::move(options)), config_(std::move(config)) {}
 
 BundleAdjustmentSummary BundleAdjuster::Solve(const CalibrationInput& input) const {
-  const bool device_model = options_.board_pose_mode == BoardPoseMode::kDeviceModel ||
-                            (options_.board_pose_mode == BoardPoseMode::kAuto && input.device);
-  if (options_.board_placement != BoardPlacement::kTested || !device_model)
+  if (options_.board_placement != BoardPlacement::kTested ||
+      resolvedMode(options_.board_pose_mode, input) != BoardPoseMode::kDeviceModel)
     return AdjustmentRun(options_, config_, input).run();
   BundleAdjustmentOptions held_options = options_, refined_options = options_;
   held_options.board_placement = BoardPlacement::kHeld;

@@ -164,12 +164,4 @@ CalibrationDevice DeviceModelBlocks::device() const {
   return d;
 }
 
-std::vector<double*> DeviceModelBlocks::allBlocks() {
-  std::vector<double*> blocks{pose_.data()};
-  for (auto& placement : placements_) blocks.push_back(placement.data());
-  for (auto& chain : planes_)
-    for (auto& p : chain) blocks.push_back(p.data());
-  return blocks;
-}
-
 }  // namespace ecs

@@ -80,7 +80,6 @@ class DeviceModelBlocks {
 
   // The device with the current pose, placements and planes.
   CalibrationDevice device() const;
-  std::vector<double*> allBlocks();
 
  private:
   CalibrationDevice nominal_;
