@@ -69,69 +69,75 @@ std::vector<cv::Point2f> smoothOffsets(const BoardPrior& board) {
 
 }  // namespace
 
-AlignmentTemplate buildAlignmentTemplate(const BoardPrior& taught_board, double blur_px, int stride) {
-  AlignmentTemplate t;
-  BoardPrior board = taught_board;
-  board.offsets = smoothOffsets(taught_board);
-  const cv::Matx33d h0 = homographyFromOuter(board, board.meanOuterCorners());
-  const cv::Matx33d h0_inv = h0.inv();
+namespace {
+
+// The taught board the template is built from: its offsets smoothed, the homography of its mean
+// outer corners (grid -> taught pixel) and its inverse.
+struct TaughtBoard {
+  BoardPrior board;
+  cv::Matx33d h0, h0_inv;
+};
+
+TaughtBoard taughtBoard(const BoardPrior& taught_board) {
+  TaughtBoard b;
+  b.board = taught_board;
+  b.board.offsets = smoothOffsets(taught_board);
+  b.h0 = homographyFromOuter(b.board, b.board.meanOuterCorners());
+  b.h0_inv = b.h0.inv();
+  return b;
+}
+
+// The normalisation of taught coordinates (the taught corners' mean and RMS spread) and the
+// corners in it.
+void normaliseCorners(const TaughtBoard& tb, AlignmentTemplate* t) {
+  const BoardPrior& board = tb.board;
   std::vector<cv::Point2f> taught(board.cornerCount());
   cv::Point2d mean(0, 0);
   for (int id = 0; id < board.cornerCount(); ++id) {
     const cv::Point2f g = gridPoint(id, board.cols);
-    taught[id] = applyHomography(h0, g.x, g.y) + board.offsets[id];
+    taught[id] = applyHomography(tb.h0, g.x, g.y) + board.offsets[id];
     mean += cv::Point2d(taught[id]);
   }
   mean *= 1.0 / board.cornerCount();
   double spread = 0;
   for (const cv::Point2f& p : taught) spread += std::pow(cv::norm(cv::Point2d(p) - mean), 2);
-  t.centre = mean;
-  t.scale = std::sqrt(spread / board.cornerCount());
+  t->centre = mean;
+  t->scale = std::sqrt(spread / board.cornerCount());
   for (const cv::Point2f& p : taught)
-    t.corners.emplace_back(static_cast<float>((p.x - mean.x) / t.scale), static_cast<float>((p.y - mean.y) / t.scale));
+    t->corners.emplace_back(static_cast<float>((p.x - mean.x) / t->scale), static_cast<float>((p.y - mean.y) / t->scale));
+}
 
-  // The pattern region used: for the device's boards the squares and the inner half of the white
-  // margin (its outer edge against the housing depends on the device); for a printed board the
-  // inner corners' lattice and half a square beyond it (printed boards often have cut outer
-  // squares and a thin margin).
-  const bool margin = board.device_pattern;
-  const double beyond = margin ? 1.5 : 0.5;
-  const double g_lo = -beyond, gx_hi = board.cols - 1 + beyond, gy_hi = board.rows - 1 + beyond;
-  float umin = 1e9f, vmin = 1e9f, umax = -1e9f, vmax = -1e9f;
-  for (double gx : {g_lo, gx_hi})
-    for (double gy : {g_lo, gy_hi}) {
-      const cv::Point2f p = applyHomography(h0, gx, gy) + offsetAt(board, gx, gy);
-      umin = std::min(umin, p.x), vmin = std::min(vmin, p.y), umax = std::max(umax, p.x), vmax = std::max(vmax, p.y);
-    }
-  // Samples within 2.5 blur widths of an edge, on a sparse lattice (every other pixel: a
-  // quincunx): the scene's pull is spatially correlated over a few pixels, so the skipped pixels
-  // would add little but time.
-  const double reach = 2.5 * blur_px;
-  // Cells: squares of about kCellPx on a side, inside one square each (their borders lie on the
-  // squares' edges). One level per square leaves the scene's variation inside a square to pull
-  // the edges; a cell's level takes out the scene's mean there, so small cells leave less of the
-  // scene's texture to correlate with the edges. Much smaller, a cell would hold only the samples
-  // of one edge's profile, and its level would take that profile (and the position) out.
-  const int split = std::min(8, std::max(1, static_cast<int>(std::lround(board.square_px / kCellPx))));
-  const int ncx = (board.cols + 3) * split, ncy = (board.rows + 3) * split;
-  t.cells = ncx * ncy;
-  const auto gridOf = [&](double u, double v) {
-    cv::Point2f g = applyHomography(h0_inv, u, v);
+// The blurred pattern T in the taught image, its region and its brightness cells.
+struct PatternModel {
+  const TaughtBoard* tb = nullptr;
+  double blur_px = 0.0;
+  bool margin = false;  // the device's white margin is part of the pattern
+  double g_lo = 0.0, gx_hi = 0.0, gy_hi = 0.0;  // the pattern region, grid coordinates
+  float umin = 1e9f, vmin = 1e9f, umax = -1e9f, vmax = -1e9f;  // its bounds, taught pixels
+  double reach = 0.0;  // px from an edge a sample may lie
+  int split = 1, ncx = 0, ncy = 0;  // cells per square side; cells along each grid axis
+
+  // Grid coordinates of taught pixel (u, v) (the offsets removed by fixed-point iteration).
+  cv::Point2f gridOf(double u, double v) const {
+    const BoardPrior& board = tb->board;
+    cv::Point2f g = applyHomography(tb->h0_inv, u, v);
     for (int k = 0; k < 3; ++k) {
       const cv::Point2f o = offsetAt(board, g.x, g.y);
-      g = applyHomography(h0_inv, u - o.x, v - o.y);
+      g = applyHomography(tb->h0_inv, u - o.x, v - o.y);
     }
     return g;
-  };
-  const auto cellOf = [&](double u, double v) {
+  }
+  int cellOf(double u, double v) const {
     const cv::Point2f g = gridOf(u, v);
     const int cx = std::min(std::max(static_cast<int>(std::floor((g.x + 2) * split)), 0), ncx - 1);
     const int cy = std::min(std::max(static_cast<int>(std::floor((g.y + 2) * split)), 0), ncy - 1);
     return cy * ncx + cx;
-  };
+  }
   // T at taught pixel (u, v); false outside the pattern region or (near_edge) too far from an edge.
-  int nearest_corner = 0;
-  const auto valueAt = [&](double u, double v, bool near_edge, double* value) {
+  // nearest_corner (when given): the corner id nearest to (u, v).
+  bool valueAt(double u, double v, bool near_edge, double* value, int* nearest_corner = nullptr) const {
+    const BoardPrior& board = tb->board;
+    const cv::Matx33d& h0 = tb->h0;
     const cv::Point2f g = gridOf(u, v);
     if (near_edge && (g.x < g_lo || g.y < g_lo || g.x > gx_hi || g.y > gy_hi)) return false;
     // Pixels per square along each grid axis here.
@@ -144,51 +150,107 @@ AlignmentTemplate buildAlignmentTemplate(const BoardPrior& taught_board, double 
     const double by = std::min(g.y + 1.0, board.rows - static_cast<double>(g.y)) * sy;
     const double to_outer = margin ? std::min(std::abs(bx), std::abs(by)) : 1e9;
     if (near_edge && std::min({std::abs(dx), std::abs(dy), to_outer}) > reach) return false;
-    nearest_corner = ky * board.cols + kx;
+    if (nearest_corner) *nearest_corner = ky * board.cols + kx;
     const double cx = ((kx & 1) ? -1.0 : 1.0) * (2.0 * phi(dx, blur_px) - 1.0);
     const double cy = ((ky & 1) ? -1.0 : 1.0) * (2.0 * phi(dy, blur_px) - 1.0);
     const double inside = margin ? phi(bx, blur_px) * phi(by, blur_px) : 1.0;
     *value = inside * board.sign * cx * cy + (1.0 - inside);
     return true;
-  };
-  for (int v = static_cast<int>(std::floor(vmin)) - 2; v <= static_cast<int>(std::ceil(vmax)) + 2; ++v) {
-    for (int u = static_cast<int>(std::floor(umin)) - 2; u <= static_cast<int>(std::ceil(umax)) + 2; ++u) {
+  }
+};
+
+PatternModel patternModel(const TaughtBoard& tb, double blur_px) {
+  const BoardPrior& board = tb.board;
+  PatternModel m;
+  m.tb = &tb;
+  m.blur_px = blur_px;
+  // The pattern region used: for the device's boards the squares and the inner half of the white
+  // margin (its outer edge against the housing depends on the device); for a printed board the
+  // inner corners' lattice and half a square beyond it (printed boards often have cut outer
+  // squares and a thin margin).
+  m.margin = board.device_pattern;
+  const double beyond = m.margin ? 1.5 : 0.5;
+  m.g_lo = -beyond, m.gx_hi = board.cols - 1 + beyond, m.gy_hi = board.rows - 1 + beyond;
+  for (double gx : {m.g_lo, m.gx_hi})
+    for (double gy : {m.g_lo, m.gy_hi}) {
+      const cv::Point2f p = applyHomography(tb.h0, gx, gy) + offsetAt(board, gx, gy);
+      m.umin = std::min(m.umin, p.x), m.vmin = std::min(m.vmin, p.y);
+      m.umax = std::max(m.umax, p.x), m.vmax = std::max(m.vmax, p.y);
+    }
+  // Samples within 2.5 blur widths of an edge, on a sparse lattice (every other pixel: a
+  // quincunx): the scene's pull is spatially correlated over a few pixels, so the skipped pixels
+  // would add little but time.
+  m.reach = 2.5 * blur_px;
+  // Cells: squares of about kCellPx on a side, inside one square each (their borders lie on the
+  // squares' edges). One level per square leaves the scene's variation inside a square to pull
+  // the edges; a cell's level takes out the scene's mean there, so small cells leave less of the
+  // scene's texture to correlate with the edges. Much smaller, a cell would hold only the samples
+  // of one edge's profile, and its level would take that profile (and the position) out.
+  m.split = std::min(8, std::max(1, static_cast<int>(std::lround(board.square_px / kCellPx))));
+  m.ncx = (board.cols + 3) * m.split, m.ncy = (board.rows + 3) * m.split;
+  return m;
+}
+
+// The samples: the taught pixels of the pattern region near an edge, on the lattice `stride`
+// asks for, each with T, its gradient (central differences, half a pixel), cell and nearest corner.
+void sampleTemplate(const PatternModel& m, int stride, AlignmentTemplate* t) {
+  const cv::Point2d mean = t->centre;
+  for (int v = static_cast<int>(std::floor(m.vmin)) - 2; v <= static_cast<int>(std::ceil(m.vmax)) + 2; ++v) {
+    for (int u = static_cast<int>(std::floor(m.umin)) - 2; u <= static_cast<int>(std::ceil(m.umax)) + 2; ++u) {
       if (stride > 1 && (stride == 2 ? ((u + v) & 1) != 0 : (u % stride != 0 || v % stride != 0))) continue;
       double value = 0.0;
-      if (!valueAt(u, v, true, &value)) continue;
-      t.corner.push_back(nearest_corner);
+      int nearest_corner = 0;
+      if (!m.valueAt(u, v, true, &value, &nearest_corner)) continue;
+      t->corner.push_back(nearest_corner);
       double vx0, vx1, vy0, vy1;  // template gradient by central differences (half a pixel)
-      valueAt(u - 0.5, v, false, &vx0), valueAt(u + 0.5, v, false, &vx1);
-      valueAt(u, v - 0.5, false, &vy0), valueAt(u, v + 0.5, false, &vy1);
-      t.grad.emplace_back(static_cast<float>((vx1 - vx0) * t.scale), static_cast<float>((vy1 - vy0) * t.scale));
-      t.ref.emplace_back(static_cast<float>((u - mean.x) / t.scale), static_cast<float>((v - mean.y) / t.scale));
-      t.value.push_back(static_cast<float>(value));
-      t.cell.push_back(cellOf(u, v));
+      m.valueAt(u - 0.5, v, false, &vx0), m.valueAt(u + 0.5, v, false, &vx1);
+      m.valueAt(u, v - 0.5, false, &vy0), m.valueAt(u, v + 0.5, false, &vy1);
+      t->grad.emplace_back(static_cast<float>((vx1 - vx0) * t->scale), static_cast<float>((vy1 - vy0) * t->scale));
+      t->ref.emplace_back(static_cast<float>((u - mean.x) / t->scale), static_cast<float>((v - mean.y) / t->scale));
+      t->value.push_back(static_cast<float>(value));
+      t->cell.push_back(m.cellOf(u, v));
     }
   }
-  // Number the cells that hold samples 0..cells-1 (the solver's work and memory follow them).
-  std::vector<int> used = t.cell;
+}
+
+// Numbers the cells that hold samples 0..cells-1 (the solver's work and memory follow them).
+void numberUsedCells(AlignmentTemplate* t) {
+  std::vector<int> used = t->cell;
   std::sort(used.begin(), used.end());
   used.erase(std::unique(used.begin(), used.end()), used.end());
-  for (int& c : t.cell) c = static_cast<int>(std::lower_bound(used.begin(), used.end(), c) - used.begin());
-  t.cells = static_cast<int>(used.size());
-  // Samples in cell order: the solver takes each cell's samples as one range (the cells
-  // are small and numbered along the grid, so the image is still read locally).
-  std::vector<size_t> order(t.ref.size());
+  for (int& c : t->cell) c = static_cast<int>(std::lower_bound(used.begin(), used.end(), c) - used.begin());
+  t->cells = static_cast<int>(used.size());
+}
+
+// Samples in cell order: the solver takes each cell's samples as one range (the cells
+// are small and numbered along the grid, so the image is still read locally).
+void sortSamplesByCell(AlignmentTemplate* t) {
+  std::vector<size_t> order(t->ref.size());
   for (size_t k = 0; k < order.size(); ++k) order[k] = k;
-  std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) { return t.cell[a] < t.cell[b]; });
-  AlignmentTemplate sorted = t;
+  std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) { return t->cell[a] < t->cell[b]; });
+  AlignmentTemplate sorted = *t;
   for (size_t k = 0; k < order.size(); ++k) {
-    sorted.ref[k] = t.ref[order[k]];
-    sorted.value[k] = t.value[order[k]];
-    sorted.grad[k] = t.grad[order[k]];
-    sorted.cell[k] = t.cell[order[k]];
-    sorted.corner[k] = t.corner[order[k]];
+    sorted.ref[k] = t->ref[order[k]];
+    sorted.value[k] = t->value[order[k]];
+    sorted.grad[k] = t->grad[order[k]];
+    sorted.cell[k] = t->cell[order[k]];
+    sorted.corner[k] = t->corner[order[k]];
   }
-  t = std::move(sorted);
-  t.cell_start.assign(t.cells + 1, 0);
-  for (int c : t.cell) ++t.cell_start[c + 1];
-  for (int c = 0; c < t.cells; ++c) t.cell_start[c + 1] += t.cell_start[c];
+  *t = std::move(sorted);
+  t->cell_start.assign(t->cells + 1, 0);
+  for (int c : t->cell) ++t->cell_start[c + 1];
+  for (int c = 0; c < t->cells; ++c) t->cell_start[c + 1] += t->cell_start[c];
+}
+
+}  // namespace
+
+AlignmentTemplate buildAlignmentTemplate(const BoardPrior& taught_board, double blur_px, int stride) {
+  AlignmentTemplate t;
+  const TaughtBoard tb = taughtBoard(taught_board);
+  normaliseCorners(tb, &t);
+  sampleTemplate(patternModel(tb, blur_px), stride, &t);
+  numberUsedCells(&t);
+  sortSamplesByCell(&t);
   return t;
 }
 
@@ -247,190 +309,237 @@ float upperMedian(const float* values, int n, int used, AlignScratch* s) {
 
 }  // namespace
 
-AlignmentResult alignBoard(const AlignmentTemplate& t, const cv::Mat& gray, const AlignmentResult& start,
-                           bool warm, int max_steps) {
-  CV_Assert(gray.type() == CV_8UC1);
-  // Parameters: the 8 of the homography and the contrast b; each cell's own brightness a_c is
-  // eliminated (Schur complement), which is cheap since a sample belongs to one cell.
-  constexpr int kP = 9;
-  using Vec = Eigen::Matrix<double, kP, 1>;
-  using Mat = Eigen::Matrix<double, kP, kP>;
-  AlignmentResult result;
+namespace {
+
+// Parameters: the 8 of the homography and the contrast b; each cell's own brightness a_c is
+// eliminated (Schur complement), which is cheap since a sample belongs to one cell.
+constexpr int kP = 9;
+using Vec = Eigen::Matrix<double, kP, 1>;
+using Mat = Eigen::Matrix<double, kP, kP>;
+
+// The fitted parameters between Gauss-Newton steps: the homography (h33 = 1), the contrast b and
+// the Huber threshold of the robust weights.
+struct AlignParams {
+  double h[8];
+  double b;
+  double huber;
+};
+
+AlignParams startParams(const AlignmentResult& start, bool warm) {
   const cv::Matx33d a_norm = start.a * (1.0 / start.a(2, 2));
-  double h[8] = {a_norm(0, 0), a_norm(0, 1), a_norm(0, 2), a_norm(1, 0),
-                 a_norm(1, 1), a_norm(1, 2), a_norm(2, 0), a_norm(2, 1)};
-  double b = warm ? start.contrast : 0.0;
+  return {{a_norm(0, 0), a_norm(0, 1), a_norm(0, 2), a_norm(1, 0), a_norm(1, 1), a_norm(1, 2), a_norm(2, 0),
+           a_norm(2, 1)},
+          warm ? start.contrast : 0.0,
+          warm ? start.huber : 1e30};
+}
+
+// Sizes the working memory for t and sets the cell levels to start from.
+void prepareScratch(const AlignmentTemplate& t, const AlignmentResult& start, bool warm, AlignScratch* s) {
   const int n = static_cast<int>(t.ref.size());
-  static thread_local AlignScratch scratch;
-  AlignScratch& s = scratch;
   // a_c: last frame's when warm, so that the first pass's residuals (and with them its Huber
   // weights and robust scale) are the fitted ones, not the image's grey levels; the step re-solves
   // them in any case.
   if (warm && static_cast<int>(start.levels.size()) == t.cells)
-    s.level = start.levels;
+    s->level = start.levels;
   else
-    s.level.assign(t.cells, 0.0);
-  s.jac.resize(n, kP);
-  s.weight.resize(n);
-  s.res.resize(n);
-  s.px.resize(n);
-  s.py.resize(n);
-  s.iw.resize(n);
-  s.vals.resize(n);
-  s.inside.resize(n);
-  s.absres.resize(n);
-  s.cell_j.resize(t.cells, kP);
-  s.cell_r.resize(t.cells);
-  s.cell_used.resize(t.cells);
+    s->level.assign(t.cells, 0.0);
+  s->jac.resize(n, kP);
+  s->weight.resize(n);
+  s->res.resize(n);
+  s->px.resize(n);
+  s->py.resize(n);
+  s->iw.resize(n);
+  s->vals.resize(n);
+  s->inside.resize(n);
+  s->absres.resize(n);
+  s->cell_j.resize(t.cells, kP);
+  s->cell_r.resize(t.cells);
+  s->cell_used.resize(t.cells);
+}
+
+// The homography in single precision, for the per-sample loops.
+struct FloatHomography {
+  float h0, h1, h2, h3, h4, h5, h6, h7;
+  explicit FloatHomography(const double h[8])
+      : h0(static_cast<float>(h[0])), h1(static_cast<float>(h[1])), h2(static_cast<float>(h[2])),
+        h3(static_cast<float>(h[3])), h4(static_cast<float>(h[4])), h5(static_cast<float>(h[5])),
+        h6(static_cast<float>(h[6])), h7(static_cast<float>(h[7])) {}
+};
+
+// Where each sample lands in the image.
+void projectSamples(const AlignmentTemplate& t, const FloatHomography& f, AlignScratch* s) {
+  const int n = static_cast<int>(t.ref.size());
+  const float h0 = f.h0, h1 = f.h1, h2 = f.h2, h3 = f.h3, h4 = f.h4, h5 = f.h5, h6 = f.h6, h7 = f.h7;
+  // (The arrays are distinct, which GCC cannot prove for this many: ivdep lets it vectorise.)
+  const cv::Point2f* ref = t.ref.data();
+  float *px = s->px.data(), *py = s->py.data(), *iw = s->iw.data();
+#pragma GCC ivdep
+  for (int k = 0; k < n; ++k) {
+    const float u = ref[k].x, v = ref[k].y;
+    iw[k] = 1.0f / (h6 * u + h7 * v + 1.0f);
+    px[k] = (h0 * u + h1 * v + h2) * iw[k];
+    py[k] = (h3 * u + h4 * v + h5) * iw[k];
+  }
+}
+
+// The image there (bilinear) and the sample's residual from its cell's level; returns how many
+// samples lie inside the image. Outside the image: no weight, so the sample adds nothing to any sum.
+int readImage(const AlignmentTemplate& t, const cv::Mat& gray, AlignScratch* s) {
+  const int n = static_cast<int>(t.ref.size());
   const float max_x = static_cast<float>(gray.cols - 1), max_y = static_cast<float>(gray.rows - 1);
   const size_t stride = gray.step[0];
   const uchar* image = gray.data;
-  double huber = warm ? start.huber : 1e30;
-  for (int it = warm ? 1 : 0; it <= max_steps; ++it) {
-    // Pass 0 fits only the photometric terms (the start map is close): parameters first..8.
-    const bool geometric = it > 0;
-    const int first = geometric ? 0 : kP - 1;
-    // 1. Residual, weight and Jacobian of every sample, in single precision (the solve below is
-    // in double; float is far below the image noise here), in loops that vectorise apart from the
-    // one that reads the image.
-    const float h0 = static_cast<float>(h[0]), h1 = static_cast<float>(h[1]), h2 = static_cast<float>(h[2]);
-    const float h3 = static_cast<float>(h[3]), h4 = static_cast<float>(h[4]), h5 = static_cast<float>(h[5]);
-    const float h6 = static_cast<float>(h[6]), h7 = static_cast<float>(h[7]);
-    const float bf = static_cast<float>(b), huber_f = static_cast<float>(huber);
-    // (The arrays are distinct, which GCC cannot prove for this many: ivdep lets it vectorise.)
-    const cv::Point2f *ref = t.ref.data(), *grad = t.grad.data();
-    const float* value = t.value.data();
-    const int* cell = t.cell.data();
-    float *px = s.px.data(), *py = s.py.data(), *iw = s.iw.data(), *vals = s.vals.data();
-    float *inside = s.inside.data(), *res = s.res.data(), *absres = s.absres.data(), *weight = s.weight.data();
-    float* jac = s.jac.data();  // column p (parameter p) at jac + p * n
+  const int* cell = t.cell.data();
+  const float *px = s->px.data(), *py = s->py.data();
+  float *vals = s->vals.data(), *inside = s->inside.data(), *res = s->res.data();
+  int used = 0;
+  for (int k = 0; k < n; ++k) {
+    float val = 0.0f;
+    inside[k] = 0.0f;
+    if (px[k] >= 0.0f && py[k] >= 0.0f && px[k] < max_x && py[k] < max_y) {
+      const int x0 = static_cast<int>(px[k]), y0 = static_cast<int>(py[k]);
+      const float fx = px[k] - x0, fy = py[k] - y0;
+      const uchar* r0 = image + y0 * stride + x0;
+      const uchar* r1 = r0 + stride;
+      val = (1 - fy) * ((1 - fx) * r0[0] + fx * r0[1]) + fy * ((1 - fx) * r1[0] + fx * r1[1]);
+      inside[k] = 1.0f;
+      ++used;
+    }
+    vals[k] = val;
+    res[k] = val - static_cast<float>(s->level[cell[k]]);
+  }
+  return used;
+}
+
+// The contrast's term of the residual, the Huber weights and the contrast's Jacobian column.
+void photometricTerms(const AlignmentTemplate& t, const AlignParams& p, AlignScratch* s) {
+  const int n = static_cast<int>(t.ref.size());
+  const float bf = static_cast<float>(p.b), huber_f = static_cast<float>(p.huber);
+  const float* value = t.value.data();
+  float *inside = s->inside.data(), *res = s->res.data(), *absres = s->absres.data(), *weight = s->weight.data();
+  float* jac = s->jac.data();  // column p (parameter p) at jac + p * n
 #pragma GCC ivdep
-    for (int k = 0; k < n; ++k) {
-      const float u = ref[k].x, v = ref[k].y;
-      iw[k] = 1.0f / (h6 * u + h7 * v + 1.0f);
-      px[k] = (h0 * u + h1 * v + h2) * iw[k];
-      py[k] = (h3 * u + h4 * v + h5) * iw[k];
-    }
-    // The image there (bilinear) and the sample's model level. Outside the image: no weight, so
-    // the sample adds nothing to any sum.
-    int used = 0;
-    for (int k = 0; k < n; ++k) {
-      float val = 0.0f;
-      inside[k] = 0.0f;
-      if (px[k] >= 0.0f && py[k] >= 0.0f && px[k] < max_x && py[k] < max_y) {
-        const int x0 = static_cast<int>(px[k]), y0 = static_cast<int>(py[k]);
-        const float fx = px[k] - x0, fy = py[k] - y0;
-        const uchar* r0 = image + y0 * stride + x0;
-        const uchar* r1 = r0 + stride;
-        val = (1 - fy) * ((1 - fx) * r0[0] + fx * r0[1]) + fy * ((1 - fx) * r1[0] + fx * r1[1]);
-        inside[k] = 1.0f;
-        ++used;
-      }
-      vals[k] = val;
-      res[k] = val - static_cast<float>(s.level[cell[k]]);
-    }
+  for (int k = 0; k < n; ++k) {
+    const float r = res[k] - bf * value[k];
+    const float ar = std::abs(r);
+    res[k] = r;
+    absres[k] = inside[k] > 0.0f ? ar : -1.0f;  // -1: left out of the robust scale
+    weight[k] = inside[k] * huber_f / std::max(ar, huber_f);
+    jac[8 * n + k] = -value[k];
+  }
+}
+
+// The homography's Jacobian columns.
+void geometricJacobian(const AlignmentTemplate& t, const FloatHomography& f, double b, AlignScratch* s) {
+  const int n = static_cast<int>(t.ref.size());
+  const float h0 = f.h0, h1 = f.h1, h3 = f.h3, h4 = f.h4, h6 = f.h6, h7 = f.h7;
+  const float bf = static_cast<float>(b);
+  const cv::Point2f *ref = t.ref.data(), *grad = t.grad.data();
+  const float *px = s->px.data(), *py = s->py.data(), *iw = s->iw.data();
+  float* jac = s->jac.data();  // column p (parameter p) at jac + p * n
 #pragma GCC ivdep
-    for (int k = 0; k < n; ++k) {
-      const float r = res[k] - bf * value[k];
-      const float ar = std::abs(r);
-      res[k] = r;
-      absres[k] = inside[k] > 0.0f ? ar : -1.0f;  // -1: left out of the robust scale
-      weight[k] = inside[k] * huber_f / std::max(ar, huber_f);
-      jac[8 * n + k] = -value[k];
+  for (int k = 0; k < n; ++k) {
+    // The gradient of the fitted pattern, not of the image: the scene's own texture then
+    // enters only through the residual, weighted by the pattern's edges (a matched filter).
+    const float u = ref[k].x, v = ref[k].y, w = iw[k], x = px[k], y = py[k];
+    const float j00 = (h0 - x * h6) * w, j01 = (h1 - x * h7) * w;
+    const float j10 = (h3 - y * h6) * w, j11 = (h4 - y * h7) * w;
+    const float bdet = bf / (j00 * j11 - j01 * j10);
+    const float tu = grad[k].x, tw = grad[k].y;
+    const float gx = bdet * (j11 * tu - j10 * tw), gy = bdet * (-j01 * tu + j00 * tw);
+    const float gp = -(gx * x + gy * y) * w;
+    jac[k] = gx * u * w, jac[n + k] = gx * v * w, jac[2 * n + k] = gx * w;
+    jac[3 * n + k] = gy * u * w, jac[4 * n + k] = gy * v * w, jac[5 * n + k] = gy * w;
+    jac[6 * n + k] = gp * u, jac[7 * n + k] = gp * v;
+  }
+}
+
+// 1. Residual, weight and Jacobian of every sample, in single precision (the solve below is
+// in double; float is far below the image noise here), in loops that vectorise apart from the
+// one that reads the image. Returns the samples inside the image.
+int evaluateSamples(const AlignmentTemplate& t, const cv::Mat& gray, const AlignParams& p, bool geometric,
+                    AlignScratch* s) {
+  const FloatHomography f(p.h);
+  projectSamples(t, f, s);
+  const int used = readImage(t, gray, s);
+  photometricTerms(t, p, s);
+  if (geometric) geometricJacobian(t, f, p.b, s);
+  return used;
+}
+
+// 2. Eliminate the cell levels (their Jacobian is -1). The Schur complement of a cell's level
+// is the weighted covariance of its samples: subtract each cell's weighted mean Jacobian
+// from its samples, then H = sum w j j^T and g = sum w j r over the centred rows (which also
+// keeps the single-precision sums free of cancellation). Parameters first..8 take part.
+void eliminateCellLevels(const AlignmentTemplate& t, int first, AlignScratch* s) {
+  for (int c = 0; c < t.cells; ++c) {
+    const int k0 = t.cell_start[c], k1 = t.cell_start[c + 1];
+    double sw = 0, swr = 0, swj[kP] = {};
+    for (int k = k0; k < k1; ++k) {
+      const double w = s->weight[k];
+      sw += w;
+      swr += w * s->res[k];
+      for (int p = first; p < kP; ++p) swj[p] += w * s->jac(k, p);
     }
-    if (geometric) {
-#pragma GCC ivdep
-      for (int k = 0; k < n; ++k) {
-        // The gradient of the fitted pattern, not of the image: the scene's own texture then
-        // enters only through the residual, weighted by the pattern's edges (a matched filter).
-        const float u = ref[k].x, v = ref[k].y, w = iw[k], x = px[k], y = py[k];
-        const float j00 = (h0 - x * h6) * w, j01 = (h1 - x * h7) * w;
-        const float j10 = (h3 - y * h6) * w, j11 = (h4 - y * h7) * w;
-        const float bdet = bf / (j00 * j11 - j01 * j10);
-        const float tu = grad[k].x, tw = grad[k].y;
-        const float gx = bdet * (j11 * tu - j10 * tw), gy = bdet * (-j01 * tu + j00 * tw);
-        const float gp = -(gx * x + gy * y) * w;
-        jac[k] = gx * u * w, jac[n + k] = gx * v * w, jac[2 * n + k] = gx * w;
-        jac[3 * n + k] = gy * u * w, jac[4 * n + k] = gy * v * w, jac[5 * n + k] = gy * w;
-        jac[6 * n + k] = gp * u, jac[7 * n + k] = gp * v;
-      }
-    }
-    if (used < 50) return result;
-    // Robust scale from this pass's residuals (normal: MAD * 1.4826), Huber at 1.345 sigma.
-    huber = std::max(1.0, 1.345 * 1.4826 * upperMedian(s.absres.data(), n, used, &s));
-    // 2. Eliminate the cell levels (their Jacobian is -1). The Schur complement of a cell's level
-    // is the weighted covariance of its samples: subtract each cell's weighted mean Jacobian
-    // from its samples, then H = sum w j j^T and g = sum w j r over the centred rows (which also
-    // keeps the single-precision sums free of cancellation).
-    for (int c = 0; c < t.cells; ++c) {
-      const int k0 = t.cell_start[c], k1 = t.cell_start[c + 1];
-      double sw = 0, swr = 0, swj[kP] = {};
-      for (int k = k0; k < k1; ++k) {
-        const double w = s.weight[k];
-        sw += w;
-        swr += w * s.res[k];
-        for (int p = first; p < kP; ++p) swj[p] += w * s.jac(k, p);
-      }
-      s.cell_used[c] = sw > 0;
-      if (sw <= 0) continue;
-      s.cell_r[c] = swr / sw;
-      for (int p = first; p < kP; ++p) {
-        const double mean = swj[p] / sw;
-        s.cell_j(c, p) = mean;
-        const float mean_f = static_cast<float>(mean);
-        for (int k = k0; k < k1; ++k) s.jac(k, p) -= mean_f;
-      }
-    }
-    // 3. Normal equations of the centred rows, scaled by sqrt(w) (one symmetric product).
-    s.weight = s.weight.cwiseSqrt();
-    const Eigen::Index cols = kP - first;
-    s.rows = s.jac.rightCols(cols).array().colwise() * s.weight.array();
-    s.weighted_res = s.weight.cwiseProduct(s.res);
-    Eigen::Matrix<float, kP, kP> hf = Eigen::Matrix<float, kP, kP>::Zero();
-    hf.topLeftCorner(cols, cols).selfadjointView<Eigen::Lower>().rankUpdate(s.rows.transpose());
-    Eigen::Matrix<float, kP, 1> gf = Eigen::Matrix<float, kP, 1>::Zero();
-    gf.head(cols).noalias() = s.rows.transpose() * s.weighted_res;
-    Mat full = Mat::Identity();
-    Vec g = Vec::Zero();
+    s->cell_used[c] = sw > 0;
+    if (sw <= 0) continue;
+    s->cell_r[c] = swr / sw;
     for (int p = first; p < kP; ++p) {
-      g[p] = gf[p - first];
-      for (int q = first; q <= p; ++q) full(p, q) = full(q, p) = hf(p - first, q - first);
-    }
-    const Vec delta = full.ldlt().solve(-g);
-    if (!delta.allFinite()) return result;
-    for (int p = first; p < 8; ++p) h[p] += delta[p];
-    b += delta[8];
-    ++result.passes;
-    // Back-substitute each level (its Jacobian is -1): da = mean r + mean j . delta over the cell.
-    for (int c = 0; c < t.cells; ++c) {
-      if (!s.cell_used[c]) continue;
-      double dot = 0;
-      for (int p = first; p < kP; ++p) dot += s.cell_j(c, p) * delta[p];
-      s.level[c] += s.cell_r[c] + dot;
-    }
-    result.samples = used;
-    if (geometric) {
-      // Corner motion of this step (at the outer corners; the map is projective).
-      const cv::Matx33d moved(h[0], h[1], h[2], h[3], h[4], h[5], h[6], h[7], 1.0);
-      const cv::Matx33d before = moved - cv::Matx33d(delta[0], delta[1], delta[2], delta[3], delta[4], delta[5],
-                                                     delta[6], delta[7], 0.0);
-      double shift = 0;
-      for (size_t id : {size_t(0), t.corners.size() - 1}) {
-        const cv::Point2f c = t.corners[id];
-        shift = std::max(shift, cv::norm(applyHomography(moved, c.x, c.y) - applyHomography(before, c.x, c.y)));
-      }
-      if (shift < kConvergedPx) {
-        result.converged = true;
-        break;
-      }
+      const double mean = swj[p] / sw;
+      s->cell_j(c, p) = mean;
+      const float mean_f = static_cast<float>(mean);
+      for (int k = k0; k < k1; ++k) s->jac(k, p) -= mean_f;
     }
   }
-  result.huber = huber;
-  result.levels = s.level;
-  result.a = cv::Matx33d(h[0], h[1], h[2], h[3], h[4], h[5], h[6], h[7], 1.0);
-  result.contrast = b;
-  // Each corner's own contrast: sum T r / sum T^2 over its samples, r the image minus its cell's
-  // level (the image as the last pass sampled it: one step from the result, too small to matter).
+}
+
+// 3. Normal equations of the centred rows, scaled by sqrt(w) (one symmetric product), solved
+// for the step of parameters first..8 (the others' entries 0).
+Vec solveStep(int first, AlignScratch* s) {
+  s->weight = s->weight.cwiseSqrt();
+  const Eigen::Index cols = kP - first;
+  s->rows = s->jac.rightCols(cols).array().colwise() * s->weight.array();
+  s->weighted_res = s->weight.cwiseProduct(s->res);
+  Eigen::Matrix<float, kP, kP> hf = Eigen::Matrix<float, kP, kP>::Zero();
+  hf.topLeftCorner(cols, cols).selfadjointView<Eigen::Lower>().rankUpdate(s->rows.transpose());
+  Eigen::Matrix<float, kP, 1> gf = Eigen::Matrix<float, kP, 1>::Zero();
+  gf.head(cols).noalias() = s->rows.transpose() * s->weighted_res;
+  Mat full = Mat::Identity();
+  Vec g = Vec::Zero();
+  for (int p = first; p < kP; ++p) {
+    g[p] = gf[p - first];
+    for (int q = first; q <= p; ++q) full(p, q) = full(q, p) = hf(p - first, q - first);
+  }
+  return full.ldlt().solve(-g);
+}
+
+// Back-substitute each level (its Jacobian is -1): da = mean r + mean j . delta over the cell.
+void backSubstituteLevels(const AlignmentTemplate& t, int first, const Vec& delta, AlignScratch* s) {
+  for (int c = 0; c < t.cells; ++c) {
+    if (!s->cell_used[c]) continue;
+    double dot = 0;
+    for (int p = first; p < kP; ++p) dot += s->cell_j(c, p) * delta[p];
+    s->level[c] += s->cell_r[c] + dot;
+  }
+}
+
+// Corner motion of the step delta that led to h (at the outer corners; the map is projective).
+double cornerShift(const AlignmentTemplate& t, const double h[8], const Vec& delta) {
+  const cv::Matx33d moved(h[0], h[1], h[2], h[3], h[4], h[5], h[6], h[7], 1.0);
+  const cv::Matx33d before = moved - cv::Matx33d(delta[0], delta[1], delta[2], delta[3], delta[4], delta[5],
+                                                 delta[6], delta[7], 0.0);
+  double shift = 0;
+  for (size_t id : {size_t(0), t.corners.size() - 1}) {
+    const cv::Point2f c = t.corners[id];
+    shift = std::max(shift, cv::norm(applyHomography(moved, c.x, c.y) - applyHomography(before, c.x, c.y)));
+  }
+  return shift;
+}
+
+// Each corner's own contrast: sum T r / sum T^2 over its samples, r the image minus its cell's
+// level (the image as the last pass sampled it: one step from the result, too small to matter).
+std::vector<float> cornerContrasts(const AlignmentTemplate& t, const AlignScratch& s, double b) {
+  const int n = static_cast<int>(t.ref.size());
   std::vector<double> tr(t.corners.size(), 0.0), tt(t.corners.size(), 0.0);
   for (int k = 0; k < n; ++k) {
     if (s.inside[k] == 0.0f) continue;
@@ -438,10 +547,50 @@ AlignmentResult alignBoard(const AlignmentTemplate& t, const cv::Mat& gray, cons
     tr[t.corner[k]] += tv * (s.vals[k] - s.level[t.cell[k]]);
     tt[t.corner[k]] += tv * tv;
   }
-  result.corner_contrast.assign(t.corners.size(), std::numeric_limits<float>::quiet_NaN());
+  std::vector<float> contrast(t.corners.size(), std::numeric_limits<float>::quiet_NaN());
   for (size_t id = 0; id < t.corners.size(); ++id)
-    if (tt[id] > 0 && b > 0) result.corner_contrast[id] = static_cast<float>(tr[id] / tt[id] / b);
-  result.ok = std::isfinite(b) && b > 0;
+    if (tt[id] > 0 && b > 0) contrast[id] = static_cast<float>(tr[id] / tt[id] / b);
+  return contrast;
+}
+
+}  // namespace
+
+AlignmentResult alignBoard(const AlignmentTemplate& t, const cv::Mat& gray, const AlignmentResult& start,
+                           bool warm, int max_steps) {
+  CV_Assert(gray.type() == CV_8UC1);
+  AlignmentResult result;
+  AlignParams p = startParams(start, warm);
+  const int n = static_cast<int>(t.ref.size());
+  static thread_local AlignScratch scratch;
+  AlignScratch& s = scratch;
+  prepareScratch(t, start, warm, &s);
+  for (int it = warm ? 1 : 0; it <= max_steps; ++it) {
+    // Pass 0 fits only the photometric terms (the start map is close): parameters first..8.
+    const bool geometric = it > 0;
+    const int first = geometric ? 0 : kP - 1;
+    const int used = evaluateSamples(t, gray, p, geometric, &s);
+    if (used < 50) return result;
+    // Robust scale from this pass's residuals (normal: MAD * 1.4826), Huber at 1.345 sigma.
+    p.huber = std::max(1.0, 1.345 * 1.4826 * upperMedian(s.absres.data(), n, used, &s));
+    eliminateCellLevels(t, first, &s);
+    const Vec delta = solveStep(first, &s);
+    if (!delta.allFinite()) return result;
+    for (int q = first; q < 8; ++q) p.h[q] += delta[q];
+    p.b += delta[8];
+    ++result.passes;
+    backSubstituteLevels(t, first, delta, &s);
+    result.samples = used;
+    if (geometric && cornerShift(t, p.h, delta) < kConvergedPx) {
+      result.converged = true;
+      break;
+    }
+  }
+  result.huber = p.huber;
+  result.levels = s.level;
+  result.a = cv::Matx33d(p.h[0], p.h[1], p.h[2], p.h[3], p.h[4], p.h[5], p.h[6], p.h[7], 1.0);
+  result.contrast = p.b;
+  result.corner_contrast = cornerContrasts(t, s, p.b);
+  result.ok = std::isfinite(p.b) && p.b > 0;
   return result;
 }
 
