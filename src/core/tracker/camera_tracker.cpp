@@ -48,16 +48,16 @@ int squareSign(const BoardPrior& board, int col, int row) {
   return ((col + row) & 1) == 0 ? board.sign : -board.sign;
 }
 
-// Correlates the expected brightness of the squares (and of the white margin around them)
-// with box means of the image over a window of shifts. The score is flat while every box stays
-// inside its square, so the shift is the centroid of the near-maximal plateau, not the argmax.
-RecentreResult recentre(const cv::Mat& gray, const cv::Matx33d& h, const BoardPrior& board,
-                        const std::vector<cv::Point2f>& offsets, double square, double radius, int step) {
-  struct Sample {
-    cv::Point2f p;
-    float sign;
-  };
-  std::vector<Sample> samples;
+// A point of the recentring correlation: the middle of a square (or of the white margin around
+// them) and its expected brightness (+1 bright, -1 dark).
+struct RecentreSample {
+  cv::Point2f p;
+  float sign;
+};
+
+std::vector<RecentreSample> recentreSamples(const cv::Matx33d& h, const BoardPrior& board,
+                                            const std::vector<cv::Point2f>& offsets) {
+  std::vector<RecentreSample> samples;
   for (int r = -2; r <= board.rows; ++r) {
     for (int c = -2; c <= board.cols; ++c) {
       const bool margin = r == -2 || c == -2 || r == board.rows || c == board.cols;
@@ -66,45 +66,57 @@ RecentreResult recentre(const cv::Mat& gray, const cv::Matx33d& h, const BoardPr
       samples.push_back({applyHomography(h, x, y) + offsetNear(board, offsets, x, y), sign});
     }
   }
-  const int box = std::max(1, static_cast<int>(std::lround(0.2 * square)));
+  return samples;
+}
+
+// The image region the boxes around the samples reach at any shift.
+cv::Rect recentreRoi(const std::vector<RecentreSample>& samples, int box, double radius) {
   const int reach = static_cast<int>(std::ceil(radius)) + box + 2;
   float umin = 1e9f, vmin = 1e9f, umax = -1e9f, vmax = -1e9f;
-  for (const Sample& s : samples) {
+  for (const RecentreSample& s : samples) {
     umin = std::min(umin, s.p.x);
     vmin = std::min(vmin, s.p.y);
     umax = std::max(umax, s.p.x);
     vmax = std::max(vmax, s.p.y);
   }
-  const cv::Rect roi(static_cast<int>(std::floor(umin)) - reach, static_cast<int>(std::floor(vmin)) - reach,
-                     static_cast<int>(umax - umin) + 2 * reach + 2,
-                     static_cast<int>(vmax - vmin) + 2 * reach + 2);
-  const BoxSampler sampler(gray, roi, box);
-  // Keep the samples whose box stays in the image at every shift.
-  const int r_int = static_cast<int>(std::ceil(radius));
-  std::vector<Sample> usable;
-  double sign_sum = 0.0;
-  for (const Sample& s : samples) {
-    if (sampler.contains(s.p + cv::Point2f(-r_int, -r_int)) &&
-        sampler.contains(s.p + cv::Point2f(r_int, r_int))) {
-      usable.push_back(s);
-      sign_sum += s.sign;
-    }
-  }
-  RecentreResult result;
-  const double n = static_cast<double>(usable.size());
-  if (usable.size() < 8) return result;
-  const double sign_var = n - sign_sum * sign_sum / n;
-  if (sign_var <= 0) return result;
-  const int cells = 2 * (r_int / step) + 1;
-  cv::Mat scores(cells, cells, CV_64F, cv::Scalar(-1.0));
+  return cv::Rect(static_cast<int>(std::floor(umin)) - reach, static_cast<int>(std::floor(vmin)) - reach,
+                  static_cast<int>(umax - umin) + 2 * reach + 2, static_cast<int>(vmax - vmin) + 2 * reach + 2);
+}
+
+// The scores of the shifts, (2 * (r_int / step) + 1) on a side, centre at no shift.
+struct ShiftScores {
+  int step = 1;
+  int cells = 0;
+  cv::Mat scores;  // CV_64F
   double best = -2.0;
-  cv::Point best_cell(0, 0);
-  for (int iy = 0; iy < cells; ++iy) {
-    for (int ix = 0; ix < cells; ++ix) {
-      const cv::Point2f d(static_cast<float>((ix - cells / 2) * step),
-                          static_cast<float>((iy - cells / 2) * step));
+  cv::Point best_cell{0, 0};
+  cv::Point2f shiftOf(int ix, int iy) const {
+    return cv::Point2f(static_cast<float>((ix - cells / 2) * step), static_cast<float>((iy - cells / 2) * step));
+  }
+};
+
+// The samples whose box stays in the image at every shift (r_int px at most along each axis).
+std::vector<RecentreSample> usableSamples(const std::vector<RecentreSample>& samples, const BoxSampler& sampler,
+                                          int r_int) {
+  std::vector<RecentreSample> usable;
+  for (const RecentreSample& s : samples) {
+    if (sampler.contains(s.p + cv::Point2f(-r_int, -r_int)) && sampler.contains(s.p + cv::Point2f(r_int, r_int)))
+      usable.push_back(s);
+  }
+  return usable;
+}
+
+// Correlation of the samples' signs with the box means at every shift of the window.
+void scoreShifts(const std::vector<RecentreSample>& usable, const BoxSampler& sampler, double sign_sum,
+                 ShiftScores* grid) {
+  const double n = static_cast<double>(usable.size());
+  const double sign_var = n - sign_sum * sign_sum / n;
+  grid->scores = cv::Mat(grid->cells, grid->cells, CV_64F, cv::Scalar(-1.0));
+  for (int iy = 0; iy < grid->cells; ++iy) {
+    for (int ix = 0; ix < grid->cells; ++ix) {
+      const cv::Point2f d = grid->shiftOf(ix, iy);
       double sv = 0, v1 = 0, v2 = 0;
-      for (const Sample& s : usable) {
+      for (const RecentreSample& s : usable) {
         float v = 0;
         sampler.mean(s.p + d, &v);
         sv += s.sign * v;
@@ -114,29 +126,57 @@ RecentreResult recentre(const cv::Mat& gray, const cv::Matx33d& h, const BoardPr
       const double cov = sv - sign_sum * v1 / n;
       const double var = v2 - v1 * v1 / n;
       const double score = var > 1e-9 ? cov / std::sqrt(var * sign_var) : 0.0;
-      scores.at<double>(iy, ix) = score;
-      if (score > best) {
-        best = score;
-        best_cell = cv::Point(ix, iy);
+      grid->scores.at<double>(iy, ix) = score;
+      if (score > grid->best) {
+        grid->best = score;
+        grid->best_cell = cv::Point(ix, iy);
       }
     }
   }
-  // Centroid of the plateau around the best shift (within half a square of it).
-  const double threshold = best - 0.1 * std::abs(best);
+}
+
+// Centroid of the plateau around the best shift (within half a square of it).
+cv::Point2f plateauCentroid(const ShiftScores& grid, double square) {
+  const int cells = grid.cells, step = grid.step;
+  const cv::Point best_cell = grid.best_cell;
+  const double threshold = grid.best - 0.1 * std::abs(grid.best);
   const int half = std::max(1, static_cast<int>(0.5 * square / step));
   double wsum = 0, xsum = 0, ysum = 0;
   for (int iy = std::max(0, best_cell.y - half); iy <= std::min(cells - 1, best_cell.y + half); ++iy) {
     for (int ix = std::max(0, best_cell.x - half); ix <= std::min(cells - 1, best_cell.x + half); ++ix) {
-      const double wgt = scores.at<double>(iy, ix) - threshold;
+      const double wgt = grid.scores.at<double>(iy, ix) - threshold;
       if (wgt <= 0) continue;
       wsum += wgt;
       xsum += wgt * (ix - cells / 2) * step;
       ysum += wgt * (iy - cells / 2) * step;
     }
   }
-  result.score = best;
-  result.shift = wsum > 0 ? cv::Point2f(static_cast<float>(xsum / wsum), static_cast<float>(ysum / wsum))
-                          : cv::Point2f((best_cell.x - cells / 2) * step, (best_cell.y - cells / 2) * step);
+  return wsum > 0 ? cv::Point2f(static_cast<float>(xsum / wsum), static_cast<float>(ysum / wsum))
+                  : cv::Point2f((best_cell.x - cells / 2) * step, (best_cell.y - cells / 2) * step);
+}
+
+// Correlates the expected brightness of the squares (and of the white margin around them)
+// with box means of the image over a window of shifts. The score is flat while every box stays
+// inside its square, so the shift is the centroid of the near-maximal plateau, not the argmax.
+RecentreResult recentre(const cv::Mat& gray, const cv::Matx33d& h, const BoardPrior& board,
+                        const std::vector<cv::Point2f>& offsets, double square, double radius, int step) {
+  const std::vector<RecentreSample> samples = recentreSamples(h, board, offsets);
+  const int box = std::max(1, static_cast<int>(std::lround(0.2 * square)));
+  const BoxSampler sampler(gray, recentreRoi(samples, box, radius), box);
+  const int r_int = static_cast<int>(std::ceil(radius));
+  const std::vector<RecentreSample> usable = usableSamples(samples, sampler, r_int);
+  double sign_sum = 0.0;
+  for (const RecentreSample& s : usable) sign_sum += s.sign;
+  RecentreResult result;
+  const double n = static_cast<double>(usable.size());
+  if (usable.size() < 8) return result;
+  if (n - sign_sum * sign_sum / n <= 0) return result;  // all of one sign: no contrast to correlate
+  ShiftScores grid;
+  grid.step = step;
+  grid.cells = 2 * (r_int / step) + 1;
+  scoreShifts(usable, sampler, sign_sum, &grid);
+  result.score = grid.best;
+  result.shift = plateauCentroid(grid, square);
   return result;
 }
 
