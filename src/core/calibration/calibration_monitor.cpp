@@ -125,6 +125,202 @@ std::string CalibrationMonitorOptions::Check() const {
   return "";
 }
 
+namespace {
+
+// Depth mode: the matches' row offsets after rectification with the calibration in force, and
+// each offset's derivative with respect to a rotation of the right camera about x and z (deg).
+struct RowOffsets {
+  std::vector<double> offsets;
+  std::vector<Eigen::Vector2d> jacobians;
+  size_t size() const { return offsets.size(); }
+};
+
+// The depth frame's images must have the calibration's size and be 8-bit grey or colour.
+void checkDepthFrame(const StereoRig& rig, const cv::Mat& left_raw, const cv::Mat& right_raw) {
+  const cv::Size size(rig.left.width, rig.left.height);
+  if (left_raw.size() != size || right_raw.size() != size)
+    throw std::invalid_argument("CalibrationMonitor: depth frame of " + std::to_string(left_raw.cols) + "x" +
+                                std::to_string(left_raw.rows) + " for a calibration of " +
+                                std::to_string(size.width) + "x" + std::to_string(size.height));
+  for (const cv::Mat* image : {&left_raw, &right_raw})
+    if (image->type() != CV_8UC1 && image->type() != CV_8UC3)
+      throw std::invalid_argument("CalibrationMonitor: depth frame images must be 8-bit grey or colour "
+                                  "(CV_8UC1 / CV_8UC3)");
+}
+
+// Robust fit offset = J w (w: tilt, roll in deg) from `start`: Huber weights inside the band
+// around the model's row. Returns the matches used (0 when the step is not finite); normal: the
+// weighted normal equations of the last iteration.
+int fitTiltRoll(const RowOffsets& rows, const CalibrationMonitorOptions& options, const Eigen::Vector2d& start,
+                Eigen::Vector2d* w, Eigen::Matrix2d* normal) {
+  *w = start;
+  int used = 0;
+  for (int iteration = 0; iteration < 8; ++iteration) {
+    normal->setZero();
+    Eigen::Vector2d rhs = Eigen::Vector2d::Zero();
+    used = 0;
+    for (size_t i = 0; i < rows.size(); ++i) {
+      const double r = rows.offsets[i] - rows.jacobians[i].dot(*w);
+      if (std::abs(r) > options.band_half_height_px) continue;
+      const double weight = std::abs(r) <= options.huber_px ? 1.0 : options.huber_px / std::abs(r);
+      *normal += weight * rows.jacobians[i] * rows.jacobians[i].transpose();
+      rhs += weight * rows.jacobians[i] * r;
+      ++used;
+    }
+    if (used < options.min_matches) return used;
+    const Eigen::Vector2d step = normal->ldlt().solve(rhs);
+    if (!step.allFinite()) return 0;
+    *w += step;
+    if (step.norm() < 1e-6) break;
+  }
+  return used;
+}
+
+// The median offset taken as a tilt: the start when the smoothed estimate finds too few matches
+// near its rows (a knock larger than the band since the last frame).
+Eigen::Vector2d medianStart(const RowOffsets& rows) {
+  std::vector<double> sorted = rows.offsets, jx;
+  for (const auto& j : rows.jacobians) jx.push_back(j(0));
+  const size_t mid = sorted.size() / 2;
+  std::nth_element(sorted.begin(), sorted.begin() + mid, sorted.end());
+  std::nth_element(jx.begin(), jx.begin() + mid, jx.end());
+  return Eigen::Vector2d(std::abs(jx[mid]) > 1e-9 ? sorted[mid] / jx[mid] : 0.0, 0.0);
+}
+
+// Covariance of the fit w: the residuals' robust spread (MAD) through the weighted normal equations.
+Eigen::Matrix2d tiltRollCovariance(const RowOffsets& rows, double band_half_height_px, const Eigen::Vector2d& w,
+                                   const Eigen::Matrix2d& normal) {
+  std::vector<double> abs_residuals;
+  for (size_t i = 0; i < rows.size(); ++i) {
+    const double r = std::abs(rows.offsets[i] - rows.jacobians[i].dot(w));
+    if (r <= band_half_height_px) abs_residuals.push_back(r);
+  }
+  const size_t mid = abs_residuals.size() / 2;
+  std::nth_element(abs_residuals.begin(), abs_residuals.begin() + mid, abs_residuals.end());
+  const double scale = 1.4826 * abs_residuals[mid];
+  return scale * scale * normal.inverse();
+}
+
+// Verification: a board corner the change is fitted to.
+struct FitCorner {
+  Eigen::Vector3d in_left;  // the corner in the left optical frame
+  Eigen::Vector2d pixel;
+  int camera;  // 0 left, 1 right
+};
+
+// What the boards of one verification show: the corners to fit and the squared reprojection
+// errors of each camera alone and of the right camera against the left's board poses.
+struct BoardErrors {
+  std::vector<FitCorner> fit_corners;
+  std::vector<double> sq_left, sq_right, sq_stereo;
+};
+
+const BoardCorners* findCorners(const std::vector<BoardCorners>& list, int id) {
+  for (const auto& b : list)
+    if (b.board_id == id) return &b;
+  return nullptr;
+}
+
+// Pose of a board in a camera from its corners (PnP on undistorted rays).
+bool solvePose(const VirtualBoard& board, const BoardCorners& corners, const PinholeCamera& camera,
+               Eigen::Isometry3d* camera_from_board) {
+  std::vector<cv::Point3d> object;
+  std::vector<cv::Point2d> image;
+  for (size_t i = 0; i < corners.size(); ++i) {
+    const Eigen::Vector3d p = board.cornerInBoard(corners.corner_ids[i]);
+    const Eigen::Vector2d n = camera.pixelToNormalized(Eigen::Vector2d(corners.u[i], corners.v[i]));
+    object.emplace_back(p.x(), p.y(), p.z());
+    image.emplace_back(n.x(), n.y());
+  }
+  cv::Vec3d rvec, tvec;
+  if (!cv::solvePnP(object, image, cv::Matx33d::eye(), cv::noArray(), rvec, tvec, false, cv::SOLVEPNP_IPPE))
+    return false;
+  cv::solvePnPRefineLM(object, image, cv::Matx33d::eye(), cv::noArray(), rvec, tvec);
+  cv::Matx33d R;
+  cv::Rodrigues(rvec, R);
+  camera_from_board->setIdentity();
+  for (int r = 0; r < 3; ++r) {
+    for (int c = 0; c < 3; ++c) camera_from_board->linear()(r, c) = R(r, c);
+    camera_from_board->translation()(r) = tvec(r);
+  }
+  return camera_from_board->translation().z() > 0;
+}
+
+bool squaredError(const PinholeCamera& camera, const Eigen::Vector3d& p, float u, float v, double* sq) {
+  Eigen::Vector2d pixel;
+  if (!camera.project(p, &pixel)) return false;
+  *sq = (pixel - Eigen::Vector2d(u, v)).squaredNorm();
+  return true;
+}
+
+bool usableCorners(const VirtualBoard& board, const BoardCorners* c, int min_board_corners) {
+  if (!c || static_cast<int>(c->size()) < min_board_corners) return false;
+  for (int id : c->corner_ids)
+    if (id < 0 || id >= board.cornerCount()) return false;
+  return c->u.size() == c->size() && c->v.size() == c->size();
+}
+
+// The corners' pixel offsets from where the rig changed by c projects them.
+void changeResiduals(const StereoRig& rig, const std::vector<FitCorner>& corners, const Change& c,
+                     Eigen::VectorXd* r) {
+  const StereoRig o = observedRig(rig, c);
+  r->resize(2 * corners.size());
+  for (size_t i = 0; i < corners.size(); ++i) {
+    const FitCorner& k = corners[i];
+    Eigen::Vector2d pixel;
+    const bool ok = k.camera == 0 ? o.left.project(k.in_left, &pixel)
+                                  : o.right.project(o.right_from_left * k.in_left, &pixel);
+    const Eigen::Vector2d d = ok ? Eigen::Vector2d(k.pixel - pixel) : Eigen::Vector2d::Zero();
+    r->segment<2>(2 * i) = d;
+  }
+}
+
+// One Gauss-Newton step of the change c (numeric derivatives of the active parameters, Huber
+// weights) given its residuals r; returns the step of the active parameters.
+Eigen::VectorXd changeStep(const StereoRig& rig, const std::vector<FitCorner>& corners, const std::vector<int>& active,
+                           const Change& c, const Eigen::VectorXd& r) {
+  const double step[kChange] = {1e-3, 1e-3, 1e-3, 1e-5, 1e-5};
+  const double huber = 1.0;
+  Eigen::MatrixXd J(r.size(), active.size());
+  for (size_t a = 0; a < active.size(); ++a) {
+    Change cs = c;
+    cs(active[a]) += step[active[a]];
+    Eigen::VectorXd rs;
+    changeResiduals(rig, corners, cs, &rs);
+    J.col(a) = -(rs - r) / step[active[a]];  // derivative of the prediction
+  }
+  Eigen::VectorXd weights(r.size());
+  for (int i = 0; i < r.size(); i += 2) {
+    const double e = r.segment<2>(i).norm();
+    weights(i) = weights(i + 1) = e <= huber ? 1.0 : huber / e;
+  }
+  const Eigen::MatrixXd JtW = J.transpose() * weights.asDiagonal();
+  return (JtW * J).ldlt().solve(JtW * r);
+}
+
+// Fits the change to the corners (Gauss-Newton, numeric derivatives, Huber weights). Without
+// board poses the boards sit where the left camera puts them, so the left focal scale is held.
+// r: the residuals of the fitted change.
+Change fitChange(const StereoRig& rig, const std::vector<FitCorner>& corners, bool boards_posed,
+                 Eigen::VectorXd* r) {
+  const int n = static_cast<int>(kChange);
+  std::vector<int> active;
+  for (int k = 0; k < n; ++k)
+    if (k != 3 || boards_posed) active.push_back(k);
+  Change c = Change::Zero();
+  for (int iteration = 0; iteration < 6; ++iteration) {
+    changeResiduals(rig, corners, c, r);
+    const Eigen::VectorXd delta = changeStep(rig, corners, active, c, *r);
+    if (!delta.allFinite()) break;
+    for (size_t a = 0; a < active.size(); ++a) c(active[a]) += delta(a);
+    if (delta.norm() < 1e-7) break;
+  }
+  changeResiduals(rig, corners, c, r);
+  return c;
+}
+
+}  // namespace
+
 struct CalibrationMonitor::Impl {
   CalibrationMonitorOptions options;
 
@@ -202,6 +398,17 @@ struct CalibrationMonitor::Impl {
   bool addVerification(double t, const StereoObservation& observation);
   HealthReport report() const;
   void updateLevels();
+
+ private:
+  // The stages of addDepthFrame and addVerification.
+  bool noDepthMeasurement(const std::string& why);  // depth_note = why; false
+  RowOffsets rowOffsets(const std::vector<SceneMatch>& found) const;
+  void smoothDepth(double t, const Eigen::Vector2d& w, const Eigen::Matrix2d& covariance);
+  void addBoardErrors(const VirtualBoard& board, const StereoObservation& observation, BoardErrors* e) const;
+  void addLeftErrors(const VirtualBoard& board, const BoardCorners& left, const Eigen::Isometry3d& pose,
+                     BoardErrors* e) const;
+  void addRightErrors(const VirtualBoard& board, const BoardCorners& right, const Eigen::Isometry3d* left_from_board,
+                      BoardErrors* e) const;
 };
 
 void CalibrationMonitor::Impl::setCalibration(const StereoRig& r, int e, const std::vector<VirtualBoard>& b,
@@ -269,38 +476,16 @@ void CalibrationMonitor::Impl::setCalibration(const StereoRig& r, int e, const s
   depth_level = board_misalignment_level = bias_level = residual_level = CalibrationHealth::kGood;
 }
 
-bool CalibrationMonitor::Impl::addDepthFrame(double t, const cv::Mat& left_raw, const cv::Mat& right_raw) {
-  if (!has_calibration) throw std::logic_error("CalibrationMonitor::addDepthFrame before setCalibration");
-  const cv::Size size(rig.left.width, rig.left.height);
-  if (left_raw.size() != size || right_raw.size() != size)
-    throw std::invalid_argument("CalibrationMonitor: depth frame of " + std::to_string(left_raw.cols) + "x" +
-                                std::to_string(left_raw.rows) + " for a calibration of " +
-                                std::to_string(size.width) + "x" + std::to_string(size.height));
-  for (const cv::Mat* image : {&left_raw, &right_raw})
-    if (image->type() != CV_8UC1 && image->type() != CV_8UC3)
-      throw std::invalid_argument("CalibrationMonitor: depth frame images must be 8-bit grey or colour "
-                                  "(CV_8UC1 / CV_8UC3)");
-  advance(t);
-  if (depth_calls++ % options.depth_frame_stride != 0) {
-    updateLevels();
-    return false;
-  }
-  const cv::Mat left = toGray(left_raw, "left"), right = toGray(right_raw, "right");
+bool CalibrationMonitor::Impl::noDepthMeasurement(const std::string& why) {
+  depth_note = why;
+  updateLevels();
+  return false;
+}
 
-  int features = 0;
-  const std::vector<SceneMatch> found = matchStereoScene(left, right, rig, options.matching, &buffers, &features);
-  if (features < options.min_matches) {
-    depth_note = "too few scene features (" + std::to_string(features) + ")";
-    updateLevels();
-    return false;
-  }
-
-  // Rectify the matches with the calibration in force: offset of the rows, and its derivative
-  // with respect to a rotation of the right camera about x and z (deg).
-  std::vector<double> offsets;
-  std::vector<Eigen::Vector2d> jacobians;
-  offsets.reserve(found.size());
-  jacobians.reserve(found.size());
+RowOffsets CalibrationMonitor::Impl::rowOffsets(const std::vector<SceneMatch>& found) const {
+  RowOffsets rows;
+  rows.offsets.reserve(found.size());
+  rows.jacobians.reserve(found.size());
   for (const SceneMatch& m : found) {
     const Eigen::Vector3d hl = H1 * rig.left.pixelToNormalized(Eigen::Vector2d(m.left_u, m.left_v)).homogeneous();
     const Eigen::Vector3d ray = rig.right.pixelToNormalized(Eigen::Vector2d(m.right_u, m.right_v)).homogeneous();
@@ -308,81 +493,24 @@ bool CalibrationMonitor::Impl::addDepthFrame(double t, const cv::Mat& left_raw, 
     if (hl.z() <= 0 || hr.z() <= 0) continue;
     const double disparity = hl.x() / hl.z() - hr.x() / hr.z();
     if (disparity < -1.0) continue;  // behind the rig: a wrong match
-    offsets.push_back(hl.y() / hl.z() - hr.y() / hr.z());
+    rows.offsets.push_back(hl.y() / hl.z() - hr.y() / hr.z());
     Eigen::Vector2d j;
     for (int k = 0; k < 2; ++k) {
       const Eigen::Vector3d axis = k == 0 ? Eigen::Vector3d::UnitX() : Eigen::Vector3d::UnitZ();
       const Eigen::Vector3d dh = H2 * (kDegToRad * axis.cross(ray));
       j(k) = (dh.y() * hr.z() - hr.y() * dh.z()) / (hr.z() * hr.z());
     }
-    jacobians.push_back(j);
+    rows.jacobians.push_back(j);
   }
-  if (static_cast<int>(offsets.size()) < options.min_matches) {
-    depth_note = "too few left-right matches (" + std::to_string(offsets.size()) + ")";
-    updateLevels();
-    return false;
-  }
+  return rows;
+}
 
-  // Robust fit offset = J w (w: tilt, roll in deg): Huber weights inside the band around the
-  // model's row. It starts from the smoothed estimate and, when too few matches lie near the
-  // rows that predicts (a knock larger than the band since the last frame), again from the median
-  // offset taken as a tilt.
-  auto fitFrom = [&](Eigen::Vector2d start, Eigen::Vector2d* w, Eigen::Matrix2d* normal) {
-    *w = start;
-    int used = 0;
-    for (int iteration = 0; iteration < 8; ++iteration) {
-      normal->setZero();
-      Eigen::Vector2d rhs = Eigen::Vector2d::Zero();
-      used = 0;
-      for (size_t i = 0; i < offsets.size(); ++i) {
-        const double r = offsets[i] - jacobians[i].dot(*w);
-        if (std::abs(r) > options.band_half_height_px) continue;
-        const double weight = std::abs(r) <= options.huber_px ? 1.0 : options.huber_px / std::abs(r);
-        *normal += weight * jacobians[i] * jacobians[i].transpose();
-        rhs += weight * jacobians[i] * r;
-        ++used;
-      }
-      if (used < options.min_matches) return used;
-      const Eigen::Vector2d step = normal->ldlt().solve(rhs);
-      if (!step.allFinite()) return 0;
-      *w += step;
-      if (step.norm() < 1e-6) break;
-    }
-    return used;
-  };
-  auto medianStart = [&]() {
-    std::vector<double> sorted = offsets, jx;
-    for (const auto& j : jacobians) jx.push_back(j(0));
-    const size_t mid = sorted.size() / 2;
-    std::nth_element(sorted.begin(), sorted.begin() + mid, sorted.end());
-    std::nth_element(jx.begin(), jx.begin() + mid, jx.end());
-    return Eigen::Vector2d(std::abs(jx[mid]) > 1e-9 ? sorted[mid] / jx[mid] : 0.0, 0.0);
-  };
-  Eigen::Vector2d w;
-  Eigen::Matrix2d normal;
-  int used = fitFrom(has_depth ? tilt_roll : medianStart(), &w, &normal);
-  if (used < options.min_matches && has_depth) used = fitFrom(medianStart(), &w, &normal);
-  if (used < options.min_matches) {
-    depth_note = "too few matches near their rows (" + std::to_string(used) + ")";
-    updateLevels();
-    return false;
-  }
-  // Covariance: the residuals' robust spread (MAD) through the weighted normal equations.
-  std::vector<double> abs_residuals;
-  for (size_t i = 0; i < offsets.size(); ++i) {
-    const double r = std::abs(offsets[i] - jacobians[i].dot(w));
-    if (r <= options.band_half_height_px) abs_residuals.push_back(r);
-  }
-  const size_t mid = abs_residuals.size() / 2;
-  std::nth_element(abs_residuals.begin(), abs_residuals.begin() + mid, abs_residuals.end());
-  const double scale = 1.4826 * abs_residuals[mid];
-  const Eigen::Matrix2d covariance = scale * scale * normal.inverse();
-
-  // Exponential smoothing over time; the first measurements are averaged (weight 1/n) until the
-  // exponential weight is the larger. The spread of a frame's estimate is taken as the larger of
-  // the fit's and the one observed from frame to frame (the scene's texture and slanted surfaces
-  // make frames disagree by more than their residuals say), and the smoothed estimate's
-  // variance is that of the weighted mean.
+// Exponential smoothing over time; the first measurements are averaged (weight 1/n) until the
+// exponential weight is the larger. The spread of a frame's estimate is taken as the larger of
+// the fit's and the one observed from frame to frame (the scene's texture and slanted surfaces
+// make frames disagree by more than their residuals say), and the smoothed estimate's
+// variance is that of the weighted mean.
+void CalibrationMonitor::Impl::smoothDepth(double t, const Eigen::Vector2d& w, const Eigen::Matrix2d& covariance) {
   const double alpha =
       has_depth ? std::max(1.0 / (depth_count + 1),
                            1.0 - std::exp(-std::max(t - depth_time, 1e-3) / options.smoothing_time_s))
@@ -400,162 +528,115 @@ bool CalibrationMonitor::Impl::addDepthFrame(double t, const cv::Mat& left_raw, 
   ++depth_count;
   has_depth = true;
   depth_time = std::max(depth_time, t);
+}
+
+bool CalibrationMonitor::Impl::addDepthFrame(double t, const cv::Mat& left_raw, const cv::Mat& right_raw) {
+  if (!has_calibration) throw std::logic_error("CalibrationMonitor::addDepthFrame before setCalibration");
+  checkDepthFrame(rig, left_raw, right_raw);
+  advance(t);
+  if (depth_calls++ % options.depth_frame_stride != 0) {
+    updateLevels();
+    return false;
+  }
+  const cv::Mat left = toGray(left_raw, "left"), right = toGray(right_raw, "right");
+
+  int features = 0;
+  const std::vector<SceneMatch> found = matchStereoScene(left, right, rig, options.matching, &buffers, &features);
+  if (features < options.min_matches)
+    return noDepthMeasurement("too few scene features (" + std::to_string(features) + ")");
+  const RowOffsets rows = rowOffsets(found);
+  if (static_cast<int>(rows.size()) < options.min_matches)
+    return noDepthMeasurement("too few left-right matches (" + std::to_string(rows.size()) + ")");
+
+  // The fit starts from the smoothed estimate and, when too few matches lie near the rows that
+  // predicts (a knock larger than the band since the last frame), again from the median offset
+  // taken as a tilt.
+  Eigen::Vector2d w;
+  Eigen::Matrix2d normal;
+  int used = fitTiltRoll(rows, options, has_depth ? tilt_roll : medianStart(rows), &w, &normal);
+  if (used < options.min_matches && has_depth) used = fitTiltRoll(rows, options, medianStart(rows), &w, &normal);
+  if (used < options.min_matches)
+    return noDepthMeasurement("too few matches near their rows (" + std::to_string(used) + ")");
+  smoothDepth(t, w, tiltRollCovariance(rows, options.band_half_height_px, w, normal));
   matches = used;
   depth_note.clear();
   updateLevels();
   return true;
 }
 
+// The left camera's corners against the board at `pose` (the rig's pose of it, or the left
+// camera's own PnP pose); with posed boards they are also fitted.
+void CalibrationMonitor::Impl::addLeftErrors(const VirtualBoard& board, const BoardCorners& left,
+                                             const Eigen::Isometry3d& pose, BoardErrors* e) const {
+  for (size_t i = 0; i < left.size(); ++i) {
+    const Eigen::Vector3d p = pose * board.cornerInBoard(left.corner_ids[i]);
+    double sq;
+    if (!squaredError(rig.left, p, left.u[i], left.v[i], &sq)) continue;
+    e->sq_left.push_back(sq);
+    if (boards_posed) e->fit_corners.push_back({p, Eigen::Vector2d(left.u[i], left.v[i]), 0});
+  }
+}
+
+// The right camera's corners: against the rig's pose of the board (fitted) or the right camera's
+// own PnP pose, and against the left camera's pose of it when there is one (left_from_board; the
+// stereo consistency, fitted without posed boards).
+void CalibrationMonitor::Impl::addRightErrors(const VirtualBoard& board, const BoardCorners& right,
+                                              const Eigen::Isometry3d* left_from_board, BoardErrors* e) const {
+  Eigen::Isometry3d right_from_board;
+  const bool right_pose = !boards_posed && solvePose(board, right, rig.right, &right_from_board);
+  for (size_t i = 0; i < right.size(); ++i) {
+    const Eigen::Vector3d local = board.cornerInBoard(right.corner_ids[i]);
+    double sq;
+    if (boards_posed) {
+      const Eigen::Vector3d p = board.rig_from_board * local;
+      if (squaredError(rig.right, rig.right_from_left * p, right.u[i], right.v[i], &sq)) {
+        e->sq_right.push_back(sq);
+        e->fit_corners.push_back({p, Eigen::Vector2d(right.u[i], right.v[i]), 1});
+      }
+    } else if (right_pose && squaredError(rig.right, right_from_board * local, right.u[i], right.v[i], &sq)) {
+      e->sq_right.push_back(sq);
+    }
+    if (left_from_board) {
+      const Eigen::Vector3d p = *left_from_board * local;
+      if (squaredError(rig.right, rig.right_from_left * p, right.u[i], right.v[i], &sq)) {
+        e->sq_stereo.push_back(sq);
+        if (!boards_posed) e->fit_corners.push_back({p, Eigen::Vector2d(right.u[i], right.v[i]), 1});
+      }
+    }
+  }
+}
+
+void CalibrationMonitor::Impl::addBoardErrors(const VirtualBoard& board, const StereoObservation& observation,
+                                              BoardErrors* e) const {
+  const BoardCorners* left = findCorners(observation.left, board.virtual_id);
+  const BoardCorners* right = findCorners(observation.right, board.virtual_id);
+  const bool has_left = usableCorners(board, left, options.min_board_corners);
+  const bool has_right = usableCorners(board, right, options.min_board_corners);
+  Eigen::Isometry3d left_from_board;
+  const bool left_pose = has_left && solvePose(board, *left, rig.left, &left_from_board);
+  if (has_left && (boards_posed || left_pose))
+    addLeftErrors(board, *left, boards_posed ? board.rig_from_board : left_from_board, e);
+  if (has_right) addRightErrors(board, *right, left_pose ? &left_from_board : nullptr, e);
+}
+
 bool CalibrationMonitor::Impl::addVerification(double t, const StereoObservation& observation) {
   if (!has_calibration) throw std::logic_error("CalibrationMonitor::addVerification before setCalibration");
   advance(t);
-  struct Corner {
-    Eigen::Vector3d in_left;  // the corner in the left optical frame
-    Eigen::Vector2d pixel;
-    int camera;  // 0 left, 1 right
-  };
-  std::vector<Corner> fit_corners;
-  std::vector<double> sq_left, sq_right, sq_stereo;
-
-  auto findCorners = [](const std::vector<BoardCorners>& list, int id) -> const BoardCorners* {
-    for (const auto& b : list)
-      if (b.board_id == id) return &b;
-    return nullptr;
-  };
-  // Pose of a board in a camera from its corners (PnP on undistorted rays).
-  auto solvePose = [](const VirtualBoard& board, const BoardCorners& corners, const PinholeCamera& camera,
-                      Eigen::Isometry3d* camera_from_board) {
-    std::vector<cv::Point3d> object;
-    std::vector<cv::Point2d> image;
-    for (size_t i = 0; i < corners.size(); ++i) {
-      const Eigen::Vector3d p = board.cornerInBoard(corners.corner_ids[i]);
-      const Eigen::Vector2d n = camera.pixelToNormalized(Eigen::Vector2d(corners.u[i], corners.v[i]));
-      object.emplace_back(p.x(), p.y(), p.z());
-      image.emplace_back(n.x(), n.y());
-    }
-    cv::Vec3d rvec, tvec;
-    if (!cv::solvePnP(object, image, cv::Matx33d::eye(), cv::noArray(), rvec, tvec, false, cv::SOLVEPNP_IPPE))
-      return false;
-    cv::solvePnPRefineLM(object, image, cv::Matx33d::eye(), cv::noArray(), rvec, tvec);
-    cv::Matx33d R;
-    cv::Rodrigues(rvec, R);
-    camera_from_board->setIdentity();
-    for (int r = 0; r < 3; ++r) {
-      for (int c = 0; c < 3; ++c) camera_from_board->linear()(r, c) = R(r, c);
-      camera_from_board->translation()(r) = tvec(r);
-    }
-    return camera_from_board->translation().z() > 0;
-  };
-  auto squaredError = [](const PinholeCamera& camera, const Eigen::Vector3d& p, float u, float v, double* sq) {
-    Eigen::Vector2d pixel;
-    if (!camera.project(p, &pixel)) return false;
-    *sq = (pixel - Eigen::Vector2d(u, v)).squaredNorm();
-    return true;
-  };
-  auto usable = [&](const VirtualBoard& board, const BoardCorners* c) {
-    if (!c || static_cast<int>(c->size()) < options.min_board_corners) return false;
-    for (int id : c->corner_ids)
-      if (id < 0 || id >= board.cornerCount()) return false;
-    return c->u.size() == c->size() && c->v.size() == c->size();
-  };
-
-  for (const auto& board : boards) {
-    const BoardCorners* left = findCorners(observation.left, board.virtual_id);
-    const BoardCorners* right = findCorners(observation.right, board.virtual_id);
-    const bool has_left = usable(board, left), has_right = usable(board, right);
-    Eigen::Isometry3d left_from_board;
-    const bool left_pose = has_left && solvePose(board, *left, rig.left, &left_from_board);
-    if (has_left) {
-      const Eigen::Isometry3d& pose = boards_posed ? board.rig_from_board : left_from_board;
-      if (boards_posed || left_pose)
-        for (size_t i = 0; i < left->size(); ++i) {
-          const Eigen::Vector3d p = pose * board.cornerInBoard(left->corner_ids[i]);
-          double sq;
-          if (!squaredError(rig.left, p, left->u[i], left->v[i], &sq)) continue;
-          sq_left.push_back(sq);
-          if (boards_posed) fit_corners.push_back({p, Eigen::Vector2d(left->u[i], left->v[i]), 0});
-        }
-    }
-    if (!has_right) continue;
-    Eigen::Isometry3d right_from_board;
-    const bool right_pose = !boards_posed && solvePose(board, *right, rig.right, &right_from_board);
-    for (size_t i = 0; i < right->size(); ++i) {
-      const Eigen::Vector3d local = board.cornerInBoard(right->corner_ids[i]);
-      double sq;
-      if (boards_posed) {
-        const Eigen::Vector3d p = board.rig_from_board * local;
-        if (squaredError(rig.right, rig.right_from_left * p, right->u[i], right->v[i], &sq)) {
-          sq_right.push_back(sq);
-          fit_corners.push_back({p, Eigen::Vector2d(right->u[i], right->v[i]), 1});
-        }
-      } else if (right_pose && squaredError(rig.right, right_from_board * local, right->u[i], right->v[i], &sq)) {
-        sq_right.push_back(sq);
-      }
-      if (left_pose) {
-        const Eigen::Vector3d p = left_from_board * local;
-        if (squaredError(rig.right, rig.right_from_left * p, right->u[i], right->v[i], &sq)) {
-          sq_stereo.push_back(sq);
-          if (!boards_posed) fit_corners.push_back({p, Eigen::Vector2d(right->u[i], right->v[i]), 1});
-        }
-      }
-    }
-  }
-  if (static_cast<int>(fit_corners.size()) < options.min_corners) {
-    verification_note = "too few board corners (" + std::to_string(fit_corners.size()) + ")";
+  BoardErrors errors;
+  for (const auto& board : boards) addBoardErrors(board, observation, &errors);
+  if (static_cast<int>(errors.fit_corners.size()) < options.min_corners) {
+    verification_note = "too few board corners (" + std::to_string(errors.fit_corners.size()) + ")";
     updateLevels();
     return false;
   }
-
-  // Fit the change to the corners (Gauss-Newton, numeric derivatives, Huber weights). Without
-  // board poses the boards sit where the left camera puts them, so the left focal scale is held.
-  const int n = static_cast<int>(kChange);
-  std::vector<int> active;
-  for (int k = 0; k < n; ++k)
-    if (k != 3 || boards_posed) active.push_back(k);
-  auto residuals = [&](const Change& c, Eigen::VectorXd* r) {
-    const StereoRig o = observedRig(rig, c);
-    r->resize(2 * fit_corners.size());
-    for (size_t i = 0; i < fit_corners.size(); ++i) {
-      const Corner& k = fit_corners[i];
-      Eigen::Vector2d pixel;
-      const bool ok = k.camera == 0 ? o.left.project(k.in_left, &pixel)
-                                    : o.right.project(o.right_from_left * k.in_left, &pixel);
-      const Eigen::Vector2d d = ok ? Eigen::Vector2d(k.pixel - pixel) : Eigen::Vector2d::Zero();
-      r->segment<2>(2 * i) = d;
-    }
-  };
-  const double step[kChange] = {1e-3, 1e-3, 1e-3, 1e-5, 1e-5};
-  const double huber = 1.0;
-  Change c = Change::Zero();
   Eigen::VectorXd r;
-  for (int iteration = 0; iteration < 6; ++iteration) {
-    residuals(c, &r);
-    Eigen::MatrixXd J(r.size(), active.size());
-    for (size_t a = 0; a < active.size(); ++a) {
-      Change cs = c;
-      cs(active[a]) += step[active[a]];
-      Eigen::VectorXd rs;
-      residuals(cs, &rs);
-      J.col(a) = -(rs - r) / step[active[a]];  // derivative of the prediction
-    }
-    Eigen::VectorXd weights(r.size());
-    for (int i = 0; i < r.size(); i += 2) {
-      const double e = r.segment<2>(i).norm();
-      weights(i) = weights(i + 1) = e <= huber ? 1.0 : huber / e;
-    }
-    const Eigen::MatrixXd JtW = J.transpose() * weights.asDiagonal();
-    const Eigen::VectorXd delta = (JtW * J).ldlt().solve(JtW * r);
-    if (!delta.allFinite()) break;
-    for (size_t a = 0; a < active.size(); ++a) c(active[a]) += delta(a);
-    if (delta.norm() < 1e-7) break;
-  }
-  residuals(c, &r);
+  const Change c = fitChange(rig, errors.fit_corners, boards_posed, &r);
 
   verified_change = c;
-  rms_left = rmsOf(sq_left);
-  rms_right = rmsOf(sq_right);
-  stereo_consistency = rmsOf(sq_stereo);
-  residual = std::sqrt(r.squaredNorm() / static_cast<double>(fit_corners.size()));
+  rms_left = rmsOf(errors.sq_left);
+  rms_right = rmsOf(errors.sq_right);
+  stereo_consistency = rmsOf(errors.sq_stereo);
+  residual = std::sqrt(r.squaredNorm() / static_cast<double>(errors.fit_corners.size()));
   has_verification = true;
   verification_time = std::max(verification_time, t);
   verification_note.clear();
