@@ -83,108 +83,131 @@ GateDecision verdict(bool accepted, const std::string& why) {
   return d;
 }
 
+GateDecision rejected(const std::string& why) { return verdict(false, why); }
+GateDecision accepted(const std::string& why) { return verdict(true, why); }
+
+// Why the candidate cannot be accepted whatever is in force (its solve, its fit, how well its
+// parameters are known); empty when it passes.
+std::string candidateProblem(const BundleAdjustmentSummary& c, const GateOptions& o) {
+  if (!c.success) return "no solution (" + c.message + ")";
+  if (c.boards_left < o.min_boards_per_camera || c.boards_right < o.min_boards_per_camera)
+    return "boards seen: " + std::to_string(c.boards_left) + " left, " + std::to_string(c.boards_right) +
+           " right; at least " + std::to_string(o.min_boards_per_camera) + " needed in each camera";
+  if (!c.converged) return "solver did not converge (" + c.message + ")";
+  if (!(c.rms_left_px <= o.max_rms_px) || !(c.rms_right_px <= o.max_rms_px))
+    return "RMS " + fmt(c.rms_left_px) + " / " + fmt(c.rms_right_px) + " px > " + fmt(o.max_rms_px) + " px";
+  if (!(c.epipolar_rms_px <= o.max_epipolar_rms_px))
+    return "epipolar RMS " + fmt(c.epipolar_rms_px) + " px > " + fmt(o.max_epipolar_rms_px) + " px";
+  if (c.corners_used == 0 || c.outliers > o.max_outlier_fraction * static_cast<double>(c.corners_used))
+    return std::to_string(c.outliers) + " outlier corners of " + std::to_string(c.corners_used) +
+           " (max fraction " + fmt(o.max_outlier_fraction) + ")";
+  return "";
+}
+
+// The candidate's standard deviations over their limits; empty when all pass.
+std::string uncertaintyProblem(const BundleAdjustmentSummary& c, const GateOptions& o) {
+  if (!c.covariance_ok) return "covariance unavailable (parameters not determined)";
+  std::string stddev = cameraStddevProblem("left", c.rig.left, c.left_stddev, o);
+  if (stddev.empty()) stddev = cameraStddevProblem("right", c.rig.right, c.right_stddev, o);
+  if (!stddev.empty()) return stddev;
+  if (!(c.baseline_stddev_m <= o.max_baseline_stddev_rel * c.rig.baseline()))
+    return "baseline stddev " + fmt(c.baseline_stddev_m * 1000) + " mm > " +
+           fmt(o.max_baseline_stddev_rel * c.rig.baseline() * 1000) + " mm";
+  if (!(c.rotation_stddev_deg <= o.max_rotation_stddev_deg))
+    return "rotation stddev " + fmt(c.rotation_stddev_deg) + " deg > " + fmt(o.max_rotation_stddev_deg) + " deg";
+  return "";
+}
+
+// A candidate that only confirms the calibration in force replaces it when clearly better
+// known (refine_ratio); otherwise `kept` stands.
+GateDecision refineOr(GateDecision kept, const BundleAdjustmentSummary& c, const GateOptions& o,
+                      std::optional<double> in_force_predicted_px) {
+  if (!kept.in_force_confirmed || !(o.refine_ratio > 0) || !in_force_predicted_px || !(*in_force_predicted_px > 0))
+    return kept;
+  const double p = QualityGate::predictedPx(c);
+  if (!(p > 0 && p < o.refine_ratio * *in_force_predicted_px)) return kept;
+  GateDecision refined = accepted("refinement of the calibration in force, predicted error " + fmt(p) +
+                                " px against " + fmt(*in_force_predicted_px) + " px");
+  refined.refinement = true;
+  refined.predicted_px = p;
+  return refined;
+}
+
+// The significance of the change, when asked.
+struct Significance {
+  std::string rejection;  // "" when significant (or not asked)
+  bool within_uncertainty = false;  // the change lies within the new solve's uncertainty (not an
+                                    // evaluation that failed)
+  std::string note;  // describes the change for the acceptance
+};
+
+Significance significance(const BundleAdjustmentSummary& c, const BundleAdjustmentSummary& in_force,
+                          const GateOptions& o) {
+  Significance s;
+  if (!(o.min_change_in_predicted > 0)) return s;
+  try {
+    const StereoAccuracy change = evaluateStereoAccuracy(in_force.rig, c.rig);
+    const StereoAccuracy predicted = predictStereoAccuracy(c.rig, c.rig_covariance);
+    const double d = std::hypot(change.misalignment_px.rms, change.disparity_bias_px.rms);
+    const double p = std::hypot(predicted.misalignment_px.rms, predicted.disparity_bias_px.rms);
+    s.note = "; change for depth " + fmt(d) + " px, predicted error " + fmt(p) + " px";
+    if (d > o.min_change_in_predicted * p) return s;
+    s.within_uncertainty = true;
+    s.rejection = "change from the calibration in force within the new solve's uncertainty: " + fmt(d) +
+                  " px (misalignment and disparity bias) vs " + fmt(o.min_change_in_predicted) + " x " + fmt(p) +
+                  " px predicted";
+  } catch (const std::exception& e) {
+    s.rejection = std::string("accuracy for depth not evaluated: ") + e.what();
+  }
+  return s;
+}
+
+// The decision for a candidate that passed on its own, against the calibration in force's fit of
+// the same observations.
+GateDecision againstInForce(const BundleAdjustmentSummary& c, const BundleAdjustmentSummary& in_force,
+                            const GateOptions& o, std::optional<double> in_force_predicted_px) {
+  const double candidate_rms = combinedRms(c);
+  const double in_force_rms = combinedRms(in_force);
+  if (in_force_rms > o.in_force_max_rms_px) {
+    const Significance s = significance(c, in_force, o);
+    if (!s.rejection.empty()) return rejected(s.rejection);
+    return accepted("calibration in force no longer fits (RMS " + fmt(in_force_rms) + " px > " +
+                  fmt(o.in_force_max_rms_px) + " px), new RMS " + fmt(candidate_rms) + " px" + s.note);
+  }
+  if (candidate_rms * (1.0 + o.min_rms_improvement_rel) <= in_force_rms) {
+    const Significance s = significance(c, in_force, o);
+    if (!s.rejection.empty()) {
+      GateDecision kept = rejected(s.rejection);
+      // The observations do not tell the two apart: the calibration in force stands.
+      kept.change_too_small = s.within_uncertainty;
+      kept.in_force_confirmed = s.within_uncertainty;
+      return refineOr(kept, c, o, in_force_predicted_px);
+    }
+    return accepted("RMS " + fmt(candidate_rms) + " px vs " + fmt(in_force_rms) + " px for the calibration in force" +
+                  s.note);
+  }
+  GateDecision kept = rejected("no significant improvement: RMS " + fmt(candidate_rms) + " px vs " +
+                             fmt(in_force_rms) + " px for the calibration in force (needs " +
+                             fmt(100 * o.min_rms_improvement_rel) + "% lower)");
+  // A fresh solve clearly worse than the calibration in force confirms nothing: something failed.
+  kept.in_force_confirmed = candidate_rms <= in_force_rms * (1.0 + o.min_rms_improvement_rel);
+  return refineOr(kept, c, o, in_force_predicted_px);
+}
+
 }  // namespace
 
 GateDecision QualityGate::evaluate(const BundleAdjustmentSummary& c, const BundleAdjustmentSummary* in_force_fit,
                                    std::optional<double> in_force_predicted_px) const {
   const GateOptions& o = options_;
-  const auto reject = [](const std::string& why) { return verdict(false, why); };
-  const auto accept = [](const std::string& why) { return verdict(true, why); };
   const std::string options_problem = o.Check();
-  if (!options_problem.empty()) return reject("invalid gate options: " + options_problem);
-  if (!c.success) return reject("no solution (" + c.message + ")");
-  if (c.boards_left < o.min_boards_per_camera || c.boards_right < o.min_boards_per_camera)
-    return reject("boards seen: " + std::to_string(c.boards_left) + " left, " +
-                  std::to_string(c.boards_right) + " right; at least " +
-                  std::to_string(o.min_boards_per_camera) + " needed in each camera");
-  if (!c.converged) return reject("solver did not converge (" + c.message + ")");
-  if (!(c.rms_left_px <= o.max_rms_px) || !(c.rms_right_px <= o.max_rms_px))
-    return reject("RMS " + fmt(c.rms_left_px) + " / " + fmt(c.rms_right_px) + " px > " +
-                  fmt(o.max_rms_px) + " px");
-  if (!(c.epipolar_rms_px <= o.max_epipolar_rms_px))
-    return reject("epipolar RMS " + fmt(c.epipolar_rms_px) + " px > " + fmt(o.max_epipolar_rms_px) +
-                  " px");
-  if (c.corners_used == 0 ||
-      c.outliers > o.max_outlier_fraction * static_cast<double>(c.corners_used))
-    return reject(std::to_string(c.outliers) + " outlier corners of " +
-                  std::to_string(c.corners_used) + " (max fraction " + fmt(o.max_outlier_fraction) +
-                  ")");
-  if (!c.covariance_ok) return reject("covariance unavailable (parameters not determined)");
-  std::string stddev = cameraStddevProblem("left", c.rig.left, c.left_stddev, o);
-  if (stddev.empty()) stddev = cameraStddevProblem("right", c.rig.right, c.right_stddev, o);
-  if (!stddev.empty()) return reject(stddev);
-  if (!(c.baseline_stddev_m <= o.max_baseline_stddev_rel * c.rig.baseline()))
-    return reject("baseline stddev " + fmt(c.baseline_stddev_m * 1000) + " mm > " +
-                  fmt(o.max_baseline_stddev_rel * c.rig.baseline() * 1000) + " mm");
-  if (!(c.rotation_stddev_deg <= o.max_rotation_stddev_deg))
-    return reject("rotation stddev " + fmt(c.rotation_stddev_deg) + " deg > " +
-                  fmt(o.max_rotation_stddev_deg) + " deg");
-
-  const double candidate_rms = combinedRms(c);
-  if (!in_force_fit)
-    return accept("first calibration, RMS " + fmt(candidate_rms) + " px");
+  if (!options_problem.empty()) return rejected("invalid gate options: " + options_problem);
+  std::string problem = candidateProblem(c, o);
+  if (problem.empty()) problem = uncertaintyProblem(c, o);
+  if (!problem.empty()) return rejected(problem);
+  if (!in_force_fit) return accepted("first calibration, RMS " + fmt(combinedRms(c)) + " px");
   if (!in_force_fit->success)
-    return accept("calibration in force cannot explain the observations (" + in_force_fit->message + ")");
-  const double in_force_rms = combinedRms(*in_force_fit);
-  // A candidate that only confirms the calibration in force replaces it when clearly better
-  // known (refine_ratio); otherwise `kept` stands.
-  const auto refineOr = [&](GateDecision kept) {
-    if (!kept.in_force_confirmed || !(o.refine_ratio > 0) || !in_force_predicted_px || !(*in_force_predicted_px > 0))
-      return kept;
-    const double p = predictedPx(c);
-    if (!(p > 0 && p < o.refine_ratio * *in_force_predicted_px)) return kept;
-    GateDecision refined = accept("refinement of the calibration in force, predicted error " + fmt(p) +
-                                  " px against " + fmt(*in_force_predicted_px) + " px");
-    refined.refinement = true;
-    refined.predicted_px = p;
-    return refined;
-  };
-  // The significance of the change, when asked: "" when significant (or not asked), otherwise
-  // the rejection (within_uncertainty: the change lies within the new solve's uncertainty, not
-  // an evaluation that failed); note describes the change for the acceptance.
-  std::string note;
-  bool within_uncertainty = false;
-  const auto insignificant = [&]() -> std::string {
-    if (!(o.min_change_in_predicted > 0)) return "";
-    try {
-      const StereoAccuracy change = evaluateStereoAccuracy(in_force_fit->rig, c.rig);
-      const StereoAccuracy predicted = predictStereoAccuracy(c.rig, c.rig_covariance);
-      const double d = std::hypot(change.misalignment_px.rms, change.disparity_bias_px.rms);
-      const double p = std::hypot(predicted.misalignment_px.rms, predicted.disparity_bias_px.rms);
-      note = "; change for depth " + fmt(d) + " px, predicted error " + fmt(p) + " px";
-      if (d > o.min_change_in_predicted * p) return "";
-      within_uncertainty = true;
-      return "change from the calibration in force within the new solve's uncertainty: " + fmt(d) +
-             " px (misalignment and disparity bias) vs " + fmt(o.min_change_in_predicted) + " x " + fmt(p) +
-             " px predicted";
-    } catch (const std::exception& e) {
-      return std::string("accuracy for depth not evaluated: ") + e.what();
-    }
-  };
-  if (in_force_rms > o.in_force_max_rms_px) {
-    const std::string why = insignificant();
-    if (!why.empty()) return reject(why);
-    return accept("calibration in force no longer fits (RMS " + fmt(in_force_rms) + " px > " +
-                  fmt(o.in_force_max_rms_px) + " px), new RMS " + fmt(candidate_rms) + " px" + note);
-  }
-  if (candidate_rms * (1.0 + o.min_rms_improvement_rel) <= in_force_rms) {
-    const std::string why = insignificant();
-    if (!why.empty()) {
-      GateDecision kept = reject(why);
-      // The observations do not tell the two apart: the calibration in force stands.
-      kept.change_too_small = within_uncertainty;
-      kept.in_force_confirmed = within_uncertainty;
-      return refineOr(kept);
-    }
-    return accept("RMS " + fmt(candidate_rms) + " px vs " + fmt(in_force_rms) + " px for the calibration in force" +
-                  note);
-  }
-  GateDecision kept = reject("no significant improvement: RMS " + fmt(candidate_rms) + " px vs " +
-                             fmt(in_force_rms) + " px for the calibration in force (needs " +
-                             fmt(100 * o.min_rms_improvement_rel) + "% lower)");
-  // A fresh solve clearly worse than the calibration in force confirms nothing: something failed.
-  kept.in_force_confirmed = candidate_rms <= in_force_rms * (1.0 + o.min_rms_improvement_rel);
-  return refineOr(kept);
+    return accepted("calibration in force cannot explain the observations (" + in_force_fit->message + ")");
+  return againstInForce(c, *in_force_fit, o, in_force_predicted_px);
 }
 
 }  // namespace ecs
