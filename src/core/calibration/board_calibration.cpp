@@ -178,52 +178,65 @@ std::unique_ptr<ceres::LossFunction> makeLoss(RobustLoss loss, double scale) {
   if (loss == RobustLoss::kCauchy) return std::make_unique<ceres::CauchyLoss>(scale);
   return nullptr;
 }
+// The rig's parameter blocks as the adjustment lays them out, held in the pose fit.
+struct RigBlocks {
+  std::array<double, kIntrinsicsSize> left, right;
+  std::array<double, kExtrinsicsSize> extrinsics;
+};
 
-// The board pose of one pair re-fitted on the final rig (held), with the adjustment's loss:
-// the per-frame pose of the adjustment's optimum, whose residuals the report shows per image.
-PairResiduals pairResiduals(const StereoRig& rig, const VirtualBoard& board,
-                            const StereoBoardDetection& d, int frame,
-                            const BoardCalibrationOptions& options) {
-  PairResiduals out;
-  out.name = d.name;
-  const BoardView left_view = boardView(frame, CameraSide::kLeft, d.left);
-  const BoardView right_view = boardView(frame, CameraSide::kRight, d.right);
-  Eigen::Isometry3d rig_from_board;
-  if (!estimateRigFromBoard(rig, left_view, board, &rig_from_board) &&
-      !estimateRigFromBoard(rig, right_view, board, &rig_from_board))
-    rig_from_board = Eigen::Isometry3d::Identity();
-  const Eigen::Quaterniond q(rig_from_board.linear());
-  std::array<double, kBoardPoseSize> pose = {
-      {q.x(), q.y(), q.z(), q.w(), rig_from_board.translation().x(),
-       rig_from_board.translation().y(), rig_from_board.translation().z()}};
+RigBlocks rigBlocks(const StereoRig& rig) {
   auto block = [](const PinholeCamera& c) {
     return std::array<double, kIntrinsicsSize>{
         {c.fx, c.fy, c.cx, c.cy, c.dist[0], c.dist[1], c.dist[2], c.dist[3], c.dist[4]}};
   };
-  std::array<double, kIntrinsicsSize> left = block(rig.left), right = block(rig.right);
+  RigBlocks b;
+  b.left = block(rig.left);
+  b.right = block(rig.right);
   const Eigen::AngleAxisd aa(rig.right_from_left.linear());
   const Eigen::Vector3d r = aa.angle() * aa.axis(), t = rig.right_from_left.translation();
-  std::array<double, kExtrinsicsSize> extrinsics = {{r.x(), r.y(), r.z(), t.x(), t.y(), t.z()}};
+  b.extrinsics = {{r.x(), r.y(), r.z(), t.x(), t.y(), t.z()}};
+  return b;
+}
 
+// One pair's board as both cameras saw it.
+struct PairViews {
+  BoardView left, right;
+};
+
+// The pose to start from: PnP in the left camera, else in the right, else the identity.
+std::array<double, kBoardPoseSize> startPose(const StereoRig& rig, const PairViews& views,
+                                             const VirtualBoard& board) {
+  Eigen::Isometry3d rig_from_board;
+  if (!estimateRigFromBoard(rig, views.left, board, &rig_from_board) &&
+      !estimateRigFromBoard(rig, views.right, board, &rig_from_board))
+    rig_from_board = Eigen::Isometry3d::Identity();
+  const Eigen::Quaterniond q(rig_from_board.linear());
+  return {{q.x(), q.y(), q.z(), q.w(), rig_from_board.translation().x(), rig_from_board.translation().y(),
+           rig_from_board.translation().z()}};
+}
+
+// Fits the board pose (x y z w quaternion, translation) to both views with the rig held.
+void fitBoardPose(const PairViews& views, const VirtualBoard& board, const BoardCalibrationOptions& options,
+                  RigBlocks* rig, std::array<double, kBoardPoseSize>* pose) {
   ceres::Problem::Options po;
   po.loss_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
   ceres::Problem problem(po);
   const std::unique_ptr<ceres::LossFunction> loss = makeLoss(options.loss, options.loss_scale_px);
-  for (const BoardView* v : {&left_view, &right_view}) {
+  for (const BoardView* v : {&views.left, &views.right}) {
     for (size_t i = 0; i < v->size(); ++i) {
       const Eigen::Vector3d corner = board.cornerInBoard(v->corner_ids[i]);
       if (v->camera == CameraSide::kLeft)
         problem.AddResidualBlock(LeftCornerReprojectionCost::Create(corner, v->pixels[i]),
-                                 loss.get(), left.data(), pose.data());
+                                 loss.get(), rig->left.data(), pose->data());
       else
         problem.AddResidualBlock(RightCornerReprojectionCost::Create(corner, v->pixels[i]),
-                                 loss.get(), right.data(), pose.data(), extrinsics.data());
+                                 loss.get(), rig->right.data(), pose->data(), rig->extrinsics.data());
     }
   }
-  for (double* b : {left.data(), right.data(), extrinsics.data()})
+  for (double* b : {rig->left.data(), rig->right.data(), rig->extrinsics.data()})
     if (problem.HasParameterBlock(b)) problem.SetParameterBlockConstant(b);
   problem.SetManifold(
-      pose.data(),
+      pose->data(),
       new ceres::ProductManifold<ceres::EigenQuaternionManifold, ceres::EuclideanManifold<3>>());
   ceres::Solver::Options so;
   so.linear_solver_type = ceres::DENSE_QR;
@@ -232,36 +245,140 @@ PairResiduals pairResiduals(const StereoRig& rig, const VirtualBoard& board,
   so.parameter_tolerance = 1e-12;
   ceres::Solver::Summary summary;
   ceres::Solve(so, &problem, &summary);
+}
+
+// One camera's residuals (predicted - observed) and observed pixels; returns their RMS.
+double viewResiduals(const BoardView& v, const PinholeCamera& camera, const Eigen::Isometry3d& camera_from_board,
+                     const VirtualBoard& board, std::vector<Eigen::Vector2d>* residuals) {
+  double sum_sq = 0.0;
+  for (size_t i = 0; i < v.size(); ++i) {
+    Eigen::Vector2d predicted;
+    if (!camera.project(camera_from_board * board.cornerInBoard(v.corner_ids[i]), &predicted))
+      predicted = Eigen::Vector2d::Constant(std::numeric_limits<double>::quiet_NaN());
+    residuals->push_back(predicted - v.pixels[i]);
+    sum_sq += residuals->back().squaredNorm();
+  }
+  return v.size() ? std::sqrt(sum_sq / v.size()) : 0.0;
+}
+
+// The board pose of one pair re-fitted on the final rig (held), with the adjustment's loss:
+// the per-frame pose of the adjustment's optimum, whose residuals the report shows per image.
+PairResiduals pairResiduals(const StereoRig& rig, const VirtualBoard& board,
+                            const StereoBoardDetection& d, int frame,
+                            const BoardCalibrationOptions& options) {
+  PairResiduals out;
+  out.name = d.name;
+  const PairViews views{boardView(frame, CameraSide::kLeft, d.left), boardView(frame, CameraSide::kRight, d.right)};
+  std::array<double, kBoardPoseSize> pose = startPose(rig, views, board);
+  RigBlocks blocks = rigBlocks(rig);
+  fitBoardPose(views, board, options, &blocks, &pose);
 
   Eigen::Isometry3d fitted = Eigen::Isometry3d::Identity();
   fitted.linear() =
       Eigen::Quaterniond(pose[3], pose[0], pose[1], pose[2]).normalized().toRotationMatrix();
   fitted.translation() = Eigen::Vector3d(pose[4], pose[5], pose[6]);
-  const auto residualsOf =
-      [&](const BoardView& v, const PinholeCamera& camera, const Eigen::Isometry3d& camera_from_rig,
-          std::vector<Eigen::Vector2d>* residuals, std::vector<Eigen::Vector2d>* pixels) {
-        double sum_sq = 0.0;
-        for (size_t i = 0; i < v.size(); ++i) {
-          Eigen::Vector2d predicted;
-          if (!camera.project(camera_from_rig * fitted * board.cornerInBoard(v.corner_ids[i]),
-                              &predicted))
-            predicted = Eigen::Vector2d::Constant(std::numeric_limits<double>::quiet_NaN());
-          residuals->push_back(predicted - v.pixels[i]);
-          pixels->push_back(v.pixels[i]);
-          sum_sq += residuals->back().squaredNorm();
-        }
-        return v.size() ? std::sqrt(sum_sq / v.size()) : 0.0;
-      };
-  out.rms_left_px =
-      residualsOf(left_view, rig.left, Eigen::Isometry3d::Identity(), &out.left, &out.left_pixels);
-  out.rms_right_px =
-      residualsOf(right_view, rig.right, rig.right_from_left, &out.right, &out.right_pixels);
-  const double n_left = static_cast<double>(left_view.size());
-  const double n_right = static_cast<double>(right_view.size());
+  out.rms_left_px = viewResiduals(views.left, rig.left, Eigen::Isometry3d::Identity() * fitted, board, &out.left);
+  out.left_pixels = views.left.pixels;
+  out.rms_right_px = viewResiduals(views.right, rig.right, rig.right_from_left * fitted, board, &out.right);
+  out.right_pixels = views.right.pixels;
+  const double n_left = static_cast<double>(views.left.size());
+  const double n_right = static_cast<double>(views.right.size());
   out.rms_px = std::sqrt(
       (out.rms_left_px * out.rms_left_px * n_left + out.rms_right_px * out.rms_right_px * n_right) /
       std::max(1.0, n_left + n_right));
   return out;
+}
+
+// What calibrateStereoBoard calibrates from.
+struct BoardProblem {
+  const ChessboardSpec& board;
+  cv::Size image_size;
+  const std::vector<StereoBoardDetection>& detections;
+  const BoardCalibrationOptions& options;
+};
+
+// Why the detections cannot be calibrated from; empty when they can.
+std::string inputProblem(const BoardProblem& p) {
+  const std::string board_problem = p.board.validate();
+  if (!board_problem.empty()) return board_problem;
+  if (p.image_size.width <= 0 || p.image_size.height <= 0) return "invalid image size";
+  const size_t corner_count = static_cast<size_t>(p.board.cols * p.board.rows);
+  for (const StereoBoardDetection& d : p.detections)
+    if (d.left.size() != corner_count || d.right.size() != corner_count)
+      return "pair '" + d.name + "' does not have all " + std::to_string(corner_count) + " corners in both images";
+  if (static_cast<int>(p.detections.size()) < std::max(p.options.min_pairs, 3))
+    return std::to_string(p.detections.size()) + " usable image pair(s), at least " +
+           std::to_string(std::max(p.options.min_pairs, 3)) + " needed";
+  return "";
+}
+
+// 1. OpenCV start: each camera alone, then R, T with the intrinsics held. Sets *start and
+// out->opencv_initial_rms_px; returns why it failed, empty when it did not.
+std::string openCvStart(const BoardProblem& p, StereoRig* start, BoardCalibrationResult* out) {
+  const std::vector<std::vector<cv::Point3f>> object(p.detections.size(), p.board.objectPoints());
+  std::vector<std::vector<cv::Point2f>> left_points, right_points;
+  for (const StereoBoardDetection& d : p.detections) {
+    left_points.push_back(d.left);
+    right_points.push_back(d.right);
+  }
+  const int flags = openCvDistortionFlags(p.options);
+  cv::Mat k_left, d_left, k_right, d_right, rotation, translation, essential, fundamental;
+  try {
+    cv::calibrateCamera(object, left_points, p.image_size, k_left, d_left, cv::noArray(),
+                        cv::noArray(), flags);
+    cv::calibrateCamera(object, right_points, p.image_size, k_right, d_right, cv::noArray(),
+                        cv::noArray(), flags);
+    out->opencv_initial_rms_px = cv::stereoCalibrate(
+        object, left_points, right_points, k_left, d_left, k_right, d_right, p.image_size, rotation,
+        translation, essential, fundamental, flags | cv::CALIB_FIX_INTRINSIC);
+  } catch (const cv::Exception& e) {
+    return std::string("OpenCV initialisation failed: ") + e.what();
+  }
+  start->left = cameraFromOpenCv(k_left, d_left, p.image_size);
+  start->right = cameraFromOpenCv(k_right, d_right, p.image_size);
+  Eigen::Matrix3d r;
+  Eigen::Vector3d t;
+  cv::cv2eigen(rotation, r);
+  cv::cv2eigen(translation.reshape(1, 3), t);
+  start->right_from_left.linear() = r;
+  start->right_from_left.translation() = t;
+  const std::string start_problem = start->validate();
+  if (!start_problem.empty()) return "OpenCV initialisation is unusable: " + start_problem;
+  return "";
+}
+
+// 2. Joint refinement with a free board pose per pair, and covariance: sets out->summary (and,
+// when it succeeded, out->rig and out->rms_px); false when it failed.
+bool jointRefinement(const BoardProblem& p, const StereoRig& start, const std::vector<VirtualBoard>& layout,
+                     BoardCalibrationResult* out) {
+  std::vector<StereoObservation> frames;
+  for (size_t i = 0; i < p.detections.size(); ++i) {
+    StereoObservation o;
+    o.stamp = static_cast<double>(i);
+    o.left.push_back(boardCorners(p.detections[i].left));
+    o.right.push_back(boardCorners(p.detections[i].right));
+    frames.push_back(std::move(o));
+  }
+  BundleAdjustmentOptions ba_options;
+  ba_options.board_pose_mode = BoardPoseMode::kPerFrame;
+  ba_options.initialization = InitializationMode::kFromInForce;
+  ba_options.loss = p.options.loss;
+  ba_options.loss_scale_px = p.options.loss_scale_px;
+  ba_options.max_iterations = 200;
+  BundleAdjustmentConfig config;
+  config.estimate_tangential = p.options.estimate_tangential;
+  config.estimate_k3 = p.options.estimate_k3;
+  CalibrationInput input;
+  input.frames = &frames;
+  input.boards = &layout;
+  input.image_width = p.image_size.width;
+  input.image_height = p.image_size.height;
+  input.in_force = start;
+  out->summary = BundleAdjuster(ba_options, config).Solve(input);
+  if (!out->summary.success) return false;
+  out->rig = out->summary.rig;
+  out->rms_px = combinedRms(out->summary);
+  return true;
 }
 
 }  // namespace
@@ -275,80 +392,17 @@ BoardCalibrationResult calibrateStereoBoard(const ChessboardSpec& board, const c
     out.message = why;
     return out;
   };
-  const std::string board_problem = board.validate();
-  if (!board_problem.empty()) return fail(board_problem);
-  if (image_size.width <= 0 || image_size.height <= 0) return fail("invalid image size");
-  const size_t corner_count = static_cast<size_t>(board.cols * board.rows);
-  for (const StereoBoardDetection& d : detections)
-    if (d.left.size() != corner_count || d.right.size() != corner_count)
-      return fail("pair '" + d.name + "' does not have all " + std::to_string(corner_count) +
-                  " corners in both images");
-  if (static_cast<int>(detections.size()) < std::max(options.min_pairs, 3))
-    return fail(std::to_string(detections.size()) + " usable image pair(s), at least " +
-                std::to_string(std::max(options.min_pairs, 3)) + " needed");
+  const BoardProblem problem{board, image_size, detections, options};
+  const std::string input_problem = inputProblem(problem);
+  if (!input_problem.empty()) return fail(input_problem);
   for (StereoBoardDetection& d : detections) orientConsistently(&d, board.cols, board.rows);
 
-  // 1. OpenCV start: each camera alone, then R, T with the intrinsics held.
-  const std::vector<std::vector<cv::Point3f>> object(detections.size(), board.objectPoints());
-  std::vector<std::vector<cv::Point2f>> left_points, right_points;
-  for (const StereoBoardDetection& d : detections) {
-    left_points.push_back(d.left);
-    right_points.push_back(d.right);
-  }
-  const int flags = openCvDistortionFlags(options);
-  cv::Mat k_left, d_left, k_right, d_right, rotation, translation, essential, fundamental;
-  try {
-    cv::calibrateCamera(object, left_points, image_size, k_left, d_left, cv::noArray(),
-                        cv::noArray(), flags);
-    cv::calibrateCamera(object, right_points, image_size, k_right, d_right, cv::noArray(),
-                        cv::noArray(), flags);
-    out.opencv_initial_rms_px = cv::stereoCalibrate(
-        object, left_points, right_points, k_left, d_left, k_right, d_right, image_size, rotation,
-        translation, essential, fundamental, flags | cv::CALIB_FIX_INTRINSIC);
-  } catch (const cv::Exception& e) {
-    return fail(std::string("OpenCV initialisation failed: ") + e.what());
-  }
   StereoRig start;
-  start.left = cameraFromOpenCv(k_left, d_left, image_size);
-  start.right = cameraFromOpenCv(k_right, d_right, image_size);
-  Eigen::Matrix3d r;
-  Eigen::Vector3d t;
-  cv::cv2eigen(rotation, r);
-  cv::cv2eigen(translation.reshape(1, 3), t);
-  start.right_from_left.linear() = r;
-  start.right_from_left.translation() = t;
-  const std::string start_problem = start.validate();
-  if (!start_problem.empty()) return fail("OpenCV initialisation is unusable: " + start_problem);
-
-  // 2. Joint refinement with a free board pose per pair, and covariance.
-  std::vector<StereoObservation> frames;
-  for (size_t i = 0; i < detections.size(); ++i) {
-    StereoObservation o;
-    o.stamp = static_cast<double>(i);
-    o.left.push_back(boardCorners(detections[i].left));
-    o.right.push_back(boardCorners(detections[i].right));
-    frames.push_back(std::move(o));
-  }
+  const std::string start_problem = openCvStart(problem, &start, &out);
+  if (!start_problem.empty()) return fail(start_problem);
   const std::vector<VirtualBoard> layout = {board.virtualBoard()};
-  BundleAdjustmentOptions ba_options;
-  ba_options.board_pose_mode = BoardPoseMode::kPerFrame;
-  ba_options.initialization = InitializationMode::kFromInForce;
-  ba_options.loss = options.loss;
-  ba_options.loss_scale_px = options.loss_scale_px;
-  ba_options.max_iterations = 200;
-  BundleAdjustmentConfig config;
-  config.estimate_tangential = options.estimate_tangential;
-  config.estimate_k3 = options.estimate_k3;
-  CalibrationInput input;
-  input.frames = &frames;
-  input.boards = &layout;
-  input.image_width = image_size.width;
-  input.image_height = image_size.height;
-  input.in_force = start;
-  out.summary = BundleAdjuster(ba_options, config).Solve(input);
-  if (!out.summary.success) return fail("bundle adjustment failed: " + out.summary.message);
-  out.rig = out.summary.rig;
-  out.rms_px = combinedRms(out.summary);
+  if (!jointRefinement(problem, start, layout, &out))
+    return fail("bundle adjustment failed: " + out.summary.message);
 
   // 3. Per-pair residuals and rectification.
   for (size_t i = 0; i < detections.size(); ++i)
