@@ -178,14 +178,9 @@ bool boardBoundingBox(const VirtualBoard& board, const Eigen::Isometry3d& camera
   *box = raw & cv::Rect(0, 0, cam.width, cam.height);
   return box->area() > 0;
 }
-
-}  // namespace
-
-void renderDevice(const std::vector<VirtualBoard>& boards, const CameraRays& rays,
-                  const Eigen::Isometry3d& rig_from_camera, double white, double black,
-                  cv::Mat* radiance) {
-  const int W = rays.camera.width, H = rays.camera.height;
-  radiance->create(H, W, CV_32F);
+// The boards the camera sees the front of, with their bounding boxes in the image.
+std::vector<BoardInCamera> visibleBoards(const std::vector<VirtualBoard>& boards, const CameraRays& rays,
+                                         const Eigen::Isometry3d& rig_from_camera) {
   std::vector<BoardInCamera> visible;
   for (const VirtualBoard& b : boards) {
     const Eigen::Isometry3d board_from_camera = b.rig_from_board.inverse() * rig_from_camera;
@@ -205,69 +200,102 @@ void renderDevice(const std::vector<VirtualBoard>& boards, const CameraRays& ray
     bc.half_footprint = footprintBound(bc, rays);
     visible.push_back(bc);
   }
+  return visible;
+}
 
-  const float housing = static_cast<float>(black);
-  cv::parallel_for_(cv::Range(0, H), [&](const cv::Range& range) {
-    std::vector<double> best_t(W);
-    for (int v = range.start; v < range.end; ++v) {
-      float* out = radiance->ptr<float>(v);
-      std::fill(out, out + W, housing);
-      std::fill(best_t.begin(), best_t.end(), std::numeric_limits<double>::infinity());
-      const float* ray_x = rays.x.ptr<float>(v);
-      const float* ray_y = rays.y.ptr<float>(v);
-      const int row_above = std::max(v - 1, 0), row_below = std::min(v + 1, H - 1);
-      const float* ray_x_above = rays.x.ptr<float>(row_above);
-      const float* ray_y_above = rays.y.ptr<float>(row_above);
-      const float* ray_x_below = rays.x.ptr<float>(row_below);
-      const float* ray_y_below = rays.y.ptr<float>(row_below);
-      for (const BoardInCamera& b : visible) {
-        if (v < b.box.y || v >= b.box.y + b.box.height) continue;
-        for (int u = b.box.x; u < b.box.x + b.box.width; ++u) {
-          const double x = ray_x[u], y = ray_y[u];
-          const double w = b.h_w.x() * x + b.h_w.y() * y + b.h_w.z();
-          if (std::abs(w) < 1e-12) continue;
-          const double inv_w = 1.0 / w;
-          const double t = b.plane_offset * inv_w;
-          if (!(t > 0) || t >= best_t[u]) continue;
-          const double col = (b.h_col.x() * x + b.h_col.y() * y + b.h_col.z()) * inv_w;
-          const double row = (b.h_row.x() * x + b.h_row.y() * y + b.h_row.z()) * inv_w;
-          // Quick reject well outside the margin (footprints are far below a square wide).
-          if (col < -3.0 || col > b.cols + 2.0 || row < -3.0 || row > b.rows + 2.0) continue;
-          const double col_floor = std::floor(col), row_floor = std::floor(row);
-          const double col_line = std::min(col - col_floor, col_floor + 1.0 - col);
-          const double row_line = std::min(row - row_floor, row_floor + 1.0 - row);
-          if (col_line > b.half_footprint && row_line > b.half_footprint) {
-            // Fast path: no line under the pixel, the pattern is constant there.
-            if (col < -2.0 || col > b.cols + 1.0 || row < -2.0 || row > b.rows + 1.0) continue;
-            const bool in_grid = col > -1.0 && col < b.cols && row > -1.0 && row < b.rows;
-            const bool black_square = ((static_cast<long>(col_floor) + static_cast<long>(row_floor)) & 1) == 0;
-            best_t[u] = t;
-            out[u] = static_cast<float>(in_grid && black_square ? black : white);
-            continue;
-          }
-          // Pixel-area averages along each board axis (exact for straight edges; near a
-          // corner the product of the two axes' averages keeps the saddle at the corner).
-          // d(x,y)/d(u,v) by central differences of the ray map (rows in cache; one-sided at
-          // the image border): the filter width needs a few digits, not the analytic value.
-          const int ul = std::max(u - 1, 0), ur = std::min(u + 1, W - 1);
-          const double du = 1.0 / (ur - ul), dv = 1.0 / (row_below - row_above);
-          const double J[4] = {(ray_x[ur] - ray_x[ul]) * du, (ray_x_below[u] - ray_x_above[u]) * dv,
-                               (ray_y[ur] - ray_y[ul]) * du, (ray_y_below[u] - ray_y_above[u]) * dv};
-          double dcol[2], drow[2];
-          boardJacobian(b, J, col, row, w, dcol, drow);
-          const AxisFilter fc = filterAxis(col, std::abs(dcol[0]), std::abs(dcol[1]), b.cols);
-          const AxisFilter fr = filterAxis(row, std::abs(drow[0]), std::abs(drow[1]), b.rows);
-          const double coverage = fc.inside_margin * fr.inside_margin;
-          if (coverage <= 0.0) continue;
-          // Black fraction: housing outside the margin + black squares (both corner squares
-          // (-1,-1) etc. are black: square (i, j) is black when i + j is even).
-          const double black_fraction =
-              1.0 - coverage + 0.5 * (fc.inside_grid * fr.inside_grid + fc.checker * fr.checker);
-          best_t[u] = t;
-          out[u] = static_cast<float>(white - (white - black) * clampd(black_fraction, 0.0, 1.0));
-        }
-      }
+// Renders image rows: each pixel shows the nearest visible board whose pattern (with its margin)
+// covers it, else the housing. One per thread (it keeps the nearest hit of each pixel of the row).
+class RowRenderer {
+ public:
+  RowRenderer(const std::vector<BoardInCamera>& visible, const CameraRays& rays, double white, double black)
+      : visible_(visible), rays_(rays), white_(white), black_(black), best_t_(rays.camera.width) {}
+
+  void render(int v, float* out) {
+    const int W = rays_.camera.width, H = rays_.camera.height;
+    const float housing = static_cast<float>(black_);
+    std::fill(out, out + W, housing);
+    std::fill(best_t_.begin(), best_t_.end(), std::numeric_limits<double>::infinity());
+    ray_x_ = rays_.x.ptr<float>(v);
+    ray_y_ = rays_.y.ptr<float>(v);
+    row_above_ = std::max(v - 1, 0), row_below_ = std::min(v + 1, H - 1);
+    ray_x_above_ = rays_.x.ptr<float>(row_above_);
+    ray_y_above_ = rays_.y.ptr<float>(row_above_);
+    ray_x_below_ = rays_.x.ptr<float>(row_below_);
+    ray_y_below_ = rays_.y.ptr<float>(row_below_);
+    for (const BoardInCamera& b : visible_) {
+      if (v < b.box.y || v >= b.box.y + b.box.height) continue;
+      for (int u = b.box.x; u < b.box.x + b.box.width; ++u) shade(b, u, out);
     }
+  }
+
+ private:
+  // Board b at pixel u of the row, when nearer than what the pixel shows so far.
+  void shade(const BoardInCamera& b, int u, float* out) {
+    const double x = ray_x_[u], y = ray_y_[u];
+    const double w = b.h_w.x() * x + b.h_w.y() * y + b.h_w.z();
+    if (std::abs(w) < 1e-12) return;
+    const double inv_w = 1.0 / w;
+    const double t = b.plane_offset * inv_w;
+    if (!(t > 0) || t >= best_t_[u]) return;
+    const double col = (b.h_col.x() * x + b.h_col.y() * y + b.h_col.z()) * inv_w;
+    const double row = (b.h_row.x() * x + b.h_row.y() * y + b.h_row.z()) * inv_w;
+    // Quick reject well outside the margin (footprints are far below a square wide).
+    if (col < -3.0 || col > b.cols + 2.0 || row < -3.0 || row > b.rows + 2.0) return;
+    const double col_floor = std::floor(col), row_floor = std::floor(row);
+    const double col_line = std::min(col - col_floor, col_floor + 1.0 - col);
+    const double row_line = std::min(row - row_floor, row_floor + 1.0 - row);
+    if (col_line > b.half_footprint && row_line > b.half_footprint) {
+      // Fast path: no line under the pixel, the pattern is constant there.
+      if (col < -2.0 || col > b.cols + 1.0 || row < -2.0 || row > b.rows + 1.0) return;
+      const bool in_grid = col > -1.0 && col < b.cols && row > -1.0 && row < b.rows;
+      const bool black_square = ((static_cast<long>(col_floor) + static_cast<long>(row_floor)) & 1) == 0;
+      best_t_[u] = t;
+      out[u] = static_cast<float>(in_grid && black_square ? black_ : white_);
+      return;
+    }
+    // Pixel-area averages along each board axis (exact for straight edges; near a
+    // corner the product of the two axes' averages keeps the saddle at the corner).
+    // d(x,y)/d(u,v) by central differences of the ray map (rows in cache; one-sided at
+    // the image border): the filter width needs a few digits, not the analytic value.
+    const int W = rays_.camera.width;
+    const int ul = std::max(u - 1, 0), ur = std::min(u + 1, W - 1);
+    const double du = 1.0 / (ur - ul), dv = 1.0 / (row_below_ - row_above_);
+    const double J[4] = {(ray_x_[ur] - ray_x_[ul]) * du, (ray_x_below_[u] - ray_x_above_[u]) * dv,
+                         (ray_y_[ur] - ray_y_[ul]) * du, (ray_y_below_[u] - ray_y_above_[u]) * dv};
+    double dcol[2], drow[2];
+    boardJacobian(b, J, col, row, w, dcol, drow);
+    const AxisFilter fc = filterAxis(col, std::abs(dcol[0]), std::abs(dcol[1]), b.cols);
+    const AxisFilter fr = filterAxis(row, std::abs(drow[0]), std::abs(drow[1]), b.rows);
+    const double coverage = fc.inside_margin * fr.inside_margin;
+    if (coverage <= 0.0) return;
+    // Black fraction: housing outside the margin + black squares (both corner squares
+    // (-1,-1) etc. are black: square (i, j) is black when i + j is even).
+    const double black_fraction =
+        1.0 - coverage + 0.5 * (fc.inside_grid * fr.inside_grid + fc.checker * fr.checker);
+    best_t_[u] = t;
+    out[u] = static_cast<float>(white_ - (white_ - black_) * clampd(black_fraction, 0.0, 1.0));
+  }
+
+  const std::vector<BoardInCamera>& visible_;
+  const CameraRays& rays_;
+  const double white_, black_;
+  std::vector<double> best_t_;  // per pixel of the row: distance along the ray of what it shows
+  // The row's rays and those of the rows above and below it (one-sided at the image border).
+  int row_above_ = 0, row_below_ = 0;
+  const float *ray_x_ = nullptr, *ray_y_ = nullptr;
+  const float *ray_x_above_ = nullptr, *ray_y_above_ = nullptr, *ray_x_below_ = nullptr, *ray_y_below_ = nullptr;
+};
+
+}  // namespace
+
+void renderDevice(const std::vector<VirtualBoard>& boards, const CameraRays& rays,
+                  const Eigen::Isometry3d& rig_from_camera, double white, double black,
+                  cv::Mat* radiance) {
+  radiance->create(rays.camera.height, rays.camera.width, CV_32F);
+  const std::vector<BoardInCamera> visible = visibleBoards(boards, rays, rig_from_camera);
+  cv::parallel_for_(cv::Range(0, rays.camera.height), [&](const cv::Range& range) {
+    RowRenderer renderer(visible, rays, white, black);
+    for (int v = range.start; v < range.end; ++v) renderer.render(v, radiance->ptr<float>(v));
   });
 }
 
