@@ -108,12 +108,67 @@ void writeCalibration(const ecs::StereoRig& rig, const std::string& left_path, c
   ecs::writeFileAtomically(right_path, ecs::cameraInfoYaml(files.second));
 }
 
-}  // namespace
-
-int main(int argc, char** argv) {
+// What the command line asks for.
+struct VideoOptions {
   std::string config_path, out;
   double seconds = 10.0, fps = 15.0, exposure = 0.6;
   Timeline timeline;
+};
+
+// Returned by parseArguments when the program goes on (otherwise: its exit code).
+constexpr int kContinue = -1;
+
+int parseLight(const std::string& value, Timeline* timeline) {
+  std::stringstream list(value);
+  std::string item;
+  std::pair<double, double> pair;
+  while (std::getline(list, item, ',')) {
+    if (!parsePair(item, &pair) || pair.second <= pair.first)
+      return usageError("--light: '" + item + "' is not an interval T1:T2 with T2 > T1");
+    timeline->light.push_back(pair);
+  }
+  return kContinue;
+}
+
+int parseTimelineOption(const std::string& arg, const std::string& value, Timeline* timeline) {
+  std::pair<double, double> pair;
+  if (arg == "--rise") {
+    if (!parseDouble(value, &timeline->rise_s) || timeline->rise_s < 0) return usageError("--rise must be >= 0");
+  } else if (arg == "--light") {
+    return parseLight(value, timeline);
+  } else if (arg == "--cover") {
+    if (!parsePair(value, &pair) || pair.second <= pair.first) return usageError("--cover: expected T1:T2");
+    timeline->cover = pair;
+  } else if (arg == "--zoom") {
+    if (!parsePair(value, &pair) || pair.second < 0.5 || pair.second > 2.0)
+      return usageError("--zoom: expected T:SCALE with SCALE in [0.5, 2]");
+    timeline->zoom_at = pair.first;
+    timeline->zoom_scale = pair.second;
+  } else {
+    return usageError("unknown option " + arg);
+  }
+  return kContinue;
+}
+
+int parseOption(const std::string& arg, const std::string& value, VideoOptions* o) {
+  if (arg == "--config") {
+    o->config_path = value;
+  } else if (arg == "--out") {
+    o->out = value;
+  } else if (arg == "--seconds") {
+    if (!parseDouble(value, &o->seconds) || o->seconds <= 0) return usageError("--seconds must be > 0");
+  } else if (arg == "--fps") {
+    if (!parseDouble(value, &o->fps) || o->fps <= 0 || o->fps > 1000) return usageError("--fps must be in (0, 1000]");
+  } else if (arg == "--exposure") {
+    if (!parseDouble(value, &o->exposure) || o->exposure <= 0 || o->exposure > 1)
+      return usageError("--exposure must be in (0, 1]");
+  } else {
+    return parseTimelineOption(arg, value, &o->timeline);
+  }
+  return kContinue;
+}
+
+int parseArguments(int argc, char** argv, VideoOptions* o) {
   for (int i = 1; i < argc; ++i) {
     const std::string arg = argv[i];
     if (arg == "-h" || arg == "--help") {
@@ -122,125 +177,131 @@ int main(int argc, char** argv) {
     }
     if (i + 1 >= argc) return usageError(arg + " needs a value");
     const std::string value = argv[++i];
-    std::pair<double, double> pair;
-    if (arg == "--config") {
-      config_path = value;
-    } else if (arg == "--out") {
-      out = value;
-    } else if (arg == "--seconds") {
-      if (!parseDouble(value, &seconds) || seconds <= 0) return usageError("--seconds must be > 0");
-    } else if (arg == "--fps") {
-      if (!parseDouble(value, &fps) || fps <= 0 || fps > 1000) return usageError("--fps must be in (0, 1000]");
-    } else if (arg == "--exposure") {
-      if (!parseDouble(value, &exposure) || exposure <= 0 || exposure > 1) return usageError("--exposure must be in (0, 1]");
-    } else if (arg == "--rise") {
-      if (!parseDouble(value, &timeline.rise_s) || timeline.rise_s < 0) return usageError("--rise must be >= 0");
-    } else if (arg == "--light") {
-      std::stringstream list(value);
-      std::string item;
-      while (std::getline(list, item, ',')) {
-        if (!parsePair(item, &pair) || pair.second <= pair.first)
-          return usageError("--light: '" + item + "' is not an interval T1:T2 with T2 > T1");
-        timeline.light.push_back(pair);
-      }
-    } else if (arg == "--cover") {
-      if (!parsePair(value, &pair) || pair.second <= pair.first) return usageError("--cover: expected T1:T2");
-      timeline.cover = pair;
-    } else if (arg == "--zoom") {
-      if (!parsePair(value, &pair) || pair.second < 0.5 || pair.second > 2.0)
-        return usageError("--zoom: expected T:SCALE with SCALE in [0.5, 2]");
-      timeline.zoom_at = pair.first;
-      timeline.zoom_scale = pair.second;
-    } else {
-      return usageError("unknown option " + arg);
-    }
+    const int code = parseOption(arg, value, o);
+    if (code != kContinue) return code;
   }
-  if (config_path.empty() || out.empty()) return usageError("--config and --out are required");
-  ::mkdir(out.c_str(), 0755);
+  if (o->config_path.empty() || o->out.empty()) return usageError("--config and --out are required");
+  return kContinue;
+}
+
+// What was written per frame: the grey images (to check the decoded videos against) and the
+// frame table's light level, covered flag and focal scale.
+struct Recording {
+  std::vector<cv::Mat> rendered[2];
+  std::vector<double> levels, scales;
+  std::vector<bool> covers;
+};
+
+// At time t both focal lengths step to `scale` x nominal, in both heads.
+void zoom(double scale, double t, ecs::SimRig* sim, ecs::SimRig* covered) {
+  ecs::DriftRequest drift;
+  drift.focal_scale = scale;
+  for (ecs::SimRig* rig : {sim, covered}) {
+    const std::string refusal = rig->setDrift(drift, t);
+    if (!refusal.empty()) throw std::runtime_error("zoom refused: " + refusal);
+  }
+}
+
+void writeFrame(const ecs::SimFrame& frame, cv::VideoWriter writers[2], Recording* recording) {
+  const cv::Mat images[2] = {frame.left, frame.right};
+  for (int c = 0; c < 2; ++c) {
+    cv::Mat grey = images[c];
+    if (grey.channels() == 3) cv::cvtColor(grey, grey, cv::COLOR_BGR2GRAY);
+    writers[c].write(grey);
+    recording->rendered[c].push_back(grey);
+  }
+}
+
+// Renders the videos and the calibration files (at the start and, as truth, at the end).
+Recording recordVideos(const VideoOptions& o, const ecs::SimRigConfig& config, int frames) {
+  ecs::SimRigConfig covered_config = config;
+  covered_config.scene.enabled = false;
+  ecs::SimRig sim(config), covered(covered_config);
+  const cv::Size size(config.rig.left.width, config.rig.left.height);
+  const int fourcc = cv::VideoWriter::fourcc('F', 'F', 'V', '1');
+  cv::VideoWriter writers[2] = {cv::VideoWriter(o.out + "/left.avi", cv::CAP_FFMPEG, fourcc, o.fps, size, false),
+                                cv::VideoWriter(o.out + "/right.avi", cv::CAP_FFMPEG, fourcc, o.fps, size, false)};
+  if (!writers[0].isOpened() || !writers[1].isOpened())
+    throw std::runtime_error("OpenCV cannot write FFV1 videos in " + o.out);
+  writeCalibration(config.rig, o.out + "/left.yaml", o.out + "/right.yaml");
+
+  const Timeline& timeline = o.timeline;
+  Recording recording;
+  bool zoomed = false;
+  for (int k = 0; k < frames; ++k) {
+    const double t = k / o.fps;
+    if (timeline.zoom_at >= 0 && !zoomed && t >= timeline.zoom_at) {
+      zoom(timeline.zoom_scale, t, &sim, &covered);
+      zoomed = true;
+    }
+    const bool is_covered = t >= timeline.cover.first && t < timeline.cover.second;
+    const double level = timeline.exposedLevel(t, o.exposure / o.fps);
+    // The image is linear in the light level: a frame lit for a fraction of its exposure is
+    // rendered at that level (as the simulator renders its own light ramp).
+    const ecs::SimFrame frame = (is_covered ? covered : sim).render(t, level, 2 * k + 1);
+    if (k == 0) {
+      cv::imwrite(o.out + "/left_scene.png", frame.left_scene);
+      cv::imwrite(o.out + "/right_scene.png", frame.right_scene);
+    }
+    writeFrame(frame, writers, &recording);
+    recording.levels.push_back(level);
+    recording.scales.push_back(zoomed ? timeline.zoom_scale : 1.0);
+    recording.covers.push_back(is_covered);
+  }
+  writers[0].release();
+  writers[1].release();
+  writeCalibration(sim.truthAt(frames / o.fps), o.out + "/truth_left.yaml", o.out + "/truth_right.yaml");
+  return recording;
+}
+
+// Decodes what a player will see, checks that it is bit-exact, and returns each frame's hash.
+std::vector<uint64_t> decodedHashes(const std::string& path, const std::vector<cv::Mat>& rendered, int frames) {
+  std::vector<uint64_t> hashes;
+  cv::VideoCapture capture(path);
+  cv::Mat decoded, grey, planes[3];
+  for (int k = 0; k < frames; ++k) {
+    if (!capture.read(decoded)) throw std::runtime_error(path + ": frame " + std::to_string(k) + " does not decode");
+    if (decoded.type() != CV_8UC3) throw std::runtime_error(path + ": decodes to a non-BGR image");
+    cv::split(decoded, planes);
+    for (int ch = 0; ch < 3; ++ch)
+      if (cv::norm(planes[ch], rendered[k], cv::NORM_INF) != 0)
+        throw std::runtime_error(path + ": frame " + std::to_string(k) + " does not decode bit-exactly");
+    hashes.push_back(fnv1a(decoded));
+  }
+  if (capture.read(decoded)) throw std::runtime_error(path + ": more frames than written");
+  return hashes;
+}
+
+void writeFrameTable(const VideoOptions& o, const Recording& recording, const std::vector<uint64_t> hashes[2],
+                     int frames) {
+  std::ofstream csv(o.out + "/frames.csv");
+  csv << "frame,time_s,left_hash,right_hash,light,covered,focal_scale\n";
+  char line[256];
+  for (int k = 0; k < frames; ++k) {
+    std::snprintf(line, sizeof(line), "%d,%.6f,%016" PRIx64 ",%016" PRIx64 ",%.6f,%d,%.6f\n", k, k / o.fps,
+                  hashes[0][k], hashes[1][k], recording.levels[k], recording.covers[k] ? 1 : 0, recording.scales[k]);
+    csv << line;
+  }
+  if (!csv) throw std::runtime_error(o.out + "/frames.csv: cannot write");
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  VideoOptions o;
+  const int code = parseArguments(argc, argv, &o);
+  if (code != kContinue) return code;
+  ::mkdir(o.out.c_str(), 0755);
 
   try {
-    const ecs::SimRigConfig config = ecs::loadSimRigConfig(config_path);
-    ecs::SimRigConfig covered_config = config;
-    covered_config.scene.enabled = false;
-    ecs::SimRig sim(config), covered(covered_config);
-    const cv::Size size(config.rig.left.width, config.rig.left.height);
-    const int fourcc = cv::VideoWriter::fourcc('F', 'F', 'V', '1');
-    cv::VideoWriter writers[2] = {cv::VideoWriter(out + "/left.avi", cv::CAP_FFMPEG, fourcc, fps, size, false),
-                                  cv::VideoWriter(out + "/right.avi", cv::CAP_FFMPEG, fourcc, fps, size, false)};
-    if (!writers[0].isOpened() || !writers[1].isOpened()) {
-      std::fprintf(stderr, "render_sim_video: OpenCV cannot write FFV1 videos in %s\n", out.c_str());
-      return 1;
-    }
-    writeCalibration(config.rig, out + "/left.yaml", out + "/right.yaml");
-
-    const int frames = static_cast<int>(std::lround(seconds * fps));
-    std::vector<cv::Mat> rendered[2];
-    std::vector<double> levels, scales;
-    std::vector<bool> covers;
-    bool zoomed = false;
-    for (int k = 0; k < frames; ++k) {
-      const double t = k / fps;
-      if (timeline.zoom_at >= 0 && !zoomed && t >= timeline.zoom_at) {
-        ecs::DriftRequest drift;
-        drift.focal_scale = timeline.zoom_scale;
-        for (ecs::SimRig* rig : {&sim, &covered}) {
-          const std::string refusal = rig->setDrift(drift, t);
-          if (!refusal.empty()) throw std::runtime_error("zoom refused: " + refusal);
-        }
-        zoomed = true;
-      }
-      const bool is_covered = t >= timeline.cover.first && t < timeline.cover.second;
-      const double level = timeline.exposedLevel(t, exposure / fps);
-      // The image is linear in the light level: a frame lit for a fraction of its exposure is
-      // rendered at that level (as the simulator renders its own light ramp).
-      const ecs::SimFrame frame = (is_covered ? covered : sim).render(t, level, 2 * k + 1);
-      if (k == 0) {
-        cv::imwrite(out + "/left_scene.png", frame.left_scene);
-        cv::imwrite(out + "/right_scene.png", frame.right_scene);
-      }
-      const cv::Mat images[2] = {frame.left, frame.right};
-      for (int c = 0; c < 2; ++c) {
-        cv::Mat grey = images[c];
-        if (grey.channels() == 3) cv::cvtColor(grey, grey, cv::COLOR_BGR2GRAY);
-        writers[c].write(grey);
-        rendered[c].push_back(grey);
-      }
-      levels.push_back(level);
-      scales.push_back(zoomed ? timeline.zoom_scale : 1.0);
-      covers.push_back(is_covered);
-    }
-    writers[0].release();
-    writers[1].release();
-    writeCalibration(sim.truthAt(frames / fps), out + "/truth_left.yaml", out + "/truth_right.yaml");
-
-    // Decode what a player will see, check that it is bit-exact, and record its hash.
-    std::vector<uint64_t> hashes[2];
-    for (int c = 0; c < 2; ++c) {
-      const std::string path = out + (c == 0 ? "/left.avi" : "/right.avi");
-      cv::VideoCapture capture(path);
-      cv::Mat decoded, grey, planes[3];
-      for (int k = 0; k < frames; ++k) {
-        if (!capture.read(decoded)) throw std::runtime_error(path + ": frame " + std::to_string(k) + " does not decode");
-        if (decoded.type() != CV_8UC3) throw std::runtime_error(path + ": decodes to a non-BGR image");
-        cv::split(decoded, planes);
-        for (int ch = 0; ch < 3; ++ch)
-          if (cv::norm(planes[ch], rendered[c][k], cv::NORM_INF) != 0)
-            throw std::runtime_error(path + ": frame " + std::to_string(k) + " does not decode bit-exactly");
-        hashes[c].push_back(fnv1a(decoded));
-      }
-      if (capture.read(decoded)) throw std::runtime_error(path + ": more frames than written");
-    }
-    std::ofstream csv(out + "/frames.csv");
-    csv << "frame,time_s,left_hash,right_hash,light,covered,focal_scale\n";
-    char line[256];
-    for (int k = 0; k < frames; ++k) {
-      std::snprintf(line, sizeof(line), "%d,%.6f,%016" PRIx64 ",%016" PRIx64 ",%.6f,%d,%.6f\n", k, k / fps,
-                    hashes[0][k], hashes[1][k], levels[k], covers[k] ? 1 : 0, scales[k]);
-      csv << line;
-    }
-    if (!csv) throw std::runtime_error(out + "/frames.csv: cannot write");
-    std::printf("render_sim_video: %d frames per camera at %.1f fps in %s (lossless, checked)\n", frames, fps,
-                out.c_str());
+    const ecs::SimRigConfig config = ecs::loadSimRigConfig(o.config_path);
+    const int frames = static_cast<int>(std::lround(o.seconds * o.fps));
+    const Recording recording = recordVideos(o, config, frames);
+    const std::vector<uint64_t> hashes[2] = {decodedHashes(o.out + "/left.avi", recording.rendered[0], frames),
+                                             decodedHashes(o.out + "/right.avi", recording.rendered[1], frames)};
+    writeFrameTable(o, recording, hashes, frames);
+    std::printf("render_sim_video: %d frames per camera at %.1f fps in %s (lossless, checked)\n", frames, o.fps,
+                o.out.c_str());
   } catch (const std::exception& e) {
     std::fprintf(stderr, "render_sim_video: %s\n", e.what());
     return 1;
