@@ -239,149 +239,224 @@ void writeSnapshot(const std::string& path, const ecs::SimFrame& frame) {
   if (!cv::imwrite(path, canvas)) throw std::runtime_error("--snapshot: cannot write '" + path + "'");
 }
 
-int run(const Options& o) {
+// What a run renders: the scenario, its drift script, the frame rate and count, and the
+// calibration in force.
+struct Scenario {
   ecs::SimRigConfig config;
+  std::vector<DriftStep> drift;
+  double fps = 0.0;
+  int64_t frames = 0;
+  ecs_ros::StereoCalibration::InForce in_force;
+};
+
+Scenario loadScenario(const Options& o) {
+  Scenario s;
   try {
-    config = ecs::loadSimRigConfig(o.config);
+    s.config = ecs::loadSimRigConfig(o.config);
   } catch (const std::exception& e) {
     throw ecs::ConfigError("--config", "'" + o.config + "': " + e.what());
   }
-  std::vector<DriftStep> drift;
   if (!o.drift.empty()) {
     try {
-      drift = loadDriftScript(o.drift);
+      s.drift = loadDriftScript(o.drift);
     } catch (const std::exception& e) {
       throw ecs::ConfigError("--drift", "'" + o.drift + "': " + e.what());
     }
   }
-  const double fps = o.fps > 0.0 ? o.fps : config.fps;
-  const auto frames = static_cast<int64_t>(std::llround(o.seconds * fps));
-  const ecs_ros::StereoCalibration::InForce in_force = calibrationInForce(o, config.rig);
+  s.fps = o.fps > 0.0 ? o.fps : s.config.fps;
+  s.frames = static_cast<int64_t>(std::llround(o.seconds * s.fps));
+  s.in_force = calibrationInForce(o, s.config.rig);
+  return s;
+}
 
-  ecs::SimRig sim(config);
-  ecs::LightSchedule schedule(o.schedule);
-  ecs_ros::HeadPoseTruth head_pose(o.left_frame_id);
-  const ros::Time start = o.start >= 0.0 ? ros::Time(o.start) : ros::Time(ros::WallTime::now().toSec());
-  const std::string prefix = o.ns.empty() ? "" : "/" + o.ns;
-  const std::string encoding = config.encoding;
+// Renders a scenario frame by frame into the bag (and the snapshot), as the driver would
+// publish it.
+class ScenarioRun {
+ public:
+  ScenarioRun(const Options& o, const Scenario& s)
+      : o_(o), s_(s), sim_(s.config), schedule_(o.schedule), head_pose_(o.left_frame_id),
+        start_(o.start >= 0.0 ? ros::Time(o.start) : ros::Time(ros::WallTime::now().toSec())),
+        prefix_(o.ns.empty() ? "" : "/" + o.ns), write_bag_(!o.out.empty()), active_(o.out + ".active"),
+        snapshot_written_(o.snapshot.empty()) {}
 
-  const bool write_bag = !o.out.empty();
-  const std::string active = o.out + ".active";  // renamed to `out` once complete
-  rosbag::Bag bag;
-  if (write_bag) {
-    bag.open(active, rosbag::bagmode::Write);
-    if (o.lz4) bag.setCompression(rosbag::compression::LZ4);
-  }
-  char light_text[64] = "no light windows";
-  if (o.schedule.period_s > 0.0) std::snprintf(light_text, sizeof(light_text), "a light window every %g s", o.schedule.period_s);
-  std::printf("render_scenario_bag: %s, %g s at %g fps (%lld frames), %s, %zu drift steps\n", o.config.c_str(),
-              o.seconds, fps, static_cast<long long>(frames), light_text, drift.size());
-  std::fflush(stdout);
-
-  const auto wall_start = std::chrono::steady_clock::now();
-  size_t next_drift = 0, light_windows = 0, messages = 0;
-  double switch_time_s = -1e300;  // the light's last switch: never
-  bool snapshot_written = o.snapshot.empty();
-  for (int64_t k = 0; k < frames && (write_bag || !snapshot_written); ++k) {
-    const double time_s = static_cast<double>(k) / fps;
-    for (; next_drift < drift.size() && drift[next_drift].time_s <= time_s; ++next_drift) {
-      const std::string refusal = sim.setDrift(drift[next_drift].request, drift[next_drift].time_s);
-      if (!refusal.empty())
-        throw ecs::ConfigError("--drift", "'" + o.drift + "': drift[" + std::to_string(next_drift) + "]: " + refusal);
+  int run() {
+    openBag();
+    wall_start_ = std::chrono::steady_clock::now();
+    for (int64_t k = 0; k < s_.frames && (write_bag_ || !snapshot_written_); ++k) {
+      const double time_s = static_cast<double>(k) / s_.fps;
+      applyDrift(time_s);
+      const ecs::LightState light = schedule_.step(time_s);
+      const ecs::SimFrame frame = render(k, time_s, light);
+      head_pose_.update(frame.world_from_left, frame.time_s);
+      if (!snapshot_written_ && light.light_on && light.settled) writeSnapshotOf(frame, k, time_s);
+      if (!write_bag_) continue;
+      writeFrame(frame, light, start_ + ros::Duration(time_s));
+      reportProgress(k);
     }
-    const ecs::LightState light = schedule.step(time_s);
-    if (light.light_on && light.switched) ++light_windows;
+    if (!snapshot_written_)
+      throw std::runtime_error("--snapshot: no settled light-on frame in the rendered time (set --period)");
+    if (!write_bag_) return 0;
+    finish();
+    return 0;
+  }
+
+ private:
+  void openBag() {
+    if (write_bag_) {
+      bag_.open(active_, rosbag::bagmode::Write);
+      if (o_.lz4) bag_.setCompression(rosbag::compression::LZ4);
+    }
+    char light_text[64] = "no light windows";
+    if (o_.schedule.period_s > 0.0)
+      std::snprintf(light_text, sizeof(light_text), "a light window every %g s", o_.schedule.period_s);
+    std::printf("render_scenario_bag: %s, %g s at %g fps (%lld frames), %s, %zu drift steps\n", o_.config.c_str(),
+                o_.seconds, s_.fps, static_cast<long long>(s_.frames), light_text, s_.drift.size());
+    std::fflush(stdout);
+  }
+
+  // The drift script's requests due by scene time time_s.
+  void applyDrift(double time_s) {
+    for (; next_drift_ < s_.drift.size() && s_.drift[next_drift_].time_s <= time_s; ++next_drift_) {
+      const std::string refusal = sim_.setDrift(s_.drift[next_drift_].request, s_.drift[next_drift_].time_s);
+      if (!refusal.empty())
+        throw ecs::ConfigError("--drift", "'" + o_.drift + "': drift[" + std::to_string(next_drift_) + "]: " + refusal);
+    }
+  }
+
+  ecs::SimFrame render(int64_t k, double time_s, const ecs::LightState& light) {
+    if (light.light_on && light.switched) ++light_windows_;
     // As the driver's sim light and sim source pass them: the schedule's level, and the command
     // with the scene time of its last switch (for a scenario with a light response model).
-    if (light.switched) switch_time_s = time_s;
+    if (light.switched) switch_time_s_ = time_s;
     ecs::SimRenderRequest request;
     request.time_s = time_s;
     request.light_level = light.light_level;
     request.noise_seed = static_cast<uint64_t>(k + 1);
     request.has_light_command = true;
     request.light_command.on = light.light_on;
-    request.light_command.switch_time_s = switch_time_s;
-    const ecs::SimFrame frame = sim.render(request);
-    head_pose.update(frame.world_from_left, frame.time_s);
-    if (!snapshot_written && light.light_on && light.settled) {
-      writeSnapshot(o.snapshot, frame);
-      snapshot_written = true;
-      std::printf("render_scenario_bag: wrote %s (frame %lld, %.2f s: left image | scene-only ground truth)\n",
-                  o.snapshot.c_str(), static_cast<long long>(k), time_s);
-    }
-    if (!write_bag) continue;
+    request.light_command.switch_time_s = switch_time_s_;
+    return sim_.render(request);
+  }
 
-    const ros::Time stamp = start + ros::Duration(time_s);
+  void writeSnapshotOf(const ecs::SimFrame& frame, int64_t k, double time_s) {
+    writeSnapshot(o_.snapshot, frame);
+    snapshot_written_ = true;
+    std::printf("render_scenario_bag: wrote %s (frame %lld, %.2f s: left image | scene-only ground truth)\n",
+                o_.snapshot.c_str(), static_cast<long long>(k), time_s);
+  }
+
+  template <typename Message>
+  void write(const std::string& topic, const ros::Time& stamp, const Message& msg) {
+    bag_.write(topic, stamp, msg);
+    ++messages_;
+  }
+
+  // The driver's topics, as its capture loop builds them.
+  void writeFrame(const ecs::SimFrame& frame, const ecs::LightState& light, const ros::Time& stamp) {
     std_msgs::Header left_header, right_header;
     left_header.stamp = right_header.stamp = stamp;
-    left_header.frame_id = o.left_frame_id;
-    right_header.frame_id = o.right_in_left_frame ? o.left_frame_id : o.right_frame_id;
-    // As the driver's capture loop builds them.
-    sensor_msgs::CameraInfo left_info = in_force.left, right_info = in_force.right;
+    left_header.frame_id = o_.left_frame_id;
+    right_header.frame_id = o_.right_in_left_frame ? o_.left_frame_id : o_.right_frame_id;
+    sensor_msgs::CameraInfo left_info = s_.in_force.left, right_info = s_.in_force.right;
     left_info.header = left_header;
     right_info.header = right_header;
     ecs_ros::CalibrationMode mode;
     mode.header = left_header;
     mode.light_on = light.light_on;
     mode.settled = light.settled;
-    mode.calibration_epoch = in_force.epoch;
-    const auto write = [&](const std::string& topic, const auto& msg) {
-      bag.write(topic, stamp, msg);
-      ++messages;
-    };
-    write(prefix + "/left/image_raw", cv_bridge::CvImage(left_header, encoding, frame.left).toImageMsg());
-    write(prefix + "/left/camera_info", left_info);
-    write(prefix + "/right/image_raw", cv_bridge::CvImage(right_header, encoding, frame.right).toImageMsg());
-    write(prefix + "/right/camera_info", right_info);
-    write(prefix + "/calibration_mode", mode);
-    if (o.ground_truth) {
-      auto truth_infos = ecs_ros::toStereoCameraInfo(frame.truth);
-      truth_infos.first.header = left_header;
-      truth_infos.second.header = right_header;
-      auto observations = ecs_ros::toMsg(frame.observations);
-      observations.header = left_header;
-      write(prefix + "/ground_truth/left/camera_info", truth_infos.first);
-      write(prefix + "/ground_truth/right/camera_info", truth_infos.second);
-      write(prefix + "/ground_truth/observations", observations);
-      write(prefix + "/ground_truth/left/image_scene",
-            cv_bridge::CvImage(left_header, encoding, frame.left_scene).toImageMsg());
-      write(prefix + "/ground_truth/right/image_scene",
-            cv_bridge::CvImage(right_header, encoding, frame.right_scene).toImageMsg());
-      write(prefix + "/ground_truth/head_pose", head_pose.odometry(stamp));
-      tf2_msgs::TFMessage tf;
-      tf.transforms.push_back(head_pose.transform(stamp));
-      write("/tf", tf);
-      if (o.depth)
-        write(prefix + "/ground_truth/left/depth", cv_bridge::CvImage(left_header, "32FC1", frame.left_depth).toImageMsg());
-    }
-    const int64_t every = std::max<int64_t>(1, static_cast<int64_t>(std::llround(5.0 * fps)));
-    if ((k + 1) % every == 0 || k + 1 == frames) {
-      const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - wall_start).count();
-      std::printf("render_scenario_bag: %.1f / %.1f s rendered (%lld frames, %.1f s wall)\n", (k + 1) / fps,
-                  o.seconds, static_cast<long long>(k + 1), wall);
+    mode.calibration_epoch = s_.in_force.epoch;
+    const std::string& encoding = s_.config.encoding;
+    write(prefix_ + "/left/image_raw", stamp, cv_bridge::CvImage(left_header, encoding, frame.left).toImageMsg());
+    write(prefix_ + "/left/camera_info", stamp, left_info);
+    write(prefix_ + "/right/image_raw", stamp, cv_bridge::CvImage(right_header, encoding, frame.right).toImageMsg());
+    write(prefix_ + "/right/camera_info", stamp, right_info);
+    write(prefix_ + "/calibration_mode", stamp, mode);
+    if (o_.ground_truth) writeGroundTruth(frame, left_header, right_header);
+  }
+
+  void writeGroundTruth(const ecs::SimFrame& frame, const std_msgs::Header& left_header,
+                        const std_msgs::Header& right_header) {
+    const ros::Time& stamp = left_header.stamp;
+    const std::string& encoding = s_.config.encoding;
+    auto truth_infos = ecs_ros::toStereoCameraInfo(frame.truth);
+    truth_infos.first.header = left_header;
+    truth_infos.second.header = right_header;
+    auto observations = ecs_ros::toMsg(frame.observations);
+    observations.header = left_header;
+    write(prefix_ + "/ground_truth/left/camera_info", stamp, truth_infos.first);
+    write(prefix_ + "/ground_truth/right/camera_info", stamp, truth_infos.second);
+    write(prefix_ + "/ground_truth/observations", stamp, observations);
+    write(prefix_ + "/ground_truth/left/image_scene", stamp,
+          cv_bridge::CvImage(left_header, encoding, frame.left_scene).toImageMsg());
+    write(prefix_ + "/ground_truth/right/image_scene", stamp,
+          cv_bridge::CvImage(right_header, encoding, frame.right_scene).toImageMsg());
+    write(prefix_ + "/ground_truth/head_pose", stamp, head_pose_.odometry(stamp));
+    tf2_msgs::TFMessage tf;
+    tf.transforms.push_back(head_pose_.transform(stamp));
+    write("/tf", stamp, tf);
+    if (o_.depth)
+      write(prefix_ + "/ground_truth/left/depth", stamp,
+            cv_bridge::CvImage(left_header, "32FC1", frame.left_depth).toImageMsg());
+  }
+
+  double wallSeconds() const {
+    return std::chrono::duration<double>(std::chrono::steady_clock::now() - wall_start_).count();
+  }
+
+  // A line every 5 s of scene time and at the end.
+  void reportProgress(int64_t k) {
+    const int64_t every = std::max<int64_t>(1, static_cast<int64_t>(std::llround(5.0 * s_.fps)));
+    if ((k + 1) % every == 0 || k + 1 == s_.frames) {
+      const double wall = wallSeconds();
+      std::printf("render_scenario_bag: %.1f / %.1f s rendered (%lld frames, %.1f s wall)\n", (k + 1) / s_.fps,
+                  o_.seconds, static_cast<long long>(k + 1), wall);
       std::fflush(stdout);
     }
   }
-  if (!snapshot_written)
-    throw std::runtime_error("--snapshot: no settled light-on frame in the rendered time (set --period)");
-  if (!write_bag) return 0;
-  bag.close();
-  std::filesystem::rename(active, o.out);
-  const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - wall_start).count();
-  std::printf("render_scenario_bag: wrote %s: %lld frames (%.1f s from stamp %.3f), %zu messages, %zu light "
-              "windows, %zu drift steps applied, %.0f MB, %.1f ms per frame\n",
-              o.out.c_str(), static_cast<long long>(frames), frames / fps, start.toSec(), messages, light_windows,
-              next_drift, std::filesystem::file_size(o.out) / 1e6, 1e3 * wall / std::max<int64_t>(frames, 1));
-  std::printf("render_scenario_bag: topics %s/{left,right}/image_raw, %s/{left,right}/camera_info, "
-              "%s/calibration_mode%s\n",
-              prefix.c_str(), prefix.c_str(), prefix.c_str(),
-              o.ground_truth ? (", " + prefix + "/ground_truth/{left,right}/image_scene, " + prefix +
-                                "/ground_truth/{left,right}/camera_info, " + prefix + "/ground_truth/observations, " +
-                                prefix + "/ground_truth/head_pose, /tf" +
-                                (o.depth ? ", " + prefix + "/ground_truth/left/depth" : ""))
-                                   .c_str()
-                             : "");
-  return 0;
+
+  // Closes the bag, gives it its name and prints what it holds.
+  void finish() {
+    bag_.close();
+    std::filesystem::rename(active_, o_.out);
+    const double wall = wallSeconds();
+    const int64_t frames = s_.frames;
+    std::printf("render_scenario_bag: wrote %s: %lld frames (%.1f s from stamp %.3f), %zu messages, %zu light "
+                "windows, %zu drift steps applied, %.0f MB, %.1f ms per frame\n",
+                o_.out.c_str(), static_cast<long long>(frames), frames / s_.fps, start_.toSec(), messages_,
+                light_windows_, next_drift_, std::filesystem::file_size(o_.out) / 1e6,
+                1e3 * wall / std::max<int64_t>(frames, 1));
+    const std::string& prefix = prefix_;
+    std::printf("render_scenario_bag: topics %s/{left,right}/image_raw, %s/{left,right}/camera_info, "
+                "%s/calibration_mode%s\n",
+                prefix.c_str(), prefix.c_str(), prefix.c_str(),
+                o_.ground_truth ? (", " + prefix + "/ground_truth/{left,right}/image_scene, " + prefix +
+                                   "/ground_truth/{left,right}/camera_info, " + prefix + "/ground_truth/observations, " +
+                                   prefix + "/ground_truth/head_pose, /tf" +
+                                   (o_.depth ? ", " + prefix + "/ground_truth/left/depth" : ""))
+                                      .c_str()
+                                : "");
+  }
+
+  const Options& o_;
+  const Scenario& s_;
+  ecs::SimRig sim_;
+  ecs::LightSchedule schedule_;
+  ecs_ros::HeadPoseTruth head_pose_;
+  const ros::Time start_;
+  const std::string prefix_;
+  const bool write_bag_;
+  const std::string active_;  // renamed to `out` once complete
+  rosbag::Bag bag_;
+  std::chrono::steady_clock::time_point wall_start_;
+  size_t next_drift_ = 0, light_windows_ = 0, messages_ = 0;
+  double switch_time_s_ = -1e300;  // the light's last switch: never
+  bool snapshot_written_;
+};
+
+int run(const Options& o) {
+  const Scenario scenario = loadScenario(o);
+  ScenarioRun renderer(o, scenario);
+  return renderer.run();
 }
 
 }  // namespace
