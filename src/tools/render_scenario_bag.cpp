@@ -105,6 +105,60 @@ int parseCount(const std::string& option, const std::string& text) {
   return static_cast<int>(v);
 }
 
+// The options of what to render (scenario, output, time, light schedule, drift); false when
+// `arg` is none of them. value() takes the option's value.
+template <typename Value>
+bool parseRenderOption(const std::string& arg, const Value& value, Options* o) {
+  if (arg == "--config") o->config = value();
+  else if (arg == "--out") o->out = value();
+  else if (arg == "--seconds") o->seconds = parseNumber(arg, value());
+  else if (arg == "--fps") o->fps = parseNumber(arg, value());
+  else if (arg == "--period") o->schedule.period_s = parseNumber(arg, value());
+  else if (arg == "--calibration-frames") o->schedule.calibration_frames = parseCount(arg, value());
+  else if (arg == "--settle-frames") o->schedule.settle_frames = parseCount(arg, value());
+  else if (arg == "--drift") o->drift = value();
+  else if (arg == "--snapshot") o->snapshot = value();
+  else return false;
+  return true;
+}
+
+// The options of how the driver would publish it (topics, frames, stamps, calibration, what is
+// recorded); false when `arg` is none of them.
+template <typename Value>
+bool parsePublishOption(const std::string& arg, const Value& value, Options* o) {
+  if (arg == "--ns") o->ns = value();
+  else if (arg == "--start") o->start = parseNumber(arg, value());
+  else if (arg == "--left-frame-id") o->left_frame_id = value();
+  else if (arg == "--right-frame-id") o->right_frame_id = value();
+  else if (arg == "--right-in-left-frame") {
+    const std::string v = value();
+    if (v != "true" && v != "false") throw UsageError(arg + ": must be true or false, not '" + v + "'");
+    o->right_in_left_frame = v == "true";
+  } else if (arg == "--left-camera-info") o->left_info = value();
+  else if (arg == "--right-camera-info") o->right_info = value();
+  else if (arg == "--no-ground-truth") o->ground_truth = false;
+  else if (arg == "--depth") o->depth = true;
+  else if (arg == "--lz4") o->lz4 = true;
+  else return false;
+  return true;
+}
+
+// Refuses what the options cannot mean together; the namespace without surrounding slashes.
+void checkOptions(Options* o) {
+  if (o->config.empty()) throw UsageError("--config is required");
+  if (o->out.empty() && o->snapshot.empty()) throw UsageError("--out is required");
+  if (!(o->seconds > 0.0) || o->seconds > 86400.0) throw UsageError("--seconds: must be in (0, 86400]");
+  if (o->fps != 0.0 && (!(o->fps > 0.0) || o->fps > 1000.0)) throw UsageError("--fps: must be in (0, 1000]");
+  const std::string schedule_problem = o->schedule.validate();
+  if (!schedule_problem.empty()) throw UsageError("light schedule: " + schedule_problem);
+  if (o->left_info.empty() != o->right_info.empty())
+    throw UsageError("--left-camera-info and --right-camera-info go together");
+  if (o->start >= 0.0 && o->start > 4e9) throw UsageError("--start: beyond ros::Time");
+  // Topic namespace without surrounding slashes.
+  while (!o->ns.empty() && o->ns.front() == '/') o->ns.erase(0, 1);
+  while (!o->ns.empty() && o->ns.back() == '/') o->ns.pop_back();
+}
+
 Options parseOptions(int argc, char** argv) {
   Options o;
   for (int i = 1; i < argc; ++i) {
@@ -113,43 +167,11 @@ Options parseOptions(int argc, char** argv) {
       if (i + 1 >= argc) throw UsageError(arg + ": needs a value");
       return argv[++i];
     };
-    if (arg == "--config") o.config = value();
-    else if (arg == "--out") o.out = value();
-    else if (arg == "--seconds") o.seconds = parseNumber(arg, value());
-    else if (arg == "--fps") o.fps = parseNumber(arg, value());
-    else if (arg == "--period") o.schedule.period_s = parseNumber(arg, value());
-    else if (arg == "--calibration-frames") o.schedule.calibration_frames = parseCount(arg, value());
-    else if (arg == "--settle-frames") o.schedule.settle_frames = parseCount(arg, value());
-    else if (arg == "--drift") o.drift = value();
-    else if (arg == "--ns") o.ns = value();
-    else if (arg == "--start") o.start = parseNumber(arg, value());
-    else if (arg == "--left-frame-id") o.left_frame_id = value();
-    else if (arg == "--right-frame-id") o.right_frame_id = value();
-    else if (arg == "--right-in-left-frame") {
-      const std::string v = value();
-      if (v != "true" && v != "false") throw UsageError(arg + ": must be true or false, not '" + v + "'");
-      o.right_in_left_frame = v == "true";
-    } else if (arg == "--left-camera-info") o.left_info = value();
-    else if (arg == "--right-camera-info") o.right_info = value();
-    else if (arg == "--no-ground-truth") o.ground_truth = false;
-    else if (arg == "--depth") o.depth = true;
-    else if (arg == "--lz4") o.lz4 = true;
-    else if (arg == "--snapshot") o.snapshot = value();
-    else if (arg == "--help" || arg == "-h") throw UsageError("");
-    else throw UsageError("unknown option '" + arg + "'");
+    if (parseRenderOption(arg, value, &o) || parsePublishOption(arg, value, &o)) continue;
+    if (arg == "--help" || arg == "-h") throw UsageError("");
+    throw UsageError("unknown option '" + arg + "'");
   }
-  if (o.config.empty()) throw UsageError("--config is required");
-  if (o.out.empty() && o.snapshot.empty()) throw UsageError("--out is required");
-  if (!(o.seconds > 0.0) || o.seconds > 86400.0) throw UsageError("--seconds: must be in (0, 86400]");
-  if (o.fps != 0.0 && (!(o.fps > 0.0) || o.fps > 1000.0)) throw UsageError("--fps: must be in (0, 1000]");
-  const std::string schedule_problem = o.schedule.validate();
-  if (!schedule_problem.empty()) throw UsageError("light schedule: " + schedule_problem);
-  if (o.left_info.empty() != o.right_info.empty())
-    throw UsageError("--left-camera-info and --right-camera-info go together");
-  if (o.start >= 0.0 && o.start > 4e9) throw UsageError("--start: beyond ros::Time");
-  // Topic namespace without surrounding slashes.
-  while (!o.ns.empty() && o.ns.front() == '/') o.ns.erase(0, 1);
-  while (!o.ns.empty() && o.ns.back() == '/') o.ns.pop_back();
+  checkOptions(&o);
   return o;
 }
 
@@ -158,57 +180,70 @@ struct DriftStep {
   ecs::DriftRequest request;
 };
 
-// The drift script: a YAML list (or a map whose `drift` key is the list) of sim/set_drift
-// requests with their scene time. Unknown keys are refused, so a misspelt field is not ignored.
-std::vector<DriftStep> loadDriftScript(const std::string& path) {
+// The drift script's list: the YAML document's root, or its `drift` key when the root is a map.
+// fs holds the document (the nodes point into it).
+cv::FileNode driftList(const std::string& path, cv::FileStorage* fs) {
   std::ifstream in(path);
   if (!in.good()) throw ecs::ConfigError(path, "file not found or not readable");
   std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
   // OpenCV's YAML reader wants its "%YAML:1.0" directive; a hand-written script has none.
   if (text.rfind("%YAML", 0) != 0) text = "%YAML:1.0\n---\n" + text;
-  cv::FileStorage fs;
   try {
-    fs.open(text, cv::FileStorage::READ | cv::FileStorage::MEMORY | cv::FileStorage::FORMAT_YAML);
+    fs->open(text, cv::FileStorage::READ | cv::FileStorage::MEMORY | cv::FileStorage::FORMAT_YAML);
   } catch (const cv::Exception& e) {
     throw ecs::ConfigError(path, std::string("malformed YAML: ") + e.err);
   }
-  if (!fs.isOpened()) throw ecs::ConfigError(path, "malformed YAML");
-  cv::FileNode list = fs.root();
-  std::string base = "drift";
+  if (!fs->isOpened()) throw ecs::ConfigError(path, "malformed YAML");
+  cv::FileNode list = fs->root();
   if (list.isMap()) list = list["drift"];
   if (list.empty() || list.isNone()) throw ecs::ConfigError("drift", "missing: the file must be a list of drift steps");
   if (!list.isSeq()) throw ecs::ConfigError("drift", "must be a list of {time_s, ...} maps");
+  return list;
+}
+
+// The request's fields of one step (time_s aside), defaults for those it leaves out.
+ecs::DriftRequest driftRequest(const cv::FileNode& n, const std::string& where) {
+  ecs::DriftRequest r;
+  r.focal_scale = ecs::readDouble(n, "focal_scale", where, 1.0);
+  r.thermal_rate_deg_per_s = ecs::readDouble(n, "thermal_rate_deg_per_s", where, 0.0);
+  for (const auto& [key, vec] : {std::pair<const char*, Eigen::Vector3d*>{"right_rotation_deg", &r.right_rotation_deg},
+                                 {"knock_rotation_deg", &r.knock_rotation_deg},
+                                 {"knock_translation_m", &r.knock_translation_m}})
+    if (!n[key].empty() && !n[key].isNone()) *vec = ecs::readVector3(n, key, where);
+  const cv::FileNode reset = n["reset"];
+  if (!reset.empty() && !reset.isNone()) {
+    if (!reset.isInt() && !(reset.isString() && (reset.string() == "true" || reset.string() == "false")))
+      throw ecs::ConfigError(where + ".reset", "must be true or false");
+    r.reset = reset.isInt() ? static_cast<int>(reset) != 0 : reset.string() == "true";
+  }
+  return r;
+}
+
+// Step `where` of the script; previous: the step before it (nullptr for the first).
+DriftStep driftStep(const cv::FileNode& n, const std::string& where, const DriftStep* previous) {
   static const std::set<std::string> kKeys = {"time_s", "focal_scale", "right_rotation_deg", "thermal_rate_deg_per_s",
                                               "knock_rotation_deg", "knock_translation_m", "reset"};
+  if (!n.isMap()) throw ecs::ConfigError(where, "must be a map {time_s: ..., ...}");
+  for (const std::string& key : n.keys())
+    if (!kKeys.count(key)) throw ecs::ConfigError(where + "." + key, "unknown field");
+  DriftStep step;
+  const cv::FileNode time = n["time_s"];
+  if (time.empty() || time.isNone()) throw ecs::ConfigError(where + ".time_s", "missing");
+  step.time_s = ecs::readDouble(n, "time_s", where, 0.0);
+  if (step.time_s < 0.0) throw ecs::ConfigError(where + ".time_s", "must be >= 0");
+  if (previous && step.time_s < previous->time_s) throw ecs::ConfigError(where + ".time_s", "steps must be in time order");
+  step.request = driftRequest(n, where);
+  return step;
+}
+
+// The drift script: a YAML list (or a map whose `drift` key is the list) of sim/set_drift
+// requests with their scene time. Unknown keys are refused, so a misspelt field is not ignored.
+std::vector<DriftStep> loadDriftScript(const std::string& path) {
+  cv::FileStorage fs;
+  const cv::FileNode list = driftList(path, &fs);
   std::vector<DriftStep> steps;
-  for (int i = 0; i < static_cast<int>(list.size()); ++i) {
-    const cv::FileNode n = list[i];
-    const std::string where = base + "[" + std::to_string(i) + "]";
-    if (!n.isMap()) throw ecs::ConfigError(where, "must be a map {time_s: ..., ...}");
-    for (const std::string& key : n.keys())
-      if (!kKeys.count(key)) throw ecs::ConfigError(where + "." + key, "unknown field");
-    DriftStep step;
-    const cv::FileNode time = n["time_s"];
-    if (time.empty() || time.isNone()) throw ecs::ConfigError(where + ".time_s", "missing");
-    step.time_s = ecs::readDouble(n, "time_s", where, 0.0);
-    if (step.time_s < 0.0) throw ecs::ConfigError(where + ".time_s", "must be >= 0");
-    if (!steps.empty() && step.time_s < steps.back().time_s)
-      throw ecs::ConfigError(where + ".time_s", "steps must be in time order");
-    ecs::DriftRequest& r = step.request;
-    r.focal_scale = ecs::readDouble(n, "focal_scale", where, 1.0);
-    r.thermal_rate_deg_per_s = ecs::readDouble(n, "thermal_rate_deg_per_s", where, 0.0);
-    for (const auto& [key, vec] : {std::pair<const char*, Eigen::Vector3d*>{"right_rotation_deg", &r.right_rotation_deg},
-                                   {"knock_rotation_deg", &r.knock_rotation_deg},
-                                   {"knock_translation_m", &r.knock_translation_m}})
-      if (!n[key].empty() && !n[key].isNone()) *vec = ecs::readVector3(n, key, where);
-    const cv::FileNode reset = n["reset"];
-    if (!reset.empty() && !reset.isNone()) {
-      if (!reset.isInt() && !(reset.isString() && (reset.string() == "true" || reset.string() == "false")))
-        throw ecs::ConfigError(where + ".reset", "must be true or false");
-      r.reset = reset.isInt() ? static_cast<int>(reset) != 0 : reset.string() == "true";
-    }
-    steps.push_back(step);
-  }
+  for (int i = 0; i < static_cast<int>(list.size()); ++i)
+    steps.push_back(driftStep(list[i], "drift[" + std::to_string(i) + "]", steps.empty() ? nullptr : &steps.back()));
   return steps;
 }
 
