@@ -9,29 +9,44 @@
 
 namespace ecs {
 
-std::string TrackerOptions::check() const {
-  if (window_radius_px < 0 || window_radius_px > 15)
+namespace {
+
+// The corner refinement's options (windows, contrast, residuals, iterations).
+std::string refinementProblem(const TrackerOptions& o) {
+  if (o.window_radius_px < 0 || o.window_radius_px > 15)
     return "window_radius_px must be in [0, 15] (0 = automatic)";
-  if (!(search_radius_px >= 0 && search_radius_px <= 64)) return "search_radius_px must be in [0, 64]";
-  if (!(min_contrast >= 0 && std::isfinite(min_contrast))) return "min_contrast must be >= 0";
-  if (!(relative_contrast >= 0 && relative_contrast <= 1)) return "relative_contrast must be in [0, 1]";
-  if (!(max_residual_px > 0 && std::isfinite(max_residual_px))) return "max_residual_px must be > 0";
-  if (!(max_residual_no_background_px > 0 && std::isfinite(max_residual_no_background_px)))
+  if (!(o.search_radius_px >= 0 && o.search_radius_px <= 64)) return "search_radius_px must be in [0, 64]";
+  if (!(o.min_contrast >= 0 && std::isfinite(o.min_contrast))) return "min_contrast must be >= 0";
+  if (!(o.relative_contrast >= 0 && o.relative_contrast <= 1)) return "relative_contrast must be in [0, 1]";
+  if (!(o.max_residual_px > 0 && std::isfinite(o.max_residual_px))) return "max_residual_px must be > 0";
+  if (!(o.max_residual_no_background_px > 0 && std::isfinite(o.max_residual_no_background_px)))
     return "max_residual_no_background_px must be > 0";
-  if (!(max_refine_shift > 0 && std::isfinite(max_refine_shift))) return "max_refine_shift must be > 0";
-  if (max_iterations < 1) return "max_iterations must be >= 1";
-  if (min_board_corners < 4) return "min_board_corners must be >= 4 (a homography needs 4)";
-  if (!(min_board_fraction >= 0 && min_board_fraction <= 1)) return "min_board_fraction must be in [0, 1]";
-  if (!(min_pattern_score >= -1 && min_pattern_score <= 1)) return "min_pattern_score must be in [-1, 1]";
-  if (!(offset_update_rate >= 0 && offset_update_rate <= 1)) return "offset_update_rate must be in [0, 1]";
-  if (!(difference_smoothing_px >= 0 && difference_smoothing_px <= 5))
+  if (!(o.max_refine_shift > 0 && std::isfinite(o.max_refine_shift))) return "max_refine_shift must be > 0";
+  if (o.max_iterations < 1) return "max_iterations must be >= 1";
+  return "";
+}
+
+// The board's, the alignment's and the background's options.
+std::string boardProblem(const TrackerOptions& o) {
+  if (o.min_board_corners < 4) return "min_board_corners must be >= 4 (a homography needs 4)";
+  if (!(o.min_board_fraction >= 0 && o.min_board_fraction <= 1)) return "min_board_fraction must be in [0, 1]";
+  if (!(o.min_pattern_score >= -1 && o.min_pattern_score <= 1)) return "min_pattern_score must be in [-1, 1]";
+  if (!(o.offset_update_rate >= 0 && o.offset_update_rate <= 1)) return "offset_update_rate must be in [0, 1]";
+  if (!(o.difference_smoothing_px >= 0 && o.difference_smoothing_px <= 5))
     return "difference_smoothing_px must be in [0, 5]";
-  if (!(alignment_blur_px >= 0.3 && alignment_blur_px <= 5)) return "alignment_blur_px must be in [0.3, 5]";
-  if (!(stale_background_level > 0 && std::isfinite(stale_background_level)))
+  if (!(o.alignment_blur_px >= 0.3 && o.alignment_blur_px <= 5)) return "alignment_blur_px must be in [0.3, 5]";
+  if (!(o.stale_background_level > 0 && std::isfinite(o.stale_background_level)))
     return "stale_background_level must be > 0";
-  if (!(background_motion_px > 0 && std::isfinite(background_motion_px)))
+  if (!(o.background_motion_px > 0 && std::isfinite(o.background_motion_px)))
     return "background_motion_px must be > 0";
   return "";
+}
+
+}  // namespace
+
+std::string TrackerOptions::check() const {
+  const std::string problem = refinementProblem(*this);
+  return problem.empty() ? boardProblem(*this) : problem;
 }
 
 cv::Mat toGrayImage(const cv::Mat& image, ColorOrder order) {
