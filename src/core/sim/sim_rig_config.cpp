@@ -51,8 +51,8 @@ Problem trajectoryProblem(const SimTrajectory& t, const std::string& key) {
 
 bool inRange(double v, double lo, double hi) { return v >= lo && v <= hi; }  // false for NaN
 
-// The real-head optics (ghost, vignetting, exposure, light response, sensor).
-Problem findRealOpticsProblem(const SimOpticsConfig& o, double fps) {
+// The ghost (the reflection off the cover glass) and the vignetting.
+Problem ghostAndVignettingProblem(const SimOpticsConfig& o) {
   const SimGhostConfig& g = o.ghost;
   if (!inRange(g.thickness_mm, 0.0, 20.0)) return {"optics.ghost.thickness_mm", "must be in [0,20] mm"};
   if (!(g.angle_deg > 0.0 && g.angle_deg <= 90.0)) return {"optics.ghost.angle_deg", "must be in (0,90] deg"};
@@ -61,7 +61,11 @@ Problem findRealOpticsProblem(const SimOpticsConfig& o, double fps) {
   if (!inRange(g.direction_deg, -360.0, 360.0)) return {"optics.ghost.direction_deg", "must be in [-360,360] deg"};
   if (!inRange(o.vignetting.scene, 0.0, 4.0)) return {"optics.vignetting.scene", "must be in [0,4]"};
   if (!inRange(o.vignetting.device, 0.0, 4.0)) return {"optics.vignetting.device", "must be in [0,4]"};
-  const SimExposureConfig& e = o.exposure;
+  return {"", ""};
+}
+
+// The exposure (fixed or automatic gain) and its time within a frame.
+Problem exposureProblem(const SimExposureConfig& e, double fps) {
   if (e.mode != "fixed" && e.mode != "auto") return {"optics.exposure.mode", "must be fixed or auto"};
   if (!inRange(e.min_gain, 1e-3, 64.0)) return {"optics.exposure.min_gain", "must be in [0.001,64]"};
   if (!inRange(e.max_gain, e.min_gain, 64.0))
@@ -72,6 +76,11 @@ Problem findRealOpticsProblem(const SimOpticsConfig& o, double fps) {
   if (!inRange(e.time_constant_frames, 0.1, 1e4))
     return {"optics.exposure.time_constant_frames", "must be in [0.1,10000] frames"};
   if (!inRange(e.time_s, 0.0, 1.0 / fps)) return {"optics.exposure.time_s", "must be in [0,1/fps] s"};
+  return {"", ""};
+}
+
+// The light's response and the sensor.
+Problem lightAndSensorProblem(const SimOpticsConfig& o) {
   const SimLightResponseConfig& l = o.light;
   if (l.model != "schedule" && l.model != "response") return {"optics.light.model", "must be schedule or response"};
   if (!inRange(l.rise_time_s, 0.0, 10.0)) return {"optics.light.rise_time_s", "must be in [0,10] s"};
@@ -84,13 +93,16 @@ Problem findRealOpticsProblem(const SimOpticsConfig& o, double fps) {
   return {"", ""};
 }
 
-Problem findProblem(const SimRigConfig& c) {
-  std::string e = c.rig.validate();
-  if (!e.empty()) return {"rig", e};
-  e = c.device.validate();
-  if (!e.empty()) return {"device", e};
-  if (c.rig.left.width != c.rig.right.width || c.rig.left.height != c.rig.right.height)
-    return {"rig.right", "must have the same image size as rig.left"};
+// The real-head optics (ghost, vignetting, exposure, light response, sensor).
+Problem findRealOpticsProblem(const SimOpticsConfig& o, double fps) {
+  Problem p = ghostAndVignettingProblem(o);
+  if (p.first.empty()) p = exposureProblem(o.exposure, fps);
+  if (p.first.empty()) p = lightAndSensorProblem(o);
+  return p;
+}
+
+// The scene's planes and movers and the head's trajectory.
+Problem sceneProblem(const SimRigConfig& c) {
   for (size_t i = 0; i < c.scene.planes.size(); ++i) {
     const Problem p = planeProblem(c.scene.planes[i], "scene.planes[" + std::to_string(i) + "]");
     if (!p.first.empty()) return p;
@@ -102,8 +114,11 @@ Problem findProblem(const SimRigConfig& c) {
     p = trajectoryProblem(c.scene.movers[i].trajectory, key + ".trajectory");
     if (!p.first.empty()) return p;
   }
-  const Problem head = trajectoryProblem(c.trajectory, "trajectory");
-  if (!head.first.empty()) return head;
+  return trajectoryProblem(c.trajectory, "trajectory");
+}
+
+// The image formation: motion blur, optics, noise, frame rate.
+Problem imagingProblem(const SimRigConfig& c) {
   if (!(c.motion_blur.samples >= 1 && c.motion_blur.samples <= kMaxBlurSamples))
     return {"motion_blur.samples", "must be in [1, 64] (1 = no motion blur)"};
   if (!(std::isfinite(c.motion_blur.exposure_s) && c.motion_blur.exposure_s >= 0.0 &&
@@ -120,8 +135,19 @@ Problem findProblem(const SimRigConfig& c) {
   if (!(o.device_black < o.device_white)) return {"optics.device_black", "must be < optics.device_white"};
   if (!(c.noise_sigma >= 0.0 && c.noise_sigma <= 64.0)) return {"noise_sigma", "must be in [0,64] grey levels"};
   if (!(c.fps > 0.0 && c.fps <= 1000.0)) return {"fps", "must be in (0,1000]"};
-  const Problem real = findRealOpticsProblem(o, c.fps);
-  if (!real.first.empty()) return real;
+  return findRealOpticsProblem(o, c.fps);
+}
+
+Problem findProblem(const SimRigConfig& c) {
+  std::string e = c.rig.validate();
+  if (!e.empty()) return {"rig", e};
+  e = c.device.validate();
+  if (!e.empty()) return {"device", e};
+  if (c.rig.left.width != c.rig.right.width || c.rig.left.height != c.rig.right.height)
+    return {"rig.right", "must have the same image size as rig.left"};
+  Problem p = sceneProblem(c);
+  if (p.first.empty()) p = imagingProblem(c);
+  if (!p.first.empty()) return p;
   if (c.encoding != "mono8" && c.encoding != "bgr8") return {"encoding", "must be mono8 or bgr8"};
   return {"", ""};
 }
@@ -350,6 +376,67 @@ std::string SimRigConfig::validate() const {
   return p.first.empty() ? std::string() : p.first + ": " + p.second;
 }
 
+namespace {
+
+// The scene section (enabled, planes, movers); config_dir: where relative image paths start.
+void loadScene(const cv::FileNode& scene, const std::string& config_dir, SimSceneConfig* out) {
+  if (scene.empty() || scene.isNone()) return;
+  if (!scene.isMap()) throw ConfigError("scene", "must be a map (enabled, planes)");
+  out->enabled = readBool(scene, "enabled", "scene", true);
+  const cv::FileNode planes = scene["planes"];
+  if (!planes.empty() && !planes.isNone()) {
+    if (!planes.isSeq()) throw ConfigError("scene.planes", "must be a list");
+    for (int i = 0; i < static_cast<int>(planes.size()); ++i)
+      out->planes.push_back(loadPlane(planes[i], "scene.planes[" + std::to_string(i) + "]", i, config_dir));
+  }
+  const cv::FileNode movers = scene["movers"];
+  if (!movers.empty() && !movers.isNone()) {
+    if (!movers.isSeq()) throw ConfigError("scene.movers", "must be a list");
+    for (int i = 0; i < static_cast<int>(movers.size()); ++i) {
+      const std::string key = "scene.movers[" + std::to_string(i) + "]";
+      SimMover m;
+      // Movers' default noise seeds follow the planes' so every surface differs.
+      m.panel = loadPlane(movers[i], key, static_cast<int>(out->planes.size()) + i, config_dir);
+      m.trajectory = loadTrajectory(movers[i]["trajectory"], key + ".trajectory");
+      out->movers.push_back(m);
+    }
+  }
+}
+
+void loadMotionBlur(const cv::FileNode& blur, SimMotionBlurConfig* out) {
+  if (blur.empty() || blur.isNone()) return;
+  if (!blur.isMap()) throw ConfigError("motion_blur", "must be a map (exposure_s, samples)");
+  checkKeys(blur, "motion_blur", {"exposure_s", "samples"});
+  out->exposure_s = readDouble(blur, "exposure_s", "motion_blur", out->exposure_s);
+  const double samples = readDouble(blur, "samples", "motion_blur", out->samples);
+  if (samples != std::floor(samples) || samples < 1 || samples > kMaxBlurSamples)
+    throw ConfigError("motion_blur.samples", "must be an integer in [1, 64] (1 = no motion blur)");
+  out->samples = static_cast<int>(samples);
+}
+
+void loadOptics(const cv::FileNode& optics, SimOpticsConfig* out) {
+  if (optics.empty() || optics.isNone()) return;
+  if (!optics.isMap()) throw ConfigError("optics", "must be a map");
+  out->transmittance = readDouble(optics, "transmittance", "optics", out->transmittance);
+  out->reflectance = readDouble(optics, "reflectance", "optics", out->reflectance);
+  out->device_white = readDouble(optics, "device_white", "optics", out->device_white);
+  out->device_black = readDouble(optics, "device_black", "optics", out->device_black);
+  out->psf_sigma_px = readDouble(optics, "psf_sigma_px", "optics", out->psf_sigma_px);
+  loadRealOptics(optics, out);
+}
+
+void loadEncoding(const cv::FileNode& encoding, std::string* out) {
+  if (encoding.empty() || encoding.isNone()) return;
+  if (!encoding.isString()) throw ConfigError("encoding", "must be mono8 or bgr8");
+  // OpenCV's YAML reader keeps a trailing "# comment" in unquoted strings: cut it off.
+  std::string value = static_cast<std::string>(encoding);
+  value = value.substr(0, value.find('#'));
+  value.erase(value.find_last_not_of(" \t") + 1);
+  *out = value;
+}
+
+}  // namespace
+
 SimRigConfig loadSimRigConfig(const std::string& path) {
   cv::FileStorage fs = openYaml(path);
   const size_t slash = path.find_last_of('/');
@@ -358,62 +445,13 @@ SimRigConfig loadSimRigConfig(const std::string& path) {
   SimRigConfig c;
   c.rig = loadStereoRig(root["rig"], "rig");
   c.device = loadDevice(root["device"], "device");
-
-  const cv::FileNode scene = root["scene"];
-  if (!scene.empty() && !scene.isNone()) {
-    if (!scene.isMap()) throw ConfigError("scene", "must be a map (enabled, planes)");
-    c.scene.enabled = readBool(scene, "enabled", "scene", true);
-    const cv::FileNode planes = scene["planes"];
-    if (!planes.empty() && !planes.isNone()) {
-      if (!planes.isSeq()) throw ConfigError("scene.planes", "must be a list");
-      for (int i = 0; i < static_cast<int>(planes.size()); ++i)
-        c.scene.planes.push_back(loadPlane(planes[i], "scene.planes[" + std::to_string(i) + "]", i, config_dir));
-    }
-    const cv::FileNode movers = scene["movers"];
-    if (!movers.empty() && !movers.isNone()) {
-      if (!movers.isSeq()) throw ConfigError("scene.movers", "must be a list");
-      for (int i = 0; i < static_cast<int>(movers.size()); ++i) {
-        const std::string key = "scene.movers[" + std::to_string(i) + "]";
-        SimMover m;
-        // Movers' default noise seeds follow the planes' so every surface differs.
-        m.panel = loadPlane(movers[i], key, static_cast<int>(c.scene.planes.size()) + i, config_dir);
-        m.trajectory = loadTrajectory(movers[i]["trajectory"], key + ".trajectory");
-        c.scene.movers.push_back(m);
-      }
-    }
-  }
+  loadScene(root["scene"], config_dir, &c.scene);
   c.trajectory = loadTrajectory(root["trajectory"], "trajectory");
-  const cv::FileNode blur = root["motion_blur"];
-  if (!blur.empty() && !blur.isNone()) {
-    if (!blur.isMap()) throw ConfigError("motion_blur", "must be a map (exposure_s, samples)");
-    checkKeys(blur, "motion_blur", {"exposure_s", "samples"});
-    c.motion_blur.exposure_s = readDouble(blur, "exposure_s", "motion_blur", c.motion_blur.exposure_s);
-    const double samples = readDouble(blur, "samples", "motion_blur", c.motion_blur.samples);
-    if (samples != std::floor(samples) || samples < 1 || samples > kMaxBlurSamples)
-      throw ConfigError("motion_blur.samples", "must be an integer in [1, 64] (1 = no motion blur)");
-    c.motion_blur.samples = static_cast<int>(samples);
-  }
-  const cv::FileNode optics = root["optics"];
-  if (!optics.empty() && !optics.isNone()) {
-    if (!optics.isMap()) throw ConfigError("optics", "must be a map");
-    c.optics.transmittance = readDouble(optics, "transmittance", "optics", c.optics.transmittance);
-    c.optics.reflectance = readDouble(optics, "reflectance", "optics", c.optics.reflectance);
-    c.optics.device_white = readDouble(optics, "device_white", "optics", c.optics.device_white);
-    c.optics.device_black = readDouble(optics, "device_black", "optics", c.optics.device_black);
-    c.optics.psf_sigma_px = readDouble(optics, "psf_sigma_px", "optics", c.optics.psf_sigma_px);
-    loadRealOptics(optics, &c.optics);
-  }
+  loadMotionBlur(root["motion_blur"], &c.motion_blur);
+  loadOptics(root["optics"], &c.optics);
   c.noise_sigma = readDouble(root, "noise_sigma", "", c.noise_sigma);
   c.fps = readDouble(root, "fps", "", c.fps);
-  const cv::FileNode encoding = root["encoding"];
-  if (!encoding.empty() && !encoding.isNone()) {
-    if (!encoding.isString()) throw ConfigError("encoding", "must be mono8 or bgr8");
-    // OpenCV's YAML reader keeps a trailing "# comment" in unquoted strings: cut it off.
-    std::string value = static_cast<std::string>(encoding);
-    value = value.substr(0, value.find('#'));
-    value.erase(value.find_last_not_of(" \t") + 1);
-    c.encoding = value;
-  }
+  loadEncoding(root["encoding"], &c.encoding);
   const Problem problem = findProblem(c);
   if (!problem.first.empty()) throw ConfigError(problem.first, problem.second);
   return c;
