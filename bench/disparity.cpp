@@ -1,6 +1,7 @@
 // Disparity throughput at 752x480 with 64 disparity levels on 2 threads, for the default
-// configuration, the own "sad" matcher (and its kernel alone per instruction set) and OpenCV
-// StereoBM/StereoSGBM configured as stereo_image_proc's defaults. Input: Teddy
+// configuration (census_sgm), its five-path mode, the census_sgm and sad matchers alone per
+// kernel (instruction set), the sad fast mode, and OpenCV StereoBM/StereoSGBM configured as
+// stereo_image_proc's defaults. Input: Teddy
 // (ECS_SHARED_DATA_DIR) resized to 752x480 when it is found (in DATA_DIR, else
 // $ECS_SHARED_DATA_DIR, else /work/shared/data), else a synthetic random-texture pair with a
 // slanted disparity ramp.
@@ -19,6 +20,7 @@
 #include <vector>
 
 #include "embedded_calibration_stereo/core/depth/disparity.h"
+#include "embedded_calibration_stereo/core/depth/census_sgm_matcher.h"
 #include "embedded_calibration_stereo/core/depth/sad_matcher.h"
 
 namespace {
@@ -101,18 +103,33 @@ int main(int argc, char** argv) {
               teddy ? "Teddy resized" : "synthetic texture");
 
   ecs::DisparityOptions defaults;
-  run("default (" + defaults.algorithm + " " + std::to_string(defaults.correlation_window_size) +
-          "x" + std::to_string(defaults.correlation_window_size) + ", lr, speckle, fill)",
+  run("default (" + defaults.algorithm + ", " + std::to_string(defaults.sgm_paths) +
+          " paths, lr, median, speckle, fill)",
       defaults, left, right, iterations);
-  ecs::DisparityOptions sad_only = defaults;
-  sad_only.algorithm = "sad";
+  ecs::DisparityOptions five = defaults;
+  five.sgm_paths = 5;
+  run("census_sgm, 5 paths (lr, median, speckle, fill)", five, left, right, iterations);
+  // The census_sgm matcher alone (lr and uniqueness on) per kernel and path count.
+  for (const std::string& kernel : ecs::censusSgmKernelNames())
+    for (const int paths : {8, 5}) {
+      ecs::CensusSgmParams p = defaults.censusSgmParams();
+      p.kernel = kernel;
+      p.paths = paths;
+      cv::Mat out;
+      timeIt("census_sgm kernel " + kernel + ", " + std::to_string(paths) + " paths",
+             [&] { ecs::computeCensusSgmDisparity16(left, right, p, &out); }, iterations);
+    }
+  ecs::DisparityOptions sad = defaults;
+  sad.algorithm = "sad";
+  run("sad 11x11 (lr, speckle, fill), the fast mode", sad, left, right, iterations);
+  ecs::DisparityOptions sad_only = sad;
   sad_only.left_right_check = false;
   sad_only.fill_holes = false;
   sad_only.speckle_size = 0;
   run("sad matcher alone (no lr, speckle, fill)", sad_only, left, right, iterations);
-  // The matcher of the default (lr and uniqueness on, no speckle filter or filling) per kernel.
+  // The sad matcher (lr and uniqueness on, no speckle filter or filling) per kernel.
   for (const std::string& kernel : ecs::sadKernelNames()) {
-    ecs::SadMatcherParams p = defaults.sadMatcherParams();
+    ecs::SadMatcherParams p = sad.sadMatcherParams();
     p.kernel = kernel;
     timeIt("sad kernel " + kernel + " (lr, uniqueness)",
            [&] { ecs::computeSadDisparity16(left, right, p); }, iterations);

@@ -1,9 +1,11 @@
 // Disparity nodelet: disparity (stereo_msgs/DisparityImage) and points2 (sensor_msgs/PointCloud2)
 // of rectified stereo frames (left|right/image_rect with left|right/camera_info of the same
-// stamp), with stereo_image_proc's topic and parameter names. The matcher is the core's
-// DisparityComputer (sad, bm or sgbm), configured by dynamic_reconfigure (cfg/Disparity.cfg).
-// Lazy: the inputs are subscribed only while someone subscribes to disparity or points2. With
-// each disparity computed, disparity_coverage (DisparityCoverage) says how much of it is valid.
+// stamp), with stereo_image_proc's topic and parameter names, and disparity_mask (mono8: 255
+// matched, 128 hidden from the right camera, 0 no reliable match; the last two filled when
+// hole_filling is on). The matcher is the core's DisparityComputer (census_sgm, sad, bm or sgbm),
+// configured by dynamic_reconfigure (cfg/Disparity.cfg). Lazy: the inputs are subscribed only
+// while someone subscribes to disparity, points2 or disparity_mask. With each disparity
+// computed, disparity_coverage (DisparityCoverage) says how much of it is valid.
 // Diagnostics (StageDiagnostics): rates, latency, algorithm and range, time per frame and input
 // copies (colour inputs are converted to mono8, a copy; mono8 inputs must be shared).
 #include <cv_bridge/cv_bridge.h>
@@ -57,6 +59,11 @@ ecs::DisparityOptions toOptions(const DisparityConfig& c) {
   o.left_right_check = c.lr_check;
   o.subpixel = c.subpixel;
   o.fill_holes = c.hole_filling;
+  o.sgm_paths = c.sgm_paths;
+  o.sgm_P1 = c.sgm_P1;
+  o.sgm_P2 = c.sgm_P2;
+  o.sgm_edge_scale = c.sgm_edge_scale;
+  o.median_size = c.median_size;
   return o;
 }
 
@@ -75,6 +82,11 @@ void toConfig(const ecs::DisparityOptions& o, DisparityConfig* c) {
   c->P2 = o.P2;
   c->disp12MaxDiff = o.disp12MaxDiff;
   if (!c->fullDP) c->sgbm_mode = o.sgbm_mode;
+  c->sgm_paths = o.sgm_paths;
+  c->sgm_P1 = o.sgm_P1;
+  c->sgm_P2 = o.sgm_P2;
+  c->sgm_edge_scale = o.sgm_edge_scale;
+  c->median_size = o.median_size;
 }
 
 // A mono8 view of a mono8 (shared, no copy) or colour (converted) image.
@@ -140,10 +152,12 @@ class DisparityNodelet : public nodelet::Nodelet {
     const auto cb = input_->connectCallback();
     disparity_pub_ = nh.advertise<stereo_msgs::DisparityImage>("disparity", 1, cb, cb);
     points_pub_ = nh.advertise<sensor_msgs::PointCloud2>("points2", 1, cb, cb);
+    mask_pub_ = nh.advertise<Image>("disparity_mask", 1, cb, cb);
     // Not watched: listening to the coverage alone does not start the matcher.
     coverage_pub_ = nh.advertise<DisparityCoverage>("disparity_coverage", 5);
     input_->watch(disparity_pub_);
     input_->watch(points_pub_);
+    input_->watch(mask_pub_);
     input_->start();  // subscribes the inputs while someone listens to an output
   }
 
@@ -189,7 +203,8 @@ class DisparityNodelet : public nodelet::Nodelet {
     // The matcher writes straight into the outgoing message's buffer (NaN where invalid); the
     // cloud is made from it, then invalid pixels get stereo_image_proc's value, then both go out.
     stereo_msgs::DisparityImagePtr disparity_msg;
-    cv::Mat disparity;
+    sensor_msgs::ImagePtr mask_msg;
+    cv::Mat disparity, mask;
     ecs::DisparityOptions options;
     try {
       const cv::Mat left_mono = monoView(left), right_mono = monoView(right);
@@ -199,7 +214,8 @@ class DisparityNodelet : public nodelet::Nodelet {
       if (!computer_) return;
       options = computer_->options();
       disparity_msg = newDisparityMsg(left_mono.size(), options, model, *left_info, &disparity);
-      computer_->compute(left_mono, right_mono, &disparity);
+      if (mask_pub_.getNumSubscribers() > 0) mask_msg = newMaskMsg(left_mono.size(), *left_info, &mask);
+      computer_->compute(left_mono, right_mono, &disparity, mask_msg ? &mask : nullptr);
     } catch (const std::exception& e) {  // e.g. an image narrower than the disparity range
       return reportError(input_->leftImageTopic() + ": " + e.what());
     }
@@ -217,6 +233,7 @@ class DisparityNodelet : public nodelet::Nodelet {
       disparity_pub_.publish(disparity_msg);
     }
     if (cloud) points_pub_.publish(cloud);
+    if (mask_msg) mask_pub_.publish(mask_msg);
     diagnostics_->framePublished(
         left->header.stamp, std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count());
   }
@@ -242,7 +259,7 @@ class DisparityNodelet : public nodelet::Nodelet {
     msg->max_disparity = o.min_disparity + o.disparity_range - 1;
     msg->delta_d = o.subpixel ? 1.0f / 16 : 1.0f;
     // The window where a match is possible, as stereo_image_proc computes it.
-    const int border = o.correlation_window_size / 2;
+    const int border = o.windowRadius();
     const int left = o.disparity_range + o.min_disparity + border - 1;
     const int wtf = o.min_disparity >= 0 ? border + o.min_disparity : std::max(border, -o.min_disparity);
     const int right = size.width - wtf;
@@ -251,6 +268,20 @@ class DisparityNodelet : public nodelet::Nodelet {
     msg->valid_window.y_offset = std::max(top, 0);
     msg->valid_window.width = std::max(right - left, 0);
     msg->valid_window.height = std::max(bottom - top, 0);
+    return msg;
+  }
+
+  // A mono8 image for the disparity's mask, its pixels not yet written; *pixels is set to a
+  // header over them.
+  static sensor_msgs::ImagePtr newMaskMsg(cv::Size size, const CameraInfo& left_info, cv::Mat* pixels) {
+    auto msg = boost::make_shared<Image>();
+    msg->header = left_info.header;
+    msg->height = size.height;
+    msg->width = size.width;
+    msg->encoding = "mono8";
+    msg->step = msg->width;
+    msg->data.resize(static_cast<size_t>(msg->step) * msg->height);
+    *pixels = cv::Mat(size, CV_8UC1, msg->data.data(), msg->step);
     return msg;
   }
 
@@ -292,7 +323,7 @@ class DisparityNodelet : public nodelet::Nodelet {
   }
 
   std::unique_ptr<StereoCameraInput> input_;  // created in onInit, before any callback
-  ros::Publisher disparity_pub_, points_pub_, coverage_pub_;
+  ros::Publisher disparity_pub_, points_pub_, mask_pub_, coverage_pub_;
   boost::recursive_mutex reconfigure_mutex_;
   std::unique_ptr<dynamic_reconfigure::Server<DisparityConfig>> reconfigure_;
   ErrorThrottle errors_{5.0};

@@ -5,21 +5,25 @@
 #include <sstream>
 #include <stdexcept>
 
+#include <opencv2/imgproc.hpp>
+
 #include "embedded_calibration_stereo/core/depth/disparity_filling.h"
 #include "embedded_calibration_stereo/core/depth/sad_matcher.h"
 
 namespace ecs {
 
 DisparityAlgorithm parseDisparityAlgorithm(const std::string& name) {
+  if (name == "census_sgm") return DisparityAlgorithm::kCensusSgm;
   if (name == "sad") return DisparityAlgorithm::kSad;
   if (name == "bm") return DisparityAlgorithm::kBm;
   if (name == "sgbm") return DisparityAlgorithm::kSgbm;
   throw std::invalid_argument("disparity algorithm '" + name +
-                              "' unknown; expected sad, bm or sgbm");
+                              "' unknown; expected census_sgm, sad, bm or sgbm");
 }
 
 std::string toString(DisparityAlgorithm algorithm) {
   switch (algorithm) {
+    case DisparityAlgorithm::kCensusSgm: return "census_sgm";
     case DisparityAlgorithm::kSad: return "sad";
     case DisparityAlgorithm::kBm: return "bm";
     case DisparityAlgorithm::kSgbm: return "sgbm";
@@ -36,6 +40,19 @@ int parseSgbmMode(const std::string& name) {
 }
 
 namespace {
+
+// What each pixel is, before holes are filled: matched, or not; if not, hidden from the right
+// camera where the matcher says so (`occluded`, nullptr when it cannot tell).
+void markDisparity(const cv::Mat& disparity, const cv::Mat* occluded, cv::Mat* mask) {
+  mask->create(disparity.size(), CV_8UC1);
+  for (int y = 0; y < disparity.rows; ++y) {
+    const float* d = disparity.ptr<float>(y);
+    const uint8_t* o = occluded ? occluded->ptr<uint8_t>(y) : nullptr;
+    uint8_t* m = mask->ptr<uint8_t>(y);
+    for (int x = 0; x < disparity.cols; ++x)
+      m[x] = isValidDisparity(d[x]) ? kMaskMatched : (o && o[x] ? kMaskOccluded : kMaskNoMatch);
+  }
+}
 
 bool isKnown(const std::string& name, int (*parse)(const std::string&)) {
   try {
@@ -73,7 +90,7 @@ struct Problems {
 std::string DisparityOptions::Check() const {
   Problems p;
   if (!isKnown(algorithm, parseAlgorithmAsInt))
-    p.add("algorithm '" + algorithm + "' unknown (sad, bm, sgbm)");
+    p.add("algorithm '" + algorithm + "' unknown (census_sgm, sad, bm, sgbm)");
   if (!isKnown(sgbm_mode, parseSgbmMode))
     p.add("sgbm_mode '" + sgbm_mode + "' unknown (sgbm, hh, sgbm_3way, hh4)");
   if (prefilter_size < 5 || prefilter_size > 255 || prefilter_size % 2 == 0)
@@ -99,6 +116,18 @@ std::string DisparityOptions::Check() const {
   if (P1 < 0) p.add("P1 must be >= 0");
   if (P2 <= P1) p.add("P2 must be > P1 (P1 " + std::to_string(P1) + ", P2 " + std::to_string(P2) + ")");
   if (disp12MaxDiff < 0) p.add("disp12MaxDiff must be >= 0");
+  if (sgm_paths != 5 && sgm_paths != 8)
+    p.add("sgm_paths must be 5 or 8, got " + std::to_string(sgm_paths));
+  if (sgm_P1 < 0 || sgm_P1 > 63) p.add("sgm_P1 must be in 0..63, got " + std::to_string(sgm_P1));
+  if (sgm_P2 <= sgm_P1 || sgm_P2 > 200)
+    p.add("sgm_P2 must be above sgm_P1 and at most 200 (sgm_P1 " + std::to_string(sgm_P1) +
+          ", sgm_P2 " + std::to_string(sgm_P2) + ")");
+  if (sgm_edge_scale < 0) p.add("sgm_edge_scale must be >= 0");
+  if (median_size != 0 && median_size != 3 && median_size != 5)
+    p.add("median_size must be 0, 3 or 5, got " + std::to_string(median_size));
+  if (algorithm == "census_sgm" && disparity_range > 512)
+    p.add("disparity_range must be at most 512 for census_sgm, got " +
+          std::to_string(disparity_range));
   return p.joined();
 }
 
@@ -132,6 +161,13 @@ std::vector<std::string> DisparityOptions::clamp() {
   fix("P1", P1, std::max(P1, 0), ">= 0");
   fix("P2", P2, std::max(P2, P1 + 1), "> P1");
   fix("disp12MaxDiff", disp12MaxDiff, std::max(disp12MaxDiff, 0), ">= 0");
+  fix("sgm_paths", sgm_paths, sgm_paths >= 7 ? 8 : 5, "5 or 8");
+  fix("sgm_P1", sgm_P1, std::clamp(sgm_P1, 0, 63), "0..63");
+  fix("sgm_P2", sgm_P2, std::clamp(sgm_P2, sgm_P1 + 1, 200), "above sgm_P1, at most 200");
+  fix("sgm_edge_scale", sgm_edge_scale, std::max(sgm_edge_scale, 0), ">= 0");
+  fix("median_size", median_size, median_size <= 1 ? 0 : (median_size <= 4 ? 3 : 5), "0, 3 or 5");
+  if (algorithm == "census_sgm")
+    fix("disparity_range", disparity_range, std::min(disparity_range, 512), "census_sgm: at most 512");
   return p.items;
 }
 
@@ -166,7 +202,8 @@ cv::Mat DisparityComputer::compute(const cv::Mat& left, const cv::Mat& right) {
   return disparity;
 }
 
-void DisparityComputer::compute(const cv::Mat& left, const cv::Mat& right, cv::Mat* disparity_out) {
+void DisparityComputer::compute(const cv::Mat& left, const cv::Mat& right, cv::Mat* disparity_out,
+                                cv::Mat* mask) {
   if (left.empty() || right.empty())
     throw std::invalid_argument("disparity: empty input image");
   if (left.type() != CV_8UC1 || right.type() != CV_8UC1)
@@ -181,14 +218,19 @@ void DisparityComputer::compute(const cv::Mat& left, const cv::Mat& right, cv::M
                                 " too small for disparity_range + window");
 
   cv::Mat& disp16 = disparity16_;
-  if (algorithm_ == DisparityAlgorithm::kSad) {
+  const bool census = algorithm_ == DisparityAlgorithm::kCensusSgm;
+  if (census) {
+    computeCensusSgmDisparity16(left, right, o.censusSgmParams(), &disp16,
+                                mask ? &occluded_ : nullptr);
+    if (o.median_size > 0) cv::medianBlur(disp16, disp16, o.median_size);
+  } else if (algorithm_ == DisparityAlgorithm::kSad) {
     computeSadDisparity16(left, right, o.sadMatcherParams(), &disp16);
-    if (o.speckle_size > 0)
-      speckle_filter_.apply(&disp16, (o.min_disparity - 1) * cv::StereoMatcher::DISP_SCALE,
-                            o.speckle_size, o.speckle_range * cv::StereoMatcher::DISP_SCALE);
   } else {
     matcher_->compute(left, right, disp16);
   }
+  if ((census || algorithm_ == DisparityAlgorithm::kSad) && o.speckle_size > 0)
+    speckle_filter_.apply(&disp16, (o.min_disparity - 1) * cv::StereoMatcher::DISP_SCALE,
+                          o.speckle_size, o.speckle_range * cv::StereoMatcher::DISP_SCALE);
 
   // Fixed point (1/16 px) -> float pixels; OpenCV marks invalid as below min_disparity.
   disparity_out->create(disp16.size(), CV_32FC1);  // keeps a buffer of this size and type
@@ -214,7 +256,27 @@ void DisparityComputer::compute(const cv::Mat& left, const cv::Mat& right, cv::M
       }
     }
   });
+  if (mask) markDisparity(disparity, census ? &occluded_ : nullptr, mask);
   if (o.fill_holes) fillDisparityHoles(&disparity);
+}
+
+int DisparityOptions::windowRadius() const {
+  return algorithm == "census_sgm" ? kCensusSgmWindow / 2 : correlation_window_size / 2;
+}
+
+CensusSgmParams DisparityOptions::censusSgmParams() const {
+  CensusSgmParams p;
+  p.min_disparity = min_disparity;
+  p.num_disparities = disparity_range;
+  p.paths = sgm_paths;
+  p.P1 = sgm_P1;
+  p.P2 = sgm_P2;
+  p.edge_scale = sgm_edge_scale;
+  p.uniqueness_ratio = uniqueness_ratio;
+  p.left_right_check = left_right_check;
+  p.left_right_tolerance = std::max(1, disp12MaxDiff);
+  p.subpixel = subpixel;
+  return p;
 }
 
 SadMatcherParams DisparityOptions::sadMatcherParams() const {

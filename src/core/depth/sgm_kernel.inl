@@ -1,0 +1,560 @@
+// The census_sgm matcher's kernel, written once with OpenCV's width-agnostic universal
+// intrinsics (cv::v_uint8 and vx_*: 16 lanes with SSE2/NEON, 32 with AVX2) and included by one
+// .cpp per instruction set, which defines SGM_KERNEL_GETTER and SGM_KERNEL_NAME first.
+// Everything but the getter has internal linkage, and nothing here calls a std:: template
+// (sad_kernel.h says why). Every instruction set gives identical results (test_sgm_kernels).
+//
+// Per row: the census costs of every disparity (Hamming distances, vectorised across the
+// disparities), then semi-global aggregation, each path in 8-bit saturating arithmetic: a path's
+// cost minus its previous minimum never exceeds the cost plus P2, so it fits a byte.
+//   - Down pass, rows top to bottom: the paths from above, above-left, above-right and the left,
+//     their sum kept per pixel in bytes (saturating at 255, which only disparities far from
+//     every path's minimum reach).
+//   - Up pass, rows bottom to top (eight paths only): the paths from below, below-left and
+//     below-right. With five paths, each row's up step follows its down step at once.
+//   - Per row, right to left: the path from the right, the sum of all paths in 16 bits, and the
+//     winner, its uniqueness, its sub-pixel offset and the right image's winners (for the
+//     left-right check, from the same sums).
+#include <cstddef>
+#include <cstdint>
+#include <cstring>
+#include <opencv2/core/hal/intrin.hpp>
+
+#include "sgm_kernel.h"
+
+#if !defined(SGM_KERNEL_GETTER) || !defined(SGM_KERNEL_NAME)
+#error "define SGM_KERNEL_GETTER and SGM_KERNEL_NAME before including sgm_kernel.inl"
+#endif
+
+namespace ecs {
+namespace sgm_kernel {
+namespace {
+
+constexpr int kDispScale = 16;  // cv::StereoMatcher::DISP_SCALE
+#if CV_SIMD
+constexpr int kLanes8 = cv::v_uint8::nlanes;
+constexpr int kLanes16 = cv::v_uint16::nlanes;
+#else
+#error "the census_sgm kernel needs universal intrinsics (SSE2, NEON or wider)"
+#endif
+
+int absInt(int v) { return v < 0 ? -v : v; }
+
+// The per-pixel helpers must be inlined for a pixel's sums to stay in registers.
+#if defined(__GNUC__)
+#define SGM_INLINE inline __attribute__((always_inline))
+#else
+#define SGM_INLINE inline
+#endif
+
+// Horizontal minima, the kernel's most frequent reductions: with AVX2, SSE4.1's PHMINPOSUW
+// finds the least of eight 16-bit lanes in one instruction.
+#if CV_AVX2
+inline uint16_t minOf(const cv::v_uint16& v) {
+  const __m128i m = _mm_min_epu16(_mm256_castsi256_si128(v.val), _mm256_extracti128_si256(v.val, 1));
+  return static_cast<uint16_t>(_mm_cvtsi128_si32(_mm_minpos_epu16(m)));
+}
+inline uint8_t minOf(const cv::v_uint8& v) {
+  __m128i m = _mm_min_epu8(_mm256_castsi256_si128(v.val), _mm256_extracti128_si256(v.val, 1));
+  m = _mm_min_epu8(m, _mm_srli_epi16(m, 8));
+  m = _mm_and_si128(m, _mm_set1_epi16(0xFF));
+  return static_cast<uint8_t>(_mm_cvtsi128_si32(_mm_minpos_epu16(m)));
+}
+#else
+inline uint16_t minOf(const cv::v_uint16& v) { return cv::v_reduce_min(v); }
+inline uint8_t minOf(const cv::v_uint8& v) { return cv::v_reduce_min(v); }
+#endif
+
+// ---- census ----------------------------------------------------------------------------
+
+// One row of the census over a 5x5 window: bit i says whether the i-th neighbour (row by row,
+// the centre left out) is brighter than the centre.
+void censusRow(const uint8_t* padded, size_t step, int width, int y, uint8_t* out) {
+  const uint8_t* centre = padded + (y + kCensusRadiusY) * step + kCensusRadiusX;
+  int x = 0;
+  for (; x + kLanes8 <= width; x += kLanes8) {
+    const cv::v_uint8 c = cv::vx_load(centre + x);
+    cv::v_uint8 planes[kPlanes];
+    for (int k = 0; k < kPlanes; ++k) planes[k] = cv::vx_setzero_u8();
+    int bit = 0;
+    for (int dy = -kCensusRadiusY; dy <= kCensusRadiusY; ++dy)
+      for (int dx = -kCensusRadiusX; dx <= kCensusRadiusX; ++dx) {
+        if (dy == 0 && dx == 0) continue;
+        const cv::v_uint8 n = cv::vx_load(centre + dy * static_cast<ptrdiff_t>(step) + dx + x);
+        const cv::v_uint8 mask = cv::vx_setall_u8(static_cast<uint8_t>(1u << (bit % 8)));
+        planes[bit / 8] = planes[bit / 8] | ((n > c) & mask);
+        ++bit;
+      }
+    for (int k = 0; k < kPlanes; ++k) cv::v_store(out + k * width + x, planes[k]);
+  }
+  for (; x < width; ++x) {
+    uint32_t code = 0;
+    int bit = 0;
+    for (int dy = -kCensusRadiusY; dy <= kCensusRadiusY; ++dy)
+      for (int dx = -kCensusRadiusX; dx <= kCensusRadiusX; ++dx) {
+        if (dy == 0 && dx == 0) continue;
+        code |= static_cast<uint32_t>(centre[dy * static_cast<ptrdiff_t>(step) + dx + x] > centre[x])
+                << bit;
+        ++bit;
+      }
+    for (int k = 0; k < kPlanes; ++k) out[k * width + x] = static_cast<uint8_t>(code >> (8 * k));
+  }
+}
+
+// ---- scratch -----------------------------------------------------------------------------
+
+// A row of path costs: one block of ndisp_padded bytes per pixel, blocks at a stride of
+// ndisp_padded + 2 so that a block's neighbours at -1 and +1 (the disparities either side) can
+// be read with unaligned loads; the pad bytes and the blocks of the columns -1 and width hold
+// 255, which makes a path start at the image's edge.
+struct PathRow {
+  uint8_t* cost;  // block of column x at cost + (x + 1) * stride + 1
+  uint8_t* min;   // min[x + 1]: the block's minimum
+};
+
+struct Penalties;
+
+struct Scratch {
+  uint8_t* costs;          // [x][k] census costs of a row outside the band's output rows
+  uint8_t* band_costs;     // [row][x][k] eight paths: the costs of the band's rows y0..
+  PathRow vertical[3][2];  // the three paths from the previous row: previous and current row
+  uint8_t* down;           // [row][x][k] the down pass's sums, rows y0.. of the band
+  uint16_t* right_cost;    // [q] right image's best sum so far, entries as Problem::census_right
+  uint16_t* right_k;       // [q] its disparity index
+  uint16_t* winner_k;      // [x] the left pixel's winning disparity index
+  const Penalties* penalties;
+};
+
+int blockStride(const Problem& p) { return p.ndisp_padded + 2; }
+size_t rowElements(const Problem& p) {
+  return static_cast<size_t>(p.width) * static_cast<size_t>(p.ndisp_padded);
+}
+
+size_t layOut(const Problem& p, int band_rows, uint8_t* base, Scratch* s) {
+  const size_t W = static_cast<size_t>(p.width);
+  const size_t path_row = (W + 2) * static_cast<size_t>(blockStride(p)) + kLanes8;
+  const size_t right = static_cast<size_t>(p.right_len + p.ndisp_padded);
+  size_t used = 0;
+  auto take = [&](size_t n) {
+    used = (used + 63) / 64 * 64;
+    uint8_t* at = base ? base + used : nullptr;
+    used += n;
+    return at;
+  };
+  s->costs = take(rowElements(p));
+  for (auto& path : s->vertical)
+    for (auto& row : path) {
+      row.cost = take(path_row);
+      row.min = take(W + 2);
+    }
+  const size_t band = rowElements(p) * static_cast<size_t>(p.paths == 5 ? 1 : band_rows);
+  s->down = take(band);
+  s->band_costs = p.paths == 5 ? s->costs : take(band);
+  s->right_cost = reinterpret_cast<uint16_t*>(take(right * 2));
+  s->right_k = reinterpret_cast<uint16_t*>(take(right * 2));
+  s->winner_k = reinterpret_cast<uint16_t*>(take(W * 2));
+  return used + 64;
+}
+
+size_t scratchBytes(const Problem& p, int band_rows) {
+  Scratch s;
+  return layOut(p, band_rows, nullptr, &s);
+}
+
+void resetVerticalPaths(const Problem& p, Scratch& s) {
+  const size_t W = static_cast<size_t>(p.width);
+  for (auto& path : s.vertical)
+    for (auto& row : path) {
+      std::memset(row.cost, 255, (W + 2) * static_cast<size_t>(blockStride(p)) + kLanes8);
+      std::memset(row.min, 255, W + 2);
+    }
+}
+
+void swapVerticalRows(Scratch& s) {
+  for (auto& path : s.vertical) {
+    const PathRow t = path[0];
+    path[0] = path[1];
+    path[1] = t;
+  }
+}
+
+uint8_t* block(const Problem& p, const PathRow& row, int x) {
+  return row.cost + (x + 1) * blockStride(p) + 1;
+}
+
+// ---- costs -------------------------------------------------------------------------------
+
+// Census costs of row y: costs[x * D + k] = Hamming distance between left pixel x and right
+// pixel x - min_disp - k; 255 in the padded lanes k >= ndisp.
+void costRow(const Problem& p, int y, uint8_t* costs) {
+  const int D = p.ndisp_padded;
+  const uint8_t* left = p.census_left + static_cast<size_t>(y) * p.left_step;
+  const uint8_t* right = p.census_right + static_cast<size_t>(y) * p.right_step;
+  for (int x = 0; x < p.width; ++x) {
+    const int q0 = p.width - 1 + p.right_off - x + p.min_disp;
+    cv::v_uint8 l[kPlanes];
+    for (int k = 0; k < kPlanes; ++k) l[k] = cv::vx_setall_u8(left[k * p.width + x]);
+    uint8_t* out = costs + static_cast<size_t>(x) * D;
+    for (int j = 0; j < D; j += kLanes8) {
+      cv::v_uint8 sum = cv::v_popcount(cv::vx_load(right + q0 + j) ^ l[0]);
+      for (int k = 1; k < kPlanes; ++k)
+        sum = sum + cv::v_popcount(cv::vx_load(right + k * p.right_len + q0 + j) ^ l[k]);
+      cv::v_store(out + j, sum);
+    }
+    for (int k = p.ndisp; k < D; ++k) out[k] = 255;
+  }
+}
+
+// ---- aggregation -------------------------------------------------------------------------
+// Templates on NV, the byte vectors of one pixel's disparities (ndisp_padded / kLanes8), so that
+// a pixel's path costs and sums stay in registers.
+
+inline cv::v_uint8 jumpFloor(uint8_t prev_min, uint8_t p2) {
+  return cv::vx_setall_u8(static_cast<uint8_t>(prev_min + p2 > 255 ? 255 : prev_min + p2));
+}
+
+// One step of a path: L(k) = C(k) + min(P(k), P(k-1) + P1, P(k+1) + P1, minP + P2) - minP,
+// written to `out` and to `l`; returns its minimum. `prev` is the path's block at the previous
+// pixel, with readable pad bytes of 255 at -1 and ndisp_padded (a row written long before, so
+// the unaligned loads do not wait on a store).
+template <int NV>
+SGM_INLINE uint8_t pathStep(const uint8_t* cost, const uint8_t* prev, uint8_t prev_min,
+                        const cv::v_uint8& p1, uint8_t p2, uint8_t* out, cv::v_uint8* l) {
+  const cv::v_uint8 floor = cv::vx_setall_u8(prev_min);
+  const cv::v_uint8 jump = jumpFloor(prev_min, p2);
+  cv::v_uint8 lowest = cv::vx_setall_u8(255);
+  for (int j = 0; j < NV; ++j) {
+    const uint8_t* at = prev + j * kLanes8;
+    const cv::v_uint8 same = cv::vx_load(at);
+    const cv::v_uint8 step = cv::v_min(cv::vx_load(at - 1), cv::vx_load(at + 1)) + p1;
+    l[j] = cv::vx_load(cost + j * kLanes8) + (cv::v_min(cv::v_min(same, step), jump) - floor);
+    cv::v_store(out + j * kLanes8, l[j]);
+    lowest = cv::v_min(lowest, l[j]);
+  }
+  return minOf(lowest);
+}
+
+// A path along the row (from the left or the right), its previous pixel held in registers:
+// the neighbouring disparities come from lane rotations, not from reloading what was just
+// stored.
+template <int NV>
+struct RowPath {
+  cv::v_uint8 l[NV];  // the path's costs at the last pixel stepped to
+  uint8_t l_min = 255;
+
+  RowPath() {
+    for (int j = 0; j < NV; ++j) l[j] = cv::vx_setall_u8(255);
+  }
+
+  void step(const uint8_t* cost, const cv::v_uint8& p1, uint8_t p2) {
+    const cv::v_uint8 edge = cv::vx_setall_u8(255);
+    const cv::v_uint8 floor = cv::vx_setall_u8(l_min);
+    const cv::v_uint8 jump = jumpFloor(l_min, p2);
+    cv::v_uint8 lowest = edge, below = edge;  // below: l[j - 1] before this step
+    for (int j = 0; j < NV; ++j) {
+      const cv::v_uint8 same = l[j];
+      const cv::v_uint8 above = j + 1 < NV ? l[j + 1] : edge;
+      const cv::v_uint8 step =
+          cv::v_min(cv::v_rotate_left<1>(same, below), cv::v_rotate_right<1>(same, above)) + p1;
+      below = same;
+      l[j] = cv::vx_load(cost + j * kLanes8) + (cv::v_min(cv::v_min(same, step), jump) - floor);
+      lowest = cv::v_min(lowest, l[j]);
+    }
+    l_min = minOf(lowest);
+  }
+};
+
+// P1, and P2 lowered across intensity edges (where depth edges are likely): P2 / (1 + |dI| / T).
+struct Penalties {
+  cv::v_uint8 p1;
+  uint8_t p2[256];
+  explicit Penalties(const Problem& p) : p1(cv::vx_setall_u8(static_cast<uint8_t>(p.P1))) {
+    for (int d = 0; d < 256; ++d) {
+      const int v = p.edge_scale > 0 ? p.P2 * p.edge_scale / (p.edge_scale + d) : p.P2;
+      p2[d] = static_cast<uint8_t>(v > p.P1 + 1 ? v : p.P1 + 1);
+    }
+  }
+  uint8_t at(int a, int b) const { return p2[absInt(a - b)]; }
+};
+
+// The three paths into row y from the previous row `from` (y - 1 going down, y + 1 going up):
+// straight, from the pixel before and from the pixel after; their costs at x to l[3].
+template <int NV>
+SGM_INLINE void verticalSteps(const Problem& p, Scratch& s, const uint8_t* row, const uint8_t* from,
+                          int x, const uint8_t* cost, cv::v_uint8 (*l)[NV]) {
+  static const int kFrom[3] = {0, -1, +1};
+  const Penalties& pen = *s.penalties;
+  for (int r = 0; r < 3; ++r) {
+    const PathRow& prev = s.vertical[r][0];
+    const PathRow& cur = s.vertical[r][1];
+    const int xf = x + kFrom[r];
+    const int xi = xf < 0 ? 0 : (xf >= p.width ? p.width - 1 : xf);
+    cur.min[x + 1] = pathStep<NV>(cost, block(p, prev, xf), prev.min[xf + 1], pen.p1,
+                                  pen.at(row[x], from[xi]), block(p, cur, x), l[r]);
+  }
+}
+
+const uint8_t* imageRow(const Problem& p, int y) {
+  const int yc = y < 0 ? 0 : (y >= p.height ? p.height - 1 : y);
+  return p.image + static_cast<size_t>(yc) * p.image_step;
+}
+
+// Down pass, row y: the paths from above (and, when `output`, from the left), their sum in
+// bytes to down[x * D + k].
+template <int NV>
+void downRow(const Problem& p, Scratch& s, int y, bool output, const uint8_t* costs,
+             uint8_t* down) {
+  constexpr int D = NV * kLanes8;
+  const Penalties& pen = *s.penalties;
+  const uint8_t* row = imageRow(p, y);
+  const uint8_t* above = y > 0 ? imageRow(p, y - 1) : row;
+  RowPath<NV> from_left;
+  cv::v_uint8 l[3][NV];
+  for (int x = 0; x < p.width; ++x) {
+    const uint8_t* cost = costs + static_cast<size_t>(x) * D;
+    verticalSteps<NV>(p, s, row, above, x, cost, l);
+    if (!output) continue;
+    from_left.step(cost, pen.p1, pen.at(row[x], row[x > 0 ? x - 1 : 0]));
+    for (int j = 0; j < NV; ++j)
+      cv::v_store(down + static_cast<size_t>(x) * D + j * kLanes8,
+                  (l[0][j] + l[1][j]) + (l[2][j] + from_left.l[j]));
+  }
+}
+
+// ---- winners -----------------------------------------------------------------------------
+
+template <int NV>
+struct PixelSums {
+  cv::v_uint16 v[2 * NV];
+  void set(const cv::v_uint8& a, int j) { cv::v_expand(a, v[2 * j], v[2 * j + 1]); }
+  void add(const cv::v_uint8& a, int j) {
+    cv::v_uint16 lo, hi;
+    cv::v_expand(a, lo, hi);
+    v[2 * j] = v[2 * j] + lo;
+    v[2 * j + 1] = v[2 * j + 1] + hi;
+  }
+};
+
+cv::v_uint16 laneIndices() {
+  alignas(64) uint16_t ramp[kLanes16];
+  for (int i = 0; i < kLanes16; ++i) ramp[i] = static_cast<uint16_t>(i);
+  return cv::vx_load_aligned(ramp);
+}
+
+struct Winner {
+  int k;         // disparity index of the least sum
+  uint16_t best;
+};
+
+// The least sum and its index (the lowest index among equal sums), without a branch per vector:
+// each lane keeps its least sum and where it was first seen.
+template <int NV>
+SGM_INLINE Winner leastSum(const PixelSums<NV>& sums, const cv::v_uint16& lanes) {
+  const cv::v_uint16 step = cv::vx_setall_u16(static_cast<uint16_t>(kLanes16));
+  cv::v_uint16 m = sums.v[0], at = lanes, index = lanes;
+  for (int j = 1; j < 2 * NV; ++j) {
+    index = index + step;
+    at = cv::v_select(sums.v[j] < m, index, at);
+    m = cv::v_min(m, sums.v[j]);
+  }
+  const uint16_t best = minOf(m);
+  const uint16_t k = minOf(cv::v_select(m == cv::vx_setall_u16(best), at, cv::vx_setall_u16(0xFFFF)));
+  return {k, best};
+}
+
+// The least sum outside the winner k and its two neighbours (the uniqueness test's rival).
+template <int NV>
+SGM_INLINE uint16_t rivalSum(const PixelSums<NV>& sums, int k, const cv::v_uint16& lanes) {
+  const cv::v_uint16 from = cv::vx_setall_u16(static_cast<uint16_t>(k > 0 ? k - 1 : 0));
+  const cv::v_uint16 to = cv::vx_setall_u16(static_cast<uint16_t>(k + 1));
+  const cv::v_uint16 step = cv::vx_setall_u16(static_cast<uint16_t>(kLanes16));
+  cv::v_uint16 index = lanes, m = cv::vx_setall_u16(0xFFFF);
+  for (int j = 0; j < 2 * NV; ++j) {
+    const cv::v_uint16 excluded = (index >= from) & (index <= to);
+    m = cv::v_min(m, sums.v[j] | excluded);
+    index = index + step;
+  }
+  return minOf(m);
+}
+
+// Folds the sums of left pixel x into the right image's winners: entry q of right_cost/right_k
+// is right column width - 1 + right_off - q, which disparity index k of x meets at q0 + k.
+template <int NV>
+SGM_INLINE void foldRightWinners(const Problem& p, const PixelSums<NV>& sums, int x,
+                      const cv::v_uint16& lanes, Scratch& s) {
+  const int q0 = p.width - 1 + p.right_off - x + p.min_disp;
+  uint16_t* rc = s.right_cost + q0;
+  uint16_t* rk = s.right_k + q0;
+  const cv::v_uint16 step = cv::vx_setall_u16(static_cast<uint16_t>(kLanes16));
+  cv::v_uint16 k = lanes;
+  for (int j = 0; j < 2 * NV; ++j) {
+    const cv::v_uint16 old = cv::vx_load(rc + j * kLanes16);
+    const cv::v_uint16 better = sums.v[j] < old;
+    cv::v_store(rc + j * kLanes16, cv::v_min(sums.v[j], old));
+    cv::v_store(rk + j * kLanes16, cv::v_select(better, k, cv::vx_load(rk + j * kLanes16)));
+    k = k + step;
+  }
+}
+
+template <int NV>
+SGM_INLINE int16_t subpixelDisparity(const Problem& p, const PixelSums<NV>& sums, int k) {
+  int value = (p.min_disp + k) * kDispScale;
+  if (p.subpixel && k > 0 && k < p.ndisp - 1) {
+    alignas(64) uint16_t all[2 * NV * kLanes16];
+    for (int j = 0; j < 2 * NV; ++j) cv::v_store_aligned(all + j * kLanes16, sums.v[j]);
+    const int a = all[k - 1], b = all[k], c = all[k + 1];
+    const int denom = a + c - 2 * b;
+    if (denom > 0) {  // a float division: an integer one costs several times more here
+      const float offset = static_cast<float>((a - c) * kDispScale) / static_cast<float>(2 * denom);
+      value += static_cast<int>(offset >= 0 ? offset + 0.5f : offset - 0.5f);
+    }
+  }
+  return static_cast<int16_t>(value);
+}
+
+// Clears the left winners whose right pixel's winner disagrees by more than the tolerance, and
+// marks in `occluded` (when given) those whose right pixel sees something nearer, or whose
+// census window does not lie inside the right image (its border columns are repeated copies):
+// hidden from the right camera rather than mismatched.
+void leftRightCheck(const Problem& p, const Scratch& s, int16_t* out, uint8_t* occluded) {
+  const int16_t invalid = static_cast<int16_t>((p.min_disp - 1) * kDispScale);
+  for (int x = 0; x < p.width; ++x) {
+    if (out[x] == invalid) continue;
+    const int k = s.winner_k[x];
+    const int xr = x - p.min_disp - k;
+    if (xr < kCensusRadiusX || xr >= p.width - kCensusRadiusX) {
+      out[x] = invalid;
+      if (occluded) occluded[x] = 255;
+      continue;
+    }
+    const int right_k = s.right_k[p.width - 1 + p.right_off - xr];
+    if (absInt(right_k - k) <= p.left_right_tolerance) continue;
+    out[x] = invalid;
+    if (occluded && right_k > k) occluded[x] = 255;
+  }
+}
+
+// Output rows' outputs: the disparity row, and the occlusion row when asked for.
+struct RowOut {
+  int16_t* disparity;
+  uint8_t* occluded;
+};
+
+// Row y, right to left: the paths from below (eight paths; `up`), the path from the right, all
+// paths' sums and each pixel's winner; then the left-right check. Rows of the up pass's
+// warm-up (`output` false) only advance the paths from below.
+template <int NV, bool kUp>
+void upRow(const Problem& p, Scratch& s, int y, bool output, const uint8_t* costs,
+           const uint8_t* down, RowOut out) {
+  constexpr int D = NV * kLanes8;
+  const Penalties& pen = *s.penalties;
+  const uint8_t* row = imageRow(p, y);
+  const uint8_t* below = y + 1 < p.height ? imageRow(p, y + 1) : row;
+  const int16_t invalid = static_cast<int16_t>((p.min_disp - 1) * kDispScale);
+  const cv::v_uint16 lanes = laneIndices();
+  // best * (100 + ratio) < rival * 100, in integers: (100 + ratio) in 1/1024ths; 0 = no test.
+  const int64_t uniqueness_scale =
+      p.uniqueness_ratio > 0 ? static_cast<int64_t>((100.0 + p.uniqueness_ratio) * 1024 + 0.5) : 0;
+  if (output)
+    std::memset(s.right_cost, 0xFF, static_cast<size_t>(p.right_len + D) * sizeof(uint16_t));
+  RowPath<NV> from_right;
+  PixelSums<NV> sums;
+  cv::v_uint8 l[3][NV];
+  for (int x = p.width - 1; x >= 0; --x) {
+    const uint8_t* cost = costs + static_cast<size_t>(x) * D;
+    if (kUp) verticalSteps<NV>(p, s, row, below, x, cost, l);
+    if (!output) continue;
+    from_right.step(cost, pen.p1, pen.at(row[x], row[x + 1 < p.width ? x + 1 : x]));
+    for (int j = 0; j < NV; ++j) {
+      sums.set(cv::vx_load(down + static_cast<size_t>(x) * D + j * kLanes8), j);
+      sums.add(kUp ? (l[0][j] + l[1][j]) + (l[2][j] + from_right.l[j]) : from_right.l[j], j);
+    }
+    const Winner w = leastSum(sums, lanes);
+    const bool unique = uniqueness_scale == 0 ||
+                        static_cast<int64_t>(w.best) * uniqueness_scale <
+                            static_cast<int64_t>(rivalSum(sums, w.k, lanes)) * 1024 * 100;
+    out.disparity[x] = unique ? subpixelDisparity(p, sums, w.k) : invalid;
+    s.winner_k[x] = static_cast<uint16_t>(w.k);
+    if (p.left_right_check) foldRightWinners(p, sums, x, lanes, s);
+  }
+  if (!output) return;
+  if (out.occluded) std::memset(out.occluded, 0, static_cast<size_t>(p.width));
+  if (p.left_right_check) leftRightCheck(p, s, out.disparity, out.occluded);
+}
+
+RowOut rowOut(const Problem& p, const Band& band, int y) {
+  return {band.out + static_cast<size_t>(y) * band.out_step,
+          p.occluded ? p.occluded + static_cast<size_t>(y) * p.occluded_step : nullptr};
+}
+
+// Five paths: each row's up step (the path from the right and the winners) right after its down
+// step, from one row of down sums.
+template <int NV>
+void matchFivePaths(const Problem& p, const Band& band, Scratch& s) {
+  for (int y = band.y_start; y < band.y1; ++y) {
+    const bool output = y >= band.y0;
+    costRow(p, y, s.costs);
+    downRow<NV>(p, s, y, output, s.costs, s.down);
+    if (output) upRow<NV, false>(p, s, y, true, s.costs, s.down, rowOut(p, band, y));
+    swapVerticalRows(s);
+  }
+}
+
+// Eight paths: the down pass over the band (from y_start; the costs and sums of rows y0.. kept),
+// then the up pass (from y_end) back to y0.
+template <int NV>
+void matchEightPaths(const Problem& p, const Band& band, Scratch& s) {
+  const size_t row_elements = rowElements(p);
+  for (int y = band.y_start; y < band.y1; ++y) {
+    const bool output = y >= band.y0;
+    const size_t at = output ? static_cast<size_t>(y - band.y0) * row_elements : 0;
+    uint8_t* costs = output ? s.band_costs + at : s.costs;
+    costRow(p, y, costs);
+    downRow<NV>(p, s, y, output, costs, s.down + at);
+    swapVerticalRows(s);
+  }
+  resetVerticalPaths(p, s);
+  for (int y = band.y_end - 1; y >= band.y0; --y) {
+    const bool output = y < band.y1;
+    const size_t at = output ? static_cast<size_t>(y - band.y0) * row_elements : 0;
+    if (!output) costRow(p, y, s.costs);
+    upRow<NV, true>(p, s, y, output, output ? s.band_costs + at : s.costs, s.down + at,
+                    rowOut(p, band, y));
+    swapVerticalRows(s);
+  }
+}
+
+template <int NV>
+void matchRows(const Problem& p, const Band& band, Scratch& s) {
+  if (p.paths == 8)
+    matchEightPaths<NV>(p, band, s);
+  else
+    matchFivePaths<NV>(p, band, s);
+}
+
+void matchBand(const Problem& p, const Band& band, uint8_t* scratch) {
+  Scratch s;
+  layOut(p, band.y1 - band.y0, scratch, &s);
+  const Penalties penalties(p);
+  s.penalties = &penalties;
+  resetVerticalPaths(p, s);
+  switch (p.ndisp_padded / kLanes8) {
+    case 1: return matchRows<1>(p, band, s);
+    case 2: return matchRows<2>(p, band, s);
+    case 4: return matchRows<4>(p, band, s);
+    case 8: return matchRows<8>(p, band, s);
+    case 16: return matchRows<16>(p, band, s);
+    case 32: return matchRows<32>(p, band, s);
+    default: return;  // the caller pads ndisp to lanes times a power of two
+  }
+}
+
+}  // namespace
+
+const Kernel& SGM_KERNEL_GETTER() {
+  static const Kernel kernel = {SGM_KERNEL_NAME, kLanes8, censusRow, scratchBytes, matchBand};
+  return kernel;
+}
+
+}  // namespace sgm_kernel
+}  // namespace ecs
