@@ -403,7 +403,9 @@ SGM_INLINE int16_t subpixelDisparity(const Problem& p, const PixelSums<NV>& sums
     alignas(64) uint16_t all[2 * NV * kLanes16];
     for (int j = 0; j < 2 * NV; ++j) cv::v_store_aligned(all + j * kLanes16, sums.v[j]);
     const int a = all[k - 1], b = all[k], c = all[k + 1];
-    const int denom = a + c - 2 * b;
+    // The equiangular (V-shaped) fit: census sums grow linearly away from the match, and a
+    // parabola through them is pulled harder towards the whole pixel.
+    const int denom = a > c ? a - b : c - b;
     if (denom > 0) {  // a float division: an integer one costs several times more here
       const float offset = static_cast<float>((a - c) * kDispScale) / static_cast<float>(2 * denom);
       value += static_cast<int>(offset >= 0 ? offset + 0.5f : offset - 0.5f);

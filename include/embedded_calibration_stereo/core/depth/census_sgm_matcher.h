@@ -1,18 +1,21 @@
 #pragma once
 // The head's default matcher ("census_sgm"): semi-global matching (Hirschmueller, 2008) of
-// centre-symmetric census costs (Spangenberg et al., 2013), vectorised across the disparities.
+// census costs, vectorised across the disparities (docs/depth.md: design and measurements).
 //
-// Cost: the Hamming distance between the 31-bit census codes of a 9x7 window (which compare
-// each pixel of the window with its mirror image through the centre), insensitive to the
-// brightness and contrast differences between the cameras. Aggregation: five paths per pixel
-// (from the left, the right, above, above-left and above-right), P1 for a step of one
-// disparity, P2 for larger ones. Then winner-take-all, a uniqueness test (no disparity other
-// than the winner and its neighbours within uniqueness_ratio % of it), parabola sub-pixel
-// offset and a left-right check against the right image's winners taken from the same sums.
+// Cost: the Hamming distance between the census codes of a 5x5 window (24 bits: is each
+// neighbour brighter than the centre?), insensitive to the brightness and contrast differences
+// between the cameras. Aggregation along eight paths (the four axes' and diagonals' both ways),
+// or five (none from below: one pass over the image, faster, less exact): P1 for a step of one
+// disparity, P2 for larger ones, P2 lowered across intensity steps where depth edges are likely.
+// Then winner-take-all, a uniqueness test (no disparity other than the winner and its
+// neighbours within uniqueness_ratio % of it), an equiangular sub-pixel offset and a left-right
+// check against the right image's winners taken from the same sums; pixels whose match falls
+// outside the right image (or within 2 columns of its edge, where the census sees repeated
+// border columns) or whose right pixel sees something nearer are marked occluded.
 //
-// Rows are processed in bands of fixed height, in parallel; the paths from above start
-// kWarmUpRows above each band. The bands do not depend on the number of threads, so neither do
-// the results; every kernel (instruction set) gives the same results too.
+// Rows are processed in bands of fixed height, in parallel; each band's paths start some rows
+// outside it. The bands do not depend on the number of threads, so neither do the results;
+// every kernel (instruction set) gives the same results too.
 //
 // Threading: computeCensusSgmDisparity16 is reentrant; its only state is scratch memory kept
 // per thread between calls.
