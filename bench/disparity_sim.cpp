@@ -236,7 +236,8 @@ cv::Mat montage(const std::vector<cv::Mat>& tiles, int columns) {
   return out;
 }
 
-void writeImages(const std::string& dir, const RectifiedSample& sample, const std::vector<Matcher>& matchers) {
+void writeImages(const std::string& dir, const RectifiedSample& sample, const std::vector<Matcher>& matchers,
+                 bool separated) {
   ::mkdir(dir.c_str(), 0755);
   double max_truth = 0.0;
   cv::minMaxLoc(sample.truth, nullptr, &max_truth);
@@ -246,8 +247,8 @@ void writeImages(const std::string& dir, const RectifiedSample& sample, const st
     if (!cv::imwrite(dir + "/" + name + ".png", image, kPng)) throw std::runtime_error("cannot write " + dir + "/" + name);
     tiles.push_back(tile(image, label));
   };
-  add(sample.raw_left, "left_lit_raw", "frame " + std::to_string(sample.frame) + ": light on, raw left");
-  add(sample.left, "left_input", "left as matched");
+  add(sample.raw_left, "left_lit_raw", "frame " + std::to_string(sample.frame) + ", light on: raw left");
+  add(sample.left, "left_matched", separated ? "separated left (matched)" : "raw left (matched, not separated)");
   add(colourDisparity(sample.truth, max_d), "disparity_truth",
       "truth (0.." + std::to_string(static_cast<int>(max_d)) + " px)");
   for (const Matcher& m : matchers)
@@ -279,7 +280,7 @@ int main(int argc, char** argv) {
     std::vector<Matcher> matchers = matchersFor(args.algorithms);
     for (Matcher& m : matchers) run(set, shown, &m);
     printTable(matchers, set, args.set.separate);
-    if (!args.out_dir.empty()) writeImages(args.out_dir, set.lit[shown], matchers);
+    if (!args.out_dir.empty()) writeImages(args.out_dir, set.lit[shown], matchers, args.set.separate);
   } catch (const std::exception& e) {
     std::fprintf(stderr, "bench_disparity_sim: %s\n", e.what());
     return 1;
