@@ -59,6 +59,7 @@ ecs::DisparityOptions toOptions(const DisparityConfig& c) {
   o.left_right_check = c.lr_check;
   o.subpixel = c.subpixel;
   o.fill_holes = c.hole_filling;
+  o.sgm_census_threshold = c.sgm_census_threshold;
   o.sgm_paths = c.sgm_paths;
   o.sgm_P1 = c.sgm_P1;
   o.sgm_P2 = c.sgm_P2;
@@ -82,6 +83,7 @@ void toConfig(const ecs::DisparityOptions& o, DisparityConfig* c) {
   c->P2 = o.P2;
   c->disp12MaxDiff = o.disp12MaxDiff;
   if (!c->fullDP) c->sgbm_mode = o.sgbm_mode;
+  c->sgm_census_threshold = o.sgm_census_threshold;
   c->sgm_paths = o.sgm_paths;
   c->sgm_P1 = o.sgm_P1;
   c->sgm_P2 = o.sgm_P2;

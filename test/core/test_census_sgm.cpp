@@ -45,7 +45,7 @@ void randomPair(cv::Size size, int shift, unsigned seed, cv::Mat* left, cv::Mat*
 
 // The matcher from its definition (census_sgm_matcher.h, sgm_kernel.inl), pixel by pixel:
 //  - census: bit i says whether the i-th pixel of the 5x5 window (row by row, the centre left
-//    out) is brighter than the centre; borders repeated;
+//    out) is brighter than the centre by more than the threshold; borders repeated;
 //  - cost C(x, k): Hamming distance to the right pixel x - min - k (column clamped to the image);
 //  - a path's cost, from its previous pixel q (C alone where q is outside the image):
 //    L(k) = min(255, C(k) + min(L_q(k), L_q(k -+ 1) + P1, min L_q + P2') - min L_q), sums of
@@ -74,7 +74,8 @@ struct Reference {
     for (int dy = -2; dy <= 2; ++dy)
       for (int dx = -2; dx <= 2; ++dx) {
         if (dy == 0 && dx == 0) continue;
-        code |= static_cast<uint32_t>(at(y + dy, x + dx) > at(y, x)) << bit++;
+        code |= static_cast<uint32_t>(at(y + dy, x + dx) > std::min(255, at(y, x) + p.census_threshold))
+                << bit++;
       }
     return code;
   }
@@ -194,7 +195,7 @@ int paddedCount(int ndisp, const std::string& kernel) {
 }
 
 struct Case {
-  int min_disparity, num_disparities, paths;
+  int min_disparity, num_disparities, paths, census_threshold;
   double uniqueness;
   bool left_right_check, subpixel;
 };
@@ -203,8 +204,8 @@ struct Case {
 // leave partial vectors, negative minimum disparities and padded disparity counts.
 TEST(CensusSgm, EveryKernelMatchesTheReference) {
   const Case cases[] = {
-      {0, 64, 8, 0, true, true},    {0, 64, 5, 10, true, true},  {-8, 48, 8, 5, true, true},
-      {0, 96, 8, 0, false, false},  {4, 48, 5, 0, true, false},  {0, 64, 8, 15, false, true},
+      {0, 64, 8, 1, 0, true, true},    {0, 64, 5, 0, 10, true, true},  {-8, 48, 8, 3, 5, true, true},
+      {0, 96, 8, 1, 0, false, false},  {4, 48, 5, 1, 0, true, false},  {0, 64, 8, 0, 15, false, true},
   };
   int compared = 0;
   for (const std::string& kernel : censusSgmKernelNames())
@@ -216,6 +217,7 @@ TEST(CensusSgm, EveryKernelMatchesTheReference) {
       p.min_disparity = c.min_disparity;
       p.num_disparities = c.num_disparities;
       p.paths = c.paths;
+      p.census_threshold = c.census_threshold;
       p.uniqueness_ratio = c.uniqueness;
       p.left_right_check = c.left_right_check;
       p.subpixel = c.subpixel;
@@ -321,6 +323,7 @@ TEST(CensusSgm, RefusesBadParametersAndInputs) {
            [](CensusSgmParams* q) { q->num_disparities = 1024; },
            [](CensusSgmParams* q) { q->P2 = q->P1; },
            [](CensusSgmParams* q) { q->uniqueness_ratio = -1; },
+           [](CensusSgmParams* q) { q->census_threshold = 256; },
            [](CensusSgmParams* q) { q->kernel = "neon9"; }}) {
     CensusSgmParams q;
     bad(&q);

@@ -72,7 +72,7 @@ void mirrorRow(const uint8_t* in, int W, int off, int len, uint8_t* out) {
 // Census planes of both images, the right one mirrored with its edge columns repeated so that
 // every disparity of every left pixel has an entry (right_off and right_len of the Problem).
 void censusBoth(const cv::Mat& left, const cv::Mat& right, const sgm_kernel::Kernel& kernel,
-                sgm_kernel::Problem* p, Workspace* w) {
+                int threshold, sgm_kernel::Problem* p, Workspace* w) {
   using namespace sgm_kernel;
   const int W = left.cols, H = left.rows;
   cv::copyMakeBorder(left, w->padded_left, kCensusRadiusY, kCensusRadiusY, kCensusRadiusX,
@@ -88,9 +88,10 @@ void censusBoth(const cv::Mat& left, const cv::Mat& right, const sgm_kernel::Ker
     thread_local std::vector<uint8_t> planes;
     planes.resize(static_cast<size_t>(kPlanes) * W);
     for (int y = rows.start; y < rows.end; ++y) {
-      kernel.census_row(w->padded_left.ptr<uint8_t>(), w->padded_left.step, W, y,
+      kernel.census_row(w->padded_left.ptr<uint8_t>(), w->padded_left.step, W, y, threshold,
                         w->census_left.ptr<uint8_t>(y));
-      kernel.census_row(w->padded_right.ptr<uint8_t>(), w->padded_right.step, W, y, planes.data());
+      kernel.census_row(w->padded_right.ptr<uint8_t>(), w->padded_right.step, W, y, threshold,
+                        planes.data());
       uint8_t* out = w->census_right.ptr<uint8_t>(y);
       for (int k = 0; k < kPlanes; ++k)
         mirrorRow(planes.data() + static_cast<size_t>(k) * W, W, p->right_off, p->right_len,
@@ -116,6 +117,8 @@ std::string CensusSgmParams::check() const {
     add("P2 must be above P1 and at most 200 census bits, got " + std::to_string(P2));
   if (!(uniqueness_ratio >= 0 && uniqueness_ratio <= 100)) add("uniqueness_ratio must be in 0..100");
   if (left_right_tolerance < 0) add("left_right_tolerance must be >= 0");
+  if (census_threshold < 0 || census_threshold > 255)
+    add("census_threshold must be in 0..255, got " + std::to_string(census_threshold));
   return problems;
 }
 
@@ -154,7 +157,7 @@ void computeCensusSgmDisparity16(const cv::Mat& left, const cv::Mat& right,
   p.left_right_tolerance = params.left_right_tolerance;
   p.subpixel = params.subpixel;
   Workspace& w = threadWorkspace();
-  censusBoth(left, right, kernel, &p, &w);
+  censusBoth(left, right, kernel, params.census_threshold, &p, &w);
 
   disparity->create(left.size(), CV_16SC1);
   p.occluded = nullptr;

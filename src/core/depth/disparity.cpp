@@ -116,6 +116,8 @@ std::string DisparityOptions::Check() const {
   if (P1 < 0) p.add("P1 must be >= 0");
   if (P2 <= P1) p.add("P2 must be > P1 (P1 " + std::to_string(P1) + ", P2 " + std::to_string(P2) + ")");
   if (disp12MaxDiff < 0) p.add("disp12MaxDiff must be >= 0");
+  if (sgm_census_threshold < 0 || sgm_census_threshold > 255)
+    p.add("sgm_census_threshold must be in 0..255, got " + std::to_string(sgm_census_threshold));
   if (sgm_paths != 5 && sgm_paths != 8)
     p.add("sgm_paths must be 5 or 8, got " + std::to_string(sgm_paths));
   if (sgm_P1 < 0 || sgm_P1 > 63) p.add("sgm_P1 must be in 0..63, got " + std::to_string(sgm_P1));
@@ -161,6 +163,7 @@ std::vector<std::string> DisparityOptions::clamp() {
   fix("P1", P1, std::max(P1, 0), ">= 0");
   fix("P2", P2, std::max(P2, P1 + 1), "> P1");
   fix("disp12MaxDiff", disp12MaxDiff, std::max(disp12MaxDiff, 0), ">= 0");
+  fix("sgm_census_threshold", sgm_census_threshold, std::clamp(sgm_census_threshold, 0, 255), "0..255");
   fix("sgm_paths", sgm_paths, sgm_paths >= 7 ? 8 : 5, "5 or 8");
   fix("sgm_P1", sgm_P1, std::clamp(sgm_P1, 0, 63), "0..63");
   fix("sgm_P2", sgm_P2, std::clamp(sgm_P2, sgm_P1 + 1, 200), "above sgm_P1, at most 200");
@@ -268,6 +271,7 @@ CensusSgmParams DisparityOptions::censusSgmParams() const {
   CensusSgmParams p;
   p.min_disparity = min_disparity;
   p.num_disparities = disparity_range;
+  p.census_threshold = sgm_census_threshold;
   p.paths = sgm_paths;
   p.P1 = sgm_P1;
   p.P2 = sgm_P2;

@@ -59,8 +59,10 @@ struct Kernel {
   int lanes;         // bytes per vector: ndisp_padded must be lanes times 1, 2, 4, ..., 32
   // One row of census planes (kPlanes x width bytes, plane k at out + k * width) from an image
   // padded by kCensusRadiusY rows and kCensusRadiusX columns on every side (row y of the image
-  // is padded row y + kCensusRadiusY).
-  void (*census_row)(const uint8_t* padded, size_t step, int width, int y, uint8_t* out);
+  // is padded row y + kCensusRadiusY); a bit is set where the neighbour is brighter than the
+  // centre by more than `threshold` (0..255) grey levels.
+  void (*census_row)(const uint8_t* padded, size_t step, int width, int y, int threshold,
+                     uint8_t* out);
   // Bytes of scratch memory match_band needs for a band of band_rows output rows.
   size_t (*scratch_bytes)(const Problem& p, int band_rows);
   void (*match_band)(const Problem& p, const Band& band, uint8_t* scratch);

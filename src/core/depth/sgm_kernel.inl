@@ -68,12 +68,12 @@ inline uint8_t minOf(const cv::v_uint8& v) { return cv::v_reduce_min(v); }
 // ---- census ----------------------------------------------------------------------------
 
 // One row of the census over a 5x5 window: bit i says whether the i-th neighbour (row by row,
-// the centre left out) is brighter than the centre.
-void censusRow(const uint8_t* padded, size_t step, int width, int y, uint8_t* out) {
+// the centre left out) is brighter than the centre by more than `threshold` grey levels.
+void censusRow(const uint8_t* padded, size_t step, int width, int y, int threshold, uint8_t* out) {
   const uint8_t* centre = padded + (y + kCensusRadiusY) * step + kCensusRadiusX;
   int x = 0;
   for (; x + kLanes8 <= width; x += kLanes8) {
-    const cv::v_uint8 c = cv::vx_load(centre + x);
+    const cv::v_uint8 c = cv::vx_load(centre + x) + cv::vx_setall_u8(static_cast<uint8_t>(threshold));
     cv::v_uint8 planes[kPlanes];
     for (int k = 0; k < kPlanes; ++k) planes[k] = cv::vx_setzero_u8();
     int bit = 0;
@@ -93,8 +93,8 @@ void censusRow(const uint8_t* padded, size_t step, int width, int y, uint8_t* ou
     for (int dy = -kCensusRadiusY; dy <= kCensusRadiusY; ++dy)
       for (int dx = -kCensusRadiusX; dx <= kCensusRadiusX; ++dx) {
         if (dy == 0 && dx == 0) continue;
-        code |= static_cast<uint32_t>(centre[dy * static_cast<ptrdiff_t>(step) + dx + x] > centre[x])
-                << bit;
+        const int c = centre[x] + threshold > 255 ? 255 : centre[x] + threshold;
+        code |= static_cast<uint32_t>(centre[dy * static_cast<ptrdiff_t>(step) + dx + x] > c) << bit;
         ++bit;
       }
     for (int k = 0; k < kPlanes; ++k) out[k * width + x] = static_cast<uint8_t>(code >> (8 * k));

@@ -3,8 +3,9 @@
 // census costs, vectorised across the disparities (docs/depth.md: design and measurements).
 //
 // Cost: the Hamming distance between the census codes of a 5x5 window (24 bits: is each
-// neighbour brighter than the centre?), insensitive to the brightness and contrast differences
-// between the cameras. Aggregation along eight paths (the four axes' and diagonals' both ways),
+// neighbour brighter than the centre by more than census_threshold?), insensitive to the
+// brightness and contrast differences between the cameras; the threshold keeps sensor noise in
+// flat regions from flipping bits. Aggregation along eight paths (the four axes' and diagonals' both ways),
 // or five (none from below: one pass over the image, faster, less exact): P1 for a step of one
 // disparity, P2 for larger ones, P2 lowered across intensity steps where depth edges are likely.
 // Then winner-take-all, a uniqueness test (no disparity other than the winner and its
@@ -30,6 +31,7 @@ constexpr int kCensusSgmWindow = 5;  // the census's window, pixels (square)
 struct CensusSgmParams {
   int min_disparity = 0;
   int num_disparities = 64;      // multiple of 16, up to 512
+  int census_threshold = 1;      // grey levels (0..255)
   int paths = 8;                 // 8, or 5 (no paths from below: one pass, faster)
   int P1 = 6;                    // penalty of a one-disparity step, census bits (0..63)
   int P2 = 48;                   // penalty of a larger step, census bits (P1 < P2 <= 200)

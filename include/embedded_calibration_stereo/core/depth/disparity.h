@@ -67,9 +67,11 @@ struct DisparityOptions {
   bool left_right_check = true;       // bm/sgbm: enables disp12MaxDiff; sad: own check
   bool subpixel = true;               // false rounds the output to whole pixels
   bool fill_holes = true;             // fill invalid pixels from the background neighbour
-  // census_sgm only (census_sgm_matcher.h): paths (8, or 5 for one pass: faster, less exact),
-  // penalties in census bits (the census has 24), P2's softening across intensity steps (grey
-  // levels; 0 = off) and the median filter's size after matching (0 = off, 3 or 5).
+  // census_sgm only (census_sgm_matcher.h): the census's noise threshold (grey levels), paths
+  // (8, or 5 for one pass: faster, less exact), penalties in census bits (the census has 24),
+  // P2's softening across intensity steps (grey levels; 0 = off) and the median filter's size
+  // after matching (0 = off, 3 or 5).
+  int sgm_census_threshold = 1;
   int sgm_paths = 8;
   int sgm_P1 = 6;
   int sgm_P2 = 48;
