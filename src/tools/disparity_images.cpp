@@ -6,6 +6,7 @@
 #include <map>
 #include <opencv2/imgcodecs.hpp>
 #include <string>
+#include <utility>
 
 #include "embedded_calibration_stereo/core/depth/disparity.h"
 #include "embedded_calibration_stereo/core/depth/disparity_evaluation.h"
@@ -15,12 +16,15 @@ namespace {
 
 const char* kUsage =
     "usage: disparity_images --left FILE --right FILE --out FILE.pfm\n"
-    "                        [--algorithm sad|bm|sgbm] [--num-disparities N] [--min-disparity N]\n"
-    "                        [--window N] [--sgbm-mode sgbm|hh|sgbm_3way|hh4] [--no-fill]\n"
+    "                        [--algorithm census_sgm|sad|bm|sgbm] [--num-disparities N]\n"
+    "                        [--min-disparity N] [--paths 8|5] [--window N]\n"
+    "                        [--sgbm-mode sgbm|hh|sgbm_3way|hh4] [--no-fill]\n"
     "                        [--gt FILE --gt-scale S]\n"
     "  Images are read as 8-bit gray and must be rectified. Defaults: the library's tuned\n"
-    "  options (algorithm sad, 64 disparities). --gt prints the percentage of pixels with\n"
-    "  ground truth (value / S > 0) whose disparity is off by more than 2 px.\n";
+    "  options (algorithm census_sgm, 8 paths, 64 disparities). --paths: census_sgm's paths;\n"
+    "  --window: sad, bm and sgbm's. --gt (an image, or a PFM of float disparities) prints the\n"
+    "  percentage of pixels with ground truth (value / S > 0) whose disparity is off by more\n"
+    "  than 2 px.\n";
 
 int usageError(const std::string& message) {
   std::fprintf(stderr, "disparity_images: %s\n%s", message.c_str(), kUsage);
@@ -35,81 +39,102 @@ bool parseInt(const std::string& text, int* value) {
   return true;
 }
 
-}  // namespace
-
-int main(int argc, char** argv) {
+struct Request {
   std::map<std::string, std::string> args;
-  bool fill = true;
+  ecs::DisparityOptions options;
+  double gt_scale = 0;
+  bool help = false;
+};
+
+// The command line's options into *args; an empty string, or the problem.
+std::string readArgs(int argc, char** argv, Request* r) {
+  static const char* kValued[] = {"--left", "--right", "--out", "--algorithm",
+                                  "--num-disparities", "--min-disparity", "--window",
+                                  "--paths", "--sgbm-mode", "--gt", "--gt-scale"};
   for (int i = 1; i < argc; ++i) {
     const std::string key = argv[i];
     if (key == "--help" || key == "-h") {
-      std::printf("%s", kUsage);
-      return 0;
+      r->help = true;
+      return "";
     }
     if (key == "--no-fill") {
-      fill = false;
+      r->options.fill_holes = false;
       continue;
     }
-    static const char* kValued[] = {"--left", "--right", "--out", "--algorithm",
-                                    "--num-disparities", "--min-disparity", "--window",
-                                    "--sgbm-mode", "--gt", "--gt-scale"};
     bool known = false;
     for (const char* k : kValued) known = known || key == k;
-    if (!known) return usageError("unknown option '" + key + "'");
-    if (i + 1 >= argc) return usageError("option " + key + " needs a value");
-    args[key] = argv[++i];
+    if (!known) return "unknown option '" + key + "'";
+    if (i + 1 >= argc) return "option " + key + " needs a value";
+    r->args[key] = argv[++i];
   }
   for (const char* required : {"--left", "--right", "--out"})
-    if (!args.count(required)) return usageError(std::string("missing ") + required);
-  if (args.count("--gt") != args.count("--gt-scale"))
-    return usageError("--gt and --gt-scale go together");
+    if (!r->args.count(required)) return std::string("missing ") + required;
+  if (r->args.count("--gt") != r->args.count("--gt-scale")) return "--gt and --gt-scale go together";
+  return "";
+}
 
-  ecs::DisparityOptions options;
-  options.fill_holes = fill;
+// The disparity options and ground-truth scale the arguments give; an empty string, or the
+// problem.
+std::string readOptions(Request* r) {
+  std::map<std::string, std::string>& args = r->args;
+  ecs::DisparityOptions& options = r->options;
   if (args.count("--algorithm")) options.algorithm = args["--algorithm"];
   if (args.count("--sgbm-mode")) options.sgbm_mode = args["--sgbm-mode"];
-  if (args.count("--num-disparities") &&
-      !parseInt(args["--num-disparities"], &options.disparity_range))
-    return usageError("--num-disparities needs an integer");
-  if (args.count("--min-disparity") && !parseInt(args["--min-disparity"], &options.min_disparity))
-    return usageError("--min-disparity needs an integer");
-  if (args.count("--window") && !parseInt(args["--window"], &options.correlation_window_size))
-    return usageError("--window needs an integer");
-  double gt_scale = 0;
+  const std::pair<const char*, int*> integers[] = {{"--num-disparities", &options.disparity_range},
+                                                   {"--min-disparity", &options.min_disparity},
+                                                   {"--window", &options.correlation_window_size},
+                                                   {"--paths", &options.sgm_paths}};
+  for (const auto& [name, field] : integers)
+    if (args.count(name) && !parseInt(args[name], field)) return std::string(name) + " needs an integer";
   if (args.count("--gt-scale")) {
     char* end = nullptr;
-    gt_scale = std::strtod(args["--gt-scale"].c_str(), &end);
-    if (*end != '\0' || !(gt_scale > 0)) return usageError("--gt-scale needs a number > 0");
+    r->gt_scale = std::strtod(args["--gt-scale"].c_str(), &end);
+    if (*end != '\0' || !(r->gt_scale > 0)) return "--gt-scale needs a number > 0";
   }
   const std::string problem = options.Check();
-  if (!problem.empty()) return usageError("invalid options: " + problem);
+  return problem.empty() ? "" : "invalid options: " + problem;
+}
 
+int run(Request& r) {
+  std::map<std::string, std::string>& args = r.args;
   const cv::Mat left = cv::imread(args["--left"], cv::IMREAD_GRAYSCALE);
   const cv::Mat right = cv::imread(args["--right"], cv::IMREAD_GRAYSCALE);
-  if (left.empty()) {
-    std::fprintf(stderr, "disparity_images: cannot read image '%s'\n", args["--left"].c_str());
-    return 1;
-  }
-  if (right.empty()) {
-    std::fprintf(stderr, "disparity_images: cannot read image '%s'\n", args["--right"].c_str());
-    return 1;
-  }
-  try {
-    ecs::DisparityComputer computer(options);
-    const cv::Mat disparity = computer.compute(left, right);
-    ecs::writePfm(args["--out"], disparity);
-    std::printf("%s: %dx%d, algorithm %s, %d disparities from %d, written to %s\n",
-                args["--left"].c_str(), left.cols, left.rows, options.algorithm.c_str(),
-                options.disparity_range, options.min_disparity, args["--out"].c_str());
-    if (args.count("--gt")) {
-      const cv::Mat gt = ecs::loadScaledGroundTruth(args["--gt"], gt_scale);
-      const ecs::BadPixelStats stats = ecs::evaluateBadPixels(disparity, gt, 2.0);
-      std::printf("bad>2px: %.2f %% of %d pixels with ground truth (%d invalid)\n",
-                  stats.badPercent(), stats.evaluated, stats.invalid);
+  for (const auto& [name, image] : {std::make_pair("--left", &left), std::make_pair("--right", &right)})
+    if (image->empty()) {
+      std::fprintf(stderr, "disparity_images: cannot read image '%s'\n", args[name].c_str());
+      return 1;
     }
+  const ecs::DisparityOptions& options = r.options;
+  ecs::DisparityComputer computer(options);
+  const cv::Mat disparity = computer.compute(left, right);
+  ecs::writePfm(args["--out"], disparity);
+  std::printf("%s: %dx%d, algorithm %s, %d disparities from %d, written to %s\n",
+              args["--left"].c_str(), left.cols, left.rows, options.algorithm.c_str(),
+              options.disparity_range, options.min_disparity, args["--out"].c_str());
+  if (args.count("--gt")) {
+    const cv::Mat gt = ecs::loadScaledGroundTruth(args["--gt"], r.gt_scale);
+    const ecs::BadPixelStats stats = ecs::evaluateBadPixels(disparity, gt, 2.0);
+    std::printf("bad>2px: %.2f %% of %d pixels with ground truth (%d invalid)\n",
+                stats.badPercent(), stats.evaluated, stats.invalid);
+  }
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  Request request;
+  std::string problem = readArgs(argc, argv, &request);
+  if (problem.empty() && request.help) {
+    std::printf("%s", kUsage);
+    return 0;
+  }
+  if (problem.empty()) problem = readOptions(&request);
+  if (!problem.empty()) return usageError(problem);
+  try {
+    return run(request);
   } catch (const std::exception& e) {
     std::fprintf(stderr, "disparity_images: %s\n", e.what());
     return 1;
   }
-  return 0;
 }
