@@ -71,7 +71,7 @@ struct DisparityOptions {
   // (8, or 5 for one pass: faster, less exact), penalties in census bits (the census has 24),
   // P2's softening across intensity steps (grey levels; 0 = off) and the median filter's size
   // after matching (0 = off, 3 or 5).
-  int sgm_census_threshold = 1;
+  int sgm_census_threshold = 2;
   int sgm_paths = 8;
   int sgm_P1 = 6;
   int sgm_P2 = 48;
