@@ -83,7 +83,7 @@ TEST(SimDepth, MedianDepthErrorAtTwoMetresIsWithinOnePercent) {
       const RectificationMaps maps = RectificationMaps::build(frame.truth, rectification);
       const cv::Mat true_disparity = rectifiedDisparityFromDepth(frame.left_depth, maps);
       const auto rect = maps.rectify(frame.left, frame.right);
-      for (const std::string algorithm : {"sad", "bm", "sgbm"}) {
+      for (const std::string algorithm : {"census_sgm", "sad", "bm", "sgbm"}) {
         DisparityOptions options;  // the defaults, with the algorithm swapped
         options.algorithm = algorithm;
         DisparityComputer matcher(options);
