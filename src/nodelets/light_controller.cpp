@@ -192,10 +192,31 @@ class LightControllerNodelet : public nodelet::Nodelet {
     }
   }
 
+  // In stages, in the order they have always run: the light before set_light can command it,
+  // the regions before the driver's inputs. No callback runs before this returns (the nodelet's
+  // single-threaded queue); when a stage throws, onInit shuts down what was advertised.
   void initialise() {
     ros::NodeHandle& nh = getNodeHandle();
     ros::NodeHandle& pnh = getPrivateNodeHandle();
     params_ = loadParams(pnh);
+    makeLight(nh);
+    schedule_ = std::make_unique<ecs::LightSchedule>(params_.schedule);
+    whole_ = std::make_unique<ecs::StereoLightConfirmer>(params_.confirmation);
+    watch_ = std::make_unique<ecs::LightCommandWatch>(params_.max_delay_frames);
+    if (params_.calibration_store == "file") advertiseSetCameraInfo(nh);
+    loadRegions(true);
+    advertiseOutputs(nh);
+    subscribeDriver(nh, pnh);
+    synchroniseDriver();
+    startDiagnostics(nh, pnh);
+    NODELET_INFO("LightController: light %s, %s sync of %s and %s, light confirmed in %s, calibrations stored by %s",
+                 params_.light_backend.c_str(), params_.approximate_sync ? "approximate" : "exact",
+                 left_sub_.getTopic().c_str(), right_sub_.getTopic().c_str(), regionsText().c_str(),
+                 params_.calibration_store == "file" ? "this nodelet (files, driver reloads)" : "the driver");
+  }
+
+  // The light backend the parameters name.
+  void makeLight(ros::NodeHandle& nh) {
     if (params_.light_backend == "serial") {
       light_ = makeSerialLight(params_.serial);
     } else if (params_.light_backend == "gpio") {
@@ -208,18 +229,19 @@ class LightControllerNodelet : public nodelet::Nodelet {
     } else {
       light_ = makeNoLight();
     }
-    schedule_ = std::make_unique<ecs::LightSchedule>(params_.schedule);
-    whole_ = std::make_unique<ecs::StereoLightConfirmer>(params_.confirmation);
-    watch_ = std::make_unique<ecs::LightCommandWatch>(params_.max_delay_frames);
-    if (params_.calibration_store == "file") {
-      // The pair store is made at the first set_camera_info, when the driver's image size is known.
-      left_set_info_srv_ = nh.advertiseService<sensor_msgs::SetCameraInfo::Request, sensor_msgs::SetCameraInfo::Response>(
-          "left/set_camera_info", [this](auto& req, auto& res) { return setCameraInfo(true, req, res); });
-      right_set_info_srv_ = nh.advertiseService<sensor_msgs::SetCameraInfo::Request, sensor_msgs::SetCameraInfo::Response>(
-          "right/set_camera_info", [this](auto& req, auto& res) { return setCameraInfo(false, req, res); });
-    }
-    loadRegions(true);
+  }
 
+  // calibration_store "file": this nodelet serves both cameras' set_camera_info. The pair store
+  // is made at the first set_camera_info, when the driver's image size is known.
+  void advertiseSetCameraInfo(ros::NodeHandle& nh) {
+    left_set_info_srv_ = nh.advertiseService<sensor_msgs::SetCameraInfo::Request, sensor_msgs::SetCameraInfo::Response>(
+        "left/set_camera_info", [this](auto& req, auto& res) { return setCameraInfo(true, req, res); });
+    right_set_info_srv_ = nh.advertiseService<sensor_msgs::SetCameraInfo::Request, sensor_msgs::SetCameraInfo::Response>(
+        "right/set_camera_info", [this](auto& req, auto& res) { return setCameraInfo(false, req, res); });
+  }
+
+  // The head's stereo stream, set_light and, on demand, the health that asks for calibrations.
+  void advertiseOutputs(ros::NodeHandle& nh) {
     it_ = std::make_unique<image_transport::ImageTransport>(nh);
     left_pub_ = it_->advertiseCamera("left/image_raw", 2);
     right_pub_ = it_->advertiseCamera("right/image_raw", 2);
@@ -227,11 +249,14 @@ class LightControllerNodelet : public nodelet::Nodelet {
     set_light_srv_ = nh.advertiseService("set_light", &LightControllerNodelet::setLight, this);
     if (params_.schedule.trigger == ecs::CalibrationTrigger::kOnDemand)
       health_sub_ = nh.subscribe<CalibrationHealth>("calibration/health", 2, [this](const auto& health) {
-        // On demand: a calibration burst while the health nodelet wants one (the calibration is known
-  // not to hold and the calibrator has not found it to be the best it can do).
+        // On demand: a calibration burst while the health nodelet wants one (the calibration is
+        // known not to hold and the calibrator has not found it to be the best it can do).
         schedule_->demand(health->calibration_wanted);
       });
+  }
 
+  // The driver's four topics, counted as they arrive and filtered before the synchroniser.
+  void subscribeDriver(ros::NodeHandle& nh, ros::NodeHandle& pnh) {
     const image_transport::TransportHints hints("raw", ros::TransportHints(), pnh);
     left_sub_.subscribe(*it_, "driver/left/image_raw", params_.queue_size, hints);
     right_sub_.subscribe(*it_, "driver/right/image_raw", params_.queue_size, hints);
@@ -242,8 +267,12 @@ class LightControllerNodelet : public nodelet::Nodelet {
     left_info_sub_.registerCallback([this](const CameraInfoConstPtr&) { ++arrived_[1]; });
     right_sub_.registerCallback([this](const ImageConstPtr&) { ++arrived_[2]; });
     right_info_sub_.registerCallback([this](const CameraInfoConstPtr&) { ++arrived_[3]; });
-    // Stamps far from the other inputs' (and unreadable images) never reach the synchroniser,
-    // whose queue they would fill (stamp_guard.h, as every synchronised input of the head).
+    admitDriverInputs(pnh);
+  }
+
+  // Stamps far from the other inputs' (and unreadable images) never reach the synchroniser,
+  // whose queue they would fill (stamp_guard.h, as every synchronised input of the head).
+  void admitDriverInputs(ros::NodeHandle& pnh) {
     guard_ = std::make_unique<StampGuard>(
         std::vector<std::string>{left_sub_.getTopic(), left_info_sub_.getTopic(), right_sub_.getTopic(),
                                  right_info_sub_.getTopic()},
@@ -263,6 +292,11 @@ class LightControllerNodelet : public nodelet::Nodelet {
     left_info_admit_ = std::make_unique<AdmissionFilter<CameraInfo>>(left_info_sub_, admit_info(1));
     right_admit_ = std::make_unique<AdmissionFilter<Image>>(right_sub_, admit_image(2));
     right_info_admit_ = std::make_unique<AdmissionFilter<CameraInfo>>(right_info_sub_, admit_info(3));
+  }
+
+  // One stereo frame per matched set of the admitted inputs: by stamp (ExactTime), or nearest
+  // stamps (ApproximateTime) for two independent drivers.
+  void synchroniseDriver() {
     if (params_.approximate_sync) {
       approximate_sync_ = std::make_unique<message_filters::Synchronizer<ApproximatePolicy>>(
           ApproximatePolicy(params_.queue_size), *left_admit_, *left_info_admit_, *right_admit_, *right_info_admit_);
@@ -274,16 +308,16 @@ class LightControllerNodelet : public nodelet::Nodelet {
           ExactPolicy(params_.queue_size), *left_admit_, *left_info_admit_, *right_admit_, *right_info_admit_);
       exact_sync_->registerCallback(&LightControllerNodelet::frameCb, this);
     }
+  }
 
+  // The diagnostics, the once-a-second tick (regions re-read, missing inputs named, diagnostics
+  // updated) and the origin of the schedule's clock.
+  void startDiagnostics(ros::NodeHandle& nh, ros::NodeHandle& pnh) {
     diagnostics_ = std::make_unique<diagnostic_updater::Updater>(nh, pnh, getName());
     diagnostics_->setHardwareID(params_.light_backend == "serial" ? params_.serial.port : params_.light_backend);
     diagnostics_->add("light_controller", this, &LightControllerNodelet::diagnose);
     timer_ = nh.createWallTimer(ros::WallDuration(1.0), [this](const ros::WallTimerEvent&) { tick(); });
     started_ = std::chrono::steady_clock::now();
-    NODELET_INFO("LightController: light %s, %s sync of %s and %s, light confirmed in %s, calibrations stored by %s",
-                 params_.light_backend.c_str(), params_.approximate_sync ? "approximate" : "exact",
-                 left_sub_.getTopic().c_str(), right_sub_.getTopic().c_str(), regionsText().c_str(),
-                 params_.calibration_store == "file" ? "this nodelet (files, driver reloads)" : "the driver");
   }
 
   bool regionsInUse() const { return regions_ && regions_->known(); }

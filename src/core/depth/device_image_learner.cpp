@@ -237,6 +237,143 @@ inline Robust robustMean(const float* values, const float* sorted, int m, double
   return inlierMean(sum, sum2, count, median);
 }
 
+// Mono pixels whose samples are all valid (nearly all of them) are sorted kLanes at a time by a
+// sorting network, branch-free (SIMD min and max); the others one by one.
+constexpr int kLanes = 8;
+static_assert(kLanes == sizeof(uint64_t) && kLanes % cv::v_float32x4::nlanes == 0,
+              "kLanes: the valid flags of a block are read as one uint64");
+
+// One image row as combine() reads and writes it: the samples' rows and the outputs' rows.
+struct CombineRow {
+  std::vector<const float*> values;  // per sample: its values (channels interleaved)
+  std::vector<const uchar*> valid;   // per sample: its valid flags (255 or 0)
+  float* out = nullptr;              // the estimate
+  uchar* support = nullptr;          // inliers per pixel; null when not wanted
+  float* standard_error = nullptr;   // null when not wanted
+  int channels = 1;
+  double threshold = 0.0;            // inliers are within this of the median
+};
+
+// Buffers a worker reuses from pixel to pixel (allocated once per band of rows).
+struct CombineScratch {
+  std::vector<float> block;   // n samples x kLanes pixels, sample-major
+  std::vector<float> values;  // one pixel's valid samples
+  std::vector<float> sorted;  // the same, sorted
+};
+
+// Points `row` at row y of the samples and of the outputs (`support`, `standard_error` may be null).
+void pointAtRow(const std::vector<Sample>& samples, int y, cv::Mat* device, cv::Mat* support,
+                cv::Mat* standard_error, CombineRow* row) {
+  for (size_t i = 0; i < samples.size(); ++i) {
+    row->values[i] = samples[i].value.ptr<float>(y);
+    row->valid[i] = samples[i].valid.ptr<uchar>(y);
+  }
+  row->out = device->ptr<float>(y);
+  row->support = support ? support->ptr<uchar>(y) : nullptr;
+  row->standard_error = standard_error ? standard_error->ptr<float>(y) : nullptr;
+}
+
+// One pixel, any number of channels, any valid flags: each channel's valid samples sorted and
+// reduced by robustMean; the pixel's support and standard error are those of its worst channel.
+void combinePixel(const CombineRow& row, int x, CombineScratch* scratch) {
+  const int n = static_cast<int>(row.values.size());
+  std::vector<float>& values = scratch->values;
+  std::vector<float>& sorted = scratch->sorted;
+  int worst_count = 255;
+  float worst_se = 0.f;
+  for (int ch = 0; ch < row.channels; ++ch) {
+    const int at = x * row.channels + ch;
+    int m = 0;
+    for (int i = 0; i < n; ++i)
+      if (row.valid[i][x]) values[m++] = row.values[i][at];
+    if (m == 0) {
+      row.out[at] = 0.f;
+      worst_count = 0;
+      worst_se = 1e9f;
+      continue;
+    }
+    for (int i = 0; i < m; ++i) {  // insertion sort: a few dozen samples at most
+      const float v = values[i];
+      int j = i;
+      for (; j > 0 && sorted[j - 1] > v; --j) sorted[j] = sorted[j - 1];
+      sorted[j] = v;
+    }
+    const Robust r = robustMean(values.data(), sorted.data(), m, row.threshold);
+    row.out[at] = r.mean;
+    worst_count = std::min(worst_count, r.count);
+    worst_se = std::max(worst_se, r.standard_error);
+  }
+  if (row.support) row.support[x] = static_cast<uchar>(std::min(worst_count, 255));
+  if (row.standard_error) row.standard_error[x] = worst_se;
+}
+
+// Whether every sample is valid at the kLanes pixels from x on.
+bool blockAllValid(const CombineRow& row, int x) {
+  for (const uchar* valid : row.valid) {
+    uint64_t lanes;  // the kLanes valid flags (255 or 0) at once
+    std::memcpy(&lanes, valid + x, sizeof(lanes));
+    if (lanes != ~uint64_t(0)) return false;
+  }
+  return true;
+}
+
+// Sorts each of the kLanes columns of `block` (n values, sample-major) with the network.
+void sortBlock(const std::vector<std::pair<int, int>>& network, float* block) {
+  for (const std::pair<int, int>& c : network) {
+    float* a = block + c.first * kLanes;
+    float* b = block + c.second * kLanes;
+    for (int l = 0; l < kLanes; l += cv::v_float32x4::nlanes) {
+      const cv::v_float32x4 va = cv::v_load(a + l), vb = cv::v_load(b + l);
+      cv::v_store(a + l, cv::v_min(va, vb));
+      cv::v_store(b + l, cv::v_max(va, vb));
+    }
+  }
+}
+
+// kLanes mono pixels from x on whose samples are all valid: copied, sorted by the network, then
+// the median and the inliers' sums lane by lane (as robustMean, in the same order, so that both
+// paths give the same bits).
+void combineBlock(const CombineRow& row, int x, const std::vector<std::pair<int, int>>& network,
+                  float* block) {
+  const int n = static_cast<int>(row.values.size());
+  for (int i = 0; i < n; ++i) std::memcpy(block + i * kLanes, row.values[i] + x, kLanes * sizeof(float));
+  sortBlock(network, block);
+  const float* lower = block + ((n - 1) / 2) * kLanes;
+  const float* upper = block + (n / 2) * kLanes;
+  float median[kLanes];
+  double sum[kLanes] = {}, sum2[kLanes] = {}, count[kLanes] = {};
+  for (int l = 0; l < kLanes; ++l) median[l] = n % 2 ? upper[l] : 0.5f * (upper[l] + lower[l]);
+  for (int i = 0; i < n; ++i) {
+    const float* v = row.values[i] + x;
+    for (int l = 0; l < kLanes; ++l) {
+      const double value = v[l], inlier = std::abs(v[l] - median[l]) <= row.threshold ? 1.0 : 0.0;
+      sum[l] += inlier * value;
+      sum2[l] += inlier * value * value;
+      count[l] += inlier;
+    }
+  }
+  for (int l = 0; l < kLanes; ++l) {
+    const Robust r = inlierMean(sum[l], sum2[l], static_cast<int>(count[l]), median[l]);
+    row.out[x + l] = r.mean;
+    if (row.support) row.support[x + l] = static_cast<uchar>(std::min(r.count, 255));
+    if (row.standard_error) row.standard_error[x + l] = r.standard_error;
+  }
+}
+
+// One row: mono pixels kLanes at a time where all samples are valid, every other pixel alone.
+void combineRow(const CombineRow& row, int width, const std::vector<std::pair<int, int>>& network,
+                CombineScratch* scratch) {
+  int x = 0;
+  for (; row.channels == 1 && x + kLanes <= width; x += kLanes) {
+    if (blockAllValid(row, x)) {
+      combineBlock(row, x, network, scratch->block.data());
+    } else {
+      for (int l = 0; l < kLanes; ++l) combinePixel(row, x + l, scratch);
+    }
+  }
+  for (; x < width; ++x) combinePixel(row, x, scratch);
+}
+
 // Per pixel: the median of the valid samples, then the mean of those within `threshold` of it.
 // `support` and `standard_error` may be null (an intermediate pass needs the estimate only).
 void combine(const std::vector<Sample>& samples, double threshold, cv::Mat* device, cv::Mat* support,
@@ -248,96 +385,19 @@ void combine(const std::vector<Sample>& samples, double threshold, cv::Mat* devi
   if (standard_error) standard_error->create(size, CV_32F);
   const int n = static_cast<int>(samples.size());
   const std::vector<std::pair<int, int>> network = sortingNetwork(n);
-  // Mono pixels whose samples are all valid (nearly all of them) are sorted kLanes at a time by
-  // the network, branch-free (SIMD min and max); the others one by one.
-  constexpr int kLanes = 8;
-  static_assert(kLanes == sizeof(uint64_t) && kLanes % cv::v_float32x4::nlanes == 0,
-                "kLanes: the valid flags of a block are read as one uint64");
   cv::parallel_for_(cv::Range(0, size.height), [&](const cv::Range& rows) {
-    std::vector<const float*> value_rows(n);
-    std::vector<const uchar*> valid_rows(n);
-    std::vector<float> block(n * kLanes), values(n), sorted(n);
+    CombineRow row;
+    row.values.resize(n);
+    row.valid.resize(n);
+    row.channels = channels;
+    row.threshold = threshold;
+    CombineScratch scratch;
+    scratch.block.resize(n * kLanes);
+    scratch.values.resize(n);
+    scratch.sorted.resize(n);
     for (int y = rows.start; y < rows.end; ++y) {
-      for (int i = 0; i < n; ++i) {
-        value_rows[i] = samples[i].value.ptr<float>(y);
-        valid_rows[i] = samples[i].valid.ptr<uchar>(y);
-      }
-      float* out = device->ptr<float>(y);
-      uchar* count_out = support ? support->ptr<uchar>(y) : nullptr;
-      float* se_out = standard_error ? standard_error->ptr<float>(y) : nullptr;
-      const auto onePixel = [&](int x) {
-        int worst_count = 255;
-        float worst_se = 0.f;
-        for (int ch = 0; ch < channels; ++ch) {
-          const int at = x * channels + ch;
-          int m = 0;
-          for (int i = 0; i < n; ++i)
-            if (valid_rows[i][x]) values[m++] = value_rows[i][at];
-          if (m == 0) {
-            out[at] = 0.f;
-            worst_count = 0;
-            worst_se = 1e9f;
-            continue;
-          }
-          for (int i = 0; i < m; ++i) {  // insertion sort: a few dozen samples at most
-            const float v = values[i];
-            int j = i;
-            for (; j > 0 && sorted[j - 1] > v; --j) sorted[j] = sorted[j - 1];
-            sorted[j] = v;
-          }
-          const Robust r = robustMean(values.data(), sorted.data(), m, threshold);
-          out[at] = r.mean;
-          worst_count = std::min(worst_count, r.count);
-          worst_se = std::max(worst_se, r.standard_error);
-        }
-        if (count_out) count_out[x] = static_cast<uchar>(std::min(worst_count, 255));
-        if (se_out) se_out[x] = worst_se;
-      };
-      int x = 0;
-      for (; channels == 1 && x + kLanes <= size.width; x += kLanes) {
-        bool all_valid = true;
-        for (int i = 0; i < n && all_valid; ++i) {
-          uint64_t lanes;  // the kLanes valid flags (255 or 0) at once
-          std::memcpy(&lanes, valid_rows[i] + x, sizeof(lanes));
-          all_valid = lanes == ~uint64_t(0);
-        }
-        if (!all_valid) {
-          for (int l = 0; l < kLanes; ++l) onePixel(x + l);
-          continue;
-        }
-        for (int i = 0; i < n; ++i) std::memcpy(&block[i * kLanes], value_rows[i] + x, kLanes * sizeof(float));
-        for (const std::pair<int, int>& c : network) {
-          float* a = &block[c.first * kLanes];
-          float* b = &block[c.second * kLanes];
-          for (int l = 0; l < kLanes; l += cv::v_float32x4::nlanes) {
-            const cv::v_float32x4 va = cv::v_load(a + l), vb = cv::v_load(b + l);
-            cv::v_store(a + l, cv::v_min(va, vb));
-            cv::v_store(b + l, cv::v_max(va, vb));
-          }
-        }
-        // The median and the inliers' sums, lane by lane (as robustMean, in the same order).
-        const float* lower = &block[((n - 1) / 2) * kLanes];
-        const float* upper = &block[(n / 2) * kLanes];
-        float median[kLanes];
-        double sum[kLanes] = {}, sum2[kLanes] = {}, count[kLanes] = {};
-        for (int l = 0; l < kLanes; ++l) median[l] = n % 2 ? upper[l] : 0.5f * (upper[l] + lower[l]);
-        for (int i = 0; i < n; ++i) {
-          const float* v = value_rows[i] + x;
-          for (int l = 0; l < kLanes; ++l) {
-            const double value = v[l], inlier = std::abs(v[l] - median[l]) <= threshold ? 1.0 : 0.0;
-            sum[l] += inlier * value;
-            sum2[l] += inlier * value * value;
-            count[l] += inlier;
-          }
-        }
-        for (int l = 0; l < kLanes; ++l) {
-          const Robust r = inlierMean(sum[l], sum2[l], static_cast<int>(count[l]), median[l]);
-          out[x + l] = r.mean;
-          if (count_out) count_out[x + l] = static_cast<uchar>(std::min(r.count, 255));
-          if (se_out) se_out[x + l] = r.standard_error;
-        }
-      }
-      for (; x < size.width; ++x) onePixel(x);
+      pointAtRow(samples, y, device, support, standard_error, &row);
+      combineRow(row, size.width, network, &scratch);
     }
   });
 }

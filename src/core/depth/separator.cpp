@@ -214,10 +214,22 @@ double ImageSeparator::paperAlpha(const cv::Mat& raw) const {
   return template_.alpha_curve.evaluate(raw_mean - device_mean_);
 }
 
-double ImageSeparator::regionalAlpha(const cv::Mat& raw, std::vector<float>* alpha_tiles) const {
+// The frame's sums per tile (row-major) of E, E^2 and E C, E being the fitted plane high-passed
+// like the regressor C.
+struct ImageSeparator::FrameTileSums {
+  std::vector<double> e, ee, ec;
+};
+
+// One least-squares fit of E on C over a block of tiles (see fitTiles).
+struct ImageSeparator::TileFit {
+  double alpha = 1.0, variance = 0.0, contrast = 0.0;
+};
+
+ImageSeparator::FrameTileSums ImageSeparator::sumFrameTiles(const cv::Mat& raw) const {
   const int T = options_.tile_size, W = raw.cols, H = raw.rows;
   const int n_tiles = tiles_x_ * tiles_y_;
-  std::vector<double> sum_e(n_tiles, 0.0), sum_ee(n_tiles, 0.0), sum_ec(n_tiles, 0.0);
+  FrameTileSums sums{std::vector<double>(n_tiles, 0.0), std::vector<double>(n_tiles, 0.0),
+                     std::vector<double>(n_tiles, 0.0)};
   // The frame high-passed like the regressor; an 8-bit local mean keeps this a fast SIMD box
   // filter (its rounding adds 1/12 grey level^2 of noise, uncorrelated with the device).
   cv::Mat plane = raw, low;
@@ -244,75 +256,86 @@ double ImageSeparator::regionalAlpha(const cv::Mat& raw, std::vector<float>* alp
         row_ee += d * d;
         row_ec += d * c[i];
       }
-      sum_e[row0 + tx] += row_e;
-      sum_ee[row0 + tx] += row_ee;
-      sum_ec[row0 + tx] += row_ec / kRegressorScale;
+      sums.e[row0 + tx] += row_e;
+      sums.ee[row0 + tx] += row_ee;
+      sums.ec[row0 + tx] += row_ec / kRegressorScale;
     }
   }
-  // Centred least squares over a block of tiles: alpha = cov(E, C) / var(C); the variance of
-  // that estimate is (residual variance / sum of centred C^2) * noise_correlation_pixels,
-  // the residual being the scene (plus sensor noise), which is spatially correlated.
-  struct Fit {
-    double alpha = 1.0, variance = 0.0, contrast = 0.0;
-  };
-  const auto fit = [&](double n, double se, double see, double sc, double scc, double sec) {
-    Fit f;
-    const double sxx = std::max(scc - sc * sc / n, 1e-9), sxy = sec - se * sc / n;
-    const double syy = see - se * se / n;
-    f.alpha = sxy / sxx;
-    const double residual = std::max(0.0, syy - f.alpha * sxy) / std::max(1.0, n - 2);
-    f.variance = residual / sxx * options_.noise_correlation_pixels;
-    f.contrast = sxx / n;
-    return f;
-  };
-  double N = 0, SE = 0, SEE = 0, SC = 0, SCC = 0, SEC = 0;
-  for (int t = 0; t < n_tiles; ++t) {
-    N += tile_count_[t]; SE += sum_e[t]; SEE += sum_ee[t]; SC += tile_sum_c_[t];
-    SCC += tile_sum_cc_[t]; SEC += sum_ec[t];
-  }
-  const double global_alpha = fit(N, SE, SEE, SC, SCC, SEC).alpha;
+  return sums;
+}
 
-  std::vector<Fit> fits(n_tiles);
-  double max_contrast = 0.0;
+// Centred least squares over a block of tiles: alpha = cov(E, C) / var(C); the variance of
+// that estimate is (residual variance / sum of centred C^2) * noise_correlation_pixels,
+// the residual being the scene (plus sensor noise), which is spatially correlated.
+// The tiles are summed row by row, left to right: the whole grid sums them in index order.
+ImageSeparator::TileFit ImageSeparator::fitTiles(const FrameTileSums& frame, const cv::Rect& tiles) const {
+  double n = 0, se = 0, see = 0, sc = 0, scc = 0, sec = 0;
+  for (int j = tiles.y; j < tiles.y + tiles.height; ++j) {
+    for (int i = tiles.x; i < tiles.x + tiles.width; ++i) {
+      const int t = j * tiles_x_ + i;
+      n += tile_count_[t]; se += frame.e[t]; see += frame.ee[t]; sc += tile_sum_c_[t];
+      scc += tile_sum_cc_[t]; sec += frame.ec[t];
+    }
+  }
+  TileFit f;
+  const double sxx = std::max(scc - sc * sc / n, 1e-9), sxy = sec - se * sc / n;
+  const double syy = see - se * se / n;
+  f.alpha = sxy / sxx;
+  const double residual = std::max(0.0, syy - f.alpha * sxy) / std::max(1.0, n - 2);
+  f.variance = residual / sxx * options_.noise_correlation_pixels;
+  f.contrast = sxx / n;
+  return f;
+}
+
+std::vector<ImageSeparator::TileFit> ImageSeparator::pooledTileFits(const FrameTileSums& frame) const {
+  std::vector<TileFit> fits(tiles_x_ * tiles_y_);
   const int r = options_.pooling_radius;
   for (int ty = 0; ty < tiles_y_; ++ty) {
     for (int tx = 0; tx < tiles_x_; ++tx) {
-      double n = 0, se = 0, see = 0, sc = 0, scc = 0, sec = 0;
-      for (int j = std::max(0, ty - r); j <= std::min(tiles_y_ - 1, ty + r); ++j) {
-        for (int i = std::max(0, tx - r); i <= std::min(tiles_x_ - 1, tx + r); ++i) {
-          const int t = j * tiles_x_ + i;
-          n += tile_count_[t]; se += sum_e[t]; see += sum_ee[t]; sc += tile_sum_c_[t];
-          scc += tile_sum_cc_[t]; sec += sum_ec[t];
-        }
-      }
-      Fit& f = fits[ty * tiles_x_ + tx];
-      f = fit(n, se, see, sc, scc, sec);
-      max_contrast = std::max(max_contrast, f.contrast);
+      // The tiles within r of (tx, ty), clipped to the grid.
+      const int x0 = std::max(0, tx - r), x1 = std::min(tiles_x_ - 1, tx + r);
+      const int y0 = std::max(0, ty - r), y1 = std::min(tiles_y_ - 1, ty + r);
+      fits[ty * tiles_x_ + tx] = fitTiles(frame, cv::Rect(x0, y0, x1 - x0 + 1, y1 - y0 + 1));
     }
   }
-  // Shrink each block's alpha towards the image-wide one by how much of the spread between
-  // blocks is real (empirical Bayes: tau^2 = spread - mean estimate variance). With a uniform
-  // light the blocks follow the global alpha (no added noise); a real gradient survives.
-  double spread = 0.0, mean_variance = 0.0;
-  int used = 0;
-  const auto usable = [&](const Fit& f) {
+  return fits;
+}
+
+// Shrinks each block's alpha towards the image-wide one by how much of the spread between
+// blocks is real (empirical Bayes: tau^2 = spread - mean estimate variance). With a uniform
+// light the blocks follow the global alpha (no added noise); a real gradient survives.
+void ImageSeparator::shrinkTowardsGlobal(const std::vector<TileFit>& fits, double global_alpha,
+                                         std::vector<float>* alpha_tiles) const {
+  double max_contrast = 0.0;
+  for (const TileFit& f : fits) max_contrast = std::max(max_contrast, f.contrast);
+  // A block with little device contrast against the strongest one would have its fit dominated
+  // by the scene: it takes the global alpha and does not count in the spread.
+  const auto usable = [&](const TileFit& f) {
     return max_contrast > 0 && f.contrast >= options_.min_device_contrast * max_contrast;
   };
-  for (const Fit& f : fits) {
+  double spread = 0.0, mean_variance = 0.0;
+  int used = 0;
+  for (const TileFit& f : fits) {
     if (!usable(f)) continue;
     spread += (f.alpha - global_alpha) * (f.alpha - global_alpha);
     mean_variance += f.variance;
     ++used;
   }
   const double tau2 = used > 1 ? std::max(0.0, (spread - mean_variance) / used) : 0.0;
-  alpha_tiles->resize(n_tiles);
-  for (int t = 0; t < n_tiles; ++t) {
-    const Fit& f = fits[t];
+  alpha_tiles->resize(fits.size());
+  for (size_t t = 0; t < fits.size(); ++t) {
+    const TileFit& f = fits[t];
     const double a = usable(f) ? global_alpha + tau2 / (tau2 + f.variance + 1e-12) *
                                                     (f.alpha - global_alpha)
                                : global_alpha;
     (*alpha_tiles)[t] = static_cast<float>(std::min(std::max(a, 0.0), options_.max_alpha));
   }
+}
+
+double ImageSeparator::regionalAlpha(const cv::Mat& raw, std::vector<float>* alpha_tiles) const {
+  const FrameTileSums frame = sumFrameTiles(raw);
+  const double global_alpha = fitTiles(frame, cv::Rect(0, 0, tiles_x_, tiles_y_)).alpha;
+  shrinkTowardsGlobal(pooledTileFits(frame), global_alpha, alpha_tiles);
   return std::min(std::max(global_alpha, 0.0), options_.max_alpha);
 }
 

@@ -135,6 +135,15 @@ class ImageSeparator {
   double paperAlpha(const cv::Mat& raw) const;
   // Fills the per-tile alpha grid (tiles_y x tiles_x, row-major); returns the image-wide alpha.
   double regionalAlpha(const cv::Mat& raw, std::vector<float>* alpha_tiles) const;
+  // regionalAlpha's stages: the frame's sums per tile, the fit over a block of tiles (the whole
+  // grid, or each tile's pooling neighbourhood), and each tile's alpha shrunk towards the global one.
+  struct FrameTileSums;
+  struct TileFit;
+  FrameTileSums sumFrameTiles(const cv::Mat& raw) const;
+  TileFit fitTiles(const FrameTileSums& frame, const cv::Rect& tiles) const;
+  std::vector<TileFit> pooledTileFits(const FrameTileSums& frame) const;
+  void shrinkTowardsGlobal(const std::vector<TileFit>& fits, double global_alpha,
+                           std::vector<float>* alpha_tiles) const;
   void subtractRegional(const cv::Mat& raw, const std::vector<float>& alpha_tiles,
                         cv::Mat* out) const;
   void subtractGlobal(const cv::Mat& raw, double alpha, cv::Mat* out) const;
