@@ -259,6 +259,74 @@ TEST(DisparityOptionsTest, CheckNamesProblemsAndClampFixesThem) {
   EXPECT_EQ(bad_names.Check(), "");
 }
 
+// census_sgm's own options: each bad value named by Check() and moved by clamp() to the nearest
+// usable one; the range limit applies to census_sgm only.
+TEST(DisparityTest, CensusSgmOptionsCheckedAndClamped) {
+  DisparityOptions o;
+  EXPECT_EQ(o.algorithm, "census_sgm");
+  EXPECT_EQ(o.Check(), "");
+  o.sgm_paths = 6;
+  o.sgm_census_threshold = -1;
+  o.sgm_P1 = 70;
+  o.sgm_P2 = 10;
+  o.sgm_edge_scale = -3;
+  o.median_size = 4;
+  o.disparity_range = 1024;
+  const std::string problem = o.Check();
+  for (const char* name : {"sgm_paths", "sgm_census_threshold", "sgm_P1", "sgm_P2", "sgm_edge_scale",
+                           "median_size", "disparity_range"})
+    EXPECT_NE(problem.find(name), std::string::npos) << name << " not named in: " << problem;
+  EXPECT_THROW(DisparityComputer{o}, std::invalid_argument);
+  EXPECT_EQ(o.clamp().size(), 7u);
+  EXPECT_EQ(o.Check(), "");
+  EXPECT_EQ(o.sgm_paths, 5);  // 6: nearer 5 than 8
+  EXPECT_EQ(o.sgm_census_threshold, 0);
+  EXPECT_EQ(o.sgm_P1, 63);
+  EXPECT_GT(o.sgm_P2, o.sgm_P1);
+  EXPECT_EQ(o.median_size, 3);
+  EXPECT_EQ(o.disparity_range, 512);
+  DisparityOptions sad;
+  sad.algorithm = "sad";
+  sad.disparity_range = 1024;
+  EXPECT_EQ(sad.Check(), "");
+}
+
+// The mask: matched pixels 255; left of x = d (the right camera cannot see them) census_sgm
+// marks them hidden (128), filled or not; where sad finds no match it says no match (0).
+TEST(DisparityTest, MaskSaysMatchedHiddenOrNoMatch) {
+  cv::Mat left, right;
+  renderPlane(20.0, cv::Size(320, 120), &left, &right);
+  for (const bool fill : {false, true}) {
+    DisparityOptions o;
+    o.fill_holes = fill;
+    cv::Mat d, mask;
+    DisparityComputer(o).compute(left, right, &d, &mask);
+    ASSERT_EQ(mask.type(), CV_8UC1);
+    int hidden = 0, unmatched = 0, matched_inside = 0;
+    for (int y = 10; y < d.rows - 10; ++y) {
+      for (int x = 0; x < 15; ++x) {
+        hidden += mask.at<uint8_t>(y, x) == kMaskOccluded;
+        unmatched += mask.at<uint8_t>(y, x) != kMaskMatched;
+      }
+      for (int x = 40; x < d.cols - 10; ++x) matched_inside += mask.at<uint8_t>(y, x) == kMaskMatched;
+    }
+    EXPECT_GT(unmatched, 0.9 * 15 * (d.rows - 20)) << "fill " << fill;
+    EXPECT_GT(hidden, 0.85 * 15 * (d.rows - 20)) << "fill " << fill;
+    EXPECT_GT(matched_inside, 0.95 * (d.cols - 50) * (d.rows - 20)) << "fill " << fill;
+    for (int y = 0; y < d.rows; ++y)
+      for (int x = 0; x < d.cols; ++x) {
+        const uint8_t m = mask.at<uint8_t>(y, x);
+        if (!fill) ASSERT_EQ(m == kMaskMatched, isValidDisparity(d.at<float>(y, x))) << x << "," << y;
+        ASSERT_TRUE(m == kMaskMatched || m == kMaskOccluded || m == kMaskNoMatch);
+      }
+  }
+  DisparityOptions sad;
+  sad.algorithm = "sad";
+  cv::Mat d, mask;
+  DisparityComputer(sad).compute(left, right, &d, &mask);
+  EXPECT_EQ(mask.at<uint8_t>(60, 5), kMaskNoMatch) << "sad cannot tell hidden from unmatched";
+}
+
 TEST(DisparityFillingTest, TakesTheFartherNeighbourAndExtendsBorders) {
   cv::Mat d(5, 12, CV_32F, cv::Scalar(kInvalidDisparity));
   for (int y = 0; y < 5; ++y) {

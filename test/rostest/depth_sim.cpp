@@ -57,6 +57,7 @@ void expectDisparityMatchesGroundTruth(const std::string& prefix, const std::str
   Collector<DisparityImage> disparity(nh, prefix + "disparity", 20);
   Collector<sensor_msgs::PointCloud2> points(nh, prefix + "points2", 20);
   Collector<embedded_calibration_stereo::DisparityCoverage> coverages(nh, prefix + "disparity_coverage", 20);
+  Collector<Image> masks(nh, prefix + "disparity_mask", 20);
   Collector<Image> depth(nh, "ground_truth/left/depth", 50);
   Collector<CameraInfo> left_info(nh, prefix + "left/" + info, 50), right_info(nh, prefix + "right/" + info, 50);
   // A disparity frame for which the depth and both CameraInfos of the same stamp arrived.
@@ -89,6 +90,25 @@ void expectDisparityMatchesGroundTruth(const std::string& prefix, const std::str
     const size_t valid = std::count_if(d, d + n, [&](float v) { return v >= disp->min_disparity; });
     EXPECT_NEAR(coverage->valid_fraction, double(valid) / n, 1e-6);
     EXPECT_GT(coverage->valid_fraction, 0.5);
+  }
+  // disparity_mask: mono8 of the disparity's stamp and size; mostly matched, and the left border
+  // (where the right camera cannot see) marked hidden (census_sgm, the default).
+  {
+    Image::ConstPtr mask;
+    ASSERT_TRUE(masks.waitFor(
+        [&](const std::vector<Image::ConstPtr>& m) {
+          mask = ecs_test::findByStamp(m, disp->header.stamp);
+          return bool(mask);
+        },
+        5.0))
+        << "no disparity_mask with the disparity's stamp";
+    EXPECT_EQ(mask->encoding, "mono8");
+    EXPECT_EQ(mask->width, disp->image.width);
+    EXPECT_EQ(mask->height, disp->image.height);
+    const auto count = [&](uint8_t v) { return std::count(mask->data.begin(), mask->data.end(), v); };
+    EXPECT_GT(double(count(255)) / mask->data.size(), 0.5);
+    EXPECT_GT(count(128), 0) << "nothing marked hidden from the right camera";
+    EXPECT_EQ(count(255) + count(128) + count(0), static_cast<long>(mask->data.size()));
   }
 
   image_geometry::StereoCameraModel model;

@@ -87,6 +87,10 @@ struct Problems {
 
 }  // namespace
 
+namespace {
+void checkCensusSgm(const DisparityOptions& o, Problems* problems);
+}  // namespace
+
 std::string DisparityOptions::Check() const {
   Problems p;
   if (!isKnown(algorithm, parseAlgorithmAsInt))
@@ -116,6 +120,17 @@ std::string DisparityOptions::Check() const {
   if (P1 < 0) p.add("P1 must be >= 0");
   if (P2 <= P1) p.add("P2 must be > P1 (P1 " + std::to_string(P1) + ", P2 " + std::to_string(P2) + ")");
   if (disp12MaxDiff < 0) p.add("disp12MaxDiff must be >= 0");
+  checkCensusSgm(*this, &p);
+  return p.joined();
+}
+
+namespace {
+
+// census_sgm's own fields (Check() has the shared ones).
+void checkCensusSgm(const DisparityOptions& o, Problems* problems) {
+  Problems& p = *problems;
+  const int sgm_census_threshold = o.sgm_census_threshold, sgm_paths = o.sgm_paths;
+  const int sgm_P1 = o.sgm_P1, sgm_P2 = o.sgm_P2, median_size = o.median_size;
   if (sgm_census_threshold < 0 || sgm_census_threshold > 255)
     p.add("sgm_census_threshold must be in 0..255, got " + std::to_string(sgm_census_threshold));
   if (sgm_paths != 5 && sgm_paths != 8)
@@ -124,14 +139,15 @@ std::string DisparityOptions::Check() const {
   if (sgm_P2 <= sgm_P1 || sgm_P2 > 200)
     p.add("sgm_P2 must be above sgm_P1 and at most 200 (sgm_P1 " + std::to_string(sgm_P1) +
           ", sgm_P2 " + std::to_string(sgm_P2) + ")");
-  if (sgm_edge_scale < 0) p.add("sgm_edge_scale must be >= 0");
+  if (o.sgm_edge_scale < 0) p.add("sgm_edge_scale must be >= 0");
   if (median_size != 0 && median_size != 3 && median_size != 5)
     p.add("median_size must be 0, 3 or 5, got " + std::to_string(median_size));
-  if (algorithm == "census_sgm" && disparity_range > 512)
+  if (o.algorithm == "census_sgm" && o.disparity_range > 512)
     p.add("disparity_range must be at most 512 for census_sgm, got " +
-          std::to_string(disparity_range));
-  return p.joined();
+          std::to_string(o.disparity_range));
 }
+
+}  // namespace
 
 std::vector<std::string> DisparityOptions::clamp() {
   Problems p;
