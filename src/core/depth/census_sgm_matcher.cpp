@@ -7,6 +7,7 @@
 #include <string>
 #include <vector>
 
+#include "kernel_choice.h"
 #include "sgm_kernel.h"
 
 static_assert(2 * ecs::sgm_kernel::kCensusRadiusX + 1 == ecs::kCensusSgmWindow &&
@@ -21,24 +22,11 @@ namespace {
 constexpr int kBandRows = 120;
 constexpr int kWarmUpRows = 16;
 
-bool cpuHasAvx2() {
 #ifdef ECS_SGM_AVX2
-  return cv::checkHardwareSupport(CV_CPU_AVX2);
+const sgm_kernel::Kernel& (*const kAvx2Kernel)() = sgm_kernel::avx2Kernel;
 #else
-  return false;
+const sgm_kernel::Kernel& (*const kAvx2Kernel)() = nullptr;
 #endif
-}
-
-const sgm_kernel::Kernel& kernelNamed(const std::string& name) {
-  if (name == "baseline") return sgm_kernel::baselineKernel();
-#ifdef ECS_SGM_AVX2
-  if (name == "avx2" && cpuHasAvx2()) return sgm_kernel::avx2Kernel();
-#endif
-  if (name == "auto") return cpuHasAvx2() ? kernelNamed("avx2") : sgm_kernel::baselineKernel();
-  throw std::invalid_argument("census_sgm matcher: kernel '" + name +
-                              "' is not available here (baseline" +
-                              std::string(cpuHasAvx2() ? ", avx2" : "") + ", auto)");
-}
 
 // Census planes of both images and the images' padded copies, kept per thread between calls:
 // fresh pages would cost page faults on every frame.
@@ -122,11 +110,7 @@ std::string CensusSgmParams::check() const {
   return problems;
 }
 
-std::vector<std::string> censusSgmKernelNames() {
-  std::vector<std::string> names{"baseline"};
-  if (cpuHasAvx2()) names.push_back("avx2");
-  return names;
-}
+std::vector<std::string> censusSgmKernelNames() { return kernelNames(); }
 
 void computeCensusSgmDisparity16(const cv::Mat& left, const cv::Mat& right,
                                  const CensusSgmParams& params, cv::Mat* disparity,
@@ -137,7 +121,8 @@ void computeCensusSgmDisparity16(const cv::Mat& left, const cv::Mat& right,
     throw std::invalid_argument("census_sgm matcher: left and right sizes differ");
   const std::string problem = params.check();
   if (!problem.empty()) throw std::invalid_argument("census_sgm matcher: " + problem);
-  const sgm_kernel::Kernel& kernel = kernelNamed(params.kernel);
+  const sgm_kernel::Kernel& kernel =
+      kernelNamed("census_sgm", params.kernel, sgm_kernel::baselineKernel(), kAvx2Kernel);
 
   sgm_kernel::Problem p;
   p.width = left.cols;

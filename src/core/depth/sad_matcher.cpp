@@ -8,6 +8,7 @@
 #include <string>
 #include <vector>
 
+#include "kernel_choice.h"
 #include "sad_kernel.h"
 #include "parallel_pieces.h"
 
@@ -102,27 +103,11 @@ Workspace& threadWorkspace() {
   return workspace;
 }
 
-bool cpuHasAvx2() {
 #ifdef ECS_SAD_AVX2
-  return cv::checkHardwareSupport(CV_CPU_AVX2);
+const sad_kernel::Kernel& (*const kAvx2Kernel)() = sad_kernel::avx2Kernel;
 #else
-  return false;
+const sad_kernel::Kernel& (*const kAvx2Kernel)() = nullptr;
 #endif
-}
-
-const sad_kernel::Kernel& kernelNamed(const std::string& name) {
-  if (name == "baseline") return sad_kernel::baselineKernel();
-#ifdef ECS_SAD_AVX2
-  if (name == "avx2" && cpuHasAvx2()) return sad_kernel::avx2Kernel();
-#endif
-  if (name == "auto") return cpuHasAvx2() ? kernelNamed("avx2") : sad_kernel::baselineKernel();
-  throw std::invalid_argument("sad matcher: kernel '" + name + "' is not available here (" +
-                              [] {
-                                std::string names;
-                                for (const auto& n : sadKernelNames()) names += (names.empty() ? "" : ", ") + n;
-                                return names;
-                              }() + ", auto)");
-}
 
 // Scratch memory of the calling thread, kept between frames: fresh pages would cost page faults
 // on every frame.
@@ -134,11 +119,7 @@ std::vector<int16_t>& threadScratch(size_t elements) {
 
 }  // namespace
 
-std::vector<std::string> sadKernelNames() {
-  std::vector<std::string> names{"baseline"};
-  if (cpuHasAvx2()) names.push_back("avx2");
-  return names;
-}
+std::vector<std::string> sadKernelNames() { return kernelNames(); }
 
 cv::Mat computeSadDisparity16(const cv::Mat& left, const cv::Mat& right,
                               const SadMatcherParams& params) {
@@ -160,7 +141,8 @@ void computeSadDisparity16(const cv::Mat& left, const cv::Mat& right, const SadM
     throw std::invalid_argument("sad matcher: num_disparities must be a positive multiple of 16");
   if (params.prefilter_cap < 1 || params.prefilter_cap > 63)
     throw std::invalid_argument("sad matcher: prefilter_cap must be in 1..63");
-  const sad_kernel::Kernel& kernel = kernelNamed(params.kernel);
+  const sad_kernel::Kernel& kernel =
+      kernelNamed("sad", params.kernel, sad_kernel::baselineKernel(), kAvx2Kernel);
 
   sad_kernel::Problem p;
   p.width = left.cols;
