@@ -130,8 +130,7 @@ HealthParams loadParams(const ros::NodeHandle& pnh, const std::string& default_d
   m.max_depth_age_s = read.atLeast("max_depth_age_s", m.max_depth_age_s, 0.0);
   m.max_verification_age_s = read.atLeast("max_verification_age_s", m.max_verification_age_s, 0.0);
   m.depth_frame_stride = 1;  // depth_every_n_frames strides before the images are converted
-  const std::string problem = m.Check();
-  if (!problem.empty()) throw ecs::ConfigError(problem.substr(0, problem.find(' ')), problem);
+  ecs::throwIfProblem(m.problem());
   p.coverage.collapse_ratio = read.inRange("coverage_collapse_ratio", p.coverage.collapse_ratio, 0.01, 0.99);
   p.coverage.history_s = read.inRange("coverage_history_s", p.coverage.history_s, 10.0, 3600.0);
   p.coverage.min_history_s = std::min(p.coverage.min_history_s, p.coverage.history_s);

@@ -94,12 +94,6 @@ std::string readBytes(const ParameterReader& read, const std::string& name, cons
   return decoded;
 }
 
-// A validate() message "name must ..." as ConfigError(name, "must ...").
-void refuseProblem(const std::string& problem) {
-  if (problem.empty()) return;
-  const size_t space = problem.find(' ');
-  throw ecs::ConfigError(problem.substr(0, space), problem.substr(space + 1));
-}
 
 // Every parameter is read and checked here, once, at start.
 LightControllerParams loadParams(const ros::NodeHandle& pnh) {
@@ -124,7 +118,7 @@ LightControllerParams loadParams(const ros::NodeHandle& pnh) {
   // frames on both sides of each switch.
   p.schedule.settle_frames = read.get("settle_frames", 5);
   readHealthSchedule(read, &p.schedule);
-  refuseProblem(p.schedule.validate());
+  ecs::throwIfProblem(p.schedule.problem());
 
   p.approximate_sync = read.get("approximate_sync", p.approximate_sync);
   p.max_interval_s = read.atLeast("max_interval_s", p.max_interval_s, 0.0);
@@ -134,7 +128,7 @@ LightControllerParams loadParams(const ros::NodeHandle& pnh) {
   p.confirmation.min_step = read.get("min_step", p.confirmation.min_step);
   p.confirmation.switch_fraction = read.get("switch_fraction", p.confirmation.switch_fraction);
   p.confirmation.plateau_fraction = read.get("plateau_fraction", p.confirmation.plateau_fraction);
-  refuseProblem(p.confirmation.validate());
+  ecs::throwIfProblem(p.confirmation.problem());
   p.max_delay_frames = read.atLeast("max_delay_frames", p.max_delay_frames, 0);
 
   p.calibration_store = read.choice("calibration_store", p.calibration_store, {"driver", "file"});

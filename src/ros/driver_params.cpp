@@ -52,9 +52,7 @@ DriverParams loadDriverParams(const ros::NodeHandle& private_nh, const std::stri
   p.schedule.calibration_frames = read.get("calibration_frames", p.schedule.calibration_frames);
   p.schedule.settle_frames = read.get("settle_frames", p.schedule.settle_frames);
   readHealthSchedule(read, &p.schedule);
-  const std::string schedule_problem = p.schedule.validate();
-  if (!schedule_problem.empty())
-    throw ecs::ConfigError(schedule_problem.substr(0, schedule_problem.find(' ')), schedule_problem);
+  ecs::throwIfProblem(p.schedule.problem());
 
   const std::string encoding = read.choice("encoding", "mono8", {"mono8", "bgr8"});
   if (p.backend == "sim") {

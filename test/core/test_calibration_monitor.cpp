@@ -432,5 +432,22 @@ TEST(CalibrationMonitor, ASolvesCalibrationIsVerifiedAgainstItsSolvesBoards) {
   EXPECT_GT(nominal_sum, 2.0 * true_sum);           // what the nominal poses would have reported
 }
 
+// Options refused by parameter name, nested ones with their path; the sentence is the same as
+// Check() gives.
+TEST(CalibrationMonitor, OptionProblemsNameTheParameter) {
+  CalibrationMonitorOptions o;
+  EXPECT_TRUE(o.problem().ok());
+  o.misalignment_bad_px = o.misalignment_degraded_px / 2;
+  EXPECT_EQ(o.problem().parameter, "misalignment_degraded_px");
+  EXPECT_EQ(o.Check(), o.problem().text());
+  o = CalibrationMonitorOptions();
+  o.matching.grid_rows = 0;
+  EXPECT_EQ(o.problem().parameter, "matching.grid_rows");
+  EXPECT_EQ(o.problem().problem, "must be >= 1");
+  o = CalibrationMonitorOptions();
+  o.max_verification_age_s = 0;
+  EXPECT_EQ(o.problem().parameter, "max_verification_age_s");
+}
+
 }  // namespace
 }  // namespace ecs

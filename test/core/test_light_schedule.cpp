@@ -288,4 +288,11 @@ TEST(LightSchedule, TheFirstBurstComesAfterTheDelayWithSettledLightOffFramesBefo
   ecs::LightScheduleConfig bad = config(1.0, 10, 2);
   bad.first_burst_delay_s = -1.0;
   EXPECT_NE(bad.validate().find("first_burst_delay_s"), std::string::npos);
+  // The parameter travels apart from the sentence: a refusal names it without parsing text.
+  EXPECT_EQ(bad.problem().parameter, "first_burst_delay_s");
+  EXPECT_EQ(bad.problem().problem, "must be >= 0");
+  ecs::LightScheduleConfig frames = config(1.0, 0, 2);
+  EXPECT_EQ(frames.problem().parameter, "calibration_frames");
+  EXPECT_TRUE(config(1.0, 10, 2).problem().ok());
+  EXPECT_THROW(ecs::throwIfProblem(frames.problem()), ecs::ConfigError);
 }

@@ -520,7 +520,13 @@ TEST(SimRigConfig, ErrorsNameTheParameter) {
   SimRigConfig c = defaultConfig();
   c.optics.reflectance = -0.1;
   EXPECT_NE(c.validate().find("optics.reflectance"), std::string::npos);
-  EXPECT_THROW(SimRig rig(c), ConfigError);
+  EXPECT_EQ(c.problem().parameter, "optics.reflectance");
+  try {
+    SimRig rig(c);
+    ADD_FAILURE() << "a negative reflectance was accepted";
+  } catch (const ConfigError& e) {
+    EXPECT_EQ(e.parameter(), "optics.reflectance") << e.what();  // carried, not cut from the text
+  }
 }
 
 TEST(SimRig, BgrEncodingReplicatesChannels) {

@@ -101,28 +101,41 @@ const char* toString(CalibrationHealth health) {
   return "UNKNOWN";
 }
 
-std::string CalibrationMonitorOptions::Check() const {
+std::string CalibrationMonitorOptions::Check() const { return problem().text(); }
+
+namespace {
+
+// A degraded limit above zero and a bad limit above it; the problem names the degraded one.
+ConfigProblem checkLimits(const char* degraded_name, double degraded, const char* bad_name, double bad) {
+  if (std::isfinite(degraded) && degraded > 0.0 && bad > degraded) return {};
+  return {degraded_name, std::string("must be > 0 and ") + bad_name + " above it"};
+}
+
+}  // namespace
+
+ConfigProblem CalibrationMonitorOptions::problem() const {
   auto positive = [](double v) { return std::isfinite(v) && v > 0.0; };
-  if (!positive(misalignment_degraded_px) || !(misalignment_bad_px > misalignment_degraded_px))
-    return "misalignment_degraded_px must be > 0 and misalignment_bad_px above it";
-  if (!positive(disparity_bias_degraded_px) || !(disparity_bias_bad_px > disparity_bias_degraded_px))
-    return "disparity_bias_degraded_px must be > 0 and disparity_bias_bad_px above it";
-  if (!positive(board_residual_degraded_px) || !(board_residual_bad_px > board_residual_degraded_px))
-    return "board_residual_degraded_px must be > 0 and board_residual_bad_px above it";
-  if (!(hysteresis >= 0.0 && hysteresis < 1.0)) return "hysteresis must be in [0, 1)";
-  if (depth_frame_stride < 1) return "depth_frame_stride must be >= 1";
-  if (!positive(smoothing_time_s)) return "smoothing_time_s must be > 0";
-  if (!positive(band_half_height_px)) return "band_half_height_px must be > 0";
-  const std::string matching_problem = matching.Check();
-  if (!matching_problem.empty()) return "matching." + matching_problem;
-  if (min_matches < 5) return "min_matches must be >= 5";
-  if (!positive(huber_px)) return "huber_px must be > 0";
-  if (!positive(max_depth_age_s)) return "max_depth_age_s must be > 0";
-  if (!positive(verification_period_s)) return "verification_period_s must be > 0";
-  if (min_board_corners < 4) return "min_board_corners must be >= 4";
-  if (min_corners < 6) return "min_corners must be >= 6";
-  if (!positive(max_verification_age_s)) return "max_verification_age_s must be > 0";
-  return "";
+  for (const ConfigProblem& p :
+       {checkLimits("misalignment_degraded_px", misalignment_degraded_px, "misalignment_bad_px", misalignment_bad_px),
+        checkLimits("disparity_bias_degraded_px", disparity_bias_degraded_px, "disparity_bias_bad_px",
+                    disparity_bias_bad_px),
+        checkLimits("board_residual_degraded_px", board_residual_degraded_px, "board_residual_bad_px",
+                    board_residual_bad_px)})
+    if (!p.ok()) return p;
+  if (!(hysteresis >= 0.0 && hysteresis < 1.0)) return {"hysteresis", "must be in [0, 1)"};
+  if (depth_frame_stride < 1) return {"depth_frame_stride", "must be >= 1"};
+  if (!positive(smoothing_time_s)) return {"smoothing_time_s", "must be > 0"};
+  if (!positive(band_half_height_px)) return {"band_half_height_px", "must be > 0"};
+  ConfigProblem matching_problem = matching.problem();
+  if (!matching_problem.ok()) return {"matching." + matching_problem.parameter, matching_problem.problem};
+  if (min_matches < 5) return {"min_matches", "must be >= 5"};
+  if (!positive(huber_px)) return {"huber_px", "must be > 0"};
+  if (!positive(max_depth_age_s)) return {"max_depth_age_s", "must be > 0"};
+  if (!positive(verification_period_s)) return {"verification_period_s", "must be > 0"};
+  if (min_board_corners < 4) return {"min_board_corners", "must be >= 4"};
+  if (min_corners < 6) return {"min_corners", "must be >= 6"};
+  if (!positive(max_verification_age_s)) return {"max_verification_age_s", "must be > 0"};
+  return {};
 }
 
 namespace {

@@ -6,12 +6,14 @@
 
 namespace ecs {
 
-std::string LightConfirmationOptions::validate() const {
-  if (!(min_step > 0.0) || !std::isfinite(min_step)) return "min_step must be > 0 grey levels";
-  if (!(switch_fraction > 0.0 && switch_fraction < 1.0)) return "switch_fraction must be in (0, 1)";
+std::string LightConfirmationOptions::validate() const { return problem().text(); }
+
+ConfigProblem LightConfirmationOptions::problem() const {
+  if (!(min_step > 0.0) || !std::isfinite(min_step)) return {"min_step", "must be > 0 grey levels"};
+  if (!(switch_fraction > 0.0 && switch_fraction < 1.0)) return {"switch_fraction", "must be in (0, 1)"};
   if (!(plateau_fraction > 0.0 && plateau_fraction < switch_fraction))
-    return "plateau_fraction must be in (0, switch_fraction)";
-  return "";
+    return {"plateau_fraction", "must be in (0, switch_fraction)"};
+  return {};
 }
 
 double regionLevel(const cv::Mat& image, const cv::Mat& mask) {

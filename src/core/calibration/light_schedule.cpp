@@ -5,15 +5,17 @@
 
 namespace ecs {
 
-std::string LightScheduleConfig::validate() const {
-  if (!std::isfinite(period_s) || period_s < 0.0) return "calibration_period_s must be >= 0";
-  if (calibration_frames < 1) return "calibration_frames must be >= 1";
-  if (settle_frames < 0) return "settle_frames must be >= 0";
-  if (!std::isfinite(min_interval_s) || min_interval_s < 0.0) return "min_calibration_interval_s must be >= 0";
-  if (!std::isfinite(verification_period_s) || verification_period_s < 0.0)
-    return "verification_period_s must be >= 0";
-  if (!std::isfinite(first_burst_delay_s) || first_burst_delay_s < 0.0) return "first_burst_delay_s must be >= 0";
-  return "";
+std::string LightScheduleConfig::validate() const { return problem().text(); }
+
+ConfigProblem LightScheduleConfig::problem() const {
+  const auto nonNegative = [](double v) { return std::isfinite(v) && v >= 0.0; };
+  if (!nonNegative(period_s)) return {"calibration_period_s", "must be >= 0"};
+  if (calibration_frames < 1) return {"calibration_frames", "must be >= 1"};
+  if (settle_frames < 0) return {"settle_frames", "must be >= 0"};
+  if (!nonNegative(min_interval_s)) return {"min_calibration_interval_s", "must be >= 0"};
+  if (!nonNegative(verification_period_s)) return {"verification_period_s", "must be >= 0"};
+  if (!nonNegative(first_burst_delay_s)) return {"first_burst_delay_s", "must be >= 0"};
+  return {};
 }
 
 LightSchedule::LightSchedule(const LightScheduleConfig& config) : config_(config) {}

@@ -8,15 +8,18 @@
 
 namespace ecs {
 
-std::string SceneMatchOptions::Check() const {
-  if (max_features < 10) return "max_features must be >= 10";
-  if (fast_threshold < 1 || fast_threshold > 255) return "fast_threshold must be in [1, 255]";
-  if (grid_cols < 1 || grid_rows < 1) return "grid_cols and grid_rows must be >= 1";
-  if (lk_window_px < 5 || lk_window_px % 2 == 0) return "lk_window_px must be odd and >= 5";
-  if (lk_levels < 0 || lk_levels > 6) return "lk_levels must be in [0, 6]";
+std::string SceneMatchOptions::Check() const { return problem().text(); }
+
+ConfigProblem SceneMatchOptions::problem() const {
+  if (max_features < 10) return {"max_features", "must be >= 10"};
+  if (fast_threshold < 1 || fast_threshold > 255) return {"fast_threshold", "must be in [1, 255]"};
+  if (grid_cols < 1) return {"grid_cols", "must be >= 1"};
+  if (grid_rows < 1) return {"grid_rows", "must be >= 1"};
+  if (lk_window_px < 5 || lk_window_px % 2 == 0) return {"lk_window_px", "must be odd and >= 5"};
+  if (lk_levels < 0 || lk_levels > 6) return {"lk_levels", "must be in [0, 6]"};
   if (!(std::isfinite(lk_max_backward_error_px) && lk_max_backward_error_px > 0.0))
-    return "lk_max_backward_error_px must be > 0";
-  return "";
+    return {"lk_max_backward_error_px", "must be > 0"};
+  return {};
 }
 
 std::vector<SceneMatch> matchStereoScene(const cv::Mat& left, const cv::Mat& right, const StereoRig& rig,

@@ -219,11 +219,7 @@ void SimRig::Impl::updateLayers(int index, const SimRigConfig& config,
 }
 
 SimRig::SimRig(SimRigConfig config) : config_(std::move(config)) {
-  const std::string problem = config_.validate();
-  if (!problem.empty()) {
-    const size_t colon = problem.find(": ");
-    throw ConfigError(problem.substr(0, colon), colon == std::string::npos ? problem : problem.substr(colon + 2));
-  }
+  throwIfProblem(config_.problem());
   boards_ = config_.device.virtualBoards();
   impl_ = std::make_unique<Impl>(config_);
 }

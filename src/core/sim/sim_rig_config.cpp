@@ -376,6 +376,11 @@ std::string SimRigConfig::validate() const {
   return p.first.empty() ? std::string() : p.first + ": " + p.second;
 }
 
+ConfigProblem SimRigConfig::problem() const {
+  const Problem p = findProblem(*this);
+  return {p.first, p.second};
+}
+
 namespace {
 
 // The scene section (enabled, planes, movers); config_dir: where relative image paths start.

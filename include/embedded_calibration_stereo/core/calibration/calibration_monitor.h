@@ -49,6 +49,7 @@
 #include "embedded_calibration_stereo/core/geometry/calibration_device.h"
 #include "embedded_calibration_stereo/core/geometry/observation.h"
 #include "embedded_calibration_stereo/core/geometry/stereo_rig.h"
+#include "embedded_calibration_stereo/core/geometry/config_error.h"
 
 namespace ecs {
 
@@ -88,7 +89,8 @@ struct CalibrationMonitorOptions {
   double max_verification_age_s = 10.0;  // older: not used for the state
 
   // Empty when usable, otherwise what is wrong (names the field).
-  std::string Check() const;
+  std::string Check() const;  // problem().text()
+  ConfigProblem problem() const;
 };
 
 enum class CalibrationHealth { kUnknown, kGood, kDegraded, kBad };

@@ -25,6 +25,7 @@
 #include <string>
 
 #include "embedded_calibration_stereo/core/tracker/board_prior.h"
+#include "embedded_calibration_stereo/core/geometry/config_error.h"
 
 namespace ecs {
 
@@ -38,7 +39,8 @@ struct LightConfirmationOptions {
   // (of min_step before a step has been measured).
   double plateau_fraction = 0.05;
   // Empty when usable; otherwise a message naming the bad field.
-  std::string validate() const;
+  std::string validate() const;  // problem().text()
+  ConfigProblem problem() const;
 };
 
 // The light as confirmed for one frame.

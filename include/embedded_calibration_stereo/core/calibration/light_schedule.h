@@ -23,6 +23,7 @@
 // Threading: not thread-safe; the owner (the camera driver) guards it with its own mutex.
 #include <cstdint>
 #include <string>
+#include "embedded_calibration_stereo/core/geometry/config_error.h"
 
 namespace ecs {
 
@@ -41,7 +42,8 @@ struct LightScheduleConfig {
   // frames with settled light-off frames before it (the drivers use 0.5 s).
   double first_burst_delay_s = 0.0;
   // Empty when usable; otherwise a message naming the bad field.
-  std::string validate() const;
+  std::string validate() const;  // problem().text()
+  ConfigProblem problem() const;
 };
 
 struct LightState {

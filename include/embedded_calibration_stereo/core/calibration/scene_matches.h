@@ -22,6 +22,7 @@
 
 #include "embedded_calibration_stereo/core/geometry/observation.h"
 #include "embedded_calibration_stereo/core/geometry/stereo_rig.h"
+#include "embedded_calibration_stereo/core/geometry/config_error.h"
 
 namespace ecs {
 
@@ -33,7 +34,8 @@ struct SceneMatchOptions {
   int lk_levels = 3;
   double lk_max_backward_error_px = 0.3;
   // Empty when usable, otherwise what is wrong (names the field).
-  std::string Check() const;
+  std::string Check() const;  // problem().text()
+  ConfigProblem problem() const;
 };
 
 // Image pyramids kept from call to call (no allocation per frame).

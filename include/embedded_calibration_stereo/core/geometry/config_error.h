@@ -6,6 +6,16 @@
 
 namespace ecs {
 
+// What a validator found: the parameter and what is wrong with it, kept apart so that a caller
+// can refuse the parameter by name without reading the sentence (both empty: nothing wrong).
+struct ConfigProblem {
+  std::string parameter;
+  std::string problem;
+  bool ok() const { return parameter.empty() && problem.empty(); }
+  // "parameter problem", the validators' one-line form; empty when ok().
+  std::string text() const { return ok() ? std::string() : parameter + " " + problem; }
+};
+
 class ConfigError : public std::runtime_error {
  public:
   ConfigError(const std::string& parameter, const std::string& problem)
@@ -15,5 +25,10 @@ class ConfigError : public std::runtime_error {
  private:
   std::string parameter_;
 };
+
+// Throws ConfigError(parameter, problem) unless the problem is ok().
+inline void throwIfProblem(const ConfigProblem& p) {
+  if (!p.ok()) throw ConfigError(p.parameter, p.problem);
+}
 
 }  // namespace ecs

@@ -31,6 +31,7 @@
 #include "embedded_calibration_stereo/core/geometry/observation.h"
 #include "embedded_calibration_stereo/core/geometry/stereo_rig.h"
 #include "embedded_calibration_stereo/core/sim/trajectory.h"
+#include "embedded_calibration_stereo/core/geometry/config_error.h"
 
 namespace ecs {
 
@@ -140,7 +141,8 @@ struct SimRigConfig {
   double noise_sigma = 1.0;    // Gaussian sensor noise, grey levels (0..255)
   double fps = 30.0;
   std::string encoding = "mono8";  // "mono8" or "bgr8"
-  std::string validate() const;
+  std::string validate() const;  // "parameter: problem", empty when usable
+  ConfigProblem problem() const;
 };
 
 // Loads and validates config/sim_rig.yaml; throws ConfigError naming the parameter. Relative
