@@ -43,10 +43,9 @@ Problem planeProblem(const ScenePlane& p, const std::string& key) {
 }
 
 Problem trajectoryProblem(const SimTrajectory& t, const std::string& key) {
-  const std::string e = t.validate();
-  if (e.empty()) return {"", ""};
-  const size_t colon = e.find(": ");
-  return {key + "." + e.substr(0, colon), colon == std::string::npos ? e : e.substr(colon + 2)};
+  const ConfigProblem p = t.problem();
+  if (p.ok()) return {"", ""};
+  return {key + "." + p.parameter, p.problem};
 }
 
 bool inRange(double v, double lo, double hi) { return v >= lo && v <= hi; }  // false for NaN

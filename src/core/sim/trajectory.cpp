@@ -3,6 +3,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <functional>
+#include <initializer_list>
 #include <cstdio>
 
 namespace ecs {
@@ -132,14 +134,63 @@ std::string number(double v) {
   return buf;
 }
 
-std::string checkRange(const std::string& key, double value, double lo, double hi, const char* unit) {
-  if (std::isfinite(value) && value >= lo && value <= hi) return "";
-  return key + ": must be in [" + number(lo) + ", " + number(hi) + "] " + unit + ", got " + number(value);
+ConfigProblem checkRange(const std::string& key, double value, double lo, double hi, const char* unit) {
+  if (std::isfinite(value) && value >= lo && value <= hi) return {};
+  return {key, "must be in [" + number(lo) + ", " + number(hi) + "] " + unit + ", got " + number(value)};
 }
 
-std::string checkPeriod(const std::string& key, double value) {
-  if (std::isfinite(value) && value >= kMinPeriod && value <= kMaxPeriod) return "";
-  return key + ": must be in [" + number(kMinPeriod) + ", " + number(kMaxPeriod) + "] s, got " + number(value);
+ConfigProblem checkPeriod(const std::string& key, double value) {
+  if (std::isfinite(value) && value >= kMinPeriod && value <= kMaxPeriod) return {};
+  return {key, "must be in [" + number(kMinPeriod) + ", " + number(kMaxPeriod) + "] s, got " + number(value)};
+}
+
+// The first problem of a list of checks (each evaluated only when the ones before it pass).
+ConfigProblem firstOf(std::initializer_list<std::function<ConfigProblem()>> checks) {
+  for (const auto& check : checks) {
+    ConfigProblem p = check();
+    if (!p.ok()) return p;
+  }
+  return {};
+}
+
+ConfigProblem driveProblem(const SimTrajectory& t) {
+  return firstOf({[&] { return checkRange("speed_m_s", t.speed_m_s, -kMaxSpeed, kMaxSpeed, "m/s"); },
+                  [&] {
+                    return checkRange("yaw_rate_amplitude_deg_s", t.yaw_rate_amplitude_deg_s, 0, kMaxYawRateDegS,
+                                      "deg/s");
+                  },
+                  [&] { return checkPeriod("yaw_period_s", t.yaw_period_s); },
+                  [&] { return checkRange("bump_amplitude_m", t.bump_amplitude_m, 0, kMaxVibrationM, "m"); },
+                  [&] { return checkRange("pitch_amplitude_deg", t.pitch_amplitude_deg, 0, kMaxVibrationDeg, "deg"); },
+                  [&] { return checkRange("roll_amplitude_deg", t.roll_amplitude_deg, 0, kMaxVibrationDeg, "deg"); },
+                  [&] { return checkPeriod("bump_period_s", t.bump_period_s); }});
+}
+
+ConfigProblem handheldProblem(const SimTrajectory& t) {
+  for (int i = 0; i < 3; ++i) {
+    const std::string axis = "[" + std::to_string(i) + "]";
+    ConfigProblem p = firstOf(
+        {[&] { return checkRange("translation_amplitude_m" + axis, t.translation_amplitude_m[i], 0, kMaxHandheldM, "m"); },
+         [&] { return checkRange("rotation_amplitude_deg" + axis, t.rotation_amplitude_deg[i], 0, kMaxHandheldDeg, "deg"); },
+         [&] { return checkPeriod("translation_period_s" + axis, t.translation_period_s[i]); },
+         [&] { return checkPeriod("rotation_period_s" + axis, t.rotation_period_s[i]); }});
+    if (!p.ok()) return p;
+  }
+  return {};
+}
+
+ConfigProblem waypointsProblem(const SimTrajectory& t) {
+  if (t.waypoints.empty()) return {"waypoints", "must list at least one {t_s, rotation_deg, translation_m}"};
+  for (size_t i = 0; i < t.waypoints.size(); ++i) {
+    const std::string key = "waypoints[" + std::to_string(i) + "]";
+    if (!std::isfinite(t.waypoints[i].t_s)) return {key + ".t_s", "must be finite"};
+    if (i > 0 && !(t.waypoints[i].t_s > t.waypoints[i - 1].t_s))
+      return {key + ".t_s", "must be later than the previous waypoint's"};
+    if (!finite(t.waypoints[i].pose)) return {key, "pose must be finite"};
+  }
+  if (t.loop_s > 0 && t.loop_s < t.waypoints.back().t_s)
+    return {"loop_s", "must be >= the last waypoint's t_s (or 0 = no loop)"};
+  return {};
 }
 
 }  // namespace
@@ -155,48 +206,20 @@ const char* trajectoryKindName(SimTrajectory::Kind kind) {
 }
 
 std::string SimTrajectory::validate() const {
-  if (!finite(start) || !start.linear().isUnitary(1e-6)) return "start: must be a finite rigid pose";
-  if (!(std::isfinite(loop_s) && loop_s >= 0.0)) return "loop_s: must be >= 0 s (0 = no loop)";
-  std::string e;
+  const ConfigProblem p = problem();
+  return p.ok() ? std::string() : p.parameter + ": " + p.problem;
+}
+
+ConfigProblem SimTrajectory::problem() const {
+  if (!finite(start) || !start.linear().isUnitary(1e-6)) return {"start", "must be a finite rigid pose"};
+  if (!(std::isfinite(loop_s) && loop_s >= 0.0)) return {"loop_s", "must be >= 0 s (0 = no loop)"};
   switch (kind) {
-    case Kind::kStatic:
-      return "";
-    case Kind::kDrive:
-      if (!(e = checkRange("speed_m_s", speed_m_s, -kMaxSpeed, kMaxSpeed, "m/s")).empty()) return e;
-      if (!(e = checkRange("yaw_rate_amplitude_deg_s", yaw_rate_amplitude_deg_s, 0, kMaxYawRateDegS, "deg/s")).empty())
-        return e;
-      if (!(e = checkPeriod("yaw_period_s", yaw_period_s)).empty()) return e;
-      if (!(e = checkRange("bump_amplitude_m", bump_amplitude_m, 0, kMaxVibrationM, "m")).empty()) return e;
-      if (!(e = checkRange("pitch_amplitude_deg", pitch_amplitude_deg, 0, kMaxVibrationDeg, "deg")).empty()) return e;
-      if (!(e = checkRange("roll_amplitude_deg", roll_amplitude_deg, 0, kMaxVibrationDeg, "deg")).empty()) return e;
-      return checkPeriod("bump_period_s", bump_period_s);
-    case Kind::kHandheld:
-      for (int i = 0; i < 3; ++i) {
-        const std::string axis = "[" + std::to_string(i) + "]";
-        if (!(e = checkRange(("translation_amplitude_m" + axis), translation_amplitude_m[i], 0,
-                             kMaxHandheldM, "m")).empty())
-          return e;
-        if (!(e = checkRange(("rotation_amplitude_deg" + axis), rotation_amplitude_deg[i], 0,
-                             kMaxHandheldDeg, "deg")).empty())
-          return e;
-        if (!(e = checkPeriod(("translation_period_s" + axis), translation_period_s[i])).empty()) return e;
-        if (!(e = checkPeriod(("rotation_period_s" + axis), rotation_period_s[i])).empty()) return e;
-      }
-      return "";
-    case Kind::kWaypoints:
-      if (waypoints.empty()) return "waypoints: must list at least one {t_s, rotation_deg, translation_m}";
-      for (size_t i = 0; i < waypoints.size(); ++i) {
-        const std::string key = "waypoints[" + std::to_string(i) + "]";
-        if (!std::isfinite(waypoints[i].t_s)) return key + ".t_s: must be finite";
-        if (i > 0 && !(waypoints[i].t_s > waypoints[i - 1].t_s))
-          return key + ".t_s: must be later than the previous waypoint's";
-        if (!finite(waypoints[i].pose)) return key + ": pose must be finite";
-      }
-      if (loop_s > 0 && loop_s < waypoints.back().t_s)
-        return "loop_s: must be >= the last waypoint's t_s (or 0 = no loop)";
-      return "";
+    case Kind::kStatic: return {};
+    case Kind::kDrive: return driveProblem(*this);
+    case Kind::kHandheld: return handheldProblem(*this);
+    case Kind::kWaypoints: return waypointsProblem(*this);
   }
-  return "kind: unknown";
+  return {"kind", "unknown"};
 }
 
 Eigen::Isometry3d trajectoryPose(const SimTrajectory& c, double time_s) {

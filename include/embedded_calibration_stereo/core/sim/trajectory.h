@@ -20,6 +20,7 @@
 #include <Eigen/Geometry>
 #include <string>
 #include <vector>
+#include "embedded_calibration_stereo/core/geometry/config_error.h"
 
 namespace ecs {
 
@@ -53,7 +54,8 @@ struct SimTrajectory {
   bool isStatic() const { return kind == Kind::kStatic; }
   // Empty string when valid, otherwise "<key>: <problem>" with the key relative to the
   // trajectory section (e.g. "waypoints[2].t_s: ...").
-  std::string validate() const;
+  std::string validate() const;  // "parameter: problem", empty when usable
+  ConfigProblem problem() const;
 };
 
 const char* trajectoryKindName(SimTrajectory::Kind kind);
