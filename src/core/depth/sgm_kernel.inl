@@ -2,7 +2,7 @@
 // intrinsics (cv::v_uint8 and vx_*: 16 lanes with SSE2/NEON, 32 with AVX2) and included by one
 // .cpp per instruction set, which defines SGM_KERNEL_GETTER and SGM_KERNEL_NAME first.
 // Everything but the getter has internal linkage, and nothing here calls a std:: template
-// (sad_kernel.h says why). Every instruction set gives identical results (test_sgm_kernels).
+// (sad_kernel.h says why). Every instruction set gives identical results (test_census_sgm).
 //
 // Per row: the census costs of every disparity (Hamming distances, vectorised across the
 // disparities), then semi-global aggregation, each path in 8-bit saturating arithmetic: a path's
