@@ -20,15 +20,23 @@ BadPixelStats evaluateBadPixels(const cv::Mat& disparity, const cv::Mat& ground_
     for (int x = 0; x < disparity.cols; ++x) {
       if (!(g[x] > 0) || !std::isfinite(g[x])) continue;
       ++stats.evaluated;
+      const double e = static_cast<double>(d[x]) - g[x];
       if (!std::isfinite(d[x])) {
         ++stats.invalid;
         ++stats.bad;
-      } else if (std::abs(d[x] - g[x]) > threshold_px) {
+      } else if (std::abs(e) > threshold_px) {
         ++stats.bad;
+      } else {
+        ++stats.inliers;
+        stats.inlier_square_sum += e * e;
       }
     }
   }
   return stats;
+}
+
+double BadPixelStats::inlierRmsPx() const {
+  return inliers > 0 ? std::sqrt(inlier_square_sum / inliers) : 0.0;
 }
 
 cv::Mat loadScaledGroundTruth(const std::string& path, double scale) {

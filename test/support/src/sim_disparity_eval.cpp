@@ -44,29 +44,13 @@ double DisparityScore::inlierRmsPx() const {
 }
 
 DisparityScore scoreDisparity(const cv::Mat& disparity, const cv::Mat& truth, double threshold_px) {
-  if (disparity.type() != CV_32FC1 || truth.type() != CV_32FC1 || disparity.size() != truth.size())
-    throw std::invalid_argument("scoreDisparity: disparity and truth must be CV_32FC1 of one size");
+  const BadPixelStats b = evaluateBadPixels(disparity, truth, threshold_px);  // the core's scoring
   DisparityScore s;
-  for (int v = 0; v < truth.rows; ++v) {
-    const float* t = truth.ptr<float>(v);
-    const float* d = disparity.ptr<float>(v);
-    for (int u = 0; u < truth.cols; ++u) {
-      if (!(std::isfinite(t[u]) && t[u] > 0.0f)) continue;
-      ++s.evaluated;
-      if (!std::isfinite(d[u])) {
-        ++s.invalid;
-        ++s.bad;
-        continue;
-      }
-      const double e = static_cast<double>(d[u]) - t[u];
-      if (std::abs(e) > threshold_px) {
-        ++s.bad;
-      } else {
-        ++s.inliers;
-        s.inlier_square_sum += e * e;
-      }
-    }
-  }
+  s.evaluated = b.evaluated;
+  s.bad = b.bad;
+  s.invalid = b.invalid;
+  s.inliers = b.inliers;
+  s.inlier_square_sum = b.inlier_square_sum;
   return s;
 }
 

@@ -11,7 +11,11 @@ struct BadPixelStats {
   int evaluated = 0;       // pixels with ground truth (ground truth > 0)
   int bad = 0;             // |d - gt| > threshold, invalid output included
   int invalid = 0;         // pixels with ground truth but no output disparity
+  int inliers = 0;         // valid and |d - gt| <= threshold
+  double inlier_square_sum = 0.0;  // of (d - gt) over the inliers, px^2
   double badPercent() const { return evaluated > 0 ? 100.0 * bad / evaluated : 0.0; }
+  // The sub-pixel accuracy of the matches that are right (0 without inliers).
+  double inlierRmsPx() const;
 };
 
 // disparity: CV_32F in pixels, NaN or +-inf = invalid. ground_truth: CV_32F in pixels, <= 0 (or
