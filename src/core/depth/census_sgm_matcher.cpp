@@ -33,7 +33,6 @@ const sgm_kernel::Kernel& (*const kAvx2Kernel)() = nullptr;
 struct Workspace {
   cv::Mat padded_left, padded_right;
   cv::Mat census_left, census_right;  // right: mirrored, see sgm_kernel::Problem
-  std::vector<uint8_t> row;
 };
 Workspace& threadWorkspace() {
   thread_local Workspace workspace;
