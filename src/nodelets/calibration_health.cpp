@@ -32,7 +32,6 @@
 #include <message_filters/subscriber.h>
 #include <message_filters/sync_policies/exact_time.h>
 #include <message_filters/synchronizer.h>
-#include <nodelet/nodelet.h>
 #include <pluginlib/class_list_macros.hpp>
 #include <ros/package.h>
 #include <ros/ros.h>
@@ -62,6 +61,7 @@
 #include "embedded_calibration_stereo/ros/calibration_session.h"
 #include "embedded_calibration_stereo/ros/conversions.h"
 #include "embedded_calibration_stereo/ros/frame_stamp_gate.h"
+#include "embedded_calibration_stereo/ros/guarded_nodelet.h"
 #include "embedded_calibration_stereo/ros/lazy_synced_input.h"
 #include "embedded_calibration_stereo/ros/parameter_reader.h"
 #include "embedded_calibration_stereo/ros/service_call.h"
@@ -163,8 +163,9 @@ bool sameIntrinsics(const std::vector<double>& intrinsics, const CameraInfo& inf
 // Threads: the frame, observation and timer callbacks run on the nodelet's single-threaded
 // queue and alone touch monitor_ and the state below; a restore runs on a std::async thread
 // (bounded service calls) and shares only its future, read from those callbacks.
-class CalibrationHealthNodelet : public nodelet::Nodelet {
+class CalibrationHealthNodelet : public GuardedNodelet {
  public:
+  CalibrationHealthNodelet() : GuardedNodelet("CalibrationHealth") {}
   ~CalibrationHealthNodelet() override {
     timer_.stop();
     if (restore_.valid()) restore_.wait();  // bounded: two service calls of service_timeout_s
@@ -173,21 +174,15 @@ class CalibrationHealthNodelet : public nodelet::Nodelet {
  private:
   using Policy = message_filters::sync_policies::ExactTime<Image, CameraInfo, Image, CameraInfo, CalibrationMode>;
 
-  void onInit() override {
-    try {
-      initialise();
-    } catch (const std::exception& e) {
-      NODELET_FATAL("CalibrationHealth cannot start: %s", e.what());
-      timer_.stop();
-      for (ros::Subscriber* sub :
-           {&observations_sub_, &status_sub_, &mode_record_sub_, &left_info_record_sub_, &right_info_record_sub_,
-            &coverage_sub_, &verified_sub_})
-        sub->shutdown();
-      throw;
-    }
+  void releaseAfterFailedStart() override {
+    timer_.stop();
+    for (ros::Subscriber* sub :
+         {&observations_sub_, &status_sub_, &mode_record_sub_, &left_info_record_sub_, &right_info_record_sub_,
+          &coverage_sub_, &verified_sub_})
+      sub->shutdown();
   }
 
-  void initialise() {
+  void initialise() override {
     ros::NodeHandle& nh = getNodeHandle();
     ros::NodeHandle& pnh = getPrivateNodeHandle();
     const std::string package_path = ros::package::getPath("embedded_calibration_stereo");

@@ -7,7 +7,6 @@
 #include <cv_bridge/cv_bridge.h>
 #include <diagnostic_updater/diagnostic_updater.h>
 #include <image_transport/image_transport.h>
-#include <nodelet/nodelet.h>
 #include <pluginlib/class_list_macros.hpp>
 #include <ros/package.h>
 #include <ros/ros.h>
@@ -35,6 +34,7 @@
 #include "embedded_calibration_stereo/ros/conversions.h"
 #include "embedded_calibration_stereo/ros/driver_params.h"
 #include "embedded_calibration_stereo/ros/frame_source.h"
+#include "embedded_calibration_stereo/ros/guarded_nodelet.h"
 #include "embedded_calibration_stereo/ros/head_pose_truth.h"
 #include "embedded_calibration_stereo/ros/light_backend.h"
 #include "embedded_calibration_stereo/ros/stereo_input_check.h"
@@ -49,20 +49,14 @@ namespace embedded_calibration_stereo {
 //    and the calibration/health subscriber, and touch only schedule_ under mutex_, calibration_ (thread-safe: the capture thread reads
 //    the pair in force and its epoch from one snapshot, never waiting for a disk write) and
 //    sim_ (thread-safe drift).
-class CameraDriverNodelet : public nodelet::Nodelet {
+class CameraDriverNodelet : public GuardedNodelet {
  public:
+  CameraDriverNodelet() : GuardedNodelet("CameraDriver") {}
   ~CameraDriverNodelet() override { stopCapture(); }
 
  private:
-  void onInit() override {
-    try {
-      initialise();
-    } catch (const std::exception& e) {
-      // Loud: logged as FATAL and rethrown, so that the manager refuses to load the nodelet.
-      NODELET_FATAL("CameraDriver cannot start: %s", e.what());
-      releaseServices();
-      throw;
-    }
+  void releaseAfterFailedStart() override {
+    releaseServices();
   }
 
   // nodelet::Loader destroys a failed nodelet's callback queues before the nodelet itself;
@@ -74,7 +68,7 @@ class CameraDriverNodelet : public nodelet::Nodelet {
     health_sub_.shutdown();
   }
 
-  void initialise() {
+  void initialise() override {
     ros::NodeHandle& nh = getNodeHandle();
     ros::NodeHandle& pnh = getPrivateNodeHandle();
     const std::string package_path = ros::package::getPath("embedded_calibration_stereo");

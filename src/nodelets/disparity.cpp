@@ -11,7 +11,6 @@
 #include <cv_bridge/cv_bridge.h>
 #include <dynamic_reconfigure/server.h>
 #include <image_geometry/stereo_camera_model.h>
-#include <nodelet/nodelet.h>
 #include <pluginlib/class_list_macros.hpp>
 #include <ros/ros.h>
 #include <sensor_msgs/PointCloud2.h>
@@ -27,6 +26,7 @@
 #include "embedded_calibration_stereo/DisparityConfig.h"
 #include "embedded_calibration_stereo/DisparityCoverage.h"
 #include "embedded_calibration_stereo/core/depth/disparity.h"
+#include "embedded_calibration_stereo/ros/guarded_nodelet.h"
 #include "embedded_calibration_stereo/ros/parameter_reader.h"
 #include "embedded_calibration_stereo/ros/stage_diagnostics.h"
 #include "embedded_calibration_stereo/ros/stereo_camera_input.h"
@@ -125,19 +125,14 @@ float packedRgb(const cv::Mat& image, const std::string& encoding, int u, int v)
 //  - input_ (un)subscribes the inputs from the publishers' connect callbacks under its own mutex
 //    (lazy_synced_input.h);
 //  - diagnostics_ reports on a wall timer of the callback queue and guards its own counters.
-class DisparityNodelet : public nodelet::Nodelet {
+class DisparityNodelet : public GuardedNodelet {
+ public:
+  DisparityNodelet() : GuardedNodelet("Disparity") {}
+
  private:
 
-  void onInit() override {
-    try {
-      initialise();
-    } catch (const std::exception& e) {  // before anything is advertised: nothing to release
-      NODELET_FATAL("Disparity cannot start: %s", e.what());
-      throw;
-    }
-  }
 
-  void initialise() {
+  void initialise() override {
     ros::NodeHandle& nh = getNodeHandle();
     ros::NodeHandle& pnh = getPrivateNodeHandle();
     const ParameterReader read(pnh);

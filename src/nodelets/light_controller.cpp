@@ -34,7 +34,6 @@
 #include <message_filters/sync_policies/approximate_time.h>
 #include <message_filters/sync_policies/exact_time.h>
 #include <message_filters/synchronizer.h>
-#include <nodelet/nodelet.h>
 #include <pluginlib/class_list_macros.hpp>
 #include <ros/ros.h>
 #include <sensor_msgs/SetCameraInfo.h>
@@ -55,6 +54,7 @@
 #include "embedded_calibration_stereo/core/geometry/config_error.h"
 #include "embedded_calibration_stereo/ros/camera_calibration.h"
 #include "embedded_calibration_stereo/ros/driver_params.h"
+#include "embedded_calibration_stereo/ros/guarded_nodelet.h"
 #include "embedded_calibration_stereo/ros/lazy_synced_input.h"
 #include "embedded_calibration_stereo/ros/light_backend.h"
 #include "embedded_calibration_stereo/ros/parameter_reader.h"
@@ -166,30 +166,25 @@ struct PendingFrame {
 // set_light, set_camera_info, calibration/health, the diagnostics timer), so the state below
 // needs no lock. The light
 // backend is driven from the frame callback only.
-class LightControllerNodelet : public nodelet::Nodelet {
+class LightControllerNodelet : public GuardedNodelet {
  public:
+  LightControllerNodelet() : GuardedNodelet("LightController") {}
   ~LightControllerNodelet() override = default;
 
  private:
   using ExactPolicy = message_filters::sync_policies::ExactTime<Image, CameraInfo, Image, CameraInfo>;
   using ApproximatePolicy = message_filters::sync_policies::ApproximateTime<Image, CameraInfo, Image, CameraInfo>;
 
-  void onInit() override {
-    try {
-      initialise();
-    } catch (const std::exception& e) {
-      NODELET_FATAL("LightController cannot start: %s", e.what());
-      for (ros::ServiceServer* server : {&set_light_srv_, &left_set_info_srv_, &right_set_info_srv_})
-        server->shutdown();
-      health_sub_.shutdown();
-      throw;
-    }
+  void releaseAfterFailedStart() override {
+    for (ros::ServiceServer* server : {&set_light_srv_, &left_set_info_srv_, &right_set_info_srv_})
+      server->shutdown();
+    health_sub_.shutdown();
   }
 
   // In stages, in the order they have always run: the light before set_light can command it,
   // the regions before the driver's inputs. No callback runs before this returns (the nodelet's
   // single-threaded queue); when a stage throws, onInit shuts down what was advertised.
-  void initialise() {
+  void initialise() override {
     ros::NodeHandle& nh = getNodeHandle();
     ros::NodeHandle& pnh = getPrivateNodeHandle();
     params_ = loadParams(pnh);

@@ -27,7 +27,6 @@
 // solves and gates every window as usual but commits nowhere except /tf_static; only header
 // stamps (sim time) order the frames, and solve durations are wall time.
 #include <diagnostic_updater/diagnostic_updater.h>
-#include <nodelet/nodelet.h>
 #include <pluginlib/class_list_macros.hpp>
 #include <ros/callback_queue.h>
 #include <ros/package.h>
@@ -56,6 +55,7 @@
 #include "embedded_calibration_stereo/ros/calibration_session.h"
 #include "embedded_calibration_stereo/ros/caller_probe.h"
 #include "embedded_calibration_stereo/ros/conversions.h"
+#include "embedded_calibration_stereo/ros/guarded_nodelet.h"
 #include "embedded_calibration_stereo/ros/service_call.h"
 #include "embedded_calibration_stereo/ros/stamp_guard.h"
 #include "embedded_calibration_stereo/ros/stereo_input_check.h"
@@ -77,8 +77,9 @@ namespace embedded_calibration_stereo {
 //    after a commit waits for the driver's first frame carrying it (its epoch).
 // Everything they share is guarded by mutex_; session_->boards() is immutable after onInit;
 // guard_ (created before the subscribers) locks itself.
-class OnlineCalibratorNodelet : public nodelet::Nodelet {
+class OnlineCalibratorNodelet : public GuardedNodelet {
  public:
+  OnlineCalibratorNodelet() : GuardedNodelet("OnlineCalibrator") {}
   ~OnlineCalibratorNodelet() override {
     stopWorker();  // a recalibrate call in progress sees stopping_ and returns
     if (service_spinner_) service_spinner_->stop();
@@ -94,26 +95,20 @@ class OnlineCalibratorNodelet : public nodelet::Nodelet {
     bool window_observation = false;  // frames: one observation of a whole window
   };
 
-  void onInit() override {
-    try {
-      initialise();
-    } catch (const std::exception& e) {
-      NODELET_FATAL("OnlineCalibrator cannot start: %s", e.what());
-      // The manager frees a failed nodelet's callback queues first: unregister everything now.
-      stopWorker();
-      if (service_spinner_) service_spinner_->stop();
-      recalibrate_srv_.shutdown();
-      diagnostics_timer_.stop();
-      window_timer_.stop();
-      commit_retry_timer_.stop();
-      for (ros::Subscriber* sub :
-           {&observations_sub_, &window_observations_sub_, &mode_sub_, &left_info_sub_, &right_info_sub_, &health_sub_})
-        sub->shutdown();
-      throw;
-    }
+  void releaseAfterFailedStart() override {
+    // The manager frees a failed nodelet's callback queues first: unregister everything now.
+    stopWorker();
+    if (service_spinner_) service_spinner_->stop();
+    recalibrate_srv_.shutdown();
+    diagnostics_timer_.stop();
+    window_timer_.stop();
+    commit_retry_timer_.stop();
+    for (ros::Subscriber* sub :
+         {&observations_sub_, &window_observations_sub_, &mode_sub_, &left_info_sub_, &right_info_sub_, &health_sub_})
+      sub->shutdown();
   }
 
-  void initialise() {
+  void initialise() override {
     ros::NodeHandle& nh = getNodeHandle();
     ros::NodeHandle& pnh = getPrivateNodeHandle();
     const std::string package_path = ros::package::getPath("embedded_calibration_stereo");

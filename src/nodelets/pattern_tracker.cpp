@@ -33,7 +33,6 @@
 // calibrator's epipolar constraints at every depth.
 #include <cv_bridge/cv_bridge.h>
 #include <diagnostic_updater/diagnostic_updater.h>
-#include <nodelet/nodelet.h>
 #include <pluginlib/class_list_macros.hpp>
 #include <ros/package.h>
 #include <ros/ros.h>
@@ -58,6 +57,7 @@
 #include "embedded_calibration_stereo/core/tracker/pattern_tracker.h"
 #include "embedded_calibration_stereo/core/tracker/window_tracker.h"
 #include "embedded_calibration_stereo/ros/conversions.h"
+#include "embedded_calibration_stereo/ros/guarded_nodelet.h"
 #include "embedded_calibration_stereo/ros/lazy_synced_input.h"
 #include "embedded_calibration_stereo/ros/light_burst.h"
 #include "embedded_calibration_stereo/ros/parameter_reader.h"
@@ -104,8 +104,9 @@ const char* toString(PriorState s) {
 //    that tracker and publishes on window_observations_pub_. window_mutex_ guards window_job_,
 //    window_stopping_ and the window figures;
 //  - input_ (un)subscribes the inputs under its own mutex (lazy_synced_input.h).
-class PatternTrackerNodelet : public nodelet::Nodelet {
+class PatternTrackerNodelet : public GuardedNodelet {
  public:
+  PatternTrackerNodelet() : GuardedNodelet("PatternTracker") {}
   ~PatternTrackerNodelet() override {
     stopWindowWorker();
     if (teach_result_.valid()) teach_result_.wait();
@@ -121,16 +122,8 @@ class PatternTrackerNodelet : public nodelet::Nodelet {
     std_msgs::Header header;  // the last light-on frame's
   };
 
-  void onInit() override {
-    try {
-      initialise();
-    } catch (const std::exception& e) {  // before anything is advertised: nothing to release
-      NODELET_FATAL("PatternTracker cannot start: %s", e.what());
-      throw;
-    }
-  }
 
-  void initialise() {
+  void initialise() override {
     ros::NodeHandle& nh = getNodeHandle();
     ros::NodeHandle& pnh = getPrivateNodeHandle();
     const std::string package_path = ros::package::getPath("embedded_calibration_stereo");

@@ -14,7 +14,6 @@
 // the last rectified frame (from calibration_mode, for the report only) and input copies.
 #include <cv_bridge/cv_bridge.h>
 #include <image_transport/image_transport.h>
-#include <nodelet/nodelet.h>
 #include <pluginlib/class_list_macros.hpp>
 #include <ros/ros.h>
 
@@ -31,6 +30,7 @@
 #include "embedded_calibration_stereo/core/depth/rectification.h"
 #include "embedded_calibration_stereo/core/geometry/config_error.h"
 #include "embedded_calibration_stereo/ros/conversions.h"
+#include "embedded_calibration_stereo/ros/guarded_nodelet.h"
 #include "embedded_calibration_stereo/ros/output_image.h"
 #include "embedded_calibration_stereo/ros/parameter_reader.h"
 #include "embedded_calibration_stereo/ros/stage_diagnostics.h"
@@ -123,8 +123,9 @@ std::shared_ptr<const StereoMaps> buildMaps(const CalibrationKey& key, ecs::Rect
 //    (lazy_synced_input.h);
 //  - modeCb (callback queue) and frameCb share epochs_ under epochs_mutex_; diagnostics_ reports
 //    on a wall timer of the callback queue and guards its own counters.
-class RectifierNodelet : public nodelet::Nodelet {
+class RectifierNodelet : public GuardedNodelet {
  public:
+  RectifierNodelet() : GuardedNodelet("Rectifier") {}
   ~RectifierNodelet() override {
     std::future<void> build;
     {
@@ -136,16 +137,8 @@ class RectifierNodelet : public nodelet::Nodelet {
 
  private:
 
-  void onInit() override {
-    try {
-      initialise();
-    } catch (const std::exception& e) {  // before anything is advertised: nothing to release
-      NODELET_FATAL("Rectifier cannot start: %s", e.what());
-      throw;
-    }
-  }
 
-  void initialise() {
+  void initialise() override {
     ros::NodeHandle& nh = getNodeHandle();
     ros::NodeHandle& pnh = getPrivateNodeHandle();
     const ParameterReader read(pnh);

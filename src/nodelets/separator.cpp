@@ -34,7 +34,6 @@
 // stay 0).
 #include <cv_bridge/cv_bridge.h>
 #include <image_transport/image_transport.h>
-#include <nodelet/nodelet.h>
 #include <pluginlib/class_list_macros.hpp>
 #include <ros/ros.h>
 #include <std_srvs/Trigger.h>
@@ -52,6 +51,7 @@
 #include "embedded_calibration_stereo/core/tracker/window_tracker.h"
 #include "embedded_calibration_stereo/core/depth/separator.h"
 #include "embedded_calibration_stereo/core/geometry/config_error.h"
+#include "embedded_calibration_stereo/ros/guarded_nodelet.h"
 #include "embedded_calibration_stereo/ros/lazy_synced_input.h"
 #include "embedded_calibration_stereo/ros/light_burst.h"
 #include "embedded_calibration_stereo/ros/output_image.h"
@@ -192,21 +192,16 @@ LearnResult learnBurst(const LightBurst& burst, bool whole, int per_end, const e
 // burst's message pointers (messages are never written after publishing) and hands its result
 // back through the future, which only the callback thread reads (unloading waits for a run in
 // progress: the future of std::async joins its thread).
-class SeparatorNodelet : public nodelet::Nodelet {
+class SeparatorNodelet : public GuardedNodelet {
+ public:
+  SeparatorNodelet() : GuardedNodelet("Separator") {}
+
  private:
   using FrameInput = LazySyncedInput<Image, Image, CalibrationMode>;
   using TruthInput = LazySyncedInput<Image, Image, CalibrationMode, Image, Image>;
 
-  void onInit() override {
-    try {
-      initialise();
-    } catch (const std::exception& e) {  // before anything is advertised: nothing to release
-      NODELET_FATAL("Separator cannot start: %s", e.what());
-      throw;
-    }
-  }
 
-  void initialise() {
+  void initialise() override {
     ros::NodeHandle& nh = getNodeHandle();
     ros::NodeHandle& pnh = getPrivateNodeHandle();
     const ParameterReader read(pnh);
