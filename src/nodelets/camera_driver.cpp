@@ -1,9 +1,4 @@
-// CameraDriver nodelet: publishes stereo frames from a backend (sim, files, v4l2) with their
-// CameraInfo and one calibration_mode message per frame, all with the same stamp; switches the
-// calibration light on a schedule (periodic, or on demand: when calibration/health leaves GOOD,
-// plus verification flashes) or on request; stores calibrations sent to set_camera_info
-// (both cameras' files change together, see StereoCalibration) and refuses those no consumer
-// could use.
+// The CameraDriver nodelet (docs/nodelets.md#cameradriver).
 #include <cv_bridge/cv_bridge.h>
 #include <diagnostic_updater/diagnostic_updater.h>
 #include <image_transport/image_transport.h>
@@ -12,7 +7,6 @@
 #include <ros/ros.h>
 #include <sensor_msgs/SetCameraInfo.h>
 #include <std_srvs/SetBool.h>
-#include <tf2_msgs/TFMessage.h>
 
 #include <atomic>
 #include <chrono>
@@ -24,31 +18,37 @@
 
 #include "embedded_calibration_stereo/CalibrationHealth.h"
 #include "embedded_calibration_stereo/CalibrationMode.h"
-#include "embedded_calibration_stereo/SetRigDrift.h"
 #include "embedded_calibration_stereo/VerifiedCalibration.h"
 #include "embedded_calibration_stereo/core/geometry/config_error.h"
 #include "embedded_calibration_stereo/core/geometry/config_io.h"
+#include "embedded_calibration_stereo/core/calibration/frame_pacer.h"
 #include "embedded_calibration_stereo/core/calibration/light_schedule.h"
+#include "embedded_calibration_stereo/core/calibration/verified_marking.h"
 #include "embedded_calibration_stereo/core/sim/sim_rig.h"
 #include "embedded_calibration_stereo/ros/camera_calibration.h"
 #include "embedded_calibration_stereo/ros/conversions.h"
 #include "embedded_calibration_stereo/ros/driver_params.h"
 #include "embedded_calibration_stereo/ros/frame_source.h"
 #include "embedded_calibration_stereo/ros/guarded_nodelet.h"
-#include "embedded_calibration_stereo/ros/head_pose_truth.h"
 #include "embedded_calibration_stereo/ros/light_backend.h"
+#include "embedded_calibration_stereo/ros/sim_ground_truth.h"
 #include "embedded_calibration_stereo/ros/stereo_input_check.h"
 
 namespace embedded_calibration_stereo {
 
+// Publishes stereo frames from a backend (sim, files, v4l2) with both CameraInfos and one
+// calibration_mode per frame, all with one stamp; switches the light on its schedule
+// (ecs::LightSchedule) or on request; stores the calibrations sent to set_camera_info
+// (StereoCalibration). What it publishes, serves and refuses: docs/nodelets.md#cameradriver.
 // Threads:
 //  - the capture thread (started at the end of onInit, joined in the destructor) owns source_,
 //    light_, the publishers' use and the diagnostics, and takes mutex_ for the shared state
 //    once per frame;
 //  - the manager's callback threads run the services (set_light, set_camera_info, sim/set_drift)
-//    and the calibration/health subscriber, and touch only schedule_ under mutex_, calibration_ (thread-safe: the capture thread reads
-//    the pair in force and its epoch from one snapshot, never waiting for a disk write) and
-//    sim_ (thread-safe drift).
+//    and the calibration/health subscriber, and touch only schedule_ under mutex_, calibration_
+//    (thread-safe: the capture thread reads the pair in force and its epoch from one snapshot,
+//    never waiting for a disk write), verified_ (the health's callback only) and sim_
+//    (thread-safe drift, through ground_truth_).
 class CameraDriverNodelet : public GuardedNodelet {
  public:
   CameraDriverNodelet() : GuardedNodelet("CameraDriver") {}
@@ -63,8 +63,8 @@ class CameraDriverNodelet : public GuardedNodelet {
   // a service still advertised then would unregister from a freed queue. Drop them now.
   void releaseServices() {
     stopCapture();
-    for (ros::ServiceServer* server : {&left_set_info_srv_, &right_set_info_srv_, &set_light_srv_, &set_drift_srv_})
-      server->shutdown();
+    for (ros::ServiceServer* server : {&left_set_info_srv_, &right_set_info_srv_, &set_light_srv_}) server->shutdown();
+    if (ground_truth_) ground_truth_->shutdown();
     health_sub_.shutdown();
   }
 
@@ -88,15 +88,7 @@ class CameraDriverNodelet : public GuardedNodelet {
     } else {
       source_ = makeV4l2FrameSource(params_.v4l2);
     }
-    if (params_.light_backend == "sim") {
-      light_ = makeSimLight(light_level, light_command);
-    } else if (params_.light_backend == "serial") {
-      light_ = makeSerialLight(params_.serial);
-    } else if (params_.light_backend == "gpio") {
-      light_ = makeGpioLight(params_.gpio);
-    } else {
-      light_ = makeNoLight();
-    }
+    light_ = makeLightBackend(params_.light, light_level, light_command);
     schedule_ = std::make_unique<ecs::LightSchedule>(params_.schedule);
     loadCalibrations();
 
@@ -124,21 +116,9 @@ class CameraDriverNodelet : public GuardedNodelet {
           NODELET_ERROR("CameraDriver: %s", result.message.c_str());
       }
     });
-    if (sim_) {
-      gt_left_info_pub_ = nh.advertise<sensor_msgs::CameraInfo>("ground_truth/left/camera_info", 2);
-      gt_right_info_pub_ = nh.advertise<sensor_msgs::CameraInfo>("ground_truth/right/camera_info", 2);
-      gt_observations_pub_ = nh.advertise<StereoPatternObservation>("ground_truth/observations", 2);
-      gt_left_scene_pub_ = it.advertise("ground_truth/left/image_scene", 2);
-      gt_right_scene_pub_ = it.advertise("ground_truth/right/image_scene", 2);
-      gt_depth_pub_ = it.advertise("ground_truth/left/depth", 2);
-      gt_head_pose_pub_ = nh.advertise<nav_msgs::Odometry>("ground_truth/head_pose", 2);
-      // As tf2_ros::TransformBroadcaster does, but with a subscriber count to skip idle work.
-      gt_tf_pub_ = nh.advertise<tf2_msgs::TFMessage>("/tf", 100);
-      head_pose_ = std::make_unique<HeadPoseTruth>(params_.left_frame_id);
-      set_drift_srv_ = nh.advertiseService("sim/set_drift", &CameraDriverNodelet::setDrift, this);
-    }
+    if (sim_) ground_truth_ = std::make_unique<SimGroundTruth>(nh, it, sim_, params_.left_frame_id);
     NODELET_INFO("CameraDriver: backend %s, light %s, %.1f fps", params_.backend.c_str(),
-                 params_.light_backend.c_str(), params_.fps);
+                 params_.light.backend.c_str(), params_.fps);
     diagnostics_ = std::make_unique<diagnostic_updater::Updater>(nh, pnh, getName());
     diagnostics_->setHardwareID(params_.backend == "v4l2" ? params_.v4l2.left_device : params_.backend);
     diagnostics_->add("camera_driver", this, &CameraDriverNodelet::diagnose);
@@ -193,18 +173,15 @@ class CameraDriverNodelet : public GuardedNodelet {
   // Paced by the steady clock: a late frame does not make the next ones burst to catch up.
   void captureLoop() {
     using Clock = std::chrono::steady_clock;
-    const auto period = std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(1.0 / params_.fps));
     const auto start = Clock::now();
-    auto next = start;
+    ecs::FramePacer pacer(params_.fps, start);
     while (true) {
       try {
         captureOne(std::chrono::duration<double>(Clock::now() - start).count());
       } catch (const std::exception& e) {  // e.g. a decoder or cv_bridge error: skip the frame
         NODELET_ERROR_THROTTLE(5.0, "CameraDriver: frame dropped: %s", e.what());
       }
-      next += period;
-      const auto now = Clock::now();
-      if (next < now - period) next = now;
+      const auto next = pacer.next(Clock::now());
       std::unique_lock<std::mutex> lock(stop_mutex_);
       if (stop_cv_.wait_until(lock, next, [this] { return !running_; })) break;
     }
@@ -239,15 +216,10 @@ class CameraDriverNodelet : public GuardedNodelet {
     }
     // Both CameraInfos and the epoch from one snapshot: a published pair is never mixed.
     StereoCalibration::InForce in_force = calibration_->inForce();
-    if (in_force.epoch != last_epoch_) {
-      // A new calibration in force is checked against the boards at once.
-      if (frames_seen_ > 0) {
-        std::lock_guard<std::mutex> lock(mutex_);
-        schedule_->verifySoon();
-      }
-      last_epoch_ = in_force.epoch;
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      schedule_->calibrationInForce(in_force.epoch);  // a new one is checked against the boards at once
     }
-    ++frames_seen_;
     auto left_info = boost::make_shared<sensor_msgs::CameraInfo>(std::move(in_force.left));
     auto right_info = boost::make_shared<sensor_msgs::CameraInfo>(std::move(in_force.right));
     mode->calibration_epoch = in_force.epoch;
@@ -264,11 +236,7 @@ class CameraDriverNodelet : public GuardedNodelet {
     left_pub_.publish(cv_bridge::CvImage(left_header, frame.encoding, frame.left).toImageMsg(), left_info);
     right_pub_.publish(cv_bridge::CvImage(right_header, frame.encoding, frame.right).toImageMsg(), right_info);
     mode_pub_.publish(mode);
-    if (frame.truth) {
-      // Every frame, subscribed or not: the velocity is a difference over consecutive frames.
-      head_pose_->update(frame.truth->world_from_left, frame.truth->time_s);
-      publishGroundTruth(*frame.truth, left_header, right_header);
-    }
+    if (frame.truth) ground_truth_->publish(*frame.truth, left_header, right_header);
     ++frames_published_;
     last_light_on_ = light.light_on;
     last_error_.clear();
@@ -309,37 +277,6 @@ class CameraDriverNodelet : public GuardedNodelet {
     status.add("calibration staged", staged.empty() ? "none" : staged);
   }
 
-  // Ground truth costs conversions and copies: only for topics somebody listens to.
-  void publishGroundTruth(const ecs::SimFrame& truth, const std_msgs::Header& left_header,
-                          const std_msgs::Header& right_header) {
-    if (gt_left_info_pub_.getNumSubscribers() > 0 || gt_right_info_pub_.getNumSubscribers() > 0) {
-      auto infos = toStereoCameraInfo(truth.truth);
-      infos.first.header = left_header;
-      infos.second.header = right_header;
-      gt_left_info_pub_.publish(boost::make_shared<sensor_msgs::CameraInfo>(infos.first));
-      gt_right_info_pub_.publish(boost::make_shared<sensor_msgs::CameraInfo>(infos.second));
-    }
-    if (gt_observations_pub_.getNumSubscribers() > 0) {
-      auto observations = boost::make_shared<StereoPatternObservation>(toMsg(truth.observations));
-      observations->header = left_header;
-      gt_observations_pub_.publish(observations);
-    }
-    const std::string& encoding = sim_->config().encoding;
-    if (gt_left_scene_pub_.getNumSubscribers() > 0)
-      gt_left_scene_pub_.publish(cv_bridge::CvImage(left_header, encoding, truth.left_scene).toImageMsg());
-    if (gt_right_scene_pub_.getNumSubscribers() > 0)
-      gt_right_scene_pub_.publish(cv_bridge::CvImage(right_header, encoding, truth.right_scene).toImageMsg());
-    if (gt_depth_pub_.getNumSubscribers() > 0)
-      gt_depth_pub_.publish(cv_bridge::CvImage(left_header, "32FC1", truth.left_depth).toImageMsg());
-    if (gt_head_pose_pub_.getNumSubscribers() > 0)
-      gt_head_pose_pub_.publish(boost::make_shared<nav_msgs::Odometry>(head_pose_->odometry(left_header.stamp)));
-    if (gt_tf_pub_.getNumSubscribers() > 0) {
-      auto tf = boost::make_shared<tf2_msgs::TFMessage>();
-      tf->transforms.push_back(head_pose_->transform(left_header.stamp));
-      gt_tf_pub_.publish(tf);
-    }
-  }
-
   bool setCameraInfo(bool left, sensor_msgs::SetCameraInfo::Request& req, sensor_msgs::SetCameraInfo::Response& res) {
     const char* side = left ? "left" : "right";
     const StereoCalibration::SetResult result = calibration_->set(left, req.camera_info);
@@ -373,20 +310,18 @@ class CameraDriverNodelet : public GuardedNodelet {
   // On demand: a calibration burst while the health nodelet wants one (the calibration is known
   // not to hold and the calibrator has not found it to be the best it can do).
   void onHealth(const CalibrationHealthConstPtr& health) {
-    if (params_.schedule.trigger == ecs::CalibrationTrigger::kOnDemand) {
+    {
       std::lock_guard<std::mutex> lock(mutex_);
-      schedule_->demand(health->calibration_wanted);
+      schedule_->demand(health->calibration_wanted);  // on demand only
     }
-    // GOOD by a verification against the boards (not by the scene rows alone).
-    if (health->state != CalibrationHealth::GOOD || !(health->verification_age_s >= 0.0)) return;
-    if (verified_epoch_ == health->epoch) return;  // once per epoch (epochs only grow)
+    if (!verified_.due(health->state == CalibrationHealth::GOOD, health->verification_age_s, health->epoch)) return;
     bool marked = false;
     const std::string error = calibration_->markVerified(health->epoch, &marked);
     if (!error.empty()) {
       NODELET_ERROR_THROTTLE(10.0, "CameraDriver: verified calibration not marked: %s", error.c_str());
       return;
     }
-    verified_epoch_ = health->epoch;
+    verified_.done(health->epoch);
     if (!marked) return;
     NODELET_INFO("CameraDriver: calibration of epoch %u verified GOOD, kept as such in '%s'", health->epoch,
                  calibration_->store().directory().c_str());
@@ -405,22 +340,6 @@ class CameraDriverNodelet : public GuardedNodelet {
     verified_pub_.publish(msg);
   }
 
-  bool setDrift(SetRigDrift::Request& req, SetRigDrift::Response& res) {
-    ecs::DriftRequest drift;
-    drift.focal_scale = req.focal_scale;
-    drift.thermal_rate_deg_per_s = req.thermal_rate_deg_per_s;
-    for (int i = 0; i < 3; ++i) {
-      drift.right_rotation_deg[i] = req.right_rotation_deg[i];
-      drift.knock_rotation_deg[i] = req.knock_rotation_deg[i];
-      drift.knock_translation_m[i] = req.knock_translation_m[i];
-    }
-    drift.reset = req.reset;
-    const std::string refusal = sim_->setDrift(drift);
-    res.success = refusal.empty();
-    res.message = res.success ? "drift applied" : refusal;
-    return true;
-  }
-
   DriverParams params_;
   std::shared_ptr<ecs::SimRig> sim_;
   std::unique_ptr<FrameSource> source_;
@@ -433,20 +352,15 @@ class CameraDriverNodelet : public GuardedNodelet {
   image_transport::CameraPublisher left_pub_, right_pub_;
   ros::Publisher mode_pub_, verified_pub_;
   ErrorThrottle refusals_{5.0};  // set_camera_info refusals, per message (thread-safe)
-  std::optional<uint32_t> verified_epoch_;  // the health's callback only: the last epoch marked (or not marked)
-  ros::Publisher gt_left_info_pub_, gt_right_info_pub_, gt_observations_pub_;
-  image_transport::Publisher gt_left_scene_pub_, gt_right_scene_pub_, gt_depth_pub_;
-  ros::Publisher gt_head_pose_pub_, gt_tf_pub_;
-  ros::ServiceServer left_set_info_srv_, right_set_info_srv_, set_light_srv_, set_drift_srv_;
+  ecs::VerifiedMarking verified_;  // the health's callback only
+  ros::ServiceServer left_set_info_srv_, right_set_info_srv_, set_light_srv_;
   ros::Subscriber health_sub_;  // the health's verdicts (on demand: when to calibrate; always: verified)
   ros::WallTimer monocular_timer_;  // commits a staged calibration of one camera alone
 
   // Capture thread only.
-  std::unique_ptr<HeadPoseTruth> head_pose_;  // sim backend only
+  std::unique_ptr<SimGroundTruth> ground_truth_;  // sim backend only (its service: any thread)
   std::unique_ptr<diagnostic_updater::Updater> diagnostics_;
   int frames_published_ = 0;
-  uint64_t frames_seen_ = 0;
-  uint32_t last_epoch_ = 0;
   bool last_light_on_ = false;
   std::string last_error_;
   std::chrono::steady_clock::time_point diagnosed_at_;

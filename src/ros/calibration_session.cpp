@@ -392,7 +392,7 @@ std::string CalibrationSession::commit(const CommittedCalibration& infos, const 
   if (!callSetCameraInfo("right", infos.right, &error)) {
     // Our driver only stages a left calibration that does not match the right one in force, and
     // drops it when the right one is refused: nothing changed, nothing to put back.
-    if (left_answer.rfind("staged:", 0) == 0) return error + "; the driver kept the calibration in force";
+    if (isStagedAnswer(left_answer)) return error + "; the driver kept the calibration in force";
     // A driver that stored the left one at once: never leave a half-updated pair, put the left
     // calibration in force back.
     std::string restore_error;

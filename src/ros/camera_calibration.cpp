@@ -5,6 +5,7 @@
 
 #include "embedded_calibration_stereo/core/geometry/config_error.h"
 #include "embedded_calibration_stereo/ros/conversions.h"
+#include "embedded_calibration_stereo/ros/set_camera_info_answer.h"
 #include "embedded_calibration_stereo/ros/stereo_input_check.h"
 
 namespace embedded_calibration_stereo {
@@ -348,11 +349,11 @@ StereoCalibration::SetResult StereoCalibration::set(bool left, const sensor_msgs
     char seconds[32];
     std::snprintf(seconds, sizeof(seconds), "%.1f", pair_timeout_.count());
     result.success = true;
-    result.message = "staged: " + mismatch + "; waiting up to " + seconds + " s for " + other_name +
+    result.message = stagedAnswer(mismatch + "; waiting up to " + seconds + " s for " + other_name +
                      " with a matching P, the calibration in force is unchanged until then" +
                      (monocular ? "; without one, it is taken as a calibration of this camera alone (R the identity, "
                                   "Tx 0): its K and D with the stereo extrinsics in force"
-                                : "");
+                                : ""));
     return result;
   }
   std::string where;

@@ -4,16 +4,6 @@
 #include "embedded_calibration_stereo/ros/parameter_reader.h"
 
 namespace embedded_calibration_stereo {
-namespace {
-
-// A byte string written with escapes (unescapeBytes, light_backend.h).
-std::string readBytes(const ParameterReader& read, const std::string& name, const std::string& fallback) {
-  std::string decoded, error;
-  if (!unescapeBytes(read.get(name, fallback), &decoded, &error)) throw ecs::ConfigError(name, error);
-  return decoded;
-}
-
-}  // namespace
 
 void readHealthSchedule(const ParameterReader& read, ecs::LightScheduleConfig* schedule) {
   const std::string trigger = read.choice("calibration_trigger", "periodic", {"periodic", "on_demand"});
@@ -27,10 +17,8 @@ DriverParams loadDriverParams(const ros::NodeHandle& private_nh, const std::stri
   const ParameterReader read(private_nh);
   DriverParams p;
   p.backend = read.choice("backend", p.backend, {"sim", "files", "v4l2"});
-  p.light_backend =
-      read.choice("light_backend", p.backend == "sim" ? "sim" : "none", {"sim", "serial", "gpio", "none"});
-  if (p.light_backend == "sim" && p.backend != "sim")
-    throw ecs::ConfigError("light_backend", "sim needs backend sim");
+  p.light = readLightBackendParams(read, p.backend == "sim" ? "sim" : "none");
+  if (p.light.backend == "sim" && p.backend != "sim") throw ecs::ConfigError("light_backend", "sim needs backend sim");
 
   p.fps = read.get("fps", p.fps);
   if (!(p.fps > 0.0) || p.fps > 1000.0) throw ecs::ConfigError("fps", "must be in (0, 1000] frames per second");
@@ -81,18 +69,6 @@ DriverParams loadDriverParams(const ros::NodeHandle& private_nh, const std::stri
     if (p.v4l2.height <= 0) throw ecs::ConfigError("v4l2_height", "must be > 0 pixels");
   }
 
-  if (p.light_backend == "serial") {
-    p.serial.port = read.get("serial_port", "");
-    if (p.serial.port.empty()) throw ecs::ConfigError("serial_port", "missing");
-    p.serial.baud = read.get("serial_baud", p.serial.baud);
-    p.serial.on_bytes = readBytes(read, "serial_on", "ON\\n");
-    p.serial.off_bytes = readBytes(read, "serial_off", "OFF\\n");
-  } else if (p.light_backend == "gpio") {
-    p.gpio.chip = read.get("gpio_chip", p.gpio.chip);
-    p.gpio.line = read.get("gpio_line", p.gpio.line);
-    p.gpio.active_low = read.get("gpio_active_low", p.gpio.active_low);
-    if (p.gpio.line < 0) throw ecs::ConfigError("gpio_line", "missing or negative line offset");
-  }
   return p;
 }
 

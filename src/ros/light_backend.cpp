@@ -1,5 +1,8 @@
-// The light backends without hardware (none, sim) and the byte-string escapes.
+// The light backends without hardware (none, sim), the byte-string escapes and the backend's
+// parameters.
 #include "embedded_calibration_stereo/ros/light_backend.h"
+
+#include "embedded_calibration_stereo/ros/parameter_reader.h"
 
 namespace embedded_calibration_stereo {
 namespace {
@@ -37,7 +40,32 @@ int hexDigit(char c) {
   return -1;
 }
 
+// A byte string written with escapes (unescapeBytes).
+std::string readBytes(const ParameterReader& read, const std::string& name, const std::string& fallback) {
+  std::string decoded, error;
+  if (!unescapeBytes(read.get(name, fallback), &decoded, &error)) throw ecs::ConfigError(name, error);
+  return decoded;
+}
+
 }  // namespace
+
+LightBackendParams readLightBackendParams(const ParameterReader& read, const std::string& default_backend) {
+  LightBackendParams p;
+  p.backend = read.choice("light_backend", default_backend, {"sim", "serial", "gpio", "none"});
+  if (p.backend == "serial") {
+    p.serial.port = read.required<std::string>("serial_port");
+    if (p.serial.port.empty()) throw ecs::ConfigError("serial_port", "missing");
+    p.serial.baud = read.get("serial_baud", p.serial.baud);
+    p.serial.on_bytes = readBytes(read, "serial_on", "ON\\n");
+    p.serial.off_bytes = readBytes(read, "serial_off", "OFF\\n");
+  } else if (p.backend == "gpio") {
+    p.gpio.chip = read.get("gpio_chip", p.gpio.chip);
+    p.gpio.line = read.get("gpio_line", p.gpio.line);
+    p.gpio.active_low = read.get("gpio_active_low", p.gpio.active_low);
+    if (p.gpio.line < 0) throw ecs::ConfigError("gpio_line", "missing or negative line offset");
+  }
+  return p;
+}
 
 bool unescapeBytes(const std::string& text, std::string* bytes, std::string* error) {
   std::string out;
@@ -84,6 +112,14 @@ std::unique_ptr<LightBackend> makeSimLight(SharedLightLevel level) {
 
 std::unique_ptr<LightBackend> makeSimLight(SharedLightLevel level, SharedLightCommand command) {
   return std::make_unique<SimLight>(std::move(level), std::move(command));
+}
+
+std::unique_ptr<LightBackend> makeLightBackend(const LightBackendParams& params, SharedLightLevel level,
+                                               SharedLightCommand command) {
+  if (params.backend == "sim") return makeSimLight(std::move(level), std::move(command));
+  if (params.backend == "serial") return makeSerialLight(params.serial);
+  if (params.backend == "gpio") return makeGpioLight(params.gpio);
+  return makeNoLight();
 }
 
 }  // namespace embedded_calibration_stereo

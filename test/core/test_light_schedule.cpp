@@ -296,3 +296,30 @@ TEST(LightSchedule, TheFirstBurstComesAfterTheDelayWithSettledLightOffFramesBefo
   EXPECT_TRUE(config(1.0, 10, 2).problem().ok());
   EXPECT_THROW(ecs::throwIfProblem(frames.problem()), ecs::ConfigError);
 }
+
+// A calibration that comes into force is checked against the boards at the next frame; the one
+// in force when the schedule first hears of it (start-up) and an unchanged epoch are not.
+TEST(LightSchedule, ANewCalibrationEpochFlashesAtTheNextFrameTheFirstDoesNot) {
+  ecs::LightSchedule schedule(healthConfig(ecs::CalibrationTrigger::kPeriodic, 0.0, 0.0, 50.0));
+  schedule.calibrationInForce(3);  // at start-up: what is in force is verified on the schedule
+  const auto start = runs(run(&schedule, 0.0, 30.0, 10));
+  EXPECT_TRUE(start.empty()) << "the epoch in force at start-up flashed";
+  schedule.calibrationInForce(3);
+  EXPECT_TRUE(runs(run(&schedule, 1.0, 30.0, 10)).empty()) << "an unchanged epoch flashed";
+  schedule.calibrationInForce(4);
+  const auto changed = runs(run(&schedule, 2.0, 30.0, 10));
+  ASSERT_EQ(changed.size(), 1u) << "a new calibration in force was not verified";
+  EXPECT_EQ(changed[0].first, 0);
+  EXPECT_TRUE(changed[0].verification);
+}
+
+// Under the periodic trigger the health's demand neither bursts nor reads as demanded.
+TEST(LightSchedule, DemandIsIgnoredUnderThePeriodicTrigger) {
+  ecs::LightSchedule periodic(healthConfig(ecs::CalibrationTrigger::kPeriodic, 0.0, 0.0, 0.0));
+  periodic.demand(true);
+  EXPECT_FALSE(periodic.demanded());
+  EXPECT_TRUE(runs(run(&periodic, 0.0, 30.0, 60)).empty());
+  ecs::LightSchedule on_demand(healthConfig(ecs::CalibrationTrigger::kOnDemand, 0.0, 0.0, 0.0));
+  on_demand.demand(true);
+  EXPECT_TRUE(on_demand.demanded());
+}

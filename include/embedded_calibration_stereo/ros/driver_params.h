@@ -14,7 +14,6 @@ namespace embedded_calibration_stereo {
 
 struct DriverParams {
   std::string backend = "sim";          // sim | files | v4l2
-  std::string light_backend = "sim";    // sim | serial | gpio | none (default: sim for the sim backend, else none)
   double fps = 30.0;                    // frames per second
   std::string left_frame_id = "stereo_left_optical_frame";
   std::string right_frame_id = "stereo_right_optical_frame";
@@ -36,8 +35,7 @@ struct DriverParams {
   ecs::LightScheduleConfig schedule;    // calibration_period_s, calibration_frames, settle_frames, trigger, ...
   FilesSourceParams files;
   V4l2SourceParams v4l2;
-  SerialLightParams serial;
-  GpioLightParams gpio;
+  LightBackendParams light;  // light_backend (default: sim for the sim backend, else none), serial_*, gpio_*
 };
 
 // The schedule's health parameters, shared by the CameraDriver and the LightController:

@@ -37,6 +37,22 @@ struct GpioLightParams {
   bool active_low = false;         // gpio_active_low: drive 0 for "on"
 };
 
+// The light backend's parameters: light_backend and the chosen backend's serial_* or gpio_*.
+struct LightBackendParams {
+  std::string backend = "none";  // light_backend: sim | serial | gpio | none
+  SerialLightParams serial;      // light_backend serial only
+  GpioLightParams gpio;          // light_backend gpio only
+};
+
+class ParameterReader;
+// The one reader of light_backend, serial_* and gpio_* (the CameraDriver's and the
+// LightController's, docs/nodelets.md): light_backend one of sim, serial, gpio, none
+// (`default_backend` when absent); serial: serial_port required and not empty, serial_baud,
+// serial_on/serial_off with escapes (unescapeBytes); gpio: gpio_line required, >= 0, gpio_chip,
+// gpio_active_low. The other backend's parameters are not read. Throws ecs::ConfigError naming
+// the parameter. Whether sim fits the camera backend is the caller's check.
+LightBackendParams readLightBackendParams(const ParameterReader& read, const std::string& default_backend);
+
 // Decodes C-style escapes in a configured byte string: \n \r \t \0 \\ and \xHH.
 // Returns false with the reason for an unknown or truncated escape.
 bool unescapeBytes(const std::string& text, std::string* bytes, std::string* error);
@@ -47,5 +63,8 @@ std::unique_ptr<LightBackend> makeSimLight(SharedLightLevel level);
 std::unique_ptr<LightBackend> makeSimLight(SharedLightLevel level, SharedLightCommand command);
 std::unique_ptr<LightBackend> makeSerialLight(const SerialLightParams& params);
 std::unique_ptr<LightBackend> makeGpioLight(const GpioLightParams& params);
+// The backend `params` names (sim: on `level`, with `command` as above).
+std::unique_ptr<LightBackend> makeLightBackend(const LightBackendParams& params, SharedLightLevel level,
+                                               SharedLightCommand command = nullptr);
 
 }  // namespace embedded_calibration_stereo

@@ -15,6 +15,7 @@
 #include <sensor_msgs/Image.h>
 
 #include "embedded_calibration_stereo/core/geometry/stereo_rig.h"
+#include "embedded_calibration_stereo/ros/set_camera_info_answer.h"  // the answers of the driver's set_camera_info
 
 #include <map>
 #include <mutex>

@@ -32,6 +32,11 @@ void LightSchedule::startBurst(double time_s) {
   if (config_.verification_period_s > 0.0) next_flash_s_ = time_s + config_.verification_period_s;
 }
 
+void LightSchedule::calibrationInForce(uint32_t epoch) {
+  if (epoch_ && *epoch_ != epoch) verifySoon();
+  epoch_ = epoch;
+}
+
 LightState LightSchedule::step(double time_s) {
   if (!started_) {
     started_ = true;

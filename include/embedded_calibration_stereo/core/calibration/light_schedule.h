@@ -22,6 +22,7 @@
 //
 // Threading: not thread-safe; the owner (the camera driver) guards it with its own mutex.
 #include <cstdint>
+#include <optional>
 #include <string>
 #include "embedded_calibration_stereo/core/geometry/config_error.h"
 
@@ -63,12 +64,17 @@ class LightSchedule {
   void request(bool on);
   bool requestedOn() const { return hold_on_; }
   // kOnDemand: whether the calibration needs a burst (true while it is not healthy). Takes
-  // effect at the next step(), subject to min_interval_s. Ignored with kPeriodic.
-  void demand(bool needed) { demand_ = needed; }
+  // effect at the next step(), subject to min_interval_s. Ignored with kPeriodic (demanded()
+  // stays false).
+  void demand(bool needed) { demand_ = needed && config_.trigger == CalibrationTrigger::kOnDemand; }
   bool demanded() const { return demand_; }
   // A verification flash at the next step(), unless the light is on for a burst, a request or
   // a flash (their settled frames to come verify); no effect when verification_period_s is 0.
   void verifySoon() { verify_soon_ = config_.verification_period_s > 0.0; }
+  // The calibration epoch in force for the coming frame: a calibration that came into force
+  // since the previous call is verified at once (verifySoon()); the first call only records it
+  // (what is in force at start-up is verified on the schedule).
+  void calibrationInForce(uint32_t epoch);
 
   // Advances one frame taken at `time_s` (monotonic seconds) and returns its light state.
   LightState step(double time_s);
@@ -90,6 +96,7 @@ class LightSchedule {
   bool started_ = false;
   bool demand_ = false;
   bool verify_soon_ = false;
+  std::optional<uint32_t> epoch_;  // the calibration epoch in force, once told
   double next_burst_s_ = 0.0;    // the next periodic burst (kOnDemand: the safety net's)
   double last_burst_end_s_ = 0.0;  // the latest burst's last lit frame (after started_)
   double next_flash_s_ = 0.0;    // the next verification flash
