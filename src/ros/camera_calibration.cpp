@@ -350,10 +350,10 @@ StereoCalibration::SetResult StereoCalibration::set(bool left, const sensor_msgs
     std::snprintf(seconds, sizeof(seconds), "%.1f", pair_timeout_.count());
     result.success = true;
     result.message = stagedAnswer(mismatch + "; waiting up to " + seconds + " s for " + other_name +
-                     " with a matching P, the calibration in force is unchanged until then" +
-                     (monocular ? "; without one, it is taken as a calibration of this camera alone (R the identity, "
-                                  "Tx 0): its K and D with the stereo extrinsics in force"
-                                : ""));
+                                  " with a matching P, the calibration in force is unchanged until then" +
+                                  (monocular ? "; without one, it is taken as a calibration of this camera alone (R "
+                                               "the identity, Tx 0): its K and D with the stereo extrinsics in force"
+                                             : ""));
     return result;
   }
   std::string where;

@@ -20,6 +20,7 @@ class DriverCalibrationWatch {
   /// The camera_info of camera 0 (left) or 1 (right) of a stereo frame. Returns true when it
   /// changes that camera's calibration (the epoch moved on); the first one does not.
   bool update(int camera, const sensor_msgs::CameraInfo& info);
+  /// The changes counted so far (0 at start).
   uint32_t epoch() const { return epoch_; }
   /// Whether the latest camera_info of `camera` has K or P all zero (false before the first).
   bool uncalibrated(int camera) const { return uncalibrated_[camera]; }

@@ -45,6 +45,7 @@ class ExternalStereoInput {
 
   /// The resolved topics: 0 left image, 1 left camera_info, 2 right image, 3 right camera_info.
   std::string topic(int index) const;
+  /// The arrivals of the four topics and the frames paired (for naming a silent topic).
   ecs::InputArrivalWatch& arrivals() { return *arrivals_; }
 
  private:

@@ -20,6 +20,7 @@ class InputArrivalWatch {
   void arrived(size_t index) { ++arrived_[index]; }
   /// A matched set went out of the synchroniser.
   void frameIn() { ++frames_in_; }
+  /// The matched sets so far.
   uint64_t framesIn() const { return frames_in_; }
 
   /// Once a period: "" while matched sets come in, or while nothing arrives at all (the driver

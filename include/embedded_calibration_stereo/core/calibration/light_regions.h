@@ -27,10 +27,12 @@ class BoardRegionsFile {
   bool refresh();
   /// The regions of camera 0 (left) or 1 (right); both empty when none are usable.
   const cv::Mat& mask(int camera) const { return masks_[camera]; }
+  /// Whether usable regions were read (both cameras have a mask).
   bool taught() const { return !masks_[0].empty(); }
   /// Why a present file is not used (not two cameras, a camera without boards, unreadable);
   /// "" when it is used or absent.
   const std::string& problem() const { return problem_; }
+  /// The prior file's path.
   const std::string& path() const { return path_; }
 
  private:
@@ -57,6 +59,7 @@ class DeviceLightConfirmer {
   /// Whether the regions of camera 0 or 1 (if any) apply to images of `size`.
   bool fits(int camera, const cv::Size& size) const;
 
+  /// Whether regions were set (used or still waiting for a switch).
   bool hasRegions() const { return regions_.has_value(); }
   /// Whether the taught regions decide (they have seen a switch).
   bool regionsInUse() const { return regions_ && regions_->known(); }
