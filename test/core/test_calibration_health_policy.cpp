@@ -81,6 +81,25 @@ TEST(CalibrationHealthPolicy, ANewCalibrationThatVerifiesWorseIsRestoredToTheOne
       << "once it has a verdict of its own the restore is no longer news";
 }
 
+TEST(CalibrationHealthPolicy, WhileARestoreRunsTheNextCalibrationIsNotDecided) {
+  Policy policy = makePolicy();
+  policy.newCalibration(1, "A");
+  policy.published(report(CalibrationHealth::kGood), 1.0);
+  policy.newCalibration(2, "B");
+  ASSERT_EQ(policy.afterVerification(report(CalibrationHealth::kBad)).outcome, Outcome::kRestore);
+  // C is committed before the restore of A has finished: its verification waits for it.
+  policy.newCalibration(3, "C");
+  ASSERT_TRUE(policy.testing());
+  EXPECT_EQ(policy.afterVerification(report(CalibrationHealth::kBad)).outcome, Outcome::kNone)
+      << "a second restore must not start while one runs";
+  EXPECT_TRUE(policy.testing()) << "the next verification decides";
+  policy.restoreFinished("");
+  const Policy::Verified verified = policy.afterVerification(report(CalibrationHealth::kBad));
+  ASSERT_EQ(verified.outcome, Outcome::kRestore);
+  ASSERT_TRUE(verified.restore);
+  EXPECT_EQ(*verified.restore, "A");
+}
+
 TEST(CalibrationHealthPolicy, ANewCalibrationNoWorseThanItsReferenceIsKept) {
   Policy policy = makePolicy();
   policy.newCalibration(1, "A");
@@ -127,6 +146,7 @@ TEST(CalibrationHealthPolicy, AfterARestartTheCalibrationInForceIsTestedAgainstT
   ASSERT_TRUE(policy.testing());
   const Policy::Verified verified = policy.afterVerification(report(CalibrationHealth::kBad, 0.0, "x"));
   ASSERT_EQ(verified.outcome, Outcome::kRestore);
+  ASSERT_TRUE(verified.restore);
   EXPECT_EQ(*verified.restore, "A");
   EXPECT_NE(verified.text.find("the one verified before the restart"), std::string::npos);
 
@@ -316,10 +336,13 @@ TEST(CalibrationHealthPolicy, SeverityIsTheLargestMeasuredSignalInUnitsOfItsDegr
   ecs::HealthReport r;
   r.misalignment_px = 0.4;
   r.disparity_bias_px = 0.16;
-  r.board_residual_px = 0.7;
+  r.board_residual_px = 1.05;
   EXPECT_DOUBLE_EQ(policy.severity(r), 0.0) << "nothing measured";
   r.board_age_s = 1.0;
-  EXPECT_DOUBLE_EQ(policy.severity(r), 2.0);
+  EXPECT_DOUBLE_EQ(policy.severity(r), 3.0) << "the corner residual, 3 times its threshold";
+  r.board_residual_px = 0.35;
+  EXPECT_DOUBLE_EQ(policy.severity(r), 2.0) << "the disparity bias, twice its threshold";
+  r.board_residual_px = 1.05;
   r.epipolar_age_s = 0.5;
   EXPECT_DOUBLE_EQ(policy.severity(r), 5.0);
 }
