@@ -58,7 +58,7 @@ class CalibrationHealthNodelet : public GuardedNodelet {
   }
 
  private:
-  using Policy = message_filters::sync_policies::ExactTime<Image, CameraInfo, Image, CameraInfo, CalibrationMode>;
+  using SyncPolicy = message_filters::sync_policies::ExactTime<Image, CameraInfo, Image, CameraInfo, CalibrationMode>;
   using Pair = std::pair<CameraInfo, CameraInfo>;
   using HealthPolicy = ecs::CalibrationHealthPolicy<Pair>;
 
@@ -122,9 +122,8 @@ class CalibrationHealthNodelet : public GuardedNodelet {
           return gate_->offer(kSyncedMode, event.getMessage()->header.stamp, event.getPublisherName(),
                               [this, event] { mode_admit_->pass(event); }) == FrameStampGate::Verdict::kPass;
         });
-    sync_ = std::make_unique<message_filters::Synchronizer<Policy>>(Policy(params_.queue_size), left_sub_,
-                                                                    left_info_sub_, right_sub_, right_info_sub_,
-                                                                    *mode_admit_);
+    sync_ = std::make_unique<message_filters::Synchronizer<SyncPolicy>>(
+        SyncPolicy(params_.queue_size), left_sub_, left_info_sub_, right_sub_, right_info_sub_, *mode_admit_);
     sync_->registerCallback(&CalibrationHealthNodelet::onFrame, this);
     mode_record_sub_ = nh.subscribe<CalibrationMode>(
         "calibration_mode", kKeptFrames,
@@ -148,7 +147,8 @@ class CalibrationHealthNodelet : public GuardedNodelet {
     collectRestore();
     stopWaitingForBoards();
     const ros::Time stamp = mode->header.stamp;
-    records_.addFrame({stamp, mode->calibration_epoch, mode->light_on && mode->settled, !mode->light_on && mode->settled});
+    const bool lit = mode->light_on && mode->settled, dark = !mode->light_on && mode->settled;
+    records_.addFrame({stamp, mode->calibration_epoch, lit, dark});
     if (policy_->epoch() == mode->calibration_epoch) return;
     const CameraInfoConstPtr left = records_.cameraInfo(true, stamp), right = records_.cameraInfo(false, stamp);
     if (!left || !right) {  // the next frame of this epoch brings it
@@ -277,7 +277,9 @@ class CalibrationHealthNodelet : public GuardedNodelet {
     if (msg) verify(msg);
   }
 
-  ecs::HealthReport effectiveReport() const { return policy_->effectiveReport(monitor_->report(), coverage_->collapse()); }
+  ecs::HealthReport effectiveReport() const {
+    return policy_->effectiveReport(monitor_->report(), coverage_->collapse());
+  }
 
   // A new epoch: the monitor starts again with it; the policy keeps the newest verified pair for
   // a restore.
@@ -288,8 +290,9 @@ class CalibrationHealthNodelet : public GuardedNodelet {
     const std::string implausible = checkCalibrationPair(left, left_info_record_sub_.getTopic(), right,
                                                          right_info_record_sub_.getTopic(), params_.nominal);
     if (!implausible.empty()) {
-      policy_->setImplausible("the calibration of epoch " + std::to_string(epoch) + " is not plausible: " + implausible);
-      NODELET_ERROR("CalibrationHealth: the calibration of epoch %u is not plausible: %s", epoch, implausible.c_str());
+      const std::string why = "the calibration of epoch " + std::to_string(epoch) + " is not plausible: " + implausible;
+      policy_->setImplausible(why);
+      NODELET_ERROR("CalibrationHealth: %s", why.c_str());
     }
     ecs::StereoRig rig;
     std::string error;
@@ -358,7 +361,7 @@ class CalibrationHealthNodelet : public GuardedNodelet {
   static constexpr size_t kSyncedMode = 0, kRecordedMode = 1;
 
   HealthParams params_;
-  std::deque<SolvedBoards> solved_;        // the calibrator's accepted solves
+  std::deque<SolvedBoards> solved_;  // the calibrator's accepted solves
   std::optional<ecs::StereoRig> rig_in_force_;
   std::string boards_source_;                  // what the calibration in force is verified against
   StereoPatternObservationConstPtr deferred_;  // a verification waiting for its solve's boards
@@ -370,7 +373,7 @@ class CalibrationHealthNodelet : public GuardedNodelet {
   message_filters::Subscriber<CalibrationMode> mode_sub_;
   std::unique_ptr<FrameStampGate> gate_;  // the frames are known by their left camera_info
   std::unique_ptr<AdmissionFilter<CalibrationMode>> mode_admit_;  // mode_sub_ -> mode_admit_ -> sync_
-  std::unique_ptr<message_filters::Synchronizer<Policy>> sync_;
+  std::unique_ptr<message_filters::Synchronizer<SyncPolicy>> sync_;
   ros::Subscriber observations_sub_, status_sub_, mode_record_sub_, left_info_record_sub_, right_info_record_sub_,
       coverage_sub_, verified_sub_;
   ros::Publisher health_pub_, status_pub_;
@@ -378,7 +381,7 @@ class CalibrationHealthNodelet : public GuardedNodelet {
   ros::WallTimer timer_;
 
   HealthFrameRecords records_{kKeptFrames};  // the latest frames' light, epoch and calibrations
-  std::future<std::string> restore_;                         // the running restore: "" or why it failed
+  std::future<std::string> restore_;          // the running restore: "" or why it failed
   uint64_t light_off_frames_ = 0, depth_frames_ = 0, verifications_ = 0;
   double depth_ms_ = 0.0;
 };

@@ -29,7 +29,8 @@ void loadMonitorParams(const ParameterReader& read, ecs::CalibrationMonitorOptio
   m.disparity_bias_bad_px =
       read.atLeast("disparity_bias_bad_px", m.disparity_bias_bad_px, m.disparity_bias_degraded_px);
   m.board_residual_degraded_px = read.atLeast("board_residual_degraded_px", m.board_residual_degraded_px, 0.0);
-  m.board_residual_bad_px = read.atLeast("board_residual_bad_px", m.board_residual_bad_px, m.board_residual_degraded_px);
+  m.board_residual_bad_px =
+      read.atLeast("board_residual_bad_px", m.board_residual_bad_px, m.board_residual_degraded_px);
   m.hysteresis = read.inRange("hysteresis", m.hysteresis, 0.0, 0.99);
   m.smoothing_time_s = read.atLeast("smoothing_time_s", m.smoothing_time_s, 0.0);
   m.max_depth_age_s = read.atLeast("max_depth_age_s", m.max_depth_age_s, 0.0);
@@ -100,10 +101,17 @@ CalibrationHealthPtr toHealthMsg(const ecs::HealthReport& report, uint32_t epoch
   msg->header.stamp = stamp;
   msg->epoch = epoch;
   switch (report.state) {
-    case ecs::CalibrationHealth::kGood: msg->state = CalibrationHealth::GOOD; break;
-    case ecs::CalibrationHealth::kDegraded: msg->state = CalibrationHealth::DEGRADED; break;
-    case ecs::CalibrationHealth::kBad: msg->state = CalibrationHealth::BAD; break;
-    default: msg->state = CalibrationHealth::UNKNOWN;
+    case ecs::CalibrationHealth::kGood:
+      msg->state = CalibrationHealth::GOOD;
+      break;
+    case ecs::CalibrationHealth::kDegraded:
+      msg->state = CalibrationHealth::DEGRADED;
+      break;
+    case ecs::CalibrationHealth::kBad:
+      msg->state = CalibrationHealth::BAD;
+      break;
+    default:
+      msg->state = CalibrationHealth::UNKNOWN;
   }
   constexpr double nan = std::numeric_limits<double>::quiet_NaN();
   const bool depth = report.epipolar_age_s >= 0.0, boards = report.board_age_s >= 0.0;
@@ -159,9 +167,9 @@ void fillHealthDiagnostics(const ecs::HealthReport& report, const ecs::Calibrati
   status->add("last restore", policy.lastRestore().empty() ? "none" : policy.lastRestore());
 }
 
-std::future<std::string> restoreCalibration(const ros::NodeHandle& nh,
-                                            const std::pair<sensor_msgs::CameraInfo, sensor_msgs::CameraInfo>& calibration,
-                                            double timeout_s) {
+std::future<std::string> restoreCalibration(
+    const ros::NodeHandle& nh, const std::pair<sensor_msgs::CameraInfo, sensor_msgs::CameraInfo>& calibration,
+    double timeout_s) {
   return std::async(std::launch::async, [nh, pair = calibration, timeout_s]() -> std::string {
     for (const bool left : {true, false}) {
       sensor_msgs::SetCameraInfo srv;
@@ -195,7 +203,8 @@ ecs::CalibratorStatus toCalibratorStatus(const CalibrationStatus& status) {
   return out;
 }
 
-std::optional<SolvedBoards> solvedBoards(const CalibrationStatus& status, const std::vector<ecs::VirtualBoard>& boards) {
+std::optional<SolvedBoards> solvedBoards(const CalibrationStatus& status,
+                                         const std::vector<ecs::VirtualBoard>& boards) {
   if (!status.accepted || status.board_ids.empty() || status.board_ids.size() != status.board_poses.size())
     return std::nullopt;
   SolvedBoards solved{status.left_intrinsics, status.right_intrinsics, {}};

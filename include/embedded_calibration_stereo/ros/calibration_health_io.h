@@ -90,9 +90,9 @@ void fillHealthDiagnostics(const ecs::HealthReport& report, const ecs::Calibrati
 
 // Sends `calibration` back to the driver's left|right/set_camera_info on a thread of its own
 // (each call bounded by timeout_s); the future gives "" or why it failed.
-std::future<std::string> restoreCalibration(const ros::NodeHandle& nh,
-                                            const std::pair<sensor_msgs::CameraInfo, sensor_msgs::CameraInfo>& calibration,
-                                            double timeout_s);
+std::future<std::string> restoreCalibration(
+    const ros::NodeHandle& nh, const std::pair<sensor_msgs::CameraInfo, sensor_msgs::CameraInfo>& calibration,
+    double timeout_s);
 // The calibration/status that says the calibration of `epoch` was rolled back, and why.
 CalibrationStatus rolledBackStatus(uint32_t epoch, const std::string& why);
 

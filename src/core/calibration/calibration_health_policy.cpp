@@ -11,8 +11,7 @@ void append(std::string* text, const std::string& part) { *text += (text->empty(
 
 }  // namespace
 
-CalibrationHealthDecisions::CalibrationHealthDecisions(CalibrationHealthPolicyOptions options)
-    : options_(options) {}
+CalibrationHealthDecisions::CalibrationHealthDecisions(CalibrationHealthPolicyOptions options) : options_(options) {}
 
 void CalibrationHealthDecisions::startEpoch(uint32_t epoch, bool is_restore) {
   if (is_restore) restored_epoch_ = epoch;  // the reason says why until it has a verdict
@@ -90,13 +89,11 @@ void CalibrationHealthDecisions::confirmedInForce(const HealthReport& report) {
   confirmed_severity_ = severity(report);
 }
 
-std::string CalibrationHealthDecisions::reasonOf(const HealthReport& report, bool testing,
-                                                 bool restore_pending) const {
+std::string CalibrationHealthDecisions::reasonOf(const HealthReport& report, bool testing, bool restore_pending) const {
   std::string reason = problem_.empty() ? report.reason : problem_;
   if (testing) append(&reason, "new calibration awaiting its verification");
   // Until the restored calibration has a verdict of its own.
-  const bool restoring =
-      restore_pending || (epoch_ == restored_epoch_ && report.state == CalibrationHealth::kUnknown);
+  const bool restoring = restore_pending || (epoch_ == restored_epoch_ && report.state == CalibrationHealth::kUnknown);
   if (!last_restore_.empty() && restoring) append(&reason, last_restore_);
   return reason;
 }

@@ -24,8 +24,8 @@
 namespace ecs {
 
 struct CalibrationHealthPolicyOptions {
-  bool rollback = true;      // a new calibration that verifies worse is restored to its reference
-  bool boards_posed = true;  // boards at their poses: a new calibration waits for its solve's
+  bool rollback = true;              // a new calibration that verifies worse is restored to its reference
+  bool boards_posed = true;          // boards at their poses: a new calibration waits for its solve's
   double solve_boards_wait_s = 2.0;  // that wait (wall s); 0: never waits
   // A commit predicted worse than this (px) wants one more burst, at most max_refinements in a
   // row (counted until the health next leaves GOOD); 0: never.
@@ -218,8 +218,8 @@ class CalibrationHealthPolicy : public CalibrationHealthDecisions {
       return verified;
     }
     verified.outcome = Verified::Outcome::kRestore;
-    verified.text = rollbackText(*epoch_, report, reference.epoch, reference.epoch == Rollback::kEarlierRun,
-                                 reference.state);
+    verified.text =
+        rollbackText(*epoch_, report, reference.epoch, reference.epoch == Rollback::kEarlierRun, reference.state);
     verified.restore = reference.calibration;
     restored_ = reference.calibration;
     restoreStarted(verified.text);
