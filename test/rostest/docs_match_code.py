@@ -111,7 +111,7 @@ NODELETS = {
     'LightController': ['src/nodelets/light_controller.cpp', 'src/ros/driver_params.cpp:readHealthSchedule'],
     'PatternTracker': ['src/nodelets/pattern_tracker.cpp'],
     'OnlineCalibrator': ['src/ros/calibration_session.cpp', 'src/nodelets/online_calibrator.cpp'],
-    'CalibrationHealth': ['src/nodelets/calibration_health.cpp'],
+    'CalibrationHealth': ['src/ros/calibration_health_io.cpp', 'src/nodelets/calibration_health.cpp'],
     'Separator': ['src/nodelets/separator.cpp'],
     'Rectifier': ['src/nodelets/rectifier.cpp'],
     'Disparity': ['src/nodelets/disparity.cpp', 'cfg/Disparity.cfg'],
