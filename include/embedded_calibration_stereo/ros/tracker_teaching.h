@@ -1,7 +1,10 @@
 #pragma once
 // Teaching step of the PatternTracker nodelet: teaches both cameras of the device from one
 // light-on stereo frame (with a light-off frame when available), or from one light burst, and
-// stores the prior file atomically, so a reader never sees a half-written prior.
+// stores the prior file atomically, so a reader never sees a half-written prior. Also the glue
+// around it: the worker that runs it (TeachingRun), the retries of a prior not written
+// (PriorWriteRetry) and the pairing of frames with the simulator's scenes (GroundTruthPairing).
+// When to teach and on what is the core TeachingPlan's decision (core/tracker/teaching_plan.h).
 //
 // Threading: the functions are pure functions of their arguments (called on the nodelet's worker
 // thread); the two cameras are taught concurrently. The classes are not thread-safe: each says
