@@ -34,12 +34,12 @@ namespace embedded_calibration_stereo {
 using sensor_msgs::Image;
 using sensor_msgs::ImageConstPtr;
 
-// Threads (docs/architecture.md#threads): the single-threaded callback queue runs frameCb, ~teach, the
-// ground-truth scene subscribers, the connect callbacks and both timers, and alone touches the
+// Threads (docs/architecture.md#threads): the single-threaded callback queue runs frameCb, ~teach,
+// the ground-truth scene subscribers, the connect callbacks and both timers, and alone touches the
 // members here; tracking runs in frameCb (cameras in parallel). Teaching runs on a std::async
 // worker with copies of the frames (or a burst's message pointers, never written) and returns
-// through teaching_ (tracker_teaching.h), collected by frameCb. Window tracking runs
-// on window_worker_'s thread (window_tracking_worker.h). input_ (un)subscribes under its own mutex.
+// through teaching_ (tracker_teaching.h), collected by frameCb. Window tracking runs on
+// window_worker_'s thread (window_tracking_worker.h). input_ (un)subscribes under its own mutex.
 class PatternTrackerNodelet : public GuardedNodelet {
  public:
   PatternTrackerNodelet() : GuardedNodelet("PatternTracker") {}
@@ -163,7 +163,7 @@ class PatternTrackerNodelet : public GuardedNodelet {
 
   bool teachCb(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& res) {
     res.success = plan_.request();  // false while teaching runs
-    res.message = res.success ? plan_.teachesAt() + std::string("; prior file ") + prior_file_ : "busy: teaching is running";
+    res.message = res.success ? plan_.teachesAt() + ("; prior file " + prior_file_) : "busy: teaching is running";
     if (res.success) updateNeed();
     return true;
   }
@@ -285,8 +285,8 @@ class PatternTrackerNodelet : public GuardedNodelet {
   void adoptTaught(const TeachOutcome& outcome) {
     prior_write_->taught(outcome, getNodeHandle());
     updateNeed();
-    const size_t left_boards = outcome.prior.cameras[0].boards.size(), right_boards = outcome.prior.cameras[1].boards.size();
-    const size_t boards = device_.device.virtualBoards().size();
+    const size_t boards = device_.device.virtualBoards().size(), left_boards = outcome.prior.cameras[0].boards.size(),
+                 right_boards = outcome.prior.cameras[1].boards.size();
     if (plan_.teachAgainIfBoardsMissing(left_boards, right_boards, boards))
       NODELET_INFO("PatternTracker: %zu + %zu of %zu boards taught on the first light-on frames of a burst; teaching "
                    "again at the end of a burst", left_boards, right_boards, boards);

@@ -33,14 +33,14 @@ namespace embedded_calibration_stereo {
 using sensor_msgs::Image;
 using sensor_msgs::ImageConstPtr;
 
-// Threads (docs/architecture.md#threads): the single-threaded callback queue runs initialise, frameCb,
-// truthCb, the teach service, the connect callbacks and the diagnostics timer (StageDiagnostics
-// guards its own counters). state_mutex_ still guards separator_ and teach_, so the class stays
-// correct on a multi-threaded handle; the inputs (un)subscribe under their own mutex, so need()
-// is called outside state_mutex_. separator_ is immutable: frameCb separates outside the lock
-// (cameras in parallel). With learn, the burst collector, waiting_burst_ and learning_plan_
-// belong to the callback queue; a learning run works on std::async's thread on a burst's
-// message pointers (never written) and returns through learning_ (unloading waits for it).
+// Threads (docs/architecture.md#threads): the single-threaded callback queue runs initialise,
+// frameCb, truthCb, the teach service, the connect callbacks and the diagnostics timer
+// (StageDiagnostics guards its own counters). state_mutex_ still guards separator_ and teach_, so
+// the class stays correct on a multi-threaded handle; the inputs (un)subscribe under their own
+// mutex, so need() is called outside state_mutex_. separator_ is immutable: frameCb separates
+// outside the lock (cameras in parallel). With learn, the burst collector, waiting_burst_ and
+// learning_plan_ belong to the callback queue; a learning run works on std::async's thread on a
+// burst's message pointers (never written) and returns through learning_ (unloading waits for it).
 class SeparatorNodelet : public GuardedNodelet {
  public:
   SeparatorNodelet() : GuardedNodelet("Separator") {}
@@ -259,7 +259,8 @@ class SeparatorNodelet : public GuardedNodelet {
       if (step.restarted) logTeachStart(epoch);
       if (!step.taught) return;
       separator_ = step.taught;
-      NODELET_INFO("Separator: device image taught from %d frames, calibration epoch %u", teach_->framesNeeded(), epoch);
+      NODELET_INFO("Separator: device image taught from %d frames, calibration epoch %u", teach_->framesNeeded(),
+                   epoch);
       diagnostics_->set("template epoch", std::to_string(epoch));
     } catch (const std::exception& e) {
       reportError(std::string("teach failed: ") + e.what());
@@ -296,7 +297,8 @@ class SeparatorNodelet : public GuardedNodelet {
     learning_ = std::async(std::launch::async, [burst = std::move(burst), whole, per_end = learning_plan_->perEnd(),
                                                 options = learn_options_, separator_options = options_, in_use,
                                                 epoch] {
-      LearnRun run{{}, static_cast<int>(burst.light_on.size()), whole, burst.light_on.back().first->header.stamp.toSec()};
+      LearnRun run{{}, static_cast<int>(burst.light_on.size()), whole,
+                   burst.light_on.back().first->header.stamp.toSec()};
       try {
         run.result = ecs::learnStereoDevice(windowFrames(burst, 0), windowFrames(burst, 1), whole, per_end, options,
                                             separator_options, in_use, epoch);
@@ -321,7 +323,8 @@ class SeparatorNodelet : public GuardedNodelet {
     std::string summary = "left " + result.left.summary() + "; right " + result.right.summary();
     if (result.residual_in_use >= 0.0) {
       char text[160];
-      std::snprintf(text, sizeof(text), "; device left on the burst's middle frames: %.1f, with the template in use %.1f",
+      std::snprintf(text, sizeof(text),
+                    "; device left on the burst's middle frames: %.1f, with the template in use %.1f",
                     result.residual_new, result.residual_in_use);
       summary += text;
     }

@@ -142,7 +142,8 @@ std::optional<TeachOutcome> TeachingRun::finished() {
 }
 
 void PriorWriteRetry::taught(const TeachOutcome& outcome, const ros::NodeHandle& nh) {
-  const size_t left_boards = outcome.prior.cameras[0].boards.size(), right_boards = outcome.prior.cameras[1].boards.size();
+  const size_t left_boards = outcome.prior.cameras[0].boards.size();
+  const size_t right_boards = outcome.prior.cameras[1].boards.size();
   if (outcome.write_error.empty()) {
     prior_.reset();
     ROS_INFO_NAMED(logger_, "PatternTracker: taught %zu + %zu boards in %.0f ms, prior written to %s (%s)", left_boards,

@@ -105,7 +105,8 @@ std::string TeachingPlan::idleReason() const {
 }
 
 const char* TeachingPlan::teachesAt() const {
-  return from_ == TeachFrom::kBurst ? "teaching at the next light burst" : "teaching at the next settled light-on frame";
+  return from_ == TeachFrom::kBurst ? "teaching at the next light burst"
+                                    : "teaching at the next settled light-on frame";
 }
 
 }  // namespace ecs
