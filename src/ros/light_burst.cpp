@@ -73,6 +73,19 @@ std::optional<EndedBurst> LightBurstCollector::add(const sensor_msgs::ImageConst
   return std::nullopt;
 }
 
+std::string readStereo(const sensor_msgs::ImageConstPtr& left, const sensor_msgs::ImageConstPtr& right,
+                       cv::Mat* left_image, cv::Mat* right_image, ecs::ColorOrder* order) {
+  if (std::string problem = stereoFormatProblem(*left, *right); !problem.empty()) return problem;
+  try {
+    *left_image = cv_bridge::toCvShare(left)->image;  // shares the message's data, which `left` keeps
+    *right_image = cv_bridge::toCvShare(right)->image;
+  } catch (const cv_bridge::Exception& e) {
+    return std::string("cannot read it: ") + e.what();
+  }
+  *order = left->encoding == "rgb8" ? ecs::ColorOrder::kRgb : ecs::ColorOrder::kBgr;
+  return "";
+}
+
 cv::Mat windowImage(const sensor_msgs::ImageConstPtr& m) {
   cv::Mat mat = cv_bridge::toCvShare(m)->image;
   if (m->encoding == "rgb8") cv::cvtColor(mat, mat, cv::COLOR_RGB2BGR);

@@ -85,6 +85,18 @@ TeachOutcome teachStereoPriorFromBurst(const ecs::WindowFrames& left, const ecs:
       device, path);
 }
 
+TeachOutcome teachStereoPriorFromBurst(const LightBurst& burst, const ecs::SimRigConfig& device,
+                                       const std::string& path) {
+  TeachOutcome out;
+  try {
+    const ecs::WindowFrames left = windowFrames(burst, 0), right = windowFrames(burst, 1);
+    return teachStereoPriorFromBurst(left, right, device, path);
+  } catch (const std::exception& e) {
+    out.error = e.what();
+  }
+  return out;
+}
+
 std::string writeStereoPrior(const std::string& path, const ecs::PatternPrior& prior) {
   try {
     createParentDirectories(path);
@@ -99,6 +111,113 @@ std::string taughtOnImagePath(const std::string& prior_path, const std::string& 
   std::filesystem::path p(prior_path);
   p.replace_extension();
   return p.string() + "_" + camera_name + "_device.png";
+}
+
+TeachingRun::~TeachingRun() {
+  if (result_.valid()) result_.wait();
+}
+
+void TeachingRun::start(const ecs::TeachFrame& left, const ecs::TeachFrame& right, ecs::ColorOrder order,
+                        const ecs::SimRigConfig& device, const std::string& path) {
+  const auto copy = [](const ecs::TeachFrame& frame) {
+    ecs::TeachFrame out;
+    out.light_on = frame.light_on.clone();
+    out.light_off = frame.light_off.clone();
+    return out;
+  };
+  result_ = std::async(std::launch::async, [left = copy(left), right = copy(right), order, device, path] {
+    return teachStereoPrior(left, right, order, device, path);
+  });
+}
+
+void TeachingRun::start(LightBurst burst, const ecs::SimRigConfig& device, const std::string& path) {
+  result_ = std::async(std::launch::async, [burst = std::move(burst), device, path] {
+    return teachStereoPriorFromBurst(burst, device, path);
+  });
+}
+
+std::optional<TeachOutcome> TeachingRun::finished() {
+  if (!result_.valid() || result_.wait_for(std::chrono::seconds(0)) != std::future_status::ready) return std::nullopt;
+  return result_.get();
+}
+
+void PriorWriteRetry::taught(const TeachOutcome& outcome, const ros::NodeHandle& nh) {
+  const size_t left_boards = outcome.prior.cameras[0].boards.size();
+  const size_t right_boards = outcome.prior.cameras[1].boards.size();
+  if (outcome.write_error.empty()) {
+    prior_.reset();
+    ROS_INFO_NAMED(logger_, "PatternTracker: taught %zu + %zu boards in %.0f ms, prior written to %s (%s)", left_boards,
+                   right_boards, outcome.ms, path_.c_str(), outcome.notes.c_str());
+    return;
+  }
+  // Tracking needs no file: keep the prior in memory and write it when the disk allows.
+  prior_ = outcome.prior;
+  error_ = outcome.write_error;
+  ROS_ERROR_NAMED(logger_, "PatternTracker: taught %zu + %zu boards in %.0f ms and tracking, but the prior file '%s' "
+                  "could not be written (%s); trying again every %.0f s", left_boards, right_boards, outcome.ms,
+                  path_.c_str(), error_.c_str(), kRetryS);
+  timer_ = nh.createWallTimer(ros::WallDuration(kRetryS), [this](const ros::WallTimerEvent&) { retry(); });
+}
+
+void PriorWriteRetry::retry() {
+  const std::string error = prior_ ? writeStereoPrior(path_, *prior_) : "";
+  if (error.empty()) {
+    if (prior_) ROS_INFO_NAMED(logger_, "PatternTracker: prior written to %s (it could not be written when taught)",
+                               path_.c_str());
+    prior_.reset();
+    error_.clear();
+    timer_.stop();
+    return;
+  }
+  error_ = error;
+  ROS_WARN_THROTTLE_NAMED(60.0, logger_, "PatternTracker: the prior file '%s' still cannot be written (%s); trying "
+                          "again every %.0f s", path_.c_str(), error.c_str(), kRetryS);
+}
+
+void GroundTruthPairing::subscribe(ros::NodeHandle& nh, std::function<void()> on_scene) {
+  for (int c = 0; c < 2; ++c)
+    subscribers_[c] = nh.subscribe<sensor_msgs::Image>(
+        c == 0 ? "ground_truth/left/image_scene" : "ground_truth/right/image_scene", 5,
+        [this, c, on_scene](const sensor_msgs::ImageConstPtr& msg) {
+          addScene(c, msg);
+          on_scene();
+        });
+}
+
+void GroundTruthPairing::unsubscribe() {
+  if (!subscribed()) return;
+  for (ros::Subscriber& sub : subscribers_) sub.shutdown();
+  clear();
+}
+
+void GroundTruthPairing::addLightOn(const StereoImages& frame) {
+  light_on_.push_back(frame);
+  while (light_on_.size() > kKept) light_on_.pop_front();
+}
+
+void GroundTruthPairing::addScene(int camera, const sensor_msgs::ImageConstPtr& scene) {
+  std::deque<sensor_msgs::ImageConstPtr>& q = scenes_[camera];
+  q.push_back(scene);
+  while (q.size() > kKept) q.pop_front();
+}
+
+std::optional<GroundTruthPairing::Match> GroundTruthPairing::newest() const {
+  const auto by_stamp = [](const std::deque<sensor_msgs::ImageConstPtr>& q, const ros::Time& stamp) {
+    for (const sensor_msgs::ImageConstPtr& m : q)
+      if (m->header.stamp == stamp) return m;
+    return sensor_msgs::ImageConstPtr();
+  };
+  for (auto it = light_on_.rbegin(); it != light_on_.rend(); ++it) {
+    const ros::Time& stamp = it->first->header.stamp;
+    Match match{*it, {by_stamp(scenes_[0], stamp), by_stamp(scenes_[1], stamp)}};
+    if (match.scene.first && match.scene.second) return match;
+  }
+  return std::nullopt;
+}
+
+void GroundTruthPairing::clear() {
+  light_on_.clear();
+  for (auto& q : scenes_) q.clear();
 }
 
 std::string defaultPatternPriorFile() {

@@ -118,6 +118,46 @@ TEST(LightBurst, TheBurstUnderWayHoldsItsFramesSoFar) {
   EXPECT_TRUE(c.underWay().light_on.empty()) << "a burst that will be dropped";
 }
 
+// lightOnFramesKept counts what underWay() holds (the PatternTracker teaches on a burst under way
+// once it has enough).
+TEST(LightBurst, CountsTheLightOnFramesTheBurstUnderWayHolds) {
+  ecsr::LightBurstCollector c(3);
+  EXPECT_EQ(c.lightOnFramesKept(), 0);
+  feed(&c, {frame(0, false), frame(1, true), frame(2, true)});
+  EXPECT_EQ(c.lightOnFramesKept(), 2);
+  EXPECT_EQ(c.lightOnFramesKept(), static_cast<int>(c.underWay().light_on.size()));
+  feed(&c, {frame(3, false)});
+  EXPECT_EQ(c.lightOnFramesKept(), 0);
+  feed(&c, {frame(4, true), frame(5, true, 0, "mono16")});
+  EXPECT_EQ(c.lightOnFramesKept(), 0) << "a burst that will be dropped";
+}
+
+// Reading a stereo frame for the tracker: the messages' own pixels, the colour order of rgb8, and
+// why a frame cannot be read.
+TEST(LightBurst, ReadsAStereoFrameWithoutCopyingOrSaysWhyNot) {
+  auto colour = [](const std::string& encoding) {
+    auto m = boost::make_shared<Image>();
+    m->encoding = encoding;
+    m->width = 4;
+    m->height = 2;
+    m->step = 12;
+    m->data.assign(24, 7);
+    return ImageConstPtr(m);
+  };
+  const ImageConstPtr left = colour("rgb8"), right = colour("rgb8");
+  cv::Mat l, r;
+  ecs::ColorOrder order = ecs::ColorOrder::kBgr;
+  EXPECT_EQ(ecsr::readStereo(left, right, &l, &r, &order), "");
+  EXPECT_EQ(l.data, left->data.data());
+  EXPECT_EQ(r.data, right->data.data());
+  EXPECT_EQ(order, ecs::ColorOrder::kRgb);
+  EXPECT_TRUE(contains(ecsr::readStereo(left, colour("bgr8"), &l, &r, &order), "differ"));
+  EXPECT_TRUE(contains(ecsr::readStereo(colour("yuv422"), colour("yuv422"), &l, &r, &order), "yuv422"));
+  auto short_data = boost::make_shared<Image>(*left);
+  short_data->data.resize(3);
+  EXPECT_FALSE(ecsr::readStereo(short_data, short_data, &l, &r, &order).empty());
+}
+
 // A collector that does not need the light-off frame before (the Separator's: it may subscribe
 // during a burst) keeps such a burst, with a null light_off_before; the default one drops it.
 TEST(LightBurst, ABurstWithoutALightOffFrameBeforeIsKeptWhenAllowed) {

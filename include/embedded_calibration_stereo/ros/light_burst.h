@@ -53,6 +53,8 @@ class LightBurstCollector {
   // The burst under way: the light-off frame before it and its settled light-on frames so far
   // (no light-on frame while none is under way, or when it will be dropped).
   LightBurst underWay() const;
+  // How many light-on frames underWay() holds.
+  int lightOnFramesKept() const { return problem_.empty() ? static_cast<int>(light_on_.size()) : 0; }
 
  private:
   const int min_light_on_frames_;
@@ -66,6 +68,11 @@ class LightBurstCollector {
 // Why a stereo frame cannot be tracked ("" when it can): left and right of different sizes or
 // encodings, or an encoding other than mono8, bgr8, rgb8.
 std::string stereoFormatProblem(const sensor_msgs::Image& left, const sensor_msgs::Image& right);
+
+// A stereo frame as the core tracker takes it: the messages' pixels (they own them) and the
+// colour order, or why it cannot be read ("" when read): stereoFormatProblem, or cv_bridge's error.
+std::string readStereo(const sensor_msgs::ImageConstPtr& left, const sensor_msgs::ImageConstPtr& right,
+                       cv::Mat* left_image, cv::Mat* right_image, ecs::ColorOrder* order);
 
 // A burst's image as the core takes it: the message's pixels (the message owns them), rgb8
 // converted to BGR. Throws cv_bridge::Exception when the message cannot be read.

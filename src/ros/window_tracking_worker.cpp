@@ -1,0 +1,100 @@
+#include "embedded_calibration_stereo/ros/window_tracking_worker.h"
+
+#include <chrono>
+#include <cstdio>
+
+#include "embedded_calibration_stereo/StereoPatternObservation.h"
+#include "embedded_calibration_stereo/ros/conversions.h"
+
+namespace embedded_calibration_stereo {
+
+WindowTrackingWorker::WindowTrackingWorker(ros::Publisher publisher, std::string logger, std::string device_config)
+    : publisher_(std::move(publisher)),
+      logger_(std::move(logger)),
+      device_config_(std::move(device_config)),
+      thread_(&WindowTrackingWorker::run, this) {}
+
+WindowTrackingWorker::~WindowTrackingWorker() {
+  jobs_.stop();
+  if (thread_.joinable()) thread_.join();
+}
+
+void WindowTrackingWorker::submit(std::shared_ptr<ecs::WindowTracker> tracker, LightBurst burst) {
+  std::optional<Job> replaced = jobs_.put(Job{std::move(tracker), std::move(burst)});
+  if (!replaced) return;
+  std::lock_guard<std::mutex> lock(mutex_);
+  ++dropped_;
+  summary_ = "burst ending at " + std::to_string(replaced->burst.light_on.back().first->header.stamp.toSec()) +
+             " s dropped: a newer one ended while the worker was busy";
+}
+
+void WindowTrackingWorker::dropped(const EndedBurst& ended, const std::string& why) {
+  char text[600];
+  std::snprintf(text, sizeof(text), "burst of %d light-on frames ending at %.3f s dropped: %s", ended.light_on_frames,
+                ended.burst.light_off_after.first->header.stamp.toSec(), why.c_str());
+  ROS_WARN_THROTTLE_NAMED(5.0, logger_, "PatternTracker: %s (window tracking, %s)", text,
+                          publisher_.getTopic().c_str());
+  std::lock_guard<std::mutex> lock(mutex_);
+  ++dropped_;
+  summary_ = text;
+}
+
+void WindowTrackingWorker::run() {
+  while (std::optional<Job> job = jobs_.take()) track(*job);
+}
+
+void WindowTrackingWorker::track(const Job& job) {
+  const auto t0 = std::chrono::steady_clock::now();
+  const std_msgs::Header header = job.burst.light_on.back().first->header;  // the last light-on frame's
+  StereoPatternObservation msg;
+  int corners = 0, saddle_failures = 0;
+  std::string error, scene_problem;
+  try {
+    const ecs::WindowTrack track =
+        job.tracker->track(windowFrames(job.burst, 0), windowFrames(job.burst, 1), header.stamp.toSec());
+    msg = toMsg(track.observation);
+    saddle_failures = track.saddle_failures;
+    scene_problem = track.scene_problem;
+    for (const auto* side : {&msg.left, &msg.right})
+      for (const BoardObservation& b : *side) corners += static_cast<int>(b.corner_ids.size());
+  } catch (const std::exception& e) {
+    error = e.what();
+  }
+  const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+  const size_t frames = job.burst.light_on.size();
+  char text[600];
+  if (error.empty()) {
+    msg.header = header;
+    publisher_.publish(msg);
+    std::snprintf(text, sizeof(text),
+                  "burst of %zu light-on frames ending at %.3f s: %d corners (%d dropped by the saddle fit), "
+                  "%zu scene correspondences, in %.0f ms",
+                  frames, header.stamp.toSec(), corners, saddle_failures, msg.scene.size(), ms);
+    if (!scene_problem.empty())
+      ROS_WARN_THROTTLE_NAMED(30.0, logger_, "PatternTracker: %s (device_config %s)", scene_problem.c_str(),
+                              device_config_.c_str());
+  } else {
+    std::snprintf(text, sizeof(text), "burst of %zu light-on frames ending at %.3f s not tracked: %s", frames,
+                  header.stamp.toSec(), error.c_str());
+    ROS_ERROR_THROTTLE_NAMED(5.0, logger_, "PatternTracker: %s (window tracking, %s)", text,
+                             publisher_.getTopic().c_str());
+  }
+  std::lock_guard<std::mutex> lock(mutex_);
+  summary_ = text;
+  if (error.empty()) {
+    ++tracked_;
+    last_ms_ = ms;
+  } else {
+    ++dropped_;
+  }
+}
+
+void WindowTrackingWorker::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  status.add("window tracking", summary_);
+  status.add("windows tracked", tracked_);
+  status.add("windows dropped", dropped_);
+  status.add("last window (ms)", last_ms_);
+}
+
+}  // namespace embedded_calibration_stereo
