@@ -57,7 +57,7 @@
 #include "embedded_calibration_stereo/test_support/corner_score.h"
 #include "embedded_calibration_stereo/test_support/synthetic_observations.h"
 
-using namespace ecs;
+using namespace embedded_calibration_stereo::core;
 
 namespace {
 

@@ -27,7 +27,7 @@
 #include "embedded_calibration_stereo/core/tracker/pattern_tracker.h"
 #include "embedded_calibration_stereo/test_support/sim_prior.h"
 
-using namespace ecs;
+using namespace embedded_calibration_stereo::core;
 using Clock = std::chrono::steady_clock;
 
 namespace {

@@ -27,12 +27,12 @@
 
 #include "embedded_calibration_stereo/test_support/solution_errors.h"
 #include "embedded_calibration_stereo/core/calibration/bundle_adjuster.h"
-#include "embedded_calibration_stereo/core/geometry/config_io.h"
+#include "embedded_calibration_stereo/core/io/config_io.h"
 #include "embedded_calibration_stereo/test_support/synthetic_observations.h"
 
 namespace {
 
-using namespace ecs;
+using namespace embedded_calibration_stereo::core;
 
 struct Accumulated {
   std::vector<double> ms, cpu_ms;

@@ -23,6 +23,8 @@
 #include "embedded_calibration_stereo/core/depth/census_sgm_matcher.h"
 #include "embedded_calibration_stereo/core/depth/sad_matcher.h"
 
+namespace core = embedded_calibration_stereo::core;
+
 namespace {
 
 const cv::Size kSize(752, 480);
@@ -83,9 +85,9 @@ void timeIt(const std::string& label, const std::function<void()>& f, int iterat
               label.c_str(), median, 1000.0 / median, ms[0], 1000.0 / ms[0], cpu_ms);
 }
 
-void run(const std::string& label, const ecs::DisparityOptions& options, const cv::Mat& left,
+void run(const std::string& label, const core::DisparityOptions& options, const cv::Mat& left,
          const cv::Mat& right, int iterations) {
-  ecs::DisparityComputer computer(options);
+  core::DisparityComputer computer(options);
   timeIt(label, [&] { computer.compute(left, right); }, iterations);
 }
 
@@ -102,46 +104,46 @@ int main(int argc, char** argv) {
               kSize.width, kSize.height, threads, iterations,
               teddy ? "Teddy resized" : "synthetic texture");
 
-  ecs::DisparityOptions defaults;
+  core::DisparityOptions defaults;
   run("default (" + defaults.algorithm + ", " + std::to_string(defaults.sgm_paths) +
           " paths, lr, median, speckle, fill)",
       defaults, left, right, iterations);
-  ecs::DisparityOptions five = defaults;
+  core::DisparityOptions five = defaults;
   five.sgm_paths = 5;
   run("census_sgm, 5 paths (lr, median, speckle, fill)", five, left, right, iterations);
   // The census_sgm matcher alone (lr and uniqueness on) per kernel and path count.
-  for (const std::string& kernel : ecs::censusSgmKernelNames())
+  for (const std::string& kernel : core::censusSgmKernelNames())
     for (const int paths : {8, 5}) {
-      ecs::CensusSgmParams p = defaults.censusSgmParams();
+      core::CensusSgmParams p = defaults.censusSgmParams();
       p.kernel = kernel;
       p.paths = paths;
       cv::Mat out;
       timeIt("census_sgm kernel " + kernel + ", " + std::to_string(paths) + " paths",
-             [&] { ecs::computeCensusSgmDisparity16(left, right, p, &out); }, iterations);
+             [&] { core::computeCensusSgmDisparity16(left, right, p, &out); }, iterations);
     }
-  ecs::DisparityOptions sad = defaults;
+  core::DisparityOptions sad = defaults;
   sad.algorithm = "sad";
   run("sad 11x11 (lr, speckle, fill), the fast mode", sad, left, right, iterations);
-  ecs::DisparityOptions sad_only = sad;
+  core::DisparityOptions sad_only = sad;
   sad_only.left_right_check = false;
   sad_only.fill_holes = false;
   sad_only.speckle_size = 0;
   run("sad matcher alone (no lr, speckle, fill)", sad_only, left, right, iterations);
   // The sad matcher (lr and uniqueness on, no speckle filter or filling) per kernel.
-  for (const std::string& kernel : ecs::sadKernelNames()) {
-    ecs::SadMatcherParams p = sad.sadMatcherParams();
+  for (const std::string& kernel : core::sadKernelNames()) {
+    core::SadMatcherParams p = sad.sadMatcherParams();
     p.kernel = kernel;
     timeIt("sad kernel " + kernel + " (lr, uniqueness)",
-           [&] { ecs::computeSadDisparity16(left, right, p); }, iterations);
+           [&] { core::computeSadDisparity16(left, right, p); }, iterations);
   }
-  ecs::DisparityOptions sgbm3 = defaults;
+  core::DisparityOptions sgbm3 = defaults;
   sgbm3.algorithm = "sgbm";
   sgbm3.sgbm_mode = "sgbm_3way";
   sgbm3.correlation_window_size = 3;
   sgbm3.P1 = 72;
   sgbm3.P2 = 288;
   run("sgbm 3x3 sgbm_3way tuned (lr, speckle, fill)", sgbm3, left, right, iterations);
-  using Stock = ecs::DisparityOptions;
+  using Stock = core::DisparityOptions;
   run("OpenCV StereoBM, stereo_image_proc defaults", Stock::stereoImageProcDefaults("bm"), left,
       right, iterations);
   run("OpenCV StereoSGBM, stereo_image_proc defaults", Stock::stereoImageProcDefaults("sgbm"),

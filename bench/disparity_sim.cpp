@@ -43,15 +43,17 @@
 #include "embedded_calibration_stereo/core/depth/disparity.h"
 #include "embedded_calibration_stereo/test_support/sim_disparity_eval.h"
 
+namespace core = embedded_calibration_stereo::core;
+
 namespace {
 
-using ecs::DisparityScore;
-using ecs::RectifiedSample;
+using core::DisparityScore;
+using core::RectifiedSample;
 
 struct Args {
   std::string config, out_dir;
   std::vector<std::string> algorithms;
-  ecs::SimDisparitySetOptions set;
+  core::SimDisparitySetOptions set;
   int frame = -1;
 };
 
@@ -94,7 +96,7 @@ Args parseArgs(int argc, char** argv) {
     a.config = std::string(src ? src : ".") + "/config/drive_photo.yaml";
   }
   a.set.config_path = a.config;
-  if (a.algorithms.empty()) a.algorithms = ecs::acceptedDisparityAlgorithms();
+  if (a.algorithms.empty()) a.algorithms = core::acceptedDisparityAlgorithms();
   return a;
 }
 
@@ -121,7 +123,7 @@ double processCpuMs() {
 // One matcher configuration and what it measured.
 struct Matcher {
   std::string label;
-  ecs::DisparityOptions options;
+  core::DisparityOptions options;
   DisparityScore off, lit;
   double wall_ms = 0.0, cpu_ms = 0.0;  // per frame, over both kinds
   cv::Mat shown;                       // its disparity of the lit frame written with --out
@@ -129,7 +131,7 @@ struct Matcher {
 
 std::vector<Matcher> matchersFor(const std::vector<std::string>& names) {
   std::vector<Matcher> out;
-  const std::string default_name = ecs::DisparityOptions().algorithm;
+  const std::string default_name = core::DisparityOptions().algorithm;
   for (const std::string& name : names) {
     Matcher ours;
     ours.options.algorithm = name;
@@ -137,7 +139,7 @@ std::vector<Matcher> matchersFor(const std::vector<std::string>& names) {
     out.push_back(ours);
     if (name == "bm" || name == "sgbm") {
       Matcher stock;
-      stock.options = ecs::DisparityOptions::stereoImageProcDefaults(name);
+      stock.options = core::DisparityOptions::stereoImageProcDefaults(name);
       stock.label = name + " (stereo_image_proc)";
       out.push_back(stock);
     }
@@ -147,8 +149,8 @@ std::vector<Matcher> matchersFor(const std::vector<std::string>& names) {
 
 // Runs the matcher over the light-off and lit samples (after one warm-up frame: buffers and
 // threads), timing every frame, and keeps its disparity of lit frame `shown`.
-void run(const ecs::SimDisparitySet& set, int shown, Matcher* m) {
-  ecs::DisparityComputer computer(m->options);
+void run(const core::SimDisparitySet& set, int shown, Matcher* m) {
+  core::DisparityComputer computer(m->options);
   computer.compute(set.light_off[0].left, set.light_off[0].right);
   double wall = 0.0;
   const double cpu0 = processCpuMs();
@@ -157,7 +159,7 @@ void run(const ecs::SimDisparitySet& set, int shown, Matcher* m) {
       const auto t0 = std::chrono::steady_clock::now();
       const cv::Mat d = computer.compute(samples[i].left, samples[i].right);
       wall += std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
-      score->add(ecs::scoreDisparity(d, samples[i].truth));
+      score->add(core::scoreDisparity(d, samples[i].truth));
       if (lit && static_cast<int>(i) == shown) m->shown = d.clone();
     }
   };
@@ -169,7 +171,7 @@ void run(const ecs::SimDisparitySet& set, int shown, Matcher* m) {
   m->wall_ms = wall / frames;
 }
 
-void printTable(const std::vector<Matcher>& matchers, const ecs::SimDisparitySet& set, bool separated) {
+void printTable(const std::vector<Matcher>& matchers, const core::SimDisparitySet& set, bool separated) {
   std::printf("\n%-28s %-14s %9s %9s %9s %10s %9s %9s\n", "algorithm", "frames", "bad>2px", "invalid",
               "rms px", "lit-off", "wall ms", "CPU ms");
   const char* lit_kind = separated ? "separated lit" : "raw lit";
@@ -272,7 +274,7 @@ int main(int argc, char** argv) {
                 args.set.settle_frames, cv::getNumThreads(),
                 args.set.separate ? "separated" : "RAW (not separated)");
     const auto t0 = std::chrono::steady_clock::now();
-    const ecs::SimDisparitySet set = ecs::renderSimDisparitySet(args.set);
+    const core::SimDisparitySet set = core::renderSimDisparitySet(args.set);
     std::printf("rendered, learned, separated, rectified in %.1f s\n",
                 std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
     for (const std::string& line : set.log) std::printf("  separator %s\n", line.c_str());

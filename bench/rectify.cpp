@@ -11,11 +11,13 @@
 
 #include "embedded_calibration_stereo/core/depth/rectification.h"
 
+namespace core = embedded_calibration_stereo::core;
+
 namespace {
 
-ecs::StereoRig rig752() {
-  ecs::StereoRig rig;
-  for (ecs::PinholeCamera* c : {&rig.left, &rig.right}) {
+core::StereoRig rig752() {
+  core::StereoRig rig;
+  for (core::PinholeCamera* c : {&rig.left, &rig.right}) {
     c->width = 752;
     c->height = 480;
     c->fx = c->fy = 650;
@@ -24,7 +26,7 @@ ecs::StereoRig rig752() {
     c->dist = {-0.28, 0.07, 0, 0, 0};
   }
   rig.right.fx = 655;
-  rig.right_from_left.linear() = ecs::rotationFromVectorDeg(Eigen::Vector3d(0.3, -0.8, 0.4));
+  rig.right_from_left.linear() = core::rotationFromVectorDeg(Eigen::Vector3d(0.3, -0.8, 0.4));
   rig.right_from_left.translation() = Eigen::Vector3d(-0.12, 0.001, 0.0);
   return rig;
 }
@@ -58,24 +60,24 @@ int main(int argc, char** argv) {
   const int iterations = argc > 1 ? std::max(1, std::atoi(argv[1])) : 100;
   const int threads = argc > 2 ? std::max(1, std::atoi(argv[2])) : 2;
   cv::setNumThreads(threads);
-  const ecs::StereoRig rig = rig752();
+  const core::StereoRig rig = rig752();
   cv::Mat left(480, 752, CV_8U), right(480, 752, CV_8U), left_rect, right_rect;
   cv::randu(left, 0, 255);
   cv::randu(right, 0, 255);
   std::printf("bench_rectify: 752x480 mono8, %d threads, median of %d runs\n", threads, iterations);
-  for (const auto method : {ecs::RectificationMethod::kBouguet, ecs::RectificationMethod::kFusiello}) {
-    ecs::RectificationOptions options;
+  for (const auto method : {core::RectificationMethod::kBouguet, core::RectificationMethod::kFusiello}) {
+    core::RectificationOptions options;
     options.method = method;
     double build_cpu, pair_cpu;
     const double build_ms = medianMs(
-        std::max(1, iterations / 10), [&] { ecs::RectificationMaps::build(rig, options); },
+        std::max(1, iterations / 10), [&] { core::RectificationMaps::build(rig, options); },
         &build_cpu);
-    const ecs::RectificationMaps maps = ecs::RectificationMaps::build(rig, options);
+    const core::RectificationMaps maps = core::RectificationMaps::build(rig, options);
     maps.rectify(left, right, &left_rect, &right_rect);  // allocate outputs once
     const double pair_ms = medianMs(
         iterations, [&] { maps.rectify(left, right, &left_rect, &right_rect); }, &pair_cpu);
     std::printf("%-9s map build %6.2f ms (cpu %6.2f)   rectify pair %5.2f ms (cpu %5.2f; budget 3 ms)\n",
-                ecs::toString(method).c_str(), build_ms, build_cpu, pair_ms, pair_cpu);
+                core::toString(method).c_str(), build_ms, build_cpu, pair_ms, pair_cpu);
   }
   return 0;
 }

@@ -19,8 +19,10 @@
 #include <string>
 #include <vector>
 
-#include "embedded_calibration_stereo/core/geometry/config_error.h"
+#include "embedded_calibration_stereo/core/io/config_error.h"
 #include "embedded_calibration_stereo/core/sim/sim_rig.h"
+
+namespace core = embedded_calibration_stereo::core;
 
 namespace {
 
@@ -68,10 +70,10 @@ void report(const char* what, const Run& run) {
 }
 
 int benchScenario(const std::string& path, int frames, const std::string& kernel) {
-  ecs::SimRigConfig config;
+  core::SimRigConfig config;
   try {
-    config = ecs::loadSimRigConfig(path);
-  } catch (const ecs::ConfigError& e) {
+    config = core::loadSimRigConfig(path);
+  } catch (const core::ConfigError& e) {
     std::fprintf(stderr, "cannot load %s: %s\n", path.c_str(), e.what());
     return 1;
   }
@@ -80,20 +82,20 @@ int benchScenario(const std::string& path, int frames, const std::string& kernel
   std::printf("image %dx%d, %zu scene planes, %zu movers, head %s, motion blur samples %d, %zu virtual boards, "
               "encoding %s, cv::getNumThreads() = %d; %s\n",
               config.rig.left.width, config.rig.left.height, config.scene.planes.size(), config.scene.movers.size(),
-              ecs::trajectoryKindName(config.trajectory.kind),
+              core::trajectoryKindName(config.trajectory.kind),
               config.motion_blur.exposure_s > 0 ? config.motion_blur.samples : 1,
               config.device.virtualBoards().size(), config.encoding.c_str(), cv::getNumThreads(),
               machineName().c_str());
 
   auto start = std::chrono::steady_clock::now();
-  std::unique_ptr<ecs::SimRig> rig_ptr;
+  std::unique_ptr<core::SimRig> rig_ptr;
   try {
-    rig_ptr = std::make_unique<ecs::SimRig>(config);
-  } catch (const ecs::ConfigError& e) {
+    rig_ptr = std::make_unique<core::SimRig>(config);
+  } catch (const core::ConfigError& e) {
     std::fprintf(stderr, "cannot build %s: %s\n", path.c_str(), e.what());
     return 1;
   }
-  ecs::SimRig& rig = *rig_ptr;
+  core::SimRig& rig = *rig_ptr;
   if (!kernel.empty() && !rig.useSceneKernel(kernel)) {
     std::fprintf(stderr, "this build or CPU has no scene kernel '%s'\n", kernel.c_str());
     return 1;
@@ -114,7 +116,7 @@ int benchScenario(const std::string& path, int frames, const std::string& kernel
     for (int i = 0; i < n; ++i) {
       t += dt;
       const auto s = std::chrono::steady_clock::now();
-      const ecs::SimFrame f = rig.render(t, light, seed++);
+      const core::SimFrame f = rig.render(t, light, seed++);
       r.wall_ms.push_back(elapsedMs(s));
       if (f.left.empty() || f.right.empty()) std::abort();
     }
@@ -127,7 +129,7 @@ int benchScenario(const std::string& path, int frames, const std::string& kernel
   report((std::string("steady state (") + kind + "), light off").c_str(), run(0.0, frames));
 
   // Zoom: both cameras' ray maps and layers are rebuilt once, then cached again.
-  ecs::DriftRequest zoom;
+  core::DriftRequest zoom;
   zoom.focal_scale = 1.03;
   rig.setDrift(zoom);
   start = std::chrono::steady_clock::now();
@@ -137,7 +139,7 @@ int benchScenario(const std::string& path, int frames, const std::string& kernel
               cpuMs() - cpu0, elapsedMs(start));
 
   // Thermal drift: the right camera moves every frame, so its device layer is re-rendered per frame.
-  ecs::DriftRequest thermal;
+  core::DriftRequest thermal;
   thermal.thermal_rate_deg_per_s = 0.01;
   rig.setDrift(thermal);
   report("thermal drift (right device every frame)", run(1.0, frames));

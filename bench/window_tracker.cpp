@@ -20,7 +20,7 @@
 #include "embedded_calibration_stereo/test_support/corner_score.h"
 #include "embedded_calibration_stereo/test_support/sim_prior.h"
 
-using namespace ecs;
+using namespace embedded_calibration_stereo::core;
 
 namespace {
 

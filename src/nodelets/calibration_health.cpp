@@ -60,7 +60,7 @@ class CalibrationHealthNodelet : public GuardedNodelet {
  private:
   using SyncPolicy = message_filters::sync_policies::ExactTime<Image, CameraInfo, Image, CameraInfo, CalibrationMode>;
   using Pair = std::pair<CameraInfo, CameraInfo>;
-  using HealthPolicy = ecs::CalibrationHealthPolicy<Pair>;
+  using HealthPolicy = core::CalibrationHealthPolicy<Pair>;
 
   void releaseAfterFailedStart() override {
     timer_.stop();
@@ -75,8 +75,8 @@ class CalibrationHealthNodelet : public GuardedNodelet {
     ros::NodeHandle& pnh = getPrivateNodeHandle();
     const std::string package_path = ros::package::getPath("embedded_calibration_stereo");
     params_ = loadHealthParams(pnh, package_path.empty() ? "" : package_path + "/config/sim_rig.yaml");
-    monitor_ = std::make_unique<ecs::CalibrationMonitor>(params_.monitor);
-    coverage_ = std::make_unique<ecs::DepthCoverageWatch>(params_.coverage);
+    monitor_ = std::make_unique<core::CalibrationMonitor>(params_.monitor);
+    coverage_ = std::make_unique<core::DepthCoverageWatch>(params_.coverage);
     policy_ = std::make_unique<HealthPolicy>(params_.policy, [](const Pair& in_force, const Pair& other) {
       return carriesCalibration(in_force.first, other.first) && carriesCalibration(in_force.second, other.second);
     });
@@ -212,7 +212,7 @@ class CalibrationHealthNodelet : public GuardedNodelet {
   // A settled light-on frame of the calibration in force: the monitor checks it against the
   // boards.
   void verify(const StereoPatternObservationConstPtr& msg) {
-    const ecs::StereoObservation observation = fromMsg(*msg);
+    const core::StereoObservation observation = fromMsg(*msg);
     if (observation.left.empty() && observation.right.empty()) return;
     bool verified = false;
     try {
@@ -233,7 +233,7 @@ class CalibrationHealthNodelet : public GuardedNodelet {
   // confirmation of the calibration in force: a collapse of depth since is the scene's, and the
   // policy stops wanting windows for it.
   void onStatus(const CalibrationStatusConstPtr& status) {
-    const ecs::CalibratorStatus seen = toCalibratorStatus(*status);
+    const core::CalibratorStatus seen = toCalibratorStatus(*status);
     policy_->noteRefinement(seen);
     if (std::optional<SolvedBoards> solved = solvedBoards(*status, params_.boards)) {
       solved_.push_back(std::move(*solved));
@@ -277,7 +277,7 @@ class CalibrationHealthNodelet : public GuardedNodelet {
     if (msg) verify(msg);
   }
 
-  ecs::HealthReport effectiveReport() const {
+  core::HealthReport effectiveReport() const {
     return policy_->effectiveReport(monitor_->report(), coverage_->collapse());
   }
 
@@ -294,7 +294,7 @@ class CalibrationHealthNodelet : public GuardedNodelet {
       policy_->setImplausible(why);
       NODELET_ERROR("CalibrationHealth: %s", why.c_str());
     }
-    ecs::StereoRig rig;
+    core::StereoRig rig;
     std::string error;
     if (!fromStereoCameraInfo(left, right, &rig, &error)) {
       policy_->setUnusable("calibration of epoch " + std::to_string(epoch) + " not usable: " + error);
@@ -310,7 +310,7 @@ class CalibrationHealthNodelet : public GuardedNodelet {
       }
     }
     if (!policy_->problem().empty()) {
-      monitor_ = std::make_unique<ecs::CalibrationMonitor>(params_.monitor);  // no calibration: UNKNOWN
+      monitor_ = std::make_unique<core::CalibrationMonitor>(params_.monitor);  // no calibration: UNKNOWN
       NODELET_ERROR("CalibrationHealth: %s", policy_->problem().c_str());
     }
   }
@@ -338,8 +338,8 @@ class CalibrationHealthNodelet : public GuardedNodelet {
   }
 
   void publish(const ros::Time& stamp) {
-    const ecs::HealthReport report = effectiveReport();
-    const ecs::HealthVerdict verdict = policy_->published(report, stamp.toSec());
+    const core::HealthReport report = effectiveReport();
+    const core::HealthVerdict verdict = policy_->published(report, stamp.toSec());
     const CalibrationHealthPtr msg = toHealthMsg(report, policy_->epoch().value_or(0), stamp);
     msg->reason = verdict.reason;
     msg->calibration_wanted = verdict.calibration_wanted;
@@ -347,7 +347,7 @@ class CalibrationHealthNodelet : public GuardedNodelet {
   }
 
   void diagnose(diagnostic_updater::DiagnosticStatusWrapper& status) {
-    const ecs::HealthReport report = effectiveReport();
+    const core::HealthReport report = effectiveReport();
     HealthDiagnostics extra;
     extra.boards_source = policy_->waitingForBoards() ? "waiting for its solve's" : boards_source_;
     extra.depth_frames = depth_frames_;
@@ -362,11 +362,11 @@ class CalibrationHealthNodelet : public GuardedNodelet {
 
   HealthParams params_;
   std::deque<SolvedBoards> solved_;  // the calibrator's accepted solves
-  std::optional<ecs::StereoRig> rig_in_force_;
+  std::optional<core::StereoRig> rig_in_force_;
   std::string boards_source_;                  // what the calibration in force is verified against
   StereoPatternObservationConstPtr deferred_;  // a verification waiting for its solve's boards
-  std::unique_ptr<ecs::CalibrationMonitor> monitor_;
-  std::unique_ptr<ecs::DepthCoverageWatch> coverage_;
+  std::unique_ptr<core::CalibrationMonitor> monitor_;
+  std::unique_ptr<core::DepthCoverageWatch> coverage_;
   std::unique_ptr<HealthPolicy> policy_;
   message_filters::Subscriber<Image> left_sub_, right_sub_;
   message_filters::Subscriber<CameraInfo> left_info_sub_, right_info_sub_;

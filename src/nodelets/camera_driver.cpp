@@ -19,10 +19,10 @@
 #include "embedded_calibration_stereo/CalibrationHealth.h"
 #include "embedded_calibration_stereo/CalibrationMode.h"
 #include "embedded_calibration_stereo/VerifiedCalibration.h"
-#include "embedded_calibration_stereo/core/geometry/config_error.h"
-#include "embedded_calibration_stereo/core/geometry/config_io.h"
-#include "embedded_calibration_stereo/core/calibration/frame_pacer.h"
-#include "embedded_calibration_stereo/core/calibration/light_schedule.h"
+#include "embedded_calibration_stereo/core/io/config_error.h"
+#include "embedded_calibration_stereo/core/io/config_io.h"
+#include "embedded_calibration_stereo/core/driver/frame_pacer.h"
+#include "embedded_calibration_stereo/core/light/light_schedule.h"
 #include "embedded_calibration_stereo/core/calibration/verified_marking.h"
 #include "embedded_calibration_stereo/core/sim/sim_rig.h"
 #include "embedded_calibration_stereo/ros/camera_calibration.h"
@@ -38,7 +38,7 @@ namespace embedded_calibration_stereo {
 
 // Publishes stereo frames from a backend (sim, files, v4l2) with both CameraInfos and one
 // calibration_mode per frame, all with one stamp; switches the light on its schedule
-// (ecs::LightSchedule) or on request; stores the calibrations sent to set_camera_info
+// (core::LightSchedule) or on request; stores the calibrations sent to set_camera_info
 // (StereoCalibration). What it publishes, serves and refuses: docs/nodelets.md#cameradriver.
 // Threads:
 //  - the capture thread (started at the end of onInit, joined in the destructor) owns source_,
@@ -78,9 +78,9 @@ class CameraDriverNodelet : public GuardedNodelet {
     auto light_command = std::make_shared<std::atomic<uint64_t>>(0);  // for the sim's light response
     if (params_.backend == "sim") {
       try {
-        sim_ = std::make_shared<ecs::SimRig>(ecs::loadSimRigConfig(params_.sim_config));
+        sim_ = std::make_shared<core::SimRig>(core::loadSimRigConfig(params_.sim_config));
       } catch (const std::exception& e) {
-        throw ecs::ConfigError("sim_config", "'" + params_.sim_config + "': " + e.what());
+        throw core::ConfigError("sim_config", "'" + params_.sim_config + "': " + e.what());
       }
       source_ = makeSimFrameSource(sim_, light_level, light_command, params_.fps);
     } else if (params_.backend == "files") {
@@ -89,7 +89,7 @@ class CameraDriverNodelet : public GuardedNodelet {
       source_ = makeV4l2FrameSource(params_.v4l2);
     }
     light_ = makeLightBackend(params_.light, light_level, light_command);
-    schedule_ = std::make_unique<ecs::LightSchedule>(params_.schedule);
+    schedule_ = std::make_unique<core::LightSchedule>(params_.schedule);
     loadCalibrations();
 
     image_transport::ImageTransport it(nh);
@@ -133,13 +133,13 @@ class CameraDriverNodelet : public GuardedNodelet {
   // (log and diagnostics).
   void loadCalibrations() {
     const cv::Size size = source_->imageSize();
-    std::optional<ecs::StereoRig> nominal;
+    std::optional<core::StereoRig> nominal;
     if (!params_.device_config.empty()) {
       try {
-        cv::FileStorage fs = ecs::openYaml(params_.device_config);
-        if (!fs["rig"].empty()) nominal = ecs::loadStereoRig(fs["rig"], "rig");
+        cv::FileStorage fs = core::openYaml(params_.device_config);
+        if (!fs["rig"].empty()) nominal = core::loadStereoRig(fs["rig"], "rig");
       } catch (const std::exception& e) {
-        throw ecs::ConfigError("device_config", "'" + params_.device_config + "': " + e.what());
+        throw core::ConfigError("device_config", "'" + params_.device_config + "': " + e.what());
       }
     }
     sensor_msgs::CameraInfo left_fallback, right_fallback;
@@ -174,7 +174,7 @@ class CameraDriverNodelet : public GuardedNodelet {
   void captureLoop() {
     using Clock = std::chrono::steady_clock;
     const auto start = Clock::now();
-    ecs::FramePacer pacer(params_.fps, start);
+    core::FramePacer pacer(params_.fps, start);
     while (true) {
       try {
         captureOne(std::chrono::duration<double>(Clock::now() - start).count());
@@ -190,7 +190,7 @@ class CameraDriverNodelet : public GuardedNodelet {
   void captureOne(double time_s) {
     const ros::Time stamp = ros::Time::now();
     const bool recorded_light = source_->recordsLightState();
-    ecs::LightState light;
+    core::LightState light;
     if (!recorded_light) {
       {
         std::lock_guard<std::mutex> lock(mutex_);
@@ -265,7 +265,7 @@ class CameraDriverNodelet : public GuardedNodelet {
     status.add("configured fps", params_.fps);
     status.add("light on", last_light_on_);
     status.add("calibration trigger",
-               params_.schedule.trigger == ecs::CalibrationTrigger::kOnDemand ? "on_demand" : "periodic");
+               params_.schedule.trigger == core::CalibrationTrigger::kOnDemand ? "on_demand" : "periodic");
     {
       std::lock_guard<std::mutex> lock(mutex_);
       status.add("calibration demanded (health not good)", schedule_->demanded());
@@ -341,18 +341,18 @@ class CameraDriverNodelet : public GuardedNodelet {
   }
 
   DriverParams params_;
-  std::shared_ptr<ecs::SimRig> sim_;
+  std::shared_ptr<core::SimRig> sim_;
   std::unique_ptr<FrameSource> source_;
   std::unique_ptr<LightBackend> light_;
   std::unique_ptr<StereoCalibration> calibration_;  // created in onInit, thread-safe
 
   std::mutex mutex_;  // guards schedule_
-  std::unique_ptr<ecs::LightSchedule> schedule_;
+  std::unique_ptr<core::LightSchedule> schedule_;
 
   image_transport::CameraPublisher left_pub_, right_pub_;
   ros::Publisher mode_pub_, verified_pub_;
   ErrorThrottle refusals_{5.0};  // set_camera_info refusals, per message (thread-safe)
-  ecs::VerifiedMarking verified_;  // the health's callback only
+  core::VerifiedMarking verified_;  // the health's callback only
   ros::ServiceServer left_set_info_srv_, right_set_info_srv_, set_light_srv_;
   ros::Subscriber health_sub_;  // the health's verdicts (on demand: when to calibrate; always: verified)
   ros::WallTimer monocular_timer_;  // commits a staged calibration of one camera alone

@@ -39,8 +39,8 @@ namespace {
 using sensor_msgs::CameraInfo;
 using sensor_msgs::Image;
 
-ecs::DisparityOptions toOptions(const DisparityConfig& c) {
-  ecs::DisparityOptions o;
+core::DisparityOptions toOptions(const DisparityConfig& c) {
+  core::DisparityOptions o;
   // stereo_image_proc's stereo_algorithm, when set, wins (its parameter files carry it).
   o.algorithm = c.stereo_algorithm == 0 ? "bm" : c.stereo_algorithm == 1 ? "sgbm" : c.algorithm;
   o.prefilter_size = c.prefilter_size;
@@ -68,7 +68,7 @@ ecs::DisparityOptions toOptions(const DisparityConfig& c) {
   return o;
 }
 
-void toConfig(const ecs::DisparityOptions& o, DisparityConfig* c) {
+void toConfig(const core::DisparityOptions& o, DisparityConfig* c) {
   c->algorithm = o.algorithm;
   c->prefilter_size = o.prefilter_size;
   c->prefilter_cap = o.prefilter_cap;
@@ -160,12 +160,12 @@ class DisparityNodelet : public GuardedNodelet {
 
   // Invalid values are clamped (with a warning) and the clamped values shown in the config.
   void configCb(DisparityConfig& config) {
-    ecs::DisparityOptions options = toOptions(config);
+    core::DisparityOptions options = toOptions(config);
     const std::vector<std::string> changes = options.clamp();
     for (const auto& change : changes) NODELET_WARN("Disparity: parameter clamped: %s", change.c_str());
     toConfig(options, &config);
     try {
-      auto computer = std::make_unique<ecs::DisparityComputer>(options);
+      auto computer = std::make_unique<core::DisparityComputer>(options);
       std::lock_guard<std::mutex> lock(computer_mutex_);
       computer_ = std::move(computer);
       diagnostics_->set("algorithm", options.algorithm);
@@ -202,7 +202,7 @@ class DisparityNodelet : public GuardedNodelet {
     stereo_msgs::DisparityImagePtr disparity_msg;
     sensor_msgs::ImagePtr mask_msg;
     cv::Mat disparity, mask;
-    ecs::DisparityOptions options;
+    core::DisparityOptions options;
     try {
       const cv::Mat left_mono = monoView(left), right_mono = monoView(right);
       diagnostics_->checkShared(left_mono, *left);
@@ -237,7 +237,7 @@ class DisparityNodelet : public GuardedNodelet {
 
   // stereo_image_proc's DisparityImage (32FC1) for an image of `size`, its pixels not yet
   // written; *pixels is set to a header over them.
-  static stereo_msgs::DisparityImagePtr newDisparityMsg(cv::Size size, const ecs::DisparityOptions& o,
+  static stereo_msgs::DisparityImagePtr newDisparityMsg(cv::Size size, const core::DisparityOptions& o,
                                                         const image_geometry::StereoCameraModel& model,
                                                         const CameraInfo& left_info, cv::Mat* pixels) {
     auto msg = boost::make_shared<stereo_msgs::DisparityImage>();
@@ -306,7 +306,7 @@ class DisparityNodelet : public GuardedNodelet {
       for (int u = 0; u < disparity.cols; ++u, ++x, ++y, ++z, ++rgb) {
         // image_geometry's Q is scaled (Q(0,0) = fy * Tx, ...): apply it in full.
         const cv::Vec4d p = Q * cv::Vec4d(u, v, d[u], 1.0);
-        if (!ecs::isValidDisparity(d[u]) || !(p[2] / p[3] > 0)) {
+        if (!core::isValidDisparity(d[u]) || !(p[2] / p[3] > 0)) {
           *x = *y = *z = nan;
         } else {
           *x = static_cast<float>(p[0] / p[3]);
@@ -327,7 +327,7 @@ class DisparityNodelet : public GuardedNodelet {
   std::unique_ptr<StageDiagnostics> diagnostics_;  // created in onInit, before any callback
 
   std::mutex computer_mutex_;
-  std::unique_ptr<ecs::DisparityComputer> computer_;
+  std::unique_ptr<core::DisparityComputer> computer_;
 };
 
 }  // namespace embedded_calibration_stereo

@@ -16,9 +16,9 @@
 
 #include "embedded_calibration_stereo/CalibrationHealth.h"
 #include "embedded_calibration_stereo/CalibrationMode.h"
-#include "embedded_calibration_stereo/core/calibration/light_confirmation.h"
-#include "embedded_calibration_stereo/core/calibration/light_regions.h"
-#include "embedded_calibration_stereo/core/calibration/light_schedule.h"
+#include "embedded_calibration_stereo/core/light/light_confirmation.h"
+#include "embedded_calibration_stereo/core/light/light_regions.h"
+#include "embedded_calibration_stereo/core/light/light_schedule.h"
 #include "embedded_calibration_stereo/ros/driver_calibration_watch.h"
 #include "embedded_calibration_stereo/ros/external_stereo_input.h"
 #include "embedded_calibration_stereo/ros/guarded_nodelet.h"
@@ -50,7 +50,7 @@ struct PendingFrame {
 // Runs the head's light when the cameras are driven by another ROS driver, and turns that
 // driver's frames into the head's stereo stream: each stereo frame, paired by stamp, goes out
 // with the left image's stamp and one calibration_mode whose light state is confirmed from the
-// images (ecs::DeviceLightConfirmer), one frame late. The schedule is ecs::LightSchedule; with
+// images (core::DeviceLightConfirmer), one frame late. The schedule is core::LightSchedule; with
 // calibration_store file it serves set_camera_info (ReloadingCalibrationStore). The whole
 // story, parameters and limits: docs/nodelets.md#lightcontroller and docs/external_driver.md.
 // Threads: everything runs on the nodelet's single-threaded callback queue (frame callbacks,
@@ -76,11 +76,11 @@ class LightControllerNodelet : public GuardedNodelet {
     ros::NodeHandle& pnh = getPrivateNodeHandle();
     params_ = loadLightControllerParams(ParameterReader(pnh), defaultPatternPriorFile());
     makeLight(nh);
-    schedule_ = std::make_unique<ecs::LightSchedule>(params_.schedule);
-    confirmer_ = std::make_unique<ecs::DeviceLightConfirmer>(params_.confirmation);
-    watch_ = std::make_unique<ecs::LightCommandWatch>(params_.max_delay_frames);
+    schedule_ = std::make_unique<core::LightSchedule>(params_.schedule);
+    confirmer_ = std::make_unique<core::DeviceLightConfirmer>(params_.confirmation);
+    watch_ = std::make_unique<core::LightCommandWatch>(params_.max_delay_frames);
     if (params_.calibration_store == "file") advertiseSetCameraInfo(nh);
-    regions_file_ = std::make_unique<ecs::BoardRegionsFile>(params_.prior_file, params_.region_margin_squares);
+    regions_file_ = std::make_unique<core::BoardRegionsFile>(params_.prior_file, params_.region_margin_squares);
     loadRegions();
     advertiseOutputs(nh);
     input_ = std::make_unique<ExternalStereoInput>(
@@ -130,7 +130,7 @@ class LightControllerNodelet : public GuardedNodelet {
     right_pub_ = it_->advertiseCamera("right/image_raw", 2);
     mode_pub_ = nh.advertise<CalibrationMode>("calibration_mode", 2);
     set_light_srv_ = nh.advertiseService("set_light", &LightControllerNodelet::setLight, this);
-    if (params_.schedule.trigger == ecs::CalibrationTrigger::kOnDemand)
+    if (params_.schedule.trigger == core::CalibrationTrigger::kOnDemand)
       health_sub_ = nh.subscribe<CalibrationHealth>("calibration/health", 2, [this](const auto& health) {
         // On demand: a calibration burst while the health nodelet wants one (the calibration is
         // known not to hold and the calibrator has not found it to be the best it can do).
@@ -210,7 +210,7 @@ class LightControllerNodelet : public GuardedNodelet {
 
     // The light for the next frames (the driver's delay decides which frame shows it).
     const double time_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - started_).count();
-    const ecs::LightState commanded = schedule_->step(time_s);
+    const core::LightState commanded = schedule_->step(time_s);
     std::string error;
     if (!light_->apply(commanded, &error)) {
       light_error_ = error;
@@ -228,7 +228,7 @@ class LightControllerNodelet : public GuardedNodelet {
 
     warnIfRegionsDoNotFit(0, left_cv->image, input_->topic(0));
     warnIfRegionsDoNotFit(1, right_cv->image, input_->topic(2));
-    const std::optional<ecs::ConfirmedLight> decided = confirmer_->push(left_cv->image, right_cv->image);
+    const std::optional<core::ConfirmedLight> decided = confirmer_->push(left_cv->image, right_cv->image);
     if (params_.light.backend != "none") {
       watch_->update(commanded.light_on, decided);
       if (!watch_->fault().empty())
@@ -249,7 +249,7 @@ class LightControllerNodelet : public GuardedNodelet {
                             topic.c_str());
   }
 
-  void publish(const PendingFrame& frame, const ecs::ConfirmedLight& light) {
+  void publish(const PendingFrame& frame, const core::ConfirmedLight& light) {
     const ros::Time stamp = frame.left->header.stamp;
     // The left image goes out as it came (zero-copy); the right one and the CameraInfos carry the
     // left stamp, so that every consumer matches the frame exactly.
@@ -324,12 +324,12 @@ class LightControllerNodelet : public GuardedNodelet {
     }
     status.add("light backend", params_.light.backend);
     status.add("calibration trigger",
-               params_.schedule.trigger == ecs::CalibrationTrigger::kOnDemand ? "on_demand" : "periodic");
+               params_.schedule.trigger == core::CalibrationTrigger::kOnDemand ? "on_demand" : "periodic");
     status.add("calibration demanded (health not good)", schedule_->demanded());
     status.add("light commanded on", commanded_on_);
     status.add("light confirmed on", last_light_.light_on);
     status.add("settled", last_light_.settled);
-    const ecs::StereoLightConfirmer& used = confirmer_->inUse();
+    const core::StereoLightConfirmer& used = confirmer_->inUse();
     status.add("light step left (grey levels)", used.left().step());
     status.add("light step right (grey levels)", used.right().step());
     status.add("confirmed in", regionsText());
@@ -348,10 +348,10 @@ class LightControllerNodelet : public GuardedNodelet {
   std::unique_ptr<LightBackend> light_;
   SharedLightLevel sim_level_;
   double published_level_ = -1.0;
-  std::unique_ptr<ecs::LightSchedule> schedule_;
-  std::unique_ptr<ecs::DeviceLightConfirmer> confirmer_;  // the whole image, or the taught regions
-  std::unique_ptr<ecs::BoardRegionsFile> regions_file_;
-  std::unique_ptr<ecs::LightCommandWatch> watch_;
+  std::unique_ptr<core::LightSchedule> schedule_;
+  std::unique_ptr<core::DeviceLightConfirmer> confirmer_;  // the whole image, or the taught regions
+  std::unique_ptr<core::BoardRegionsFile> regions_file_;
+  std::unique_ptr<core::LightCommandWatch> watch_;
   std::unique_ptr<ReloadingCalibrationStore> store_;  // calibration_store "file" only
   // How long a calibration of one camera waits for the other camera's (as the CameraDriver's default).
   static constexpr double kPairTimeoutS = 10.0;
@@ -369,7 +369,7 @@ class LightControllerNodelet : public GuardedNodelet {
 
   std::optional<PendingFrame> pending_;
   bool commanded_on_ = false;
-  ecs::ConfirmedLight last_light_;
+  core::ConfirmedLight last_light_;
   std::string light_error_, missing_;
   uint64_t frames_out_ = 0, dropped_ = 0, settled_on_ = 0, settled_off_ = 0;
   double max_spread_s_ = 0.0;

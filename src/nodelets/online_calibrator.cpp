@@ -50,8 +50,8 @@
 #include "embedded_calibration_stereo/CalibrationMode.h"
 #include "embedded_calibration_stereo/Recalibrate.h"
 #include "embedded_calibration_stereo/core/calibration/repeated_observations.h"
-#include "embedded_calibration_stereo/core/geometry/config_error.h"
-#include "embedded_calibration_stereo/core/geometry/config_io.h"
+#include "embedded_calibration_stereo/core/io/config_error.h"
+#include "embedded_calibration_stereo/core/io/config_io.h"
 #include "embedded_calibration_stereo/ros/calibration_session.h"
 #include "embedded_calibration_stereo/ros/caller_probe.h"
 #include "embedded_calibration_stereo/ros/conversions.h"
@@ -88,7 +88,7 @@ class OnlineCalibratorNodelet : public GuardedNodelet {
 
  private:
   struct Job {
-    std::vector<ecs::StereoObservation> frames;
+    std::vector<core::StereoObservation> frames;
     bool dry_run = false;
     std::shared_ptr<std::promise<CalibrationStatus>> result;  // null for automatic windows
     bool commit_again = false;  // no solve: commit uncommitted_ again
@@ -113,17 +113,17 @@ class OnlineCalibratorNodelet : public GuardedNodelet {
     ros::NodeHandle& pnh = getPrivateNodeHandle();
     const std::string package_path = ros::package::getPath("embedded_calibration_stereo");
     params_ = loadCalibratorParams(pnh, package_path.empty() ? "" : package_path + "/config/sim_rig.yaml");
-    ecs::CalibrationDevice device;
-    std::optional<ecs::StereoRig> nominal;
+    core::CalibrationDevice device;
+    std::optional<core::StereoRig> nominal;
     try {
-      cv::FileStorage fs = ecs::openYaml(params_.device_config);
-      device = ecs::loadDevice(fs["device"], "device");
-      if (!fs["rig"].empty()) nominal = ecs::loadStereoRig(fs["rig"], "rig");
+      cv::FileStorage fs = core::openYaml(params_.device_config);
+      device = core::loadDevice(fs["device"], "device");
+      if (!fs["rig"].empty()) nominal = core::loadStereoRig(fs["rig"], "rig");
     } catch (const std::exception& e) {
-      throw ecs::ConfigError("device_config", "'" + params_.device_config + "': " + e.what());
+      throw core::ConfigError("device_config", "'" + params_.device_config + "': " + e.what());
     }
     session_ = std::make_unique<CalibrationSession>(nh, params_, device, nominal);
-    paced_ = std::make_unique<ecs::PacedQueue<Job>>(params_.solve_pacing);
+    paced_ = std::make_unique<core::PacedQueue<Job>>(params_.solve_pacing);
     guard_ = std::make_unique<StampGuard>(
         std::vector<std::string>{nh.resolveName("calibration_mode"), nh.resolveName("calibration/observations"),
                                  nh.resolveName("left/camera_info"), nh.resolveName("right/camera_info")},
@@ -232,7 +232,7 @@ class OnlineCalibratorNodelet : public GuardedNodelet {
       return;
     }
     if (!left_info) return;
-    ecs::StereoRig rig;
+    core::StereoRig rig;
     std::string error;
     if (fromStereoCameraInfo(*left_info, *right_info, &rig, &error))
       session_->broadcastTransform(rig);
@@ -242,8 +242,8 @@ class OnlineCalibratorNodelet : public GuardedNodelet {
 
   // Subscriber queue. The observation in `msg`; nothing when it has a defect, then *why says
   // which and it is counted as dropped. The caller logs (a throttle per input).
-  std::optional<ecs::StereoObservation> validObservation(const StereoPatternObservation& msg, std::string* why) {
-    ecs::StereoObservation observation = fromMsg(msg);
+  std::optional<core::StereoObservation> validObservation(const StereoPatternObservation& msg, std::string* why) {
+    core::StereoObservation observation = fromMsg(msg);
     const std::vector<std::string> defects = observationDefects(observation, session_->boards());
     if (defects.empty()) return observation;
     why->clear();
@@ -270,13 +270,13 @@ class OnlineCalibratorNodelet : public GuardedNodelet {
   void onObservation(const StereoPatternObservationConstPtr& msg) {
     if (!guard_->admit(kObservationInput, msg->header.stamp)) return;
     std::string why;
-    std::optional<ecs::StereoObservation> valid = validObservation(*msg, &why);
+    std::optional<core::StereoObservation> valid = validObservation(*msg, &why);
     if (!valid) {
       NODELET_ERROR_THROTTLE(5.0, "OnlineCalibrator: observation dropped on %s: %s",
                              observations_sub_.getTopic().c_str(), why.c_str());
       return;
     }
-    ecs::StereoObservation observation = std::move(*valid);
+    core::StereoObservation observation = std::move(*valid);
     std::lock_guard<std::mutex> lock(mutex_);
     const ros::Time previous = last_observation_stamp_;
     if (!stampAfterPrevious(msg->header.stamp, &last_observation_stamp_)) {  // one frame per stamp in a window
@@ -304,13 +304,13 @@ class OnlineCalibratorNodelet : public GuardedNodelet {
     const StereoPatternObservationConstPtr msg = event.getMessage();
     const std::string& publisher = event.getPublisherName();
     std::string why;
-    std::optional<ecs::StereoObservation> valid = validObservation(*msg, &why);
+    std::optional<core::StereoObservation> valid = validObservation(*msg, &why);
     if (!valid) {
       NODELET_ERROR_THROTTLE(5.0, "OnlineCalibrator: window observation dropped on %s: %s",
                              window_observations_sub_.getTopic().c_str(), why.c_str());
       return;
     }
-    ecs::StereoObservation observation = std::move(*valid);
+    core::StereoObservation observation = std::move(*valid);
     {
       std::lock_guard<std::mutex> lock(mutex_);
       if (repeated_windows_.repeats(observation)) {  // before the stamp: a copy must not move it on
@@ -458,7 +458,7 @@ class OnlineCalibratorNodelet : public GuardedNodelet {
   }
 
   // Caller holds mutex_.
-  void addToWindow(ecs::StereoObservation observation, const ros::Time& stamp, bool calibrating) {
+  void addToWindow(core::StereoObservation observation, const ros::Time& stamp, bool calibrating) {
     if (!calibrating || stamp <= window_closed_at_) return;
     const size_t cap = request_active_ ? request_frames_ : static_cast<size_t>(params_.max_frames);
     if (window_.size() >= cap) return;
@@ -757,7 +757,7 @@ class OnlineCalibratorNodelet : public GuardedNodelet {
   // ended early ("" when it did not): the caller went away (probed every kProbePeriodS without
   // mutex_ held) or the calibrator is shutting down.
   std::string collectRequestWindow(size_t frames, double timeout_s, const CallerProbe& probe,
-                                   std::vector<ecs::StereoObservation>* frames_out) {
+                                   std::vector<core::StereoObservation>* frames_out) {
     using Clock = std::chrono::steady_clock;
     const auto deadline = Clock::now() + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(timeout_s));
     const auto probe_period = std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(kProbePeriodS));
@@ -895,10 +895,10 @@ class OnlineCalibratorNodelet : public GuardedNodelet {
   bool awaiting_commit_ = false;  // the worker waits for the driver's frame of a commit
   ros::Time last_observation_stamp_;  // newest observation accepted (zero: none yet)
   ros::Time last_window_observation_stamp_;  // newest window observation accepted (zero: none yet)
-  ecs::RepeatedObservations repeated_windows_;  // the latest window observations' contents
+  core::RepeatedObservations repeated_windows_;  // the latest window observations' contents
   uint64_t window_observations_ = 0;         // accepted
-  std::deque<std::pair<ros::Time, ecs::StereoObservation>> pending_;
-  std::vector<ecs::StereoObservation> window_;
+  std::deque<std::pair<ros::Time, core::StereoObservation>> pending_;
+  std::vector<core::StereoObservation> window_;
   ros::Time window_closed_at_;  // frames up to this stamp belong to a finished window
   bool request_active_ = false;      // a recalibrate call is collecting its window
   bool request_in_flight_ = false;   // a recalibrate call is running (from its start to its answer)
@@ -912,7 +912,7 @@ class OnlineCalibratorNodelet : public GuardedNodelet {
   static constexpr double kRequestWindowWaitS = 20.0;
   bool request_wants_window_ = false;
   ros::Time request_started_;
-  std::optional<ecs::StereoObservation> request_window_;
+  std::optional<core::StereoObservation> request_window_;
   sensor_msgs::CameraInfoConstPtr left_info_, right_info_;  // the latest valid pair (storeInfo)
   sensor_msgs::CameraInfoConstPtr latest_left_info_, latest_right_info_;  // the latest valid side
   // The rectification (left R, right R and P) of the pair in force last put on /tf_static by
@@ -920,7 +920,7 @@ class OnlineCalibratorNodelet : public GuardedNodelet {
   std::vector<double> in_force_tf_key_;
   std::atomic<uint32_t> epoch_{0};  // also read without mutex_ (statuses)
   std::deque<Job> jobs_;                       // requests and commits again, first come first served
-  std::unique_ptr<ecs::PacedQueue<Job>> paced_;  // automatic solves (params_.solve_pacing)
+  std::unique_ptr<core::PacedQueue<Job>> paced_;  // automatic solves (params_.solve_pacing)
   bool stopping_ = false;
   std::optional<CalibrationStatus> last_solve_;
   ros::WallTime last_solve_time_, last_commit_time_;

@@ -16,7 +16,7 @@
 
 #include "embedded_calibration_stereo/CalibrationMode.h"
 #include "embedded_calibration_stereo/StereoPatternObservation.h"
-#include "embedded_calibration_stereo/core/geometry/config_error.h"
+#include "embedded_calibration_stereo/core/io/config_error.h"
 #include "embedded_calibration_stereo/core/tracker/pattern_tracker.h"
 #include "embedded_calibration_stereo/core/tracker/teaching_plan.h"
 #include "embedded_calibration_stereo/core/tracker/window_tracker.h"
@@ -59,17 +59,17 @@ class PatternTrackerNodelet : public GuardedNodelet {
     const bool from_truth = read.get("teach_from_ground_truth", false);
     const bool from_burst = read.choice("teach_from", "burst", {"burst", "light_off"}) == "burst";
     // The test-only truth teaching takes precedence over teach_from.
-    plan_ = ecs::TeachingPlan(from_truth   ? ecs::TeachFrom::kGroundTruth
-                              : from_burst ? ecs::TeachFrom::kBurst
-                                           : ecs::TeachFrom::kLightOff);
+    plan_ = core::TeachingPlan(from_truth   ? core::TeachFrom::kGroundTruth
+                              : from_burst ? core::TeachFrom::kBurst
+                                           : core::TeachFrom::kLightOff);
     const int queue_size = read.atLeast("queue_size", 10, 1);
-    stale_background_level_ = read.atLeast("stale_background_level", ecs::TrackerOptions().stale_background_level, 0.0);
+    stale_background_level_ = read.atLeast("stale_background_level", core::TrackerOptions().stale_background_level, 0.0);
     window_tracking_ = read.get("window_tracking", false);
     window_options_.scene_matches = read.get("scene_matches", true);
     try {
-      device_ = ecs::loadSimRigConfig(device_config_);
+      device_ = core::loadSimRigConfig(device_config_);
     } catch (const std::exception& e) {
-      throw ecs::ConfigError("device_config", "'" + device_config_ + "': " + e.what());
+      throw core::ConfigError("device_config", "'" + device_config_ + "': " + e.what());
     }
     bursts_.emplace(window_options_.min_light_on_frames);  // window tracking and teaching from a burst
     loadPrior(teach_on_start);
@@ -94,7 +94,7 @@ class PatternTrackerNodelet : public GuardedNodelet {
     }
     updateNeed();
     input_->start();  // subscribes the inputs while someone listens or teaching waits
-    NODELET_INFO("PatternTracker: prior %s (%s), device %s%s", prior_file_.c_str(), ecs::toString(plan_.state()),
+    NODELET_INFO("PatternTracker: prior %s (%s), device %s%s", prior_file_.c_str(), core::toString(plan_.state()),
                  device_config_.c_str(),
                  window_tracking_ ? ", window tracking on (one observation per light burst on "
                                     "calibration/window_observations)"
@@ -108,7 +108,7 @@ class PatternTrackerNodelet : public GuardedNodelet {
       return;
     }
     try {
-      startTracking(ecs::readPatternPrior(prior_file_));
+      startTracking(core::readPatternPrior(prior_file_));
     } catch (const std::exception& e) {
       plan_.priorUnusable(e.what());
       NODELET_ERROR("%s", idleMessage().c_str());
@@ -116,14 +116,14 @@ class PatternTrackerNodelet : public GuardedNodelet {
   }
 
   // Throws ConfigError (or std::invalid_argument) when the prior is unusable.
-  void startTracking(const ecs::PatternPrior& prior) {
+  void startTracking(const core::PatternPrior& prior) {
     if (prior.cameras.size() != 2)
       throw std::invalid_argument("expected 2 cameras (left, right), found " + std::to_string(prior.cameras.size()));
-    ecs::TrackerOptions options;
+    core::TrackerOptions options;
     options.stale_background_level = stale_background_level_;
     auto window_tracker =
-        window_tracking_ ? std::make_shared<ecs::WindowTracker>(prior, options, window_options_, device_.rig) : nullptr;
-    tracker_ = std::make_unique<ecs::PatternTracker>(prior, options);
+        window_tracking_ ? std::make_shared<core::WindowTracker>(prior, options, window_options_, device_.rig) : nullptr;
+    tracker_ = std::make_unique<core::PatternTracker>(prior, options);
     window_tracker_ = std::move(window_tracker);  // the worker keeps the previous one until its window is done
     background_stamp_ = ros::Time();  // the tracker has no background yet
     plan_.tracking();
@@ -148,7 +148,7 @@ class PatternTrackerNodelet : public GuardedNodelet {
     if (!match) return;
     const Image &on = *match->light_on.first, &scene = *match->scene.first;
     cv::Mat left, right;
-    ecs::ColorOrder order;
+    core::ColorOrder order;
     if (scene.encoding != on.encoding || scene.width != on.width || scene.height != on.height) {
       NODELET_ERROR_THROTTLE(5.0, "PatternTracker: ground_truth/left/image_scene (%s %ux%u) does not match %s; "
                              "cannot teach from it", scene.encoding.c_str(), scene.width, scene.height,
@@ -178,11 +178,11 @@ class PatternTrackerNodelet : public GuardedNodelet {
       return;
     }
     cv::Mat left_image, right_image;  // the messages' pixels
-    ecs::ColorOrder order;
+    core::ColorOrder order;
     if (!toImages(left, right, &left_image, &right_image, &order)) return;
     if (teachOnLightOn(left, right, left_image, right_image, order)) return;
     if (!tracker_) {
-      if (plan_.state() != ecs::PriorState::kTeaching && !plan_.teachRequested())
+      if (plan_.state() != core::PriorState::kTeaching && !plan_.teachRequested())
         NODELET_ERROR_THROTTLE(5.0, "%s", idleMessage().c_str());
       return;
     }
@@ -192,8 +192,8 @@ class PatternTrackerNodelet : public GuardedNodelet {
   // Teaching's part of a settled light-on frame (TeachingPlan::lightOn). True when teaching
   // started.
   bool teachOnLightOn(const ImageConstPtr& left, const ImageConstPtr& right, const cv::Mat& left_image,
-                      const cv::Mat& right_image, ecs::ColorOrder order) {
-    using Step = ecs::TeachingPlan::LightOnStep;
+                      const cv::Mat& right_image, core::ColorOrder order) {
+    using Step = core::TeachingPlan::LightOnStep;
     switch (plan_.lightOn(bursts_->lightOnFramesKept(), lightOffMatches(*left))) {
       case Step::kNone: return false;
       case Step::kMatchGroundTruth:
@@ -206,7 +206,7 @@ class PatternTrackerNodelet : public GuardedNodelet {
       case Step::kTeachOnBurstUnderWay: startTeachingFromBurst(bursts_->underWay()); return true;
       case Step::kWaitForBurst:
         NODELET_INFO_THROTTLE(30.0, "PatternTracker: teaching waits for a light burst of %d settled light-on frames "
-                              "on %s", ecs::TeachingPlan::kTeachLightOnFrames, input_->topic(0).c_str());
+                              "on %s", core::TeachingPlan::kTeachLightOnFrames, input_->topic(0).c_str());
         return false;
       case Step::kTeachOnLightOff:
         startTeaching(left_image, right_image, cv_bridge::toCvShare(light_off_left_)->image,
@@ -221,7 +221,7 @@ class PatternTrackerNodelet : public GuardedNodelet {
   }
 
   bool toImages(const ImageConstPtr& left, const ImageConstPtr& right, cv::Mat* left_image, cv::Mat* right_image,
-                ecs::ColorOrder* order) {
+                core::ColorOrder* order) {
     const std::string problem = readStereo(left, right, left_image, right_image, order);
     if (!problem.empty())
       NODELET_ERROR_THROTTLE(5.0, "PatternTracker: %s, %s: %s; frame dropped", input_->topic(0).c_str(),
@@ -238,7 +238,7 @@ class PatternTrackerNodelet : public GuardedNodelet {
   // `left_off`/`right_off`: the scene without the device (light-off frame, or the sim's truth),
   // same format as the light-on frames.
   void startTeaching(const cv::Mat& left, const cv::Mat& right, const cv::Mat& left_off, const cv::Mat& right_off,
-                     ecs::ColorOrder order) {
+                     core::ColorOrder order) {
     beginTeaching(false);  // no longer needs the ground-truth scene
     NODELET_INFO("PatternTracker: teaching from a light-on frame and the latest light-off frame (worker thread)");
     teaching_.start({left, left_off}, {right, right_off}, order, device_, prior_file_);
@@ -294,7 +294,7 @@ class PatternTrackerNodelet : public GuardedNodelet {
     taught_burst_.reset();
   }
 
-  void track(const ImageConstPtr& left_msg, const cv::Mat& left, const cv::Mat& right, ecs::ColorOrder order) {
+  void track(const ImageConstPtr& left_msg, const cv::Mat& left, const cv::Mat& right, core::ColorOrder order) {
     const auto t0 = std::chrono::steady_clock::now();
     StereoPatternObservation msg;
     try {
@@ -305,7 +305,7 @@ class PatternTrackerNodelet : public GuardedNodelet {
         background_stamp_ = light_off_left_->header.stamp;
       }
       msg = toMsg(tracker_->trackStereo(left, right, left_msg->header.stamp.toSec(), order));
-      const ecs::CameraTracker& left_tracker = tracker_->camera(0);
+      const core::CameraTracker& left_tracker = tracker_->camera(0);
       background_use_ = left_tracker.background().empty() ? "none: raw images, boards aligned whole"
                         : left_tracker.lastBackgroundStale()
                             ? "light-off frame stale (scene moved): raw images, boards aligned whole"
@@ -321,7 +321,7 @@ class PatternTrackerNodelet : public GuardedNodelet {
 
   // A light burst ended (the first settled light-off frame after it): TeachingPlan::burstEnded.
   void endBurst(EndedBurst ended) {
-    using Step = ecs::TeachingPlan::BurstStep;
+    using Step = core::TeachingPlan::BurstStep;
     switch (plan_.burstEnded(ended.problem.empty(), window_tracking_)) {
       case Step::kIgnore: return;
       case Step::kTeach: return startTeachingFromBurst(ended.burst);
@@ -341,15 +341,15 @@ class PatternTrackerNodelet : public GuardedNodelet {
   }
 
   void diagnose(diagnostic_updater::DiagnosticStatusWrapper& status) {
-    using Level = ecs::TeachingPlan::Level;
+    using Level = core::TeachingPlan::Level;
     using diagnostic_msgs::DiagnosticStatus;
-    const ecs::TeachingPlan::Summary summary = plan_.summary(prior_write_->pending(), prior_write_->error());
+    const core::TeachingPlan::Summary summary = plan_.summary(prior_write_->pending(), prior_write_->error());
     status.summary(summary.level == Level::kOk     ? DiagnosticStatus::OK
                    : summary.level == Level::kWarn ? DiagnosticStatus::WARN
                                                    : DiagnosticStatus::ERROR,
                    summary.text);
     status.add("prior file", prior_file_);
-    status.add("prior state", ecs::toString(plan_.state()));
+    status.add("prior state", core::toString(plan_.state()));
     status.add("prior file written", !prior_write_->pending());
     status.add("teach requested", plan_.teachRequested());
     figures_.report(status);
@@ -364,7 +364,7 @@ class PatternTrackerNodelet : public GuardedNodelet {
 
   double stale_background_level_ = 0.0;        // parameter, see TrackerOptions
   std::string prior_file_, device_config_;
-  ecs::SimRigConfig device_;
+  core::SimRigConfig device_;
   std::unique_ptr<FrameInput> input_;  // created in initialise, before any callback
   ros::Publisher observations_pub_;
   ros::ServiceServer teach_srv_;
@@ -372,14 +372,14 @@ class PatternTrackerNodelet : public GuardedNodelet {
   ros::WallTimer diagnostics_timer_;
 
   // Teaching.
-  ecs::TeachingPlan plan_;
+  core::TeachingPlan plan_;
   TeachingRun teaching_;  // waits for a teaching under way when destroyed
   std::optional<EndedBurst> taught_burst_;            // ended while teaching ran: tracked once taught
   std::optional<PriorWriteRetry> prior_write_;  // set in initialise
   GroundTruthPairing truth_;  // teach_from_ground_truth, subscribed while teaching waits
 
   // Tracking each frame.
-  std::unique_ptr<ecs::PatternTracker> tracker_;
+  std::unique_ptr<core::PatternTracker> tracker_;
   ImageConstPtr light_off_left_, light_off_right_;  // latest settled light-off pair
   ros::Time background_stamp_;                      // stamp of the pair the tracker has as background
   std::string background_use_ = "none yet";         // what the last tracked frame did with the background
@@ -387,9 +387,9 @@ class PatternTrackerNodelet : public GuardedNodelet {
 
   // Window tracking, and teaching from a burst.
   bool window_tracking_ = false;  // parameter
-  ecs::WindowTrackerOptions window_options_;
+  core::WindowTrackerOptions window_options_;
   std::optional<LightBurstCollector> bursts_;           // set in initialise
-  std::shared_ptr<ecs::WindowTracker> window_tracker_;  // null without a prior
+  std::shared_ptr<core::WindowTracker> window_tracker_;  // null without a prior
   std::unique_ptr<WindowTrackingWorker> window_worker_;  // window_tracking only
 };
 

@@ -28,7 +28,7 @@
 
 #include "embedded_calibration_stereo/CalibrationMode.h"
 #include "embedded_calibration_stereo/core/depth/rectification.h"
-#include "embedded_calibration_stereo/core/geometry/config_error.h"
+#include "embedded_calibration_stereo/core/io/config_error.h"
 #include "embedded_calibration_stereo/ros/conversions.h"
 #include "embedded_calibration_stereo/ros/guarded_nodelet.h"
 #include "embedded_calibration_stereo/ros/output_image.h"
@@ -78,23 +78,23 @@ CameraInfo rectifiedInfo(const CameraInfo& raw, const cv::Matx33d& R, const cv::
 
 // Bouguet: the CameraInfo's own R and P (as image_proc does), so the maps match the P that
 // stereo_image_proc reads from camera_info. Fusiello: the core computes R and P from the rig.
-std::shared_ptr<const StereoMaps> buildMaps(const CalibrationKey& key, ecs::RectificationMethod method) {
+std::shared_ptr<const StereoMaps> buildMaps(const CalibrationKey& key, core::RectificationMethod method) {
   auto maps = std::make_shared<StereoMaps>(key);
   const cv::Size size(key.left.width, key.left.height);
   cv::Matx33d R1, R2;
   cv::Matx34d P1, P2;
-  if (method == ecs::RectificationMethod::kBouguet) {
+  if (method == core::RectificationMethod::kBouguet) {
     R1 = matx33(key.left.R);
     R2 = matx33(key.right.R);
     P1 = matx34(key.left.P);
     P2 = matx34(key.right.P);
   } else {
-    ecs::StereoRig rig;
+    core::StereoRig rig;
     std::string error;
     if (!fromStereoCameraInfo(key.left, key.right, &rig, &error)) throw std::invalid_argument(error);
-    ecs::RectificationOptions options;
+    core::RectificationOptions options;
     options.method = method;
-    const ecs::RectificationGeometry g = ecs::computeRectificationGeometry(rig, options);
+    const core::RectificationGeometry g = core::computeRectificationGeometry(rig, options);
     R1 = g.R1;
     R2 = g.R2;
     P1 = g.P1;
@@ -144,9 +144,9 @@ class RectifierNodelet : public GuardedNodelet {
     const ParameterReader read(pnh);
     const std::string method_name = read.get("rectification_method", "bouguet");
     try {
-      method_ = ecs::parseRectificationMethod(method_name);
+      method_ = core::parseRectificationMethod(method_name);
     } catch (const std::exception& e) {
-      throw ecs::ConfigError("rectification_method", e.what());
+      throw core::ConfigError("rectification_method", e.what());
     }
     const int queue_size = read.atLeast("queue_size", 5, 1);
     const bool approximate = read.get("approximate_sync", false);
@@ -236,7 +236,7 @@ class RectifierNodelet : public GuardedNodelet {
       return nullptr;
     }
     if (build_.valid() && build_.wait_for(std::chrono::seconds(0)) != std::future_status::ready) return nullptr;
-    NODELET_INFO("Rectifier: calibration changed, building %s maps", ecs::toString(method_).c_str());
+    NODELET_INFO("Rectifier: calibration changed, building %s maps", core::toString(method_).c_str());
     build_ = std::async(std::launch::async, [this, key] {
       std::shared_ptr<const StereoMaps> maps;
       std::string error;
@@ -257,7 +257,7 @@ class RectifierNodelet : public GuardedNodelet {
   }
 
   // Remaps both images into new messages' own buffers (no extra copy; side by side, see
-  // ecs::remapStereoPair), then publishes them; a message is not touched after publishing.
+  // core::remapStereoPair), then publishes them; a message is not touched after publishing.
   void publishRectified(const Image& left, const Image& right, const StereoMaps& maps) {
     const boost::shared_ptr<void> no_owner;  // the callers hold the messages
     const cv_bridge::CvImageConstPtr left_in = cv_bridge::toCvShare(left, no_owner);
@@ -265,7 +265,7 @@ class RectifierNodelet : public GuardedNodelet {
     diagnostics_->checkShared(left_in->image, left);
     diagnostics_->checkShared(right_in->image, right);
     OutputImage left_out = newImageLike(left), right_out = newImageLike(right);
-    ecs::remapStereoPair(left_in->image, right_in->image, maps.left_map1, maps.left_map2,
+    core::remapStereoPair(left_in->image, right_in->image, maps.left_map1, maps.left_map2,
                          maps.right_map1, maps.right_map2, &left_out.view, &right_out.view);
     publishBoth(left_out, left_pub_, left_color_pub_);
     publishBoth(right_out, right_pub_, right_color_pub_);
@@ -295,7 +295,7 @@ class RectifierNodelet : public GuardedNodelet {
     color.publish(rectified.msg);
   }
 
-  ecs::RectificationMethod method_ = ecs::RectificationMethod::kBouguet;
+  core::RectificationMethod method_ = core::RectificationMethod::kBouguet;
   std::unique_ptr<StereoCameraInput> input_;  // created in onInit, before any callback
   image_transport::Publisher left_pub_, right_pub_;              // image_rect: mono8
   image_transport::Publisher left_color_pub_, right_color_pub_;  // image_rect_color: the input's encoding

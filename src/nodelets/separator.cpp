@@ -18,7 +18,7 @@
 #include "embedded_calibration_stereo/CalibrationMode.h"
 #include "embedded_calibration_stereo/core/depth/separator.h"
 #include "embedded_calibration_stereo/core/depth/stereo_device_template.h"
-#include "embedded_calibration_stereo/core/geometry/config_error.h"
+#include "embedded_calibration_stereo/core/io/config_error.h"
 #include "embedded_calibration_stereo/core/tracker/window_tracker.h"
 #include "embedded_calibration_stereo/ros/guarded_nodelet.h"
 #include "embedded_calibration_stereo/ros/lazy_synced_input.h"
@@ -51,7 +51,7 @@ class SeparatorNodelet : public GuardedNodelet {
 
   // One learning run's result, with what the log says of its burst.
   struct LearnRun {
-    ecs::StereoLearnResult result;
+    core::StereoLearnResult result;
     int light_on_frames = 0;  // of the burst, used or not
     bool whole_burst = true;  // false: the first frames of a burst under way
     double stamp = 0.0;       // the burst's last light-on frame used
@@ -67,17 +67,17 @@ class SeparatorNodelet : public GuardedNodelet {
     const ParameterReader read(pnh);
     const std::string method = read.get("method", "regional_alpha");
     try {
-      options_.method = ecs::parseSeparationMethod(method);
+      options_.method = core::parseSeparationMethod(method);
     } catch (const std::exception& e) {
-      throw ecs::ConfigError("method", e.what());
+      throw core::ConfigError("method", e.what());
     }
     teach_from_truth_ = read.get("teach_from_ground_truth", false);  // tests only: implies teach
     learn_ = read.choice("device_template", teach_from_truth_ ? "teach" : "learn", {"teach", "learn"}) == "learn";
     teach_.emplace(read.atLeast("teach_frames", 8, 1), options_);
     if (learn_ && teach_from_truth_)
-      throw ecs::ConfigError("teach_from_ground_truth", "applies to device_template teach only, not learn");
+      throw core::ConfigError("teach_from_ground_truth", "applies to device_template teach only, not learn");
     learning_plan_.emplace(read.inRange("learn_frames_per_end", 4, 1, 30));
-    learn_options_ = ecs::windowLearnerOptions();
+    learn_options_ = core::windowLearnerOptions();
     reteach_on_epoch_change_ = read.get("reteach_on_epoch_change", true);
     const int queue_size = read.atLeast("queue_size", 5, 1);
     const bool approximate = read.get("approximate_sync", false);
@@ -165,23 +165,23 @@ class SeparatorNodelet : public GuardedNodelet {
     diagnostics_->set("light on", mode->light_on ? "true" : "false");
     if (!problem.empty()) return reportError("frame dropped: " + problem);
     if (learn_) learnFrom(left, right, *mode);
-    std::shared_ptr<const ecs::StereoSeparator> separator;
+    std::shared_ptr<const core::StereoSeparator> separator;
     if (mode->light_on && mode->settled) separator = teachOrTakeSeparator(*left, *right, mode->calibration_epoch);
-    switch (ecs::routeFrame(mode->light_on, mode->settled, separator.get(), mode->calibration_epoch,
+    switch (core::routeFrame(mode->light_on, mode->settled, separator.get(), mode->calibration_epoch,
                             !learn_ && reteach_on_epoch_change_)) {
-      case ecs::SceneRoute::kLightOff: return publishRaw(left, right, "light off");
-      case ecs::SceneRoute::kLightChanging: return publishRaw(left, right, "light changing");
-      case ecs::SceneRoute::kNoTemplate:
+      case core::SceneRoute::kLightOff: return publishRaw(left, right, "light off");
+      case core::SceneRoute::kLightChanging: return publishRaw(left, right, "light changing");
+      case core::SceneRoute::kNoTemplate:
         reportWarning(learn_ ? "device image not learned yet: republishing the raw light-on frames"
                              : "separation not taught yet: republishing the raw light-on frames");
         return publishRaw(left, right, learn_ ? "learning" : "not taught");
-      case ecs::SceneRoute::kOtherEpoch:
+      case core::SceneRoute::kOtherEpoch:
         reportWarning("template taught under calibration epoch " + std::to_string(separator->epoch()) +
                       ", frames are epoch " + std::to_string(mode->calibration_epoch) +
                       (teach_from_truth_ ? ": re-teaching, republishing raw frames meanwhile"
                                          : ": call teach with the scene covered; republishing raw frames"));
         return publishRaw(left, right, "template of another epoch");
-      case ecs::SceneRoute::kSeparate: break;
+      case core::SceneRoute::kSeparate: break;
     }
     try {
       const auto start = std::chrono::steady_clock::now();
@@ -190,7 +190,7 @@ class SeparatorNodelet : public GuardedNodelet {
       diagnostics_->checkShared(right_in->image, *right);
       const OutputImage left_out = newImageLike(*left), right_out = newImageLike(*right);
       cv::Mat left_scene = left_out.view, right_scene = right_out.view;
-      ecs::separateStereo(separator->left, separator->right, left_in->image, right_in->image, &left_scene,
+      core::separateStereo(separator->left, separator->right, left_in->image, right_in->image, &left_scene,
                           &right_scene);
       left_pub_.publish(left_out.msg);
       right_pub_.publish(right_out.msg);
@@ -207,9 +207,9 @@ class SeparatorNodelet : public GuardedNodelet {
   // A settled light-on frame: a teach frame (the teach service's), or the start of a teach from
   // the truth (no template, or one of another epoch with reteach_on_epoch_change). Returns the
   // template in use.
-  std::shared_ptr<const ecs::StereoSeparator> teachOrTakeSeparator(const Image& left, const Image& right,
+  std::shared_ptr<const core::StereoSeparator> teachOrTakeSeparator(const Image& left, const Image& right,
                                                                    uint32_t epoch) {
-    std::shared_ptr<const ecs::StereoSeparator> separator;
+    std::shared_ptr<const core::StereoSeparator> separator;
     bool teaching;
     {
       std::lock_guard<std::mutex> lock(state_mutex_);
@@ -254,7 +254,7 @@ class SeparatorNodelet : public GuardedNodelet {
       return m ? cv_bridge::toCvShare(*m, boost::shared_ptr<void>())->image : cv::Mat();
     };
     try {
-      const ecs::StereoTemplateTeach::Step step =
+      const core::StereoTemplateTeach::Step step =
           teach_->add(view(&left), view(&right), view(left_truth), view(right_truth), epoch);
       if (step.restarted) logTeachStart(epoch);
       if (!step.taught) return;
@@ -289,7 +289,7 @@ class SeparatorNodelet : public GuardedNodelet {
       if (whole) waiting_burst_ = PendingBurst{std::move(burst), epoch};
       return;
     }
-    std::shared_ptr<const ecs::StereoSeparator> in_use;
+    std::shared_ptr<const core::StereoSeparator> in_use;
     {
       std::lock_guard<std::mutex> lock(state_mutex_);
       in_use = separator_;
@@ -300,7 +300,7 @@ class SeparatorNodelet : public GuardedNodelet {
       LearnRun run{{}, static_cast<int>(burst.light_on.size()), whole,
                    burst.light_on.back().first->header.stamp.toSec()};
       try {
-        run.result = ecs::learnStereoDevice(windowFrames(burst, 0), windowFrames(burst, 1), whole, per_end, options,
+        run.result = core::learnStereoDevice(windowFrames(burst, 0), windowFrames(burst, 1), whole, per_end, options,
                                             separator_options, in_use, epoch);
       } catch (const std::exception& e) {  // an image cv_bridge cannot read
         run.result.error = e.what();
@@ -313,7 +313,7 @@ class SeparatorNodelet : public GuardedNodelet {
   void collectLearned() {
     if (!learning_.valid() || learning_.wait_for(std::chrono::seconds(0)) != std::future_status::ready) return;
     const LearnRun run = learning_.get();
-    const ecs::StereoLearnResult& result = run.result;
+    const core::StereoLearnResult& result = run.result;
     if (waiting_burst_) {
       PendingBurst next = std::move(*waiting_burst_);
       waiting_burst_.reset();
@@ -362,7 +362,7 @@ class SeparatorNodelet : public GuardedNodelet {
     return true;
   }
 
-  ecs::SeparatorOptions options_;
+  core::SeparatorOptions options_;
   bool teach_from_truth_ = false, reteach_on_epoch_change_ = true;
   std::unique_ptr<FrameInput> frames_;  // created in initialise, before any callback
   std::unique_ptr<TruthInput> truth_;   // only with teach_from_ground_truth
@@ -372,13 +372,13 @@ class SeparatorNodelet : public GuardedNodelet {
   std::unique_ptr<StageDiagnostics> diagnostics_;  // created in initialise, before any callback
 
   std::mutex state_mutex_;
-  std::shared_ptr<const ecs::StereoSeparator> separator_;
-  std::optional<ecs::StereoTemplateTeach> teach_;  // set in initialise
+  std::shared_ptr<const core::StereoSeparator> separator_;
+  std::optional<core::StereoTemplateTeach> teach_;  // set in initialise
 
   // device_template learn (callback thread only, see the class comment).
   bool learn_ = true;
-  std::optional<ecs::DeviceLearningPlan> learning_plan_;  // set in initialise
-  ecs::DeviceLearnerOptions learn_options_;
+  std::optional<core::DeviceLearningPlan> learning_plan_;  // set in initialise
+  core::DeviceLearnerOptions learn_options_;
   // A burst: at least 3 settled light-on frames; one the Separator saw no light-off frame before
   // (it subscribed during it) is learned from the light-off frame after it alone.
   LightBurstCollector bursts_{3, false};

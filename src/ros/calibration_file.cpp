@@ -1,6 +1,6 @@
 #include "embedded_calibration_stereo/ros/calibration_file.h"
 
-#include "embedded_calibration_stereo/core/geometry/atomic_file.h"
+#include "embedded_calibration_stereo/core/io/atomic_file.h"
 
 #include <camera_calibration_parsers/parse.h>
 #include <camera_calibration_parsers/parse_ini.h>
@@ -229,7 +229,7 @@ bool writeCalibrationFileAtomic(const std::string& path, const std::string& came
   const std::string dir = directoryOf(path);
   if (!makeDirectories(dir)) return fail(errnoText("cannot create directory '" + dir + "'"));
   try {
-    ecs::writeFileAtomically(path, text.str());
+    core::writeFileAtomically(path, text.str());
   } catch (const std::exception& e) {
     return fail(e.what());
   }
@@ -327,7 +327,7 @@ unsigned CalibrationPairStore::linkedGeneration() const {
 }
 
 void CalibrationPairStore::markVerified(unsigned number, const std::string& note) const {
-  ecs::writeFileAtomically(generation(number).verified_file, note + "\n");
+  core::writeFileAtomically(generation(number).verified_file, note + "\n");
 }
 
 std::string CalibrationPairStore::linkTarget(bool left) const {
@@ -413,7 +413,7 @@ unsigned CalibrationPairStore::commit(const sensor_msgs::CameraInfo& left, const
         if (::stat(url_file.c_str(), &st) == 0) {
           std::string bytes;
           if (!readBytes(url_file, &bytes)) throw std::runtime_error(errnoText("cannot read '" + url_file + "'"));
-          ecs::writeFileAtomically(is_left ? copy.left_file : copy.right_file, bytes);
+          core::writeFileAtomically(is_left ? copy.left_file : copy.right_file, bytes);
         } else if (errno != ENOENT && errno != ENOTDIR) {
           throw std::runtime_error(errnoText("cannot read '" + url_file + "'"));
         }

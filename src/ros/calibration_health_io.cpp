@@ -8,8 +8,8 @@
 #include <boost/make_shared.hpp>
 #include <sensor_msgs/SetCameraInfo.h>
 
-#include "embedded_calibration_stereo/core/geometry/config_error.h"
-#include "embedded_calibration_stereo/core/geometry/config_io.h"
+#include "embedded_calibration_stereo/core/io/config_error.h"
+#include "embedded_calibration_stereo/core/io/config_io.h"
 #include "embedded_calibration_stereo/ros/conversions.h"
 #include "embedded_calibration_stereo/ros/parameter_reader.h"
 #include "embedded_calibration_stereo/ros/service_call.h"
@@ -18,11 +18,11 @@ namespace embedded_calibration_stereo {
 
 namespace {
 
-void loadMonitorParams(const ParameterReader& read, ecs::CalibrationMonitorOptions* monitor) {
-  ecs::CalibrationMonitorOptions& m = *monitor;
+void loadMonitorParams(const ParameterReader& read, core::CalibrationMonitorOptions* monitor) {
+  core::CalibrationMonitorOptions& m = *monitor;
   m.rectification.alpha = read.get("rectification_alpha", m.rectification.alpha);
   if (!(m.rectification.alpha == -1.0 || (m.rectification.alpha >= 0.0 && m.rectification.alpha <= 1.0)))
-    throw ecs::ConfigError("rectification_alpha", "must be in [0, 1], or -1 for OpenCV's default scaling");
+    throw core::ConfigError("rectification_alpha", "must be in [0, 1], or -1 for OpenCV's default scaling");
   m.misalignment_degraded_px = read.atLeast("misalignment_degraded_px", m.misalignment_degraded_px, 0.0);
   m.misalignment_bad_px = read.atLeast("misalignment_bad_px", m.misalignment_bad_px, m.misalignment_degraded_px);
   m.disparity_bias_degraded_px = read.atLeast("disparity_bias_degraded_px", m.disparity_bias_degraded_px, 0.0);
@@ -36,7 +36,7 @@ void loadMonitorParams(const ParameterReader& read, ecs::CalibrationMonitorOptio
   m.max_depth_age_s = read.atLeast("max_depth_age_s", m.max_depth_age_s, 0.0);
   m.max_verification_age_s = read.atLeast("max_verification_age_s", m.max_verification_age_s, 0.0);
   m.depth_frame_stride = 1;  // depth_every_n_frames strides before the images are converted
-  ecs::throwIfProblem(m.problem());
+  core::throwIfProblem(m.problem());
 }
 
 }  // namespace
@@ -69,8 +69,8 @@ HealthParams loadHealthParams(const ros::NodeHandle& pnh, const std::string& def
   const ParameterReader read(pnh);
   HealthParams p;
   p.device_config = read.get("device_config", default_device_config);
-  if (p.device_config.empty()) throw ecs::ConfigError("device_config", "missing");
-  ecs::CalibrationHealthPolicyOptions& policy = p.policy;
+  if (p.device_config.empty()) throw core::ConfigError("device_config", "missing");
+  core::CalibrationHealthPolicyOptions& policy = p.policy;
   policy.boards_posed = read.get("boards_posed", policy.boards_posed);
   policy.solve_boards_wait_s = read.inRange("solve_boards_wait_s", policy.solve_boards_wait_s, 0.0, 60.0);
   policy.refine_predicted_px = read.atLeast("refine_predicted_px", policy.refine_predicted_px, 0.0);
@@ -87,27 +87,27 @@ HealthParams loadHealthParams(const ros::NodeHandle& pnh, const std::string& def
   p.coverage.history_s = read.inRange("coverage_history_s", p.coverage.history_s, 10.0, 3600.0);
   p.coverage.min_history_s = std::min(p.coverage.min_history_s, p.coverage.history_s);
   try {
-    cv::FileStorage fs = ecs::openYaml(p.device_config);
-    p.boards = ecs::loadDevice(fs["device"], "device").virtualBoards();
-    if (!fs["rig"].empty()) p.nominal = ecs::loadStereoRig(fs["rig"], "rig");
+    cv::FileStorage fs = core::openYaml(p.device_config);
+    p.boards = core::loadDevice(fs["device"], "device").virtualBoards();
+    if (!fs["rig"].empty()) p.nominal = core::loadStereoRig(fs["rig"], "rig");
   } catch (const std::exception& e) {
-    throw ecs::ConfigError("device_config", "'" + p.device_config + "': " + e.what());
+    throw core::ConfigError("device_config", "'" + p.device_config + "': " + e.what());
   }
   return p;
 }
 
-CalibrationHealthPtr toHealthMsg(const ecs::HealthReport& report, uint32_t epoch, const ros::Time& stamp) {
+CalibrationHealthPtr toHealthMsg(const core::HealthReport& report, uint32_t epoch, const ros::Time& stamp) {
   auto msg = boost::make_shared<CalibrationHealth>();
   msg->header.stamp = stamp;
   msg->epoch = epoch;
   switch (report.state) {
-    case ecs::CalibrationHealth::kGood:
+    case core::CalibrationHealth::kGood:
       msg->state = CalibrationHealth::GOOD;
       break;
-    case ecs::CalibrationHealth::kDegraded:
+    case core::CalibrationHealth::kDegraded:
       msg->state = CalibrationHealth::DEGRADED;
       break;
-    case ecs::CalibrationHealth::kBad:
+    case core::CalibrationHealth::kBad:
       msg->state = CalibrationHealth::BAD;
       break;
     default:
@@ -121,7 +121,7 @@ CalibrationHealthPtr toHealthMsg(const ecs::HealthReport& report, uint32_t epoch
   msg->board_rms_right_px = boards ? report.board_rms_right_px : nan;
   msg->stereo_consistency_px = boards ? report.stereo_consistency_px : nan;
   for (size_t i = 0; i < 4; ++i) {
-    msg->predicted_depths_m[i] = ecs::kHealthDepthsM[i];
+    msg->predicted_depths_m[i] = core::kHealthDepthsM[i];
     msg->predicted_depth_error_pct[i] = report.predicted_depth_error_pct[i];
   }
   msg->misalignment_age_s = report.epipolar_age_s;
@@ -129,7 +129,7 @@ CalibrationHealthPtr toHealthMsg(const ecs::HealthReport& report, uint32_t epoch
   return msg;
 }
 
-void fillHealthDiagnostics(const ecs::HealthReport& report, const ecs::CalibrationHealthDecisions& policy,
+void fillHealthDiagnostics(const core::HealthReport& report, const core::CalibrationHealthDecisions& policy,
                            const std::string& reason, const HealthDiagnostics& extra,
                            diagnostic_updater::DiagnosticStatusWrapper* status) {
   using diagnostic_msgs::DiagnosticStatus;
@@ -138,14 +138,14 @@ void fillHealthDiagnostics(const ecs::HealthReport& report, const ecs::Calibrati
   } else if (policy.restoreFailed()) {
     status->summary(DiagnosticStatus::ERROR, policy.lastRestore());
   } else {
-    const int8_t level = report.state == ecs::CalibrationHealth::kGood  ? DiagnosticStatus::OK
-                         : report.state == ecs::CalibrationHealth::kBad ? DiagnosticStatus::ERROR
+    const int8_t level = report.state == core::CalibrationHealth::kGood  ? DiagnosticStatus::OK
+                         : report.state == core::CalibrationHealth::kBad ? DiagnosticStatus::ERROR
                                                                         : DiagnosticStatus::WARN;
     const std::string head =
-        report.state == ecs::CalibrationHealth::kUnknown ? "no verdict yet" : ecs::toString(report.state);
+        report.state == core::CalibrationHealth::kUnknown ? "no verdict yet" : core::toString(report.state);
     status->summary(level, reason.empty() ? head : head + ": " + reason);
   }
-  status->add("state", ecs::toString(report.state));
+  status->add("state", core::toString(report.state));
   status->add("calibration epoch", policy.epoch().value_or(0));
   status->add("boards verified against", extra.boards_source);
   status->add("misalignment (px)", report.misalignment_px);
@@ -155,7 +155,7 @@ void fillHealthDiagnostics(const ecs::HealthReport& report, const ecs::Calibrati
   status->add("stereo consistency (px)", report.stereo_consistency_px);
   for (size_t i = 0; i < 4; ++i) {
     char key[64];
-    std::snprintf(key, sizeof(key), "predicted depth error at %.0f m (%%)", ecs::kHealthDepthsM[i]);
+    std::snprintf(key, sizeof(key), "predicted depth error at %.0f m (%%)", core::kHealthDepthsM[i]);
     status->add(key, report.predicted_depth_error_pct[i]);
   }
   status->add("misalignment age (s)", report.epipolar_age_s);
@@ -192,8 +192,8 @@ CalibrationStatus rolledBackStatus(uint32_t epoch, const std::string& why) {
   return status;
 }
 
-ecs::CalibratorStatus toCalibratorStatus(const CalibrationStatus& status) {
-  ecs::CalibratorStatus out;
+core::CalibratorStatus toCalibratorStatus(const CalibrationStatus& status) {
+  core::CalibratorStatus out;
   out.epoch = status.epoch;
   out.accepted = status.accepted;
   out.in_force_confirmed = status.in_force_confirmed;
@@ -204,11 +204,11 @@ ecs::CalibratorStatus toCalibratorStatus(const CalibrationStatus& status) {
 }
 
 std::optional<SolvedBoards> solvedBoards(const CalibrationStatus& status,
-                                         const std::vector<ecs::VirtualBoard>& boards) {
+                                         const std::vector<core::VirtualBoard>& boards) {
   if (!status.accepted || status.board_ids.empty() || status.board_ids.size() != status.board_poses.size())
     return std::nullopt;
   SolvedBoards solved{status.left_intrinsics, status.right_intrinsics, {}};
-  for (ecs::VirtualBoard board : boards)
+  for (core::VirtualBoard board : boards)
     for (size_t i = 0; i < status.board_ids.size(); ++i)
       if (status.board_ids[i] == board.virtual_id) {
         board.rig_from_board = fromPoseMsg(status.board_poses[i]);

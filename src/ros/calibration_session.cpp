@@ -10,7 +10,7 @@
 #include <tuple>
 #include <utility>
 
-#include "embedded_calibration_stereo/core/geometry/config_error.h"
+#include "embedded_calibration_stereo/core/io/config_error.h"
 #include "embedded_calibration_stereo/core/calibration/observation_validator.h"
 #include "embedded_calibration_stereo/core/calibration/stereo_accuracy.h"
 #include "embedded_calibration_stereo/ros/conversions.h"
@@ -22,7 +22,7 @@
 namespace embedded_calibration_stereo {
 namespace {
 
-void appendIntrinsics(const ecs::PinholeCamera& camera, const ecs::CameraStddev& sd, std::vector<double>* values,
+void appendIntrinsics(const core::PinholeCamera& camera, const core::CameraStddev& sd, std::vector<double>* values,
                       std::vector<double>* stddevs) {
   *values = {camera.fx, camera.fy, camera.cx, camera.cy};
   values->insert(values->end(), camera.dist.begin(), camera.dist.end());
@@ -32,16 +32,16 @@ void appendIntrinsics(const ecs::PinholeCamera& camera, const ecs::CameraStddev&
 
 // The predicted depth accuracy of a solve with a covariance; zeros otherwise (also for a rig
 // that cannot be rectified: such a one is never committed).
-void fillPredictedAccuracy(const ecs::BundleAdjustmentSummary& summary, const ecs::RectificationOptions& rectification,
+void fillPredictedAccuracy(const core::BundleAdjustmentSummary& summary, const core::RectificationOptions& rectification,
                            CalibrationStatus* status) {
-  ecs::StereoAccuracyOptions options;
+  core::StereoAccuracyOptions options;
   options.rectification = rectification;
   options.depths_m = {1.0, 2.0, 5.0, 10.0, std::numeric_limits<double>::infinity()};
   for (size_t i = 0; i < status->predicted_depths_m.size(); ++i) status->predicted_depths_m[i] = options.depths_m[i];
   if (!summary.success || !summary.covariance_ok) return;
-  ecs::StereoAccuracy predicted;
+  core::StereoAccuracy predicted;
   try {
-    predicted = ecs::predictStereoAccuracy(summary.rig, summary.rig_covariance, options);
+    predicted = core::predictStereoAccuracy(summary.rig, summary.rig_covariance, options);
   } catch (const std::invalid_argument&) {
     return;
   }
@@ -56,7 +56,7 @@ void fillPredictedAccuracy(const ecs::BundleAdjustmentSummary& summary, const ec
 CommitTarget parseCommitTarget(const std::string& name) {
   if (name == "driver") return CommitTarget::kDriver;
   if (name == "none") return CommitTarget::kNone;
-  throw ecs::ConfigError("commit", "must be 'driver' or 'none', got '" + name + "'");
+  throw core::ConfigError("commit", "must be 'driver' or 'none', got '" + name + "'");
 }
 
 CalibratorParams loadCalibratorParams(const ros::NodeHandle& pnh, const std::string& default_device_config) {
@@ -83,20 +83,20 @@ CalibratorParams loadCalibratorParams(const ros::NodeHandle& pnh, const std::str
   p.commit = parseCommitTarget(read.get("commit", "driver"));
   p.rectification_alpha = read.get("rectification_alpha", p.rectification_alpha);
   if (!(p.rectification_alpha == -1.0 || (p.rectification_alpha >= 0.0 && p.rectification_alpha <= 1.0)))
-    throw ecs::ConfigError("rectification_alpha", "must be in [0, 1], or -1 for OpenCV's default scaling");
+    throw core::ConfigError("rectification_alpha", "must be in [0, 1], or -1 for OpenCV's default scaling");
   p.terms.estimate_tangential = read.get("estimate_tangential", p.terms.estimate_tangential);
   p.terms.estimate_k3 = read.get("estimate_k3", p.terms.estimate_k3);
   non_negative("loss_scale_px", &p.adjustment.loss_scale_px);
   const std::string placement = read.get("board_placement", std::string("tested"));
-  if (placement == "held") p.adjustment.board_placement = ecs::BoardPlacement::kHeld;
-  else if (placement == "refined") p.adjustment.board_placement = ecs::BoardPlacement::kRefined;
-  else if (placement == "tested") p.adjustment.board_placement = ecs::BoardPlacement::kTested;
-  else throw ecs::ConfigError("board_placement", "must be held, refined or tested, got '" + placement + "'");
+  if (placement == "held") p.adjustment.board_placement = core::BoardPlacement::kHeld;
+  else if (placement == "refined") p.adjustment.board_placement = core::BoardPlacement::kRefined;
+  else if (placement == "tested") p.adjustment.board_placement = core::BoardPlacement::kTested;
+  else throw core::ConfigError("board_placement", "must be held, refined or tested, got '" + placement + "'");
   p.adjustment.use_scene_matches = read.get("scene_constraints", p.adjustment.use_scene_matches);
   p.prior_from_earlier_windows = read.get("prior_from_earlier_windows", p.prior_from_earlier_windows);
   p.filter.change_probability = read.get("change_probability", p.filter.change_probability);
   p.gate.refine_ratio = read.inRange("refine_ratio", 0.85, 0.0, 0.99);
-  if (const std::string e = p.filter.Check(); !e.empty()) throw ecs::ConfigError("change_probability", e);
+  if (const std::string e = p.filter.validate(); !e.empty()) throw core::ConfigError("change_probability", e);
   non_negative("max_rms_px", &p.gate.max_rms_px);
   non_negative("max_epipolar_rms_px", &p.gate.max_epipolar_rms_px);
   non_negative("max_outlier_fraction", &p.gate.max_outlier_fraction);
@@ -109,8 +109,8 @@ CalibratorParams loadCalibratorParams(const ros::NodeHandle& pnh, const std::str
   non_negative("min_rms_improvement_rel", &p.gate.min_rms_improvement_rel);
   non_negative("min_change_in_predicted", &p.gate.min_change_in_predicted);
   non_negative("in_force_max_rms_px", &p.gate.in_force_max_rms_px);
-  if (const std::string e = p.adjustment.Check(); !e.empty()) throw ecs::ConfigError("loss_scale_px", e);
-  if (const std::string e = p.gate.Check(); !e.empty()) throw ecs::ConfigError("quality gate", e);
+  if (const std::string e = p.adjustment.validate(); !e.empty()) throw core::ConfigError("loss_scale_px", e);
+  if (const std::string e = p.gate.validate(); !e.empty()) throw core::ConfigError("quality gate", e);
   return p;
 }
 
@@ -142,23 +142,23 @@ BoundedRequest boundRecalibrateRequest(uint32_t frames, double timeout_s, const 
   return r;
 }
 
-std::vector<std::string> observationDefects(const ecs::StereoObservation& observation,
-                                            const std::vector<ecs::VirtualBoard>& boards) {
-  ecs::ObservationValidationOptions options;
+std::vector<std::string> observationDefects(const core::StereoObservation& observation,
+                                            const std::vector<core::VirtualBoard>& boards) {
+  core::ObservationValidationOptions options;
   // Size and corner count are judged at solve time against the calibration in force; here only
   // defects of the message itself count.
   options.image_width = options.image_height = 1 << 20;
   options.max_outside_image_px = 1 << 20;
   options.min_corners_per_board = 0;
-  std::vector<std::string> defects = ecs::validateObservations({observation}, boards, options).dropped;
+  std::vector<std::string> defects = core::validateObservations({observation}, boards, options).dropped;
   // "frame 0 left board 3: ..." -> "left board 3: ..." (there is only one frame here).
   for (std::string& d : defects)
     if (d.rfind("frame 0 ", 0) == 0) d.erase(0, 8);
   return defects;
 }
 
-CalibrationStatus makeStatus(const ecs::BundleAdjustmentSummary& summary, const ecs::GateDecision& decision,
-                             const ecs::RectificationOptions& rectification) {
+CalibrationStatus makeStatus(const core::BundleAdjustmentSummary& summary, const core::GateDecision& decision,
+                             const core::RectificationOptions& rectification) {
   CalibrationStatus status;
   status.header.stamp = ros::Time::now();
   status.accepted = decision.accepted;
@@ -195,8 +195,8 @@ bool carriesCalibration(const sensor_msgs::CameraInfo& published, const sensor_m
          same(published.K, committed.K) && same(published.R, committed.R) && same(published.P, committed.P);
 }
 
-CalibrationSession::CalibrationSession(ros::NodeHandle nh, CalibratorParams params, ecs::CalibrationDevice device,
-                                       std::optional<ecs::StereoRig> nominal)
+CalibrationSession::CalibrationSession(ros::NodeHandle nh, CalibratorParams params, core::CalibrationDevice device,
+                                       std::optional<core::StereoRig> nominal)
     : nh_(std::move(nh)),
       params_(std::move(params)),
       device_(std::move(device)),
@@ -206,7 +206,7 @@ CalibrationSession::CalibrationSession(ros::NodeHandle nh, CalibratorParams para
       gate_(params_.gate),
       filter_(params_.filter) {}
 
-CalibrationStatus CalibrationSession::solve(const std::vector<ecs::StereoObservation>& frames,
+CalibrationStatus CalibrationSession::solve(const std::vector<core::StereoObservation>& frames,
                                             const sensor_msgs::CameraInfo* left_info,
                                             const sensor_msgs::CameraInfo* right_info, uint32_t epoch,
                                             bool dry_run, std::optional<CommittedCalibration>* committed,
@@ -221,7 +221,7 @@ CalibrationStatus CalibrationSession::solve(const std::vector<ecs::StereoObserva
     status.reason = "no left/right camera_info received: image size and calibration in force unknown";
     return status;
   }
-  ecs::StereoRig in_force;
+  core::StereoRig in_force;
   std::string error;
   const bool have_in_force = fromStereoCameraInfo(*left_info, *right_info, &in_force, &error);
   // What earlier windows taught holds only under the calibration it was learned with.
@@ -231,15 +231,15 @@ CalibrationStatus CalibrationSession::solve(const std::vector<ecs::StereoObserva
     filter_in_force_.reset();
     in_force_predicted_px_.reset();
   }
-  const ecs::BundleAdjustmentSummary candidate =
+  const core::BundleAdjustmentSummary candidate =
       solveWindow(frames, *left_info, have_in_force ? &in_force : nullptr, health_problem_s);
   // An implausible calibration in force (an outside driver's) is never confirmed: the solve is
   // judged on its own, as for an uncalibrated head.
   const bool judge_in_force = have_in_force && implausibleCandidate({*left_info, *right_info}).empty();
-  ecs::BundleAdjustmentSummary in_force_fit;
+  core::BundleAdjustmentSummary in_force_fit;
   if (judge_in_force && candidate.success)
-    in_force_fit = ecs::evaluateFixedCalibration(in_force, frames, boards_, params_.adjustment, &device_);
-  ecs::GateDecision decision;
+    in_force_fit = core::evaluateFixedCalibration(in_force, frames, boards_, params_.adjustment, &device_);
+  core::GateDecision decision;
   if (!candidate.success) {
     decision.reason = "solve failed: " + candidate.message;
   } else {
@@ -264,26 +264,26 @@ CalibrationStatus CalibrationSession::solve(const std::vector<ecs::StereoObserva
 
 // The window's solve: on its own, then again with what earlier windows taught about the
 // parameter groups it does not contradict (prior_note_ says which).
-ecs::BundleAdjustmentSummary CalibrationSession::solveWindow(const std::vector<ecs::StereoObservation>& frames,
+core::BundleAdjustmentSummary CalibrationSession::solveWindow(const std::vector<core::StereoObservation>& frames,
                                                              const sensor_msgs::CameraInfo& left_info,
-                                                             const ecs::StereoRig* in_force,
+                                                             const core::StereoRig* in_force,
                                                              std::optional<double> health_problem_s) {
-  ecs::CalibrationInput input;
+  core::CalibrationInput input;
   input.frames = &frames;
   input.device = &device_;
   input.image_width = static_cast<int>(left_info.width);
   input.image_height = static_cast<int>(left_info.height);
   if (in_force) input.in_force = *in_force;  // otherwise an uncalibrated head: Zhang start
-  ecs::BundleAdjustmentSummary candidate = adjuster_.Solve(input);
+  core::BundleAdjustmentSummary candidate = adjuster_.Solve(input);
   const double stamp = frames.empty() ? 0.0 : frames.back().stamp;
   prior_note_.clear();
   if (params_.prior_from_earlier_windows && candidate.success && filter_.hasState()) {
     std::vector<std::string> changed, seen_by_health;
-    if (health_problem_s && *health_problem_s >= filter_.stateTime()) seen_by_health = ecs::turnAndZoomGroups();
-    if (const std::optional<ecs::RigPrior> prior = filter_.priorFor(candidate, stamp, &changed, seen_by_health)) {
+    if (health_problem_s && *health_problem_s >= filter_.stateTime()) seen_by_health = core::turnAndZoomGroups();
+    if (const std::optional<core::RigPrior> prior = filter_.priorFor(candidate, stamp, &changed, seen_by_health)) {
       input.rig_prior = prior;
       input.weights_from = &candidate;
-      ecs::BundleAdjustmentSummary with_prior = adjuster_.Solve(input);
+      core::BundleAdjustmentSummary with_prior = adjuster_.Solve(input);
       input.weights_from = nullptr;
       if (with_prior.success) {
         with_prior.solve_ms += candidate.solve_ms;  // both solves are this window's
@@ -304,19 +304,19 @@ ecs::BundleAdjustmentSummary CalibrationSession::solveWindow(const std::vector<e
 }
 
 // The status of a judged solve, in the words a user reads.
-CalibrationStatus CalibrationSession::statusOf(const ecs::BundleAdjustmentSummary& candidate,
-                                               const ecs::GateDecision& decision,
-                                               const ecs::BundleAdjustmentSummary& in_force_fit, uint32_t epoch,
-                                               const std::vector<ecs::StereoObservation>& frames) const {
-  ecs::RectificationOptions rectification;  // as toStereoCameraInfo() commits it
+CalibrationStatus CalibrationSession::statusOf(const core::BundleAdjustmentSummary& candidate,
+                                               const core::GateDecision& decision,
+                                               const core::BundleAdjustmentSummary& in_force_fit, uint32_t epoch,
+                                               const std::vector<core::StereoObservation>& frames) const {
+  core::RectificationOptions rectification;  // as toStereoCameraInfo() commits it
   rectification.alpha = params_.rectification_alpha;
   CalibrationStatus status = makeStatus(candidate, decision, rectification);
   status.epoch = epoch;
   if (!frames.empty()) status.newest_frame.fromSec(frames.back().stamp);
   if (decision.in_force_confirmed) {
     char rms[96];
-    std::snprintf(rms, sizeof(rms), " (RMS %.3f px; the new solve %.3f px, no better)", ecs::combinedRms(in_force_fit),
-                  ecs::combinedRms(candidate));
+    std::snprintf(rms, sizeof(rms), " (RMS %.3f px; the new solve %.3f px, no better)", core::combinedRms(in_force_fit),
+                  core::combinedRms(candidate));
     // The gate's words when the new solve fits better but changes too little to trust.
     status.reason = kInForceConfirmedReason +
                     (decision.change_too_small ? " (" + decision.detail + ")" : std::string(rms));
@@ -327,7 +327,7 @@ CalibrationStatus CalibrationSession::statusOf(const ecs::BundleAdjustmentSummar
 
 // An accepted solve to the driver (or, for a replay, to /tf_static only); `status` says what
 // became of it.
-void CalibrationSession::commitAccepted(const ecs::BundleAdjustmentSummary& candidate, bool learned,
+void CalibrationSession::commitAccepted(const core::BundleAdjustmentSummary& candidate, bool learned,
                                         const sensor_msgs::CameraInfo& left_info,
                                         const sensor_msgs::CameraInfo& right_info, CalibrationStatus* status,
                                         std::optional<CommittedCalibration>* committed,
@@ -360,13 +360,13 @@ void CalibrationSession::commitAccepted(const ecs::BundleAdjustmentSummary& cand
     status->reason = "not committed: " + commit_error;
     if (uncommitted)
       *uncommitted = UncommittedCalibration{infos, candidate.rig, left_info, right_info, *status,
-                                            ecs::QualityGate::predictedPx(candidate)};
+                                            core::QualityGate::predictedPx(candidate)};
     return;
   }
   // status.epoch stays `epoch`: how far the driver moves its epoch per set_camera_info is the
   // driver's business, so the caller reads the new epoch from the driver's frames.
   if (learned) filter_in_force_.emplace(infos.left, infos.right);
-  const double predicted = ecs::QualityGate::predictedPx(candidate);
+  const double predicted = core::QualityGate::predictedPx(candidate);
   in_force_predicted_px_ = predicted > 0.0 ? std::optional<double>(predicted) : std::nullopt;
   *committed = std::move(infos);
 }
@@ -385,7 +385,7 @@ std::string CalibrationSession::commitAgain(const UncommittedCalibration& calibr
   return error;
 }
 
-std::string CalibrationSession::commit(const CommittedCalibration& infos, const ecs::StereoRig& rig,
+std::string CalibrationSession::commit(const CommittedCalibration& infos, const core::StereoRig& rig,
                                        const sensor_msgs::CameraInfo& left_in_force) {
   std::string error, left_answer;
   if (!callSetCameraInfo("left", infos.left, &error, &left_answer)) return error;
@@ -404,7 +404,7 @@ std::string CalibrationSession::commit(const CommittedCalibration& infos, const 
   return "";
 }
 
-void CalibrationSession::broadcastTransform(const ecs::StereoRig& rig) {
+void CalibrationSession::broadcastTransform(const core::StereoRig& rig) {
   std::lock_guard<std::mutex> lock(tf_mutex_);
   tf_broadcaster_.sendTransform(
       toTransformStamped(rig.leftFromRight(), params_.left_frame_id, params_.right_frame_id, ros::Time::now()));

@@ -3,7 +3,7 @@
 #include <cmath>
 #include <cstdio>
 
-#include "embedded_calibration_stereo/core/geometry/config_error.h"
+#include "embedded_calibration_stereo/core/io/config_error.h"
 #include "embedded_calibration_stereo/ros/conversions.h"
 #include "embedded_calibration_stereo/ros/set_camera_info_answer.h"
 #include "embedded_calibration_stereo/ros/stereo_input_check.h"
@@ -14,7 +14,7 @@ namespace {
 
 std::string resolve(const StereoCalibration::Camera& camera) {
   std::string path, error;
-  if (!resolveCalibrationUrl(camera.url, camera.name, &path, &error)) throw ecs::ConfigError(camera.parameter, error);
+  if (!resolveCalibrationUrl(camera.url, camera.name, &path, &error)) throw core::ConfigError(camera.parameter, error);
   return path;
 }
 
@@ -50,7 +50,7 @@ bool isMonocular(const sensor_msgs::CameraInfo& info, const sensor_msgs::CameraI
 }  // namespace
 
 StereoCalibration::StereoCalibration(const Camera& left, const Camera& right, uint32_t width, uint32_t height,
-                                     double pair_timeout_s, std::optional<ecs::StereoRig> nominal)
+                                     double pair_timeout_s, std::optional<core::StereoRig> nominal)
     : left_camera_(left),
       right_camera_(right),
       width_(width),
@@ -59,7 +59,7 @@ StereoCalibration::StereoCalibration(const Camera& left, const Camera& right, ui
       nominal_(std::move(nominal)),
       store_(resolve(left), resolve(right), left.name, right.name) {
   if (store_.leftPath() == store_.rightPath())
-    throw ecs::ConfigError(right.parameter, "resolves to '" + store_.rightPath() + "', the same file as " +
+    throw core::ConfigError(right.parameter, "resolves to '" + store_.rightPath() + "', the same file as " +
                                                 left.parameter + ": each camera needs its own file");
 }
 
@@ -67,12 +67,12 @@ std::string StereoCalibration::checkOne(bool left, const sensor_msgs::CameraInfo
   std::string problem = checkCameraInfo(info, name, width_, height_);
   if (!problem.empty()) return problem;
   if (nominal_) {
-    const ecs::PinholeCamera& camera = left ? nominal_->left : nominal_->right;
+    const core::PinholeCamera& camera = left ? nominal_->left : nominal_->right;
     problem = checkNominalFocal(info, name, camera.fx, camera.fy);
     if (!problem.empty()) return problem;
   }
   // The OnlineCalibrator models plumb_bob only: it would not read any other calibration back.
-  ecs::PinholeCamera camera;
+  core::PinholeCamera camera;
   std::string error;
   if (!fromCameraInfo(info, &camera, &error)) return name + ": " + error;
   return "";
@@ -181,8 +181,8 @@ StereoCalibration::SetResult StereoCalibration::setMonocularLocked(bool left, co
                                                                   const InForce& in_force) {
   SetResult result;
   const std::string name = std::string(sideName(left)) + "/set_camera_info";
-  ecs::StereoRig rig;
-  ecs::PinholeCamera camera;
+  core::StereoRig rig;
+  core::PinholeCamera camera;
   std::string error;
   if (!fromStereoCameraInfo(in_force.left, in_force.right, &rig, &error) || !fromCameraInfo(info, &camera, &error)) {
     result.message = "rejected: " + name + ": a calibration of this camera alone (R the identity, Tx 0), and " + error;

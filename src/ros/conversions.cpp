@@ -9,13 +9,13 @@ namespace embedded_calibration_stereo {
 namespace {
 
 // Fields shared by the mono and stereo messages: size, model, K, D.
-sensor_msgs::CameraInfo intrinsicsMsg(const ecs::PinholeCamera& camera) {
+sensor_msgs::CameraInfo intrinsicsMsg(const core::PinholeCamera& camera) {
   sensor_msgs::CameraInfo info;
   info.width = static_cast<uint32_t>(camera.width);
   info.height = static_cast<uint32_t>(camera.height);
   info.distortion_model = sensor_msgs::distortion_models::PLUMB_BOB;
   info.D.assign(camera.dist.begin(), camera.dist.end());
-  const cv::Matx33d k = ecs::cameraMatrix(camera);
+  const cv::Matx33d k = core::cameraMatrix(camera);
   for (int i = 0; i < 9; ++i) info.K[i] = k.val[i];
   return info;
 }
@@ -36,10 +36,10 @@ Eigen::Matrix3d rotationOf(const boost::array<double, 9>& r) {
 
 }  // namespace
 
-sensor_msgs::CameraInfo toCameraInfo(const ecs::PinholeCamera& camera) {
+sensor_msgs::CameraInfo toCameraInfo(const core::PinholeCamera& camera) {
   sensor_msgs::CameraInfo info = intrinsicsMsg(camera);
   info.R = {1, 0, 0, 0, 1, 0, 0, 0, 1};
-  const cv::Matx33d k = ecs::cameraMatrix(camera);
+  const cv::Matx33d k = core::cameraMatrix(camera);
   for (int i = 0; i < 3; ++i) {
     for (int j = 0; j < 3; ++j) info.P[4 * i + j] = k(i, j);
     info.P[4 * i + 3] = 0.0;
@@ -48,21 +48,21 @@ sensor_msgs::CameraInfo toCameraInfo(const ecs::PinholeCamera& camera) {
 }
 
 std::pair<sensor_msgs::CameraInfo, sensor_msgs::CameraInfo> toStereoCameraInfo(
-    const ecs::StereoRig& rig, double alpha) {
+    const core::StereoRig& rig, double alpha) {
   sensor_msgs::CameraInfo left = intrinsicsMsg(rig.left);
   sensor_msgs::CameraInfo right = intrinsicsMsg(rig.right);
   // Bouguet is the rectification CameraInfo's R and P mean to stereo_image_proc (and the
   // rectifier's bouguet method applies them as they are).
-  ecs::RectificationOptions options;
-  options.method = ecs::RectificationMethod::kBouguet;
+  core::RectificationOptions options;
+  options.method = core::RectificationMethod::kBouguet;
   options.alpha = alpha;
-  const ecs::RectificationGeometry g = ecs::computeRectificationGeometry(rig, options);
+  const core::RectificationGeometry g = core::computeRectificationGeometry(rig, options);
   setRectification(g.R1, g.P1, &left);
   setRectification(g.R2, g.P2, &right);
   return {left, right};
 }
 
-bool fromCameraInfo(const sensor_msgs::CameraInfo& info, ecs::PinholeCamera* camera,
+bool fromCameraInfo(const sensor_msgs::CameraInfo& info, core::PinholeCamera* camera,
                     std::string* error) {
   auto fail = [error](const std::string& why) {
     if (error) *error = why;
@@ -74,7 +74,7 @@ bool fromCameraInfo(const sensor_msgs::CameraInfo& info, ecs::PinholeCamera* cam
   if (info.D.size() != 0 && info.D.size() != 4 && info.D.size() != 5)
     return fail("D has " + std::to_string(info.D.size()) + " coefficients (plumb_bob takes 4 or 5)");
   if (info.width == 0 || info.height == 0) return fail("width and height must be > 0");
-  ecs::PinholeCamera c;
+  core::PinholeCamera c;
   c.width = static_cast<int>(info.width);
   c.height = static_cast<int>(info.height);
   c.fx = info.K[0];
@@ -94,9 +94,9 @@ bool fromCameraInfo(const sensor_msgs::CameraInfo& info, ecs::PinholeCamera* cam
 }
 
 bool fromStereoCameraInfo(const sensor_msgs::CameraInfo& left,
-                          const sensor_msgs::CameraInfo& right, ecs::StereoRig* rig,
+                          const sensor_msgs::CameraInfo& right, core::StereoRig* rig,
                           std::string* error) {
-  ecs::StereoRig result;
+  core::StereoRig result;
   std::string why;
   if (!fromCameraInfo(left, &result.left, &why)) {
     if (error) *error = "left: " + why;
@@ -122,7 +122,7 @@ bool fromStereoCameraInfo(const sensor_msgs::CameraInfo& left,
   return true;
 }
 
-BoardObservation toMsg(const ecs::BoardCorners& corners) {
+BoardObservation toMsg(const core::BoardCorners& corners) {
   BoardObservation msg;
   msg.board_id = static_cast<uint16_t>(corners.board_id);
   msg.corner_ids.assign(corners.corner_ids.begin(), corners.corner_ids.end());
@@ -131,8 +131,8 @@ BoardObservation toMsg(const ecs::BoardCorners& corners) {
   return msg;
 }
 
-ecs::BoardCorners fromMsg(const BoardObservation& msg) {
-  ecs::BoardCorners corners;
+core::BoardCorners fromMsg(const BoardObservation& msg) {
+  core::BoardCorners corners;
   corners.board_id = msg.board_id;
   corners.corner_ids.assign(msg.corner_ids.begin(), msg.corner_ids.end());
   corners.u = msg.u;
@@ -140,13 +140,13 @@ ecs::BoardCorners fromMsg(const BoardObservation& msg) {
   return corners;
 }
 
-StereoPatternObservation toMsg(const ecs::StereoObservation& observation) {
+StereoPatternObservation toMsg(const core::StereoObservation& observation) {
   StereoPatternObservation msg;
   msg.header.stamp.fromSec(observation.stamp);
   for (const auto& b : observation.left) msg.left.push_back(toMsg(b));
   for (const auto& b : observation.right) msg.right.push_back(toMsg(b));
   msg.scene.reserve(observation.scene.size());
-  for (const ecs::SceneMatch& m : observation.scene) {
+  for (const core::SceneMatch& m : observation.scene) {
     SceneMatch s;
     s.left_u = m.left_u, s.left_v = m.left_v, s.right_u = m.right_u, s.right_v = m.right_v;
     msg.scene.push_back(s);
@@ -154,8 +154,8 @@ StereoPatternObservation toMsg(const ecs::StereoObservation& observation) {
   return msg;
 }
 
-ecs::StereoObservation fromMsg(const StereoPatternObservation& msg) {
-  ecs::StereoObservation observation;
+core::StereoObservation fromMsg(const StereoPatternObservation& msg) {
+  core::StereoObservation observation;
   observation.stamp = msg.header.stamp.toSec();
   for (const auto& b : msg.left) observation.left.push_back(fromMsg(b));
   for (const auto& b : msg.right) observation.right.push_back(fromMsg(b));

@@ -14,7 +14,7 @@ ExternalStereoInput::ExternalStereoInput(ros::NodeHandle& nh, ros::NodeHandle& p
   left_info_sub_.subscribe(nh, "driver/left/camera_info", options.queue_size);
   right_info_sub_.subscribe(nh, "driver/right/camera_info", options.queue_size);
   // Arrivals per topic, to name the missing one when no frame can be matched.
-  arrivals_ = std::make_unique<ecs::InputArrivalWatch>(
+  arrivals_ = std::make_unique<core::InputArrivalWatch>(
       std::vector<std::string>{"image on " + topic(0), "camera_info on " + topic(1), "image on " + topic(2),
                                "camera_info on " + topic(3)},
       "the driver's images and camera_info arrive but do not pair by stamp");

@@ -11,7 +11,7 @@
 #include <opencv2/videoio.hpp>
 #include <vector>
 
-#include "embedded_calibration_stereo/core/geometry/config_error.h"
+#include "embedded_calibration_stereo/core/io/config_error.h"
 #include "embedded_calibration_stereo/ros/frame_source.h"
 
 namespace embedded_calibration_stereo {
@@ -36,7 +36,7 @@ std::string trim(const std::string& s) {
 // Rows "frame,light_on" (light_on: 0/1/true/false/on/off); an optional non-numeric header row.
 std::map<int, bool> readLightCsv(const std::string& path) {
   const std::string param = "files_light_csv";
-  if (!isFile(path)) throw ecs::ConfigError(param, "file not found: '" + path + "'");
+  if (!isFile(path)) throw core::ConfigError(param, "file not found: '" + path + "'");
   std::ifstream in(path);
   std::map<int, bool> states;
   std::string line;
@@ -47,7 +47,7 @@ std::map<int, bool> readLightCsv(const std::string& path) {
     if (line.empty() || line[0] == '#') continue;
     const size_t comma = line.find(',');
     const std::string where = "'" + path + "' line " + std::to_string(line_no);
-    if (comma == std::string::npos) throw ecs::ConfigError(param, where + ": expected 'frame,light_on'");
+    if (comma == std::string::npos) throw core::ConfigError(param, where + ": expected 'frame,light_on'");
     const std::string frame_text = trim(line.substr(0, comma));
     std::string value = trim(line.substr(comma + 1));
     const size_t extra = value.find(',');
@@ -56,20 +56,20 @@ std::map<int, bool> readLightCsv(const std::string& path) {
     const long frame = std::strtol(frame_text.c_str(), &end, 10);
     if (end == frame_text.c_str() || *end != '\0') {
       if (states.empty() && line_no == 1) continue;  // header row
-      throw ecs::ConfigError(param, where + ": frame '" + frame_text + "' is not an integer");
+      throw core::ConfigError(param, where + ": frame '" + frame_text + "' is not an integer");
     }
-    if (frame < 0) throw ecs::ConfigError(param, where + ": negative frame index");
+    if (frame < 0) throw core::ConfigError(param, where + ": negative frame index");
     bool on;
     if (value == "1" || value == "true" || value == "True" || value == "on") {
       on = true;
     } else if (value == "0" || value == "false" || value == "False" || value == "off") {
       on = false;
     } else {
-      throw ecs::ConfigError(param, where + ": light_on '" + value + "' is not 0/1/true/false");
+      throw core::ConfigError(param, where + ": light_on '" + value + "' is not 0/1/true/false");
     }
     states[static_cast<int>(frame)] = on;
   }
-  if (states.empty()) throw ecs::ConfigError(param, "'" + path + "' has no rows");
+  if (states.empty()) throw core::ConfigError(param, "'" + path + "' has no rows");
   return states;
 }
 
@@ -77,7 +77,7 @@ class FilesFrameSource : public FrameSource {
  public:
   explicit FilesFrameSource(const FilesSourceParams& params) : params_(params) {
     if (params_.encoding != "mono8" && params_.encoding != "bgr8")
-      throw ecs::ConfigError("encoding", "must be mono8 or bgr8 (got '" + params_.encoding + "')");
+      throw core::ConfigError("encoding", "must be mono8 or bgr8 (got '" + params_.encoding + "')");
     if (!params_.left_video.empty() || !params_.right_video.empty()) {
       openVideos();
     } else {
@@ -87,7 +87,7 @@ class FilesFrameSource : public FrameSource {
     // Read the first pair now: an unreadable file or a size mismatch fails at start-up.
     StereoFrame first;
     std::string error;
-    if (!read(0, &first, &error)) throw ecs::ConfigError(videos_ ? "files_left_video" : "files_dir", error);
+    if (!read(0, &first, &error)) throw core::ConfigError(videos_ ? "files_left_video" : "files_dir", error);
     size_ = first.left.size();
     rewind();
   }
@@ -125,16 +125,16 @@ class FilesFrameSource : public FrameSource {
 
  private:
   void listImages() {
-    if (params_.dir.empty()) throw ecs::ConfigError("files_dir", "missing (or give files_left_video and files_right_video)");
-    if (!isDirectory(params_.dir)) throw ecs::ConfigError("files_dir", "directory does not exist: '" + params_.dir + "'");
+    if (params_.dir.empty()) throw core::ConfigError("files_dir", "missing (or give files_left_video and files_right_video)");
+    if (!isDirectory(params_.dir)) throw core::ConfigError("files_dir", "directory does not exist: '" + params_.dir + "'");
     cv::glob(params_.dir + "/" + params_.left_glob, left_files_, false);
     cv::glob(params_.dir + "/" + params_.right_glob, right_files_, false);
     std::sort(left_files_.begin(), left_files_.end());
     std::sort(right_files_.begin(), right_files_.end());
     if (left_files_.empty())
-      throw ecs::ConfigError("files_left_glob", "no file matches '" + params_.left_glob + "' in '" + params_.dir + "'");
+      throw core::ConfigError("files_left_glob", "no file matches '" + params_.left_glob + "' in '" + params_.dir + "'");
     if (right_files_.size() != left_files_.size())
-      throw ecs::ConfigError("files_right_glob", std::to_string(right_files_.size()) + " files match '" +
+      throw core::ConfigError("files_right_glob", std::to_string(right_files_.size()) + " files match '" +
                                                      params_.right_glob + "' but " + std::to_string(left_files_.size()) +
                                                      " match files_left_glob");
   }
@@ -144,13 +144,13 @@ class FilesFrameSource : public FrameSource {
     const std::pair<const char*, const std::string*> sides[] = {{"files_left_video", &params_.left_video},
                                                                 {"files_right_video", &params_.right_video}};
     for (const auto& side : sides) {
-      if (side.second->empty()) throw ecs::ConfigError(side.first, "missing (both videos are needed)");
-      if (!isFile(*side.second)) throw ecs::ConfigError(side.first, "file not found: '" + *side.second + "'");
+      if (side.second->empty()) throw core::ConfigError(side.first, "missing (both videos are needed)");
+      if (!isFile(*side.second)) throw core::ConfigError(side.first, "file not found: '" + *side.second + "'");
     }
     left_video_.open(params_.left_video);
     right_video_.open(params_.right_video);
-    if (!left_video_.isOpened()) throw ecs::ConfigError("files_left_video", "cannot decode '" + params_.left_video + "'");
-    if (!right_video_.isOpened()) throw ecs::ConfigError("files_right_video", "cannot decode '" + params_.right_video + "'");
+    if (!left_video_.isOpened()) throw core::ConfigError("files_left_video", "cannot decode '" + params_.left_video + "'");
+    if (!right_video_.isOpened()) throw core::ConfigError("files_right_video", "cannot decode '" + params_.right_video + "'");
   }
 
   void rewind() {

@@ -9,7 +9,7 @@ namespace {
 
 class NoLight : public LightBackend {
  public:
-  bool apply(const ecs::LightState&, std::string*) override { return true; }
+  bool apply(const core::LightState&, std::string*) override { return true; }
 };
 
 class SimLight : public LightBackend {
@@ -18,7 +18,7 @@ class SimLight : public LightBackend {
       : level_(std::move(level)), command_(std::move(command)) {}
   // The sim renders the ramping level, so the settling frames really show a half-lit device
   // (or, with a light response model, the level that follows the command).
-  bool apply(const ecs::LightState& state, std::string*) override {
+  bool apply(const core::LightState& state, std::string*) override {
     level_->store(state.light_level);
     if (command_) {
       if (state.switched) switches_ += 1;
@@ -43,7 +43,7 @@ int hexDigit(char c) {
 // A byte string written with escapes (unescapeBytes).
 std::string readBytes(const ParameterReader& read, const std::string& name, const std::string& fallback) {
   std::string decoded, error;
-  if (!unescapeBytes(read.get(name, fallback), &decoded, &error)) throw ecs::ConfigError(name, error);
+  if (!unescapeBytes(read.get(name, fallback), &decoded, &error)) throw core::ConfigError(name, error);
   return decoded;
 }
 
@@ -54,7 +54,7 @@ LightBackendParams readLightBackendParams(const ParameterReader& read, const std
   p.backend = read.choice("light_backend", default_backend, {"sim", "serial", "gpio", "none"});
   if (p.backend == "serial") {
     p.serial.port = read.required<std::string>("serial_port");
-    if (p.serial.port.empty()) throw ecs::ConfigError("serial_port", "missing");
+    if (p.serial.port.empty()) throw core::ConfigError("serial_port", "missing");
     p.serial.baud = read.get("serial_baud", p.serial.baud);
     p.serial.on_bytes = readBytes(read, "serial_on", "ON\\n");
     p.serial.off_bytes = readBytes(read, "serial_off", "OFF\\n");
@@ -62,7 +62,7 @@ LightBackendParams readLightBackendParams(const ParameterReader& read, const std
     p.gpio.chip = read.get("gpio_chip", p.gpio.chip);
     p.gpio.line = read.get("gpio_line", p.gpio.line);
     p.gpio.active_low = read.get("gpio_active_low", p.gpio.active_low);
-    if (p.gpio.line < 0) throw ecs::ConfigError("gpio_line", "missing or negative line offset");
+    if (p.gpio.line < 0) throw core::ConfigError("gpio_line", "missing or negative line offset");
   }
   return p;
 }

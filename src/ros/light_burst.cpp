@@ -74,7 +74,7 @@ std::optional<EndedBurst> LightBurstCollector::add(const sensor_msgs::ImageConst
 }
 
 std::string readStereo(const sensor_msgs::ImageConstPtr& left, const sensor_msgs::ImageConstPtr& right,
-                       cv::Mat* left_image, cv::Mat* right_image, ecs::ColorOrder* order) {
+                       cv::Mat* left_image, cv::Mat* right_image, core::ColorOrder* order) {
   if (std::string problem = stereoFormatProblem(*left, *right); !problem.empty()) return problem;
   try {
     *left_image = cv_bridge::toCvShare(left)->image;  // shares the message's data, which `left` keeps
@@ -82,7 +82,7 @@ std::string readStereo(const sensor_msgs::ImageConstPtr& left, const sensor_msgs
   } catch (const cv_bridge::Exception& e) {
     return std::string("cannot read it: ") + e.what();
   }
-  *order = left->encoding == "rgb8" ? ecs::ColorOrder::kRgb : ecs::ColorOrder::kBgr;
+  *order = left->encoding == "rgb8" ? core::ColorOrder::kRgb : core::ColorOrder::kBgr;
   return "";
 }
 
@@ -92,9 +92,9 @@ cv::Mat windowImage(const sensor_msgs::ImageConstPtr& m) {
   return mat;
 }
 
-ecs::WindowFrames windowFrames(const LightBurst& burst, int camera) {
+core::WindowFrames windowFrames(const LightBurst& burst, int camera) {
   const auto side = [camera](const StereoImages& pair) { return camera == 0 ? pair.first : pair.second; };
-  ecs::WindowFrames frames;
+  core::WindowFrames frames;
   if (side(burst.light_off_before)) frames.light_off_before.push_back(windowImage(side(burst.light_off_before)));
   if (side(burst.light_off_after)) frames.light_off_after.push_back(windowImage(side(burst.light_off_after)));
   for (const StereoImages& on : burst.light_on) frames.light_on.push_back(windowImage(side(on)));

@@ -1,6 +1,6 @@
 #include "embedded_calibration_stereo/ros/light_controller_params.h"
 
-#include "embedded_calibration_stereo/core/geometry/config_error.h"
+#include "embedded_calibration_stereo/core/io/config_error.h"
 #include "embedded_calibration_stereo/ros/driver_params.h"
 #include "embedded_calibration_stereo/ros/parameter_reader.h"
 
@@ -15,7 +15,7 @@ LightControllerParams loadLightControllerParams(const ParameterReader& read, con
   // frames on both sides of each switch.
   p.schedule.settle_frames = read.get("settle_frames", 5);
   readHealthSchedule(read, &p.schedule);
-  ecs::throwIfProblem(p.schedule.problem());
+  core::throwIfProblem(p.schedule.problem());
 
   p.approximate_sync = read.get("approximate_sync", p.approximate_sync);
   p.max_interval_s = read.atLeast("max_interval_s", p.max_interval_s, 0.0);
@@ -25,7 +25,7 @@ LightControllerParams loadLightControllerParams(const ParameterReader& read, con
   p.confirmation.min_step = read.get("min_step", p.confirmation.min_step);
   p.confirmation.switch_fraction = read.get("switch_fraction", p.confirmation.switch_fraction);
   p.confirmation.plateau_fraction = read.get("plateau_fraction", p.confirmation.plateau_fraction);
-  ecs::throwIfProblem(p.confirmation.problem());
+  core::throwIfProblem(p.confirmation.problem());
   p.max_delay_frames = read.atLeast("max_delay_frames", p.max_delay_frames, 0);
 
   p.calibration_store = read.choice("calibration_store", p.calibration_store, {"driver", "file"});
@@ -36,9 +36,9 @@ LightControllerParams loadLightControllerParams(const ParameterReader& read, con
     p.right_camera_info_url = read.get("right_camera_info_url", "");
     p.left_reload_service = read.get("left_reload_service", "");
     p.right_reload_service = read.get("right_reload_service", "");
-    if (p.left_camera_info_url.empty()) throw ecs::ConfigError("left_camera_info_url", "missing (calibration_store file)");
+    if (p.left_camera_info_url.empty()) throw core::ConfigError("left_camera_info_url", "missing (calibration_store file)");
     if (p.right_camera_info_url.empty())
-      throw ecs::ConfigError("right_camera_info_url", "missing (calibration_store file)");
+      throw core::ConfigError("right_camera_info_url", "missing (calibration_store file)");
   }
   return p;
 }

@@ -26,7 +26,7 @@ std::string describe(XmlRpcValue& v) {
 }
 
 [[noreturn]] void refuse(const std::string& name, const std::string& expected, XmlRpcValue& v) {
-  throw ecs::ConfigError(name, "must be " + expected + " (got " + describe(v) + ")");
+  throw core::ConfigError(name, "must be " + expected + " (got " + describe(v) + ")");
 }
 
 void convert(const std::string& name, XmlRpcValue& v, bool* out) {
@@ -86,7 +86,7 @@ T ParameterReader::get(const std::string& name, const T& fallback) const {
 template <class T>
 T ParameterReader::required(const std::string& name) const {
   XmlRpcValue value;
-  if (!lookup_(name, &value)) throw ecs::ConfigError(name, "missing");
+  if (!lookup_(name, &value)) throw core::ConfigError(name, "missing");
   T out;
   convert(name, value, &out);
   return out;
@@ -118,14 +118,14 @@ void ParameterReader::checkType(const std::string& name, const std::string& type
   } else if (type == "bool") {
     get<bool>(name, false);
   } else {
-    throw ecs::ConfigError(name, "unknown parameter type '" + type + "'");
+    throw core::ConfigError(name, "unknown parameter type '" + type + "'");
   }
 }
 
 void checkChoice(const std::string& name, const std::string& value, const std::vector<std::string>& choices) {
   for (const std::string& c : choices)
     if (value == c) return;
-  throw ecs::ConfigError(name, "unknown value '" + value + "' (use " + listed(choices) + ")");
+  throw core::ConfigError(name, "unknown value '" + value + "' (use " + listed(choices) + ")");
 }
 
 }  // namespace embedded_calibration_stereo

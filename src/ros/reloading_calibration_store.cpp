@@ -3,7 +3,7 @@
 #include <dynamic_reconfigure/Reconfigure.h>
 #include <ros/service.h>
 
-#include "embedded_calibration_stereo/core/geometry/config_error.h"
+#include "embedded_calibration_stereo/core/io/config_error.h"
 #include "embedded_calibration_stereo/ros/set_camera_info_answer.h"
 
 namespace embedded_calibration_stereo {
@@ -41,7 +41,7 @@ bool ReloadingCalibrationStore::makeStore(const std::optional<sensor_msgs::Camer
     calibration_ = std::make_unique<StereoCalibration>(sides_[0].camera, sides_[1].camera, in_force[0]->width,
                                                        in_force[0]->height, pair_timeout_s_);
     calibration_->load(*in_force[0], *in_force[1]);
-  } catch (const ecs::ConfigError& e) {
+  } catch (const core::ConfigError& e) {
     calibration_.reset();
     res->success = false;
     res->status_message = std::string("not stored: ") + e.what();

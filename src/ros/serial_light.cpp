@@ -7,7 +7,7 @@
 #include <cerrno>
 #include <cstring>
 
-#include "embedded_calibration_stereo/core/geometry/config_error.h"
+#include "embedded_calibration_stereo/core/io/config_error.h"
 #include "embedded_calibration_stereo/ros/light_backend.h"
 
 namespace embedded_calibration_stereo {
@@ -33,13 +33,13 @@ speed_t baudConstant(int baud) {
 class SerialLight : public LightBackend {
  public:
   explicit SerialLight(const SerialLightParams& params) : params_(params) {
-    if (params_.port.empty()) throw ecs::ConfigError("serial_port", "missing");
+    if (params_.port.empty()) throw core::ConfigError("serial_port", "missing");
     const speed_t speed = baudConstant(params_.baud);
-    if (speed == B0) throw ecs::ConfigError("serial_baud", "unsupported baud rate " + std::to_string(params_.baud));
+    if (speed == B0) throw core::ConfigError("serial_baud", "unsupported baud rate " + std::to_string(params_.baud));
     struct stat st;
-    if (stat(params_.port.c_str(), &st) != 0) throw ecs::ConfigError("serial_port", "device does not exist: '" + params_.port + "'");
+    if (stat(params_.port.c_str(), &st) != 0) throw core::ConfigError("serial_port", "device does not exist: '" + params_.port + "'");
     fd_ = ::open(params_.port.c_str(), O_RDWR | O_NOCTTY | O_CLOEXEC);
-    if (fd_ < 0) throw ecs::ConfigError("serial_port", "cannot open '" + params_.port + "': " + std::strerror(errno));
+    if (fd_ < 0) throw core::ConfigError("serial_port", "cannot open '" + params_.port + "': " + std::strerror(errno));
     struct termios tio;
     if (tcgetattr(fd_, &tio) != 0) fail("not a tty");
     cfmakeraw(&tio);  // no translation: the configured bytes go out exactly
@@ -52,7 +52,7 @@ class SerialLight : public LightBackend {
     if (fd_ >= 0) ::close(fd_);
   }
 
-  bool apply(const ecs::LightState& state, std::string* error) override {
+  bool apply(const core::LightState& state, std::string* error) override {
     if (written_ && *written_ == state.light_on) return true;
     const std::string& bytes = state.light_on ? params_.on_bytes : params_.off_bytes;
     size_t done = 0;
@@ -75,7 +75,7 @@ class SerialLight : public LightBackend {
     const std::string reason = what + " '" + params_.port + "': " + std::strerror(errno);
     ::close(fd_);
     fd_ = -1;
-    throw ecs::ConfigError("serial_port", reason);
+    throw core::ConfigError("serial_port", reason);
   }
 
   SerialLightParams params_;

@@ -8,7 +8,7 @@ namespace {
 
 class SimFrameSource : public FrameSource {
  public:
-  SimFrameSource(std::shared_ptr<ecs::SimRig> sim, SharedLightLevel light_level, SharedLightCommand light_command,
+  SimFrameSource(std::shared_ptr<core::SimRig> sim, SharedLightLevel light_level, SharedLightCommand light_command,
                  double fps)
       : sim_(std::move(sim)), light_level_(std::move(light_level)), light_command_(std::move(light_command)), fps_(fps) {
     if (!(fps_ > 0.0)) throw std::invalid_argument("sim frame source: fps must be > 0");
@@ -18,7 +18,7 @@ class SimFrameSource : public FrameSource {
   // run renders the same frames (motion, movers, drift, the light's response) however fast the
   // machine is.
   bool grab(double, StereoFrame* frame, std::string*) override {
-    ecs::SimRenderRequest request;
+    core::SimRenderRequest request;
     request.time_s = static_cast<double>(frame_count_) / fps_;
     request.light_level = light_level_ ? light_level_->load() : 0.0;
     // The frame counter seeds the noise: a replay of the same run renders the same images.
@@ -35,7 +35,7 @@ class SimFrameSource : public FrameSource {
       request.light_command.on = (command & 1) != 0;
       request.light_command.switch_time_s = switch_time_s_;
     }
-    auto truth = std::make_shared<ecs::SimFrame>(sim_->render(request));
+    auto truth = std::make_shared<core::SimFrame>(sim_->render(request));
     frame->left = truth->left;
     frame->right = truth->right;
     frame->encoding = sim_->config().encoding;
@@ -49,7 +49,7 @@ class SimFrameSource : public FrameSource {
   }
 
  private:
-  std::shared_ptr<ecs::SimRig> sim_;
+  std::shared_ptr<core::SimRig> sim_;
   SharedLightLevel light_level_;
   SharedLightCommand light_command_;  // null: the schedule's level only
   double fps_;
@@ -60,12 +60,12 @@ class SimFrameSource : public FrameSource {
 
 }  // namespace
 
-std::unique_ptr<FrameSource> makeSimFrameSource(std::shared_ptr<ecs::SimRig> sim,
+std::unique_ptr<FrameSource> makeSimFrameSource(std::shared_ptr<core::SimRig> sim,
                                                 SharedLightLevel light_level, double fps) {
   return std::make_unique<SimFrameSource>(std::move(sim), std::move(light_level), nullptr, fps);
 }
 
-std::unique_ptr<FrameSource> makeSimFrameSource(std::shared_ptr<ecs::SimRig> sim, SharedLightLevel light_level,
+std::unique_ptr<FrameSource> makeSimFrameSource(std::shared_ptr<core::SimRig> sim, SharedLightLevel light_level,
                                                 SharedLightCommand light_command, double fps) {
   return std::make_unique<SimFrameSource>(std::move(sim), std::move(light_level), std::move(light_command), fps);
 }

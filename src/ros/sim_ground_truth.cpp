@@ -8,7 +8,7 @@
 namespace embedded_calibration_stereo {
 
 SimGroundTruth::SimGroundTruth(ros::NodeHandle& nh, image_transport::ImageTransport& it,
-                               std::shared_ptr<ecs::SimRig> sim, const std::string& left_frame_id)
+                               std::shared_ptr<core::SimRig> sim, const std::string& left_frame_id)
     : sim_(std::move(sim)), head_pose_(left_frame_id) {
   left_info_pub_ = nh.advertise<sensor_msgs::CameraInfo>("ground_truth/left/camera_info", 2);
   right_info_pub_ = nh.advertise<sensor_msgs::CameraInfo>("ground_truth/right/camera_info", 2);
@@ -22,7 +22,7 @@ SimGroundTruth::SimGroundTruth(ros::NodeHandle& nh, image_transport::ImageTransp
   set_drift_srv_ = nh.advertiseService("sim/set_drift", &SimGroundTruth::setDrift, this);
 }
 
-void SimGroundTruth::publish(const ecs::SimFrame& truth, const std_msgs::Header& left_header,
+void SimGroundTruth::publish(const core::SimFrame& truth, const std_msgs::Header& left_header,
                              const std_msgs::Header& right_header) {
   head_pose_.update(truth.world_from_left, truth.time_s);
   if (left_info_pub_.getNumSubscribers() > 0 || right_info_pub_.getNumSubscribers() > 0) {
@@ -54,7 +54,7 @@ void SimGroundTruth::publish(const ecs::SimFrame& truth, const std_msgs::Header&
 }
 
 bool SimGroundTruth::setDrift(SetRigDrift::Request& req, SetRigDrift::Response& res) {
-  ecs::DriftRequest drift;
+  core::DriftRequest drift;
   drift.focal_scale = req.focal_scale;
   drift.thermal_rate_deg_per_s = req.thermal_rate_deg_per_s;
   for (int i = 0; i < 3; ++i) {

@@ -248,7 +248,7 @@ std::string checkNominalFocal(const sensor_msgs::CameraInfo& info, const std::st
 
 std::string checkCalibrationPair(const sensor_msgs::CameraInfo& left, const std::string& left_topic,
                                  const sensor_msgs::CameraInfo& right, const std::string& right_topic,
-                                 const std::optional<ecs::StereoRig>& nominal) {
+                                 const std::optional<core::StereoRig>& nominal) {
   std::string problem = checkCameraInfo(left, left_topic, left.width, left.height);
   if (problem.empty()) problem = checkCameraInfo(right, right_topic, right.width, right.height);
   if (problem.empty()) problem = checkRectifiedPair(left, left_topic, right, right_topic);

@@ -8,7 +8,7 @@
 
 #include <opencv2/imgcodecs.hpp>
 
-#include "embedded_calibration_stereo/core/geometry/atomic_file.h"
+#include "embedded_calibration_stereo/core/io/atomic_file.h"
 
 namespace embedded_calibration_stereo {
 
@@ -23,24 +23,24 @@ void createParentDirectories(const std::string& path) {
 // Teaches both cameras concurrently with `teach(camera, layout, name)` (0 left, 1 right) and
 // writes the prior.
 template <typename TeachOne>
-TeachOutcome teachBoth(const TeachOne& teach, const ecs::SimRigConfig& device, const std::string& path) {
+TeachOutcome teachBoth(const TeachOne& teach, const core::SimRigConfig& device, const std::string& path) {
   TeachOutcome out;
   const auto t0 = std::chrono::steady_clock::now();
   try {
-    const std::vector<ecs::VirtualBoard> boards = device.device.virtualBoards();
+    const std::vector<core::VirtualBoard> boards = device.device.virtualBoards();
     auto right_result = std::async(std::launch::async, [&] {
-      return teach(1, ecs::BoardLayout::device(boards, device.rig.right, device.rig.right_from_left), "right");
+      return teach(1, core::BoardLayout::device(boards, device.rig.right, device.rig.right_from_left), "right");
     });
-    ecs::TeachResult left_result;
+    core::TeachResult left_result;
     try {
-      left_result = teach(0, ecs::BoardLayout::device(boards, device.rig.left, Eigen::Isometry3d::Identity()), "left");
+      left_result = teach(0, core::BoardLayout::device(boards, device.rig.left, Eigen::Isometry3d::Identity()), "left");
     } catch (...) {
       right_result.wait();  // it references `boards`
       throw;
     }
-    const ecs::TeachResult right_taught = right_result.get();
+    const core::TeachResult right_taught = right_result.get();
     out.prior.cameras = {left_result.prior, right_taught.prior};
-    for (const ecs::TeachResult* r : {static_cast<const ecs::TeachResult*>(&left_result), &right_taught})
+    for (const core::TeachResult* r : {static_cast<const core::TeachResult*>(&left_result), &right_taught})
       for (const std::string& note : r->notes) out.notes += (out.notes.empty() ? "" : "; ") + note;
   } catch (const std::exception& e) {
     out.error = e.what();
@@ -52,31 +52,31 @@ TeachOutcome teachBoth(const TeachOne& teach, const ecs::SimRigConfig& device, c
 
 }  // namespace
 
-TeachOutcome teachStereoPrior(const ecs::TeachFrame& left, const ecs::TeachFrame& right, ecs::ColorOrder order,
-                              const ecs::SimRigConfig& device, const std::string& path) {
-  const ecs::TeachFrame* frames[2] = {&left, &right};
+TeachOutcome teachStereoPrior(const core::TeachFrame& left, const core::TeachFrame& right, core::ColorOrder order,
+                              const core::SimRigConfig& device, const std::string& path) {
+  const core::TeachFrame* frames[2] = {&left, &right};
   return teachBoth(
-      [&](int c, const ecs::BoardLayout& layout, const std::string& name) {
-        return ecs::teachCamera({*frames[c]}, layout, name, order);
+      [&](int c, const core::BoardLayout& layout, const std::string& name) {
+        return core::teachCamera({*frames[c]}, layout, name, order);
       },
       device, path);
 }
 
-TeachOutcome teachStereoPriorFromBurst(const ecs::WindowFrames& left, const ecs::WindowFrames& right,
-                                       const ecs::SimRigConfig& device, const std::string& path) {
-  const ecs::WindowFrames* frames[2] = {&left, &right};
+TeachOutcome teachStereoPriorFromBurst(const core::WindowFrames& left, const core::WindowFrames& right,
+                                       const core::SimRigConfig& device, const std::string& path) {
+  const core::WindowFrames* frames[2] = {&left, &right};
   return teachBoth(
-      [&](int c, const ecs::BoardLayout& layout, const std::string& name) {
+      [&](int c, const core::BoardLayout& layout, const std::string& name) {
         cv::Mat taught_on;
-        ecs::TeachResult result =
-            ecs::teachCameraFromWindow(*frames[c], layout, name, ecs::windowLearnerOptions(), &taught_on);
+        core::TeachResult result =
+            core::teachCameraFromWindow(*frames[c], layout, name, core::windowLearnerOptions(), &taught_on);
         // Beside the prior, for whoever brings a head up: what the boards were found on.
         const std::string image_path = taughtOnImagePath(path, name);
         std::vector<uchar> png;
         try {
           createParentDirectories(image_path);
           cv::imencode(".png", taught_on, png);
-          ecs::writeFileAtomically(image_path, std::string(png.begin(), png.end()));
+          core::writeFileAtomically(image_path, std::string(png.begin(), png.end()));
         } catch (const std::exception& e) {
           result.notes.push_back(name + ": " + image_path + " not written (" + e.what() + ")");
         }
@@ -85,11 +85,11 @@ TeachOutcome teachStereoPriorFromBurst(const ecs::WindowFrames& left, const ecs:
       device, path);
 }
 
-TeachOutcome teachStereoPriorFromBurst(const LightBurst& burst, const ecs::SimRigConfig& device,
+TeachOutcome teachStereoPriorFromBurst(const LightBurst& burst, const core::SimRigConfig& device,
                                        const std::string& path) {
   TeachOutcome out;
   try {
-    const ecs::WindowFrames left = windowFrames(burst, 0), right = windowFrames(burst, 1);
+    const core::WindowFrames left = windowFrames(burst, 0), right = windowFrames(burst, 1);
     return teachStereoPriorFromBurst(left, right, device, path);
   } catch (const std::exception& e) {
     out.error = e.what();
@@ -97,10 +97,10 @@ TeachOutcome teachStereoPriorFromBurst(const LightBurst& burst, const ecs::SimRi
   return out;
 }
 
-std::string writeStereoPrior(const std::string& path, const ecs::PatternPrior& prior) {
+std::string writeStereoPrior(const std::string& path, const core::PatternPrior& prior) {
   try {
     createParentDirectories(path);
-    ecs::writePatternPrior(path, prior);  // atomic
+    core::writePatternPrior(path, prior);  // atomic
   } catch (const std::exception& e) {
     return e.what();
   }
@@ -117,10 +117,10 @@ TeachingRun::~TeachingRun() {
   if (result_.valid()) result_.wait();
 }
 
-void TeachingRun::start(const ecs::TeachFrame& left, const ecs::TeachFrame& right, ecs::ColorOrder order,
-                        const ecs::SimRigConfig& device, const std::string& path) {
-  const auto copy = [](const ecs::TeachFrame& frame) {
-    ecs::TeachFrame out;
+void TeachingRun::start(const core::TeachFrame& left, const core::TeachFrame& right, core::ColorOrder order,
+                        const core::SimRigConfig& device, const std::string& path) {
+  const auto copy = [](const core::TeachFrame& frame) {
+    core::TeachFrame out;
     out.light_on = frame.light_on.clone();
     out.light_off = frame.light_off.clone();
     return out;
@@ -130,7 +130,7 @@ void TeachingRun::start(const ecs::TeachFrame& left, const ecs::TeachFrame& righ
   });
 }
 
-void TeachingRun::start(LightBurst burst, const ecs::SimRigConfig& device, const std::string& path) {
+void TeachingRun::start(LightBurst burst, const core::SimRigConfig& device, const std::string& path) {
   result_ = std::async(std::launch::async, [burst = std::move(burst), device, path] {
     return teachStereoPriorFromBurst(burst, device, path);
   });

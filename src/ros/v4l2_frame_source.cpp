@@ -4,7 +4,7 @@
 
 #include <opencv2/videoio.hpp>
 
-#include "embedded_calibration_stereo/core/geometry/config_error.h"
+#include "embedded_calibration_stereo/core/io/config_error.h"
 #include "embedded_calibration_stereo/ros/frame_source.h"
 
 namespace embedded_calibration_stereo {
@@ -13,11 +13,11 @@ namespace {
 class V4l2FrameSource : public FrameSource {
  public:
   explicit V4l2FrameSource(const V4l2SourceParams& params) : params_(params) {
-    if (params_.width <= 0) throw ecs::ConfigError("v4l2_width", "must be > 0");
-    if (params_.height <= 0) throw ecs::ConfigError("v4l2_height", "must be > 0");
-    if (!(params_.fps > 0)) throw ecs::ConfigError("fps", "must be > 0");
+    if (params_.width <= 0) throw core::ConfigError("v4l2_width", "must be > 0");
+    if (params_.height <= 0) throw core::ConfigError("v4l2_height", "must be > 0");
+    if (!(params_.fps > 0)) throw core::ConfigError("fps", "must be > 0");
     if (params_.encoding != "mono8" && params_.encoding != "bgr8")
-      throw ecs::ConfigError("encoding", "must be mono8 or bgr8 (got '" + params_.encoding + "')");
+      throw core::ConfigError("encoding", "must be mono8 or bgr8 (got '" + params_.encoding + "')");
     side_by_side_ = params_.right_device.empty();
     open(&left_, "v4l2_left_device", params_.left_device, side_by_side_ ? 2 * params_.width : params_.width);
     if (!side_by_side_) open(&right_, "v4l2_right_device", params_.right_device, params_.width);
@@ -55,17 +55,17 @@ class V4l2FrameSource : public FrameSource {
  private:
   void open(cv::VideoCapture* capture, const char* parameter, const std::string& device, int width) {
     struct stat st;
-    if (device.empty()) throw ecs::ConfigError(parameter, "missing");
-    if (stat(device.c_str(), &st) != 0) throw ecs::ConfigError(parameter, "device does not exist: '" + device + "'");
+    if (device.empty()) throw core::ConfigError(parameter, "missing");
+    if (stat(device.c_str(), &st) != 0) throw core::ConfigError(parameter, "device does not exist: '" + device + "'");
     if (!capture->open(device, cv::CAP_V4L2))
-      throw ecs::ConfigError(parameter, "cannot open V4L2 device '" + device + "'");
+      throw core::ConfigError(parameter, "cannot open V4L2 device '" + device + "'");
     capture->set(cv::CAP_PROP_FRAME_WIDTH, width);
     capture->set(cv::CAP_PROP_FRAME_HEIGHT, params_.height);
     capture->set(cv::CAP_PROP_FPS, params_.fps);
     const int got_w = static_cast<int>(capture->get(cv::CAP_PROP_FRAME_WIDTH));
     const int got_h = static_cast<int>(capture->get(cv::CAP_PROP_FRAME_HEIGHT));
     if (got_w != width || got_h != params_.height)
-      throw ecs::ConfigError(parameter, "'" + device + "' does not support " + std::to_string(width) + "x" +
+      throw core::ConfigError(parameter, "'" + device + "' does not support " + std::to_string(width) + "x" +
                                             std::to_string(params_.height) + " (got " + std::to_string(got_w) +
                                             "x" + std::to_string(got_h) + "); check v4l2_width/v4l2_height");
   }

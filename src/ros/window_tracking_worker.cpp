@@ -19,7 +19,7 @@ WindowTrackingWorker::~WindowTrackingWorker() {
   if (thread_.joinable()) thread_.join();
 }
 
-void WindowTrackingWorker::submit(std::shared_ptr<ecs::WindowTracker> tracker, LightBurst burst) {
+void WindowTrackingWorker::submit(std::shared_ptr<core::WindowTracker> tracker, LightBurst burst) {
   std::optional<Job> replaced = jobs_.put(Job{std::move(tracker), std::move(burst)});
   if (!replaced) return;
   std::lock_guard<std::mutex> lock(mutex_);
@@ -50,7 +50,7 @@ void WindowTrackingWorker::track(const Job& job) {
   int corners = 0, saddle_failures = 0;
   std::string error, scene_problem;
   try {
-    const ecs::WindowTrack track =
+    const core::WindowTrack track =
         job.tracker->track(windowFrames(job.burst, 0), windowFrames(job.burst, 1), header.stamp.toSec());
     msg = toMsg(track.observation);
     saddle_failures = track.saddle_failures;

@@ -25,6 +25,8 @@
 #include "embedded_calibration_stereo/core/calibration/bringup_check.h"
 #include "embedded_calibration_stereo/core/sim/sim_rig.h"
 
+namespace core = embedded_calibration_stereo::core;
+
 namespace {
 
 const char* kUsage =
@@ -43,7 +45,7 @@ const char* kUsage =
 struct Options {
   std::string bag, device_config, ns = "stereo", left_topic, right_topic, mode_topic;
   bool mode_given = false;
-  ecs::BringupThresholds thresholds;
+  core::BringupThresholds thresholds;
 };
 
 struct UsageError : std::runtime_error {
@@ -94,10 +96,10 @@ struct Camera {
   const char* name = "";
   std::string topic;
   cv::Size size;
-  std::vector<ecs::BoardRegion> regions;
+  std::vector<core::BoardRegion> regions;
   cv::Mat mask, surround;
   std::vector<double> stamps;
-  std::vector<ecs::ImageLevels> levels;
+  std::vector<core::ImageLevels> levels;
 };
 
 cv::Mat greyImage(const sensor_msgs::ImageConstPtr& msg, const Camera& camera) {
@@ -111,43 +113,43 @@ cv::Mat greyImage(const sensor_msgs::ImageConstPtr& msg, const Camera& camera) {
 
 // First pass: every image's stamp and levels, and the driver's modes by stamp.
 void readLevels(const rosbag::Bag& bag, Camera* left, Camera* right, const std::string& mode_topic,
-                std::map<double, ecs::FrameMode>* modes) {
+                std::map<double, core::FrameMode>* modes) {
   rosbag::View view(bag, rosbag::TopicQuery({left->topic, right->topic, mode_topic}));
   for (const rosbag::MessageInstance& m : view) {
     if (const auto mode = m.instantiate<embedded_calibration_stereo::CalibrationMode>()) {
-      (*modes)[mode->header.stamp.toSec()] = ecs::FrameMode{true, mode->light_on != 0, mode->settled != 0};
+      (*modes)[mode->header.stamp.toSec()] = core::FrameMode{true, mode->light_on != 0, mode->settled != 0};
       continue;
     }
     const auto image = m.instantiate<sensor_msgs::Image>();
     if (!image) continue;
     Camera* camera = m.getTopic() == left->topic ? left : right;
     camera->stamps.push_back(image->header.stamp.toSec());
-    camera->levels.push_back(ecs::measureImage(greyImage(image, *camera), camera->mask, camera->surround));
+    camera->levels.push_back(core::measureImage(greyImage(image, *camera), camera->mask, camera->surround));
   }
 }
 
 // The driver's mode of each stereo frame: the one stamped as its left image (within a tenth of
 // a frame).
-std::vector<ecs::FrameMode> modesOfPairs(const std::map<double, ecs::FrameMode>& modes, const Camera& left,
-                                         const ecs::StampPairing& stamps) {
-  std::vector<ecs::FrameMode> out;
+std::vector<core::FrameMode> modesOfPairs(const std::map<double, core::FrameMode>& modes, const Camera& left,
+                                         const core::StampPairing& stamps) {
+  std::vector<core::FrameMode> out;
   if (modes.empty()) return out;
   const double tolerance = 0.1 * stamps.frame_period_s;
   for (const auto& pair : stamps.pairs) {
     const double t = left.stamps[pair.first];
     auto it = modes.lower_bound(t - tolerance);
-    out.push_back(it != modes.end() && it->first <= t + tolerance ? it->second : ecs::FrameMode());
+    out.push_back(it != modes.end() && it->first <= t + tolerance ? it->second : core::FrameMode());
   }
   return out;
 }
 
 // One camera's board levels per stereo frame, the exposure's changes taken out; `scene_range`:
 // the lowest and highest scene level, how much the exposure changed.
-std::vector<double> pairLevels(const Camera& camera, const ecs::StampPairing& stamps, bool left,
+std::vector<double> pairLevels(const Camera& camera, const core::StampPairing& stamps, bool left,
                                std::pair<double, double>* scene_range) {
   std::vector<double> device, scene;
   for (const auto& pair : stamps.pairs) {
-    const ecs::ImageLevels& l = camera.levels[left ? pair.first : pair.second];
+    const core::ImageLevels& l = camera.levels[left ? pair.first : pair.second];
     device.push_back(l.device_level);
     scene.push_back(l.scene_level);
   }
@@ -155,7 +157,7 @@ std::vector<double> pairLevels(const Camera& camera, const ecs::StampPairing& st
     const auto range = std::minmax_element(scene.begin(), scene.end());
     *scene_range = {*range.first, *range.second};
   }
-  return ecs::withoutExposureChanges(device, scene);
+  return core::withoutExposureChanges(device, scene);
 }
 
 // Second pass: the mean lit image minus the mean unlit one of each camera.
@@ -182,10 +184,10 @@ void litMinusUnlit(const rosbag::Bag& bag, Camera* cameras, const std::vector<in
   }
 }
 
-void printLight(const ecs::LightTiming& t, bool has_modes) {
+void printLight(const core::LightTiming& t, bool has_modes) {
   std::printf("Light: lit minus unlit %.1f (left) and %.1f (right) grey levels in the boards; %zu switches\n",
               t.left_step, t.right_step, t.switches.size());
-  for (const ecs::LightSwitch& s : t.switches) {
+  for (const core::LightSwitch& s : t.switches) {
     std::printf("  %s: changing from stereo frame %d, fully %s at frame %d (%d frames of change)", s.rise ? "on " : "off",
                 s.change_frame, s.rise ? "on" : "off", s.done_frame, s.done_frame - s.change_frame);
     if (s.command_frame >= 0)
@@ -205,8 +207,8 @@ void printLight(const ecs::LightTiming& t, bool has_modes) {
   else std::printf("  no calibration_mode in the bag: the light's timing from the images only\n");
 }
 
-void printReport(const ecs::BringupMeasurements& m, const std::pair<double, double>* scene_range) {
-  const ecs::StampPairing& s = m.stamps;
+void printReport(const core::BringupMeasurements& m, const std::pair<double, double>* scene_range) {
+  const core::StampPairing& s = m.stamps;
   std::printf("Stamps: %zu stereo frames from %d left and %d right images, a frame every %.1f ms; right - left "
               "%.2f ms (median), at most %.2f ms apart\n",
               s.pairs.size(), s.left_frames, s.right_frames, 1e3 * s.frame_period_s, 1e3 * s.median_offset_s,
@@ -219,7 +221,7 @@ void printReport(const ecs::BringupMeasurements& m, const std::pair<double, doub
   std::printf("Boards (contrast: lit white minus lit black square, grey levels; seen: the part of the board "
               "showing it):\n  board   left: contrast  seen  in image   right: contrast  seen  in image\n");
   for (size_t i = 0; i < m.boards[0].size() && i < m.boards[1].size(); ++i) {
-    const ecs::BoardVisibility &l = m.boards[0][i], &r = m.boards[1][i];
+    const core::BoardVisibility &l = m.boards[0][i], &r = m.boards[1][i];
     std::printf("  %5d   %15.1f  %3.0f %%  %6.0f %%   %16.1f  %3.0f %%  %6.0f %%\n", l.board_id, l.contrast,
                 100.0 * l.seen_fraction, 100.0 * l.inside_fraction, r.contrast, 100.0 * r.seen_fraction,
                 100.0 * r.inside_fraction);
@@ -229,9 +231,9 @@ void printReport(const ecs::BringupMeasurements& m, const std::pair<double, doub
 }
 
 // The lit and unlit stereo frames' image indices per camera, and the clipping of the lit ones.
-void sortFrames(ecs::BringupMeasurements* m, const Camera* cameras, const ecs::BringupThresholds& th,
+void sortFrames(core::BringupMeasurements* m, const Camera* cameras, const core::BringupThresholds& th,
                 std::vector<int>* lit, std::vector<int>* unlit) {
-  const ecs::LightTiming& t = m->light;
+  const core::LightTiming& t = m->light;
   for (size_t k = 0; k < t.left_fraction.size(); ++k) {
     const double lo = std::min(t.left_fraction[k], t.right_fraction[k]);
     const double hi = std::max(t.left_fraction[k], t.right_fraction[k]);
@@ -257,19 +259,19 @@ void sortFrames(ecs::BringupMeasurements* m, const Camera* cameras, const ecs::B
 }
 
 int run(const Options& o) {
-  const ecs::SimRigConfig head = ecs::loadSimRigConfig(o.device_config);
+  const core::SimRigConfig head = core::loadSimRigConfig(o.device_config);
   Camera cameras[2];
   for (int c = 0; c < 2; ++c) {
-    const ecs::PinholeCamera& camera = c == 0 ? head.rig.left : head.rig.right;
+    const core::PinholeCamera& camera = c == 0 ? head.rig.left : head.rig.right;
     cameras[c].name = c == 0 ? "left" : "right";
     cameras[c].topic = c == 0 ? o.left_topic : o.right_topic;
     cameras[c].size = cv::Size(camera.width, camera.height);
-    cameras[c].regions = ecs::projectBoardRegions(head.device, head.rig, c == 1);
-    cameras[c].mask = ecs::boardOutlineMask(cameras[c].regions, cameras[c].size);
-    cameras[c].surround = ecs::boardOutlineMask(cameras[c].regions, cameras[c].size, true);
+    cameras[c].regions = core::projectBoardRegions(head.device, head.rig, c == 1);
+    cameras[c].mask = core::boardOutlineMask(cameras[c].regions, cameras[c].size);
+    cameras[c].surround = core::boardOutlineMask(cameras[c].regions, cameras[c].size, true);
   }
   rosbag::Bag bag(o.bag, rosbag::bagmode::Read);
-  std::map<double, ecs::FrameMode> modes;
+  std::map<double, core::FrameMode> modes;
   readLevels(bag, &cameras[0], &cameras[1], o.mode_topic, &modes);
   for (const Camera& c : cameras)
     if (c.stamps.empty()) throw std::runtime_error("no image on " + c.topic + " in " + o.bag);
@@ -277,23 +279,23 @@ int run(const Options& o) {
               o.bag.c_str(), cameras[0].stamps.size(), o.left_topic.c_str(), cameras[1].stamps.size(),
               o.right_topic.c_str(), modes.size());
 
-  ecs::BringupMeasurements m;
-  m.stamps = ecs::pairStereoStamps(cameras[0].stamps, cameras[1].stamps);
+  core::BringupMeasurements m;
+  m.stamps = core::pairStereoStamps(cameras[0].stamps, cameras[1].stamps);
   std::pair<double, double> scene_range[2];
   const std::vector<double> levels[2] = {pairLevels(cameras[0], m.stamps, true, &scene_range[0]),
                                          pairLevels(cameras[1], m.stamps, false, &scene_range[1])};
-  const std::vector<ecs::FrameMode> pair_modes = modesOfPairs(modes, cameras[0], m.stamps);
+  const std::vector<core::FrameMode> pair_modes = modesOfPairs(modes, cameras[0], m.stamps);
   m.has_modes = !pair_modes.empty();
-  m.light = ecs::analyseLight(levels[0], levels[1], pair_modes, o.thresholds);
+  m.light = core::analyseLight(levels[0], levels[1], pair_modes, o.thresholds);
   std::vector<int> lit[2], unlit[2];
   sortFrames(&m, cameras, o.thresholds, lit, unlit);
   if (m.lit_frames > 0 && m.unlit_frames > 0) {
     cv::Mat difference[2];
     litMinusUnlit(bag, cameras, lit, unlit, difference);
-    for (int c = 0; c < 2; ++c) m.boards[c] = ecs::measureBoards(difference[c], cameras[c].regions, o.thresholds);
+    for (int c = 0; c < 2; ++c) m.boards[c] = core::measureBoards(difference[c], cameras[c].regions, o.thresholds);
   }
   printReport(m, scene_range);
-  const ecs::BringupVerdict verdict = ecs::judgeBringup(m, o.thresholds);
+  const core::BringupVerdict verdict = core::judgeBringup(m, o.thresholds);
   std::printf("Verdict: %s\n", verdict.ready ? "READY: nothing found that keeps this head from calibrating itself"
                                                : "NOT READY:");
   for (const std::string& reason : verdict.reasons) std::printf("  - %s\n", reason.c_str());

@@ -26,9 +26,9 @@
 
 #include "embedded_calibration_stereo/core/calibration/board_calibration.h"
 #include "embedded_calibration_stereo/core/calibration/board_calibration_report.h"
-#include "embedded_calibration_stereo/core/geometry/camera_info_yaml.h"
+#include "embedded_calibration_stereo/core/io/camera_info_yaml.h"
 
-using namespace ecs;
+using namespace embedded_calibration_stereo::core;
 
 namespace {
 

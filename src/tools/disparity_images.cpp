@@ -10,7 +10,9 @@
 
 #include "embedded_calibration_stereo/core/depth/disparity.h"
 #include "embedded_calibration_stereo/core/depth/disparity_evaluation.h"
-#include "embedded_calibration_stereo/core/geometry/pfm_io.h"
+#include "embedded_calibration_stereo/core/io/pfm_io.h"
+
+namespace core = embedded_calibration_stereo::core;
 
 namespace {
 
@@ -41,7 +43,7 @@ bool parseInt(const std::string& text, int* value) {
 
 struct Request {
   std::map<std::string, std::string> args;
-  ecs::DisparityOptions options;
+  core::DisparityOptions options;
   double gt_scale = 0;
   bool help = false;
 };
@@ -77,7 +79,7 @@ std::string readArgs(int argc, char** argv, Request* r) {
 // problem.
 std::string readOptions(Request* r) {
   std::map<std::string, std::string>& args = r->args;
-  ecs::DisparityOptions& options = r->options;
+  core::DisparityOptions& options = r->options;
   if (args.count("--algorithm")) options.algorithm = args["--algorithm"];
   if (args.count("--sgbm-mode")) options.sgbm_mode = args["--sgbm-mode"];
   const std::pair<const char*, int*> integers[] = {{"--num-disparities", &options.disparity_range},
@@ -91,7 +93,7 @@ std::string readOptions(Request* r) {
     r->gt_scale = std::strtod(args["--gt-scale"].c_str(), &end);
     if (*end != '\0' || !(r->gt_scale > 0)) return "--gt-scale needs a number > 0";
   }
-  const std::string problem = options.Check();
+  const std::string problem = options.validate();
   return problem.empty() ? "" : "invalid options: " + problem;
 }
 
@@ -104,16 +106,16 @@ int run(Request& r) {
       std::fprintf(stderr, "disparity_images: cannot read image '%s'\n", args[name].c_str());
       return 1;
     }
-  const ecs::DisparityOptions& options = r.options;
-  ecs::DisparityComputer computer(options);
+  const core::DisparityOptions& options = r.options;
+  core::DisparityComputer computer(options);
   const cv::Mat disparity = computer.compute(left, right);
-  ecs::writePfm(args["--out"], disparity);
+  core::writePfm(args["--out"], disparity);
   std::printf("%s: %dx%d, algorithm %s, %d disparities from %d, written to %s\n",
               args["--left"].c_str(), left.cols, left.rows, options.algorithm.c_str(),
               options.disparity_range, options.min_disparity, args["--out"].c_str());
   if (args.count("--gt")) {
-    const cv::Mat gt = ecs::loadScaledGroundTruth(args["--gt"], r.gt_scale);
-    const ecs::BadPixelStats stats = ecs::evaluateBadPixels(disparity, gt, 2.0);
+    const cv::Mat gt = core::loadScaledGroundTruth(args["--gt"], r.gt_scale);
+    const core::BadPixelStats stats = core::evaluateBadPixels(disparity, gt, 2.0);
     std::printf("bad>2px: %.2f %% of %d pixels with ground truth (%d invalid)\n",
                 stats.badPercent(), stats.evaluated, stats.invalid);
   }

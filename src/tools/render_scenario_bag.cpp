@@ -2,7 +2,7 @@
 // sim driver (ground_truth:=true): the same topics, types, frame ids and stamps, without a ROS
 // master and without paying the renderer at replay time. Frame k (from 0) is the scene at time
 // k / fps, stamped start + k / fps; the light follows the driver's schedule
-// (ecs::LightSchedule: period, calibration frames, settle frames) and an optional drift script
+// (core::LightSchedule: period, calibration frames, settle frames) and an optional drift script
 // replays sim/set_drift requests at given scene times. So a bag is the same every time it is
 // made (same seeds as the driver: frame k's noise seed is k + 1).
 //
@@ -36,13 +36,15 @@
 #include <vector>
 
 #include "embedded_calibration_stereo/CalibrationMode.h"
-#include "embedded_calibration_stereo/core/calibration/light_schedule.h"
-#include "embedded_calibration_stereo/core/geometry/config_error.h"
-#include "embedded_calibration_stereo/core/geometry/config_io.h"
+#include "embedded_calibration_stereo/core/light/light_schedule.h"
+#include "embedded_calibration_stereo/core/io/config_error.h"
+#include "embedded_calibration_stereo/core/io/config_io.h"
 #include "embedded_calibration_stereo/core/sim/sim_rig.h"
 #include "embedded_calibration_stereo/ros/camera_calibration.h"
 #include "embedded_calibration_stereo/ros/conversions.h"
 #include "embedded_calibration_stereo/ros/head_pose_truth.h"
+
+namespace core = embedded_calibration_stereo::core;
 
 namespace ecs_ros = embedded_calibration_stereo;
 
@@ -77,7 +79,7 @@ struct Options {
   std::string config, out, drift, snapshot;
   double seconds = 20.0;
   double fps = 0.0;  // 0: the scenario's
-  ecs::LightScheduleConfig schedule;
+  core::LightScheduleConfig schedule;
   std::string ns = "stereo";
   double start = -1.0;  // < 0: now
   std::string left_frame_id = "stereo_left_optical_frame";
@@ -177,43 +179,43 @@ Options parseOptions(int argc, char** argv) {
 
 struct DriftStep {
   double time_s = 0.0;
-  ecs::DriftRequest request;
+  core::DriftRequest request;
 };
 
 // The drift script's list: the YAML document's root, or its `drift` key when the root is a map.
 // fs holds the document (the nodes point into it).
 cv::FileNode driftList(const std::string& path, cv::FileStorage* fs) {
   std::ifstream in(path);
-  if (!in.good()) throw ecs::ConfigError(path, "file not found or not readable");
+  if (!in.good()) throw core::ConfigError(path, "file not found or not readable");
   std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
   // OpenCV's YAML reader wants its "%YAML:1.0" directive; a hand-written script has none.
   if (text.rfind("%YAML", 0) != 0) text = "%YAML:1.0\n---\n" + text;
   try {
     fs->open(text, cv::FileStorage::READ | cv::FileStorage::MEMORY | cv::FileStorage::FORMAT_YAML);
   } catch (const cv::Exception& e) {
-    throw ecs::ConfigError(path, std::string("malformed YAML: ") + e.err);
+    throw core::ConfigError(path, std::string("malformed YAML: ") + e.err);
   }
-  if (!fs->isOpened()) throw ecs::ConfigError(path, "malformed YAML");
+  if (!fs->isOpened()) throw core::ConfigError(path, "malformed YAML");
   cv::FileNode list = fs->root();
   if (list.isMap()) list = list["drift"];
-  if (list.empty() || list.isNone()) throw ecs::ConfigError("drift", "missing: the file must be a list of drift steps");
-  if (!list.isSeq()) throw ecs::ConfigError("drift", "must be a list of {time_s, ...} maps");
+  if (list.empty() || list.isNone()) throw core::ConfigError("drift", "missing: the file must be a list of drift steps");
+  if (!list.isSeq()) throw core::ConfigError("drift", "must be a list of {time_s, ...} maps");
   return list;
 }
 
 // The request's fields of one step (time_s aside), defaults for those it leaves out.
-ecs::DriftRequest driftRequest(const cv::FileNode& n, const std::string& where) {
-  ecs::DriftRequest r;
-  r.focal_scale = ecs::readDouble(n, "focal_scale", where, 1.0);
-  r.thermal_rate_deg_per_s = ecs::readDouble(n, "thermal_rate_deg_per_s", where, 0.0);
+core::DriftRequest driftRequest(const cv::FileNode& n, const std::string& where) {
+  core::DriftRequest r;
+  r.focal_scale = core::readDouble(n, "focal_scale", where, 1.0);
+  r.thermal_rate_deg_per_s = core::readDouble(n, "thermal_rate_deg_per_s", where, 0.0);
   for (const auto& [key, vec] : {std::pair<const char*, Eigen::Vector3d*>{"right_rotation_deg", &r.right_rotation_deg},
                                  {"knock_rotation_deg", &r.knock_rotation_deg},
                                  {"knock_translation_m", &r.knock_translation_m}})
-    if (!n[key].empty() && !n[key].isNone()) *vec = ecs::readVector3(n, key, where);
+    if (!n[key].empty() && !n[key].isNone()) *vec = core::readVector3(n, key, where);
   const cv::FileNode reset = n["reset"];
   if (!reset.empty() && !reset.isNone()) {
     if (!reset.isInt() && !(reset.isString() && (reset.string() == "true" || reset.string() == "false")))
-      throw ecs::ConfigError(where + ".reset", "must be true or false");
+      throw core::ConfigError(where + ".reset", "must be true or false");
     r.reset = reset.isInt() ? static_cast<int>(reset) != 0 : reset.string() == "true";
   }
   return r;
@@ -223,15 +225,15 @@ ecs::DriftRequest driftRequest(const cv::FileNode& n, const std::string& where) 
 DriftStep driftStep(const cv::FileNode& n, const std::string& where, const DriftStep* previous) {
   static const std::set<std::string> kKeys = {"time_s", "focal_scale", "right_rotation_deg", "thermal_rate_deg_per_s",
                                               "knock_rotation_deg", "knock_translation_m", "reset"};
-  if (!n.isMap()) throw ecs::ConfigError(where, "must be a map {time_s: ..., ...}");
+  if (!n.isMap()) throw core::ConfigError(where, "must be a map {time_s: ..., ...}");
   for (const std::string& key : n.keys())
-    if (!kKeys.count(key)) throw ecs::ConfigError(where + "." + key, "unknown field");
+    if (!kKeys.count(key)) throw core::ConfigError(where + "." + key, "unknown field");
   DriftStep step;
   const cv::FileNode time = n["time_s"];
-  if (time.empty() || time.isNone()) throw ecs::ConfigError(where + ".time_s", "missing");
-  step.time_s = ecs::readDouble(n, "time_s", where, 0.0);
-  if (step.time_s < 0.0) throw ecs::ConfigError(where + ".time_s", "must be >= 0");
-  if (previous && step.time_s < previous->time_s) throw ecs::ConfigError(where + ".time_s", "steps must be in time order");
+  if (time.empty() || time.isNone()) throw core::ConfigError(where + ".time_s", "missing");
+  step.time_s = core::readDouble(n, "time_s", where, 0.0);
+  if (step.time_s < 0.0) throw core::ConfigError(where + ".time_s", "must be >= 0");
+  if (previous && step.time_s < previous->time_s) throw core::ConfigError(where + ".time_s", "steps must be in time order");
   step.request = driftRequest(n, where);
   return step;
 }
@@ -249,24 +251,24 @@ std::vector<DriftStep> loadDriftScript(const std::string& path) {
 
 // The calibration in force in the driver: its files when given (checked as the driver checks
 // them; a rejected pair is an error here, not a fallback), else the nominal rig.
-ecs_ros::StereoCalibration::InForce calibrationInForce(const Options& o, const ecs::StereoRig& rig) {
+ecs_ros::StereoCalibration::InForce calibrationInForce(const Options& o, const core::StereoRig& rig) {
   ecs_ros::StereoCalibration::InForce in_force;
   std::tie(in_force.left, in_force.right) = ecs_ros::toStereoCameraInfo(rig);
   if (o.left_info.empty()) return in_force;
   for (const std::string* file : {&o.left_info, &o.right_info})
-    if (!std::filesystem::exists(*file)) throw ecs::ConfigError(*file, "calibration file not found");
+    if (!std::filesystem::exists(*file)) throw core::ConfigError(*file, "calibration file not found");
   const auto url = [](const std::string& file) { return "file://" + std::filesystem::absolute(file).string(); };
   ecs_ros::StereoCalibration calibration({"stereo_left", url(o.left_info), "--left-camera-info"},
                                          {"stereo_right", url(o.right_info), "--right-camera-info"},
                                          static_cast<uint32_t>(rig.left.width),
                                          static_cast<uint32_t>(rig.left.height), 10.0);
   calibration.load(in_force.left, in_force.right);
-  if (!calibration.problem().empty()) throw ecs::ConfigError("camera info", calibration.problem());
+  if (!calibration.problem().empty()) throw core::ConfigError("camera info", calibration.problem());
   return calibration.inForce();
 }
 
 // Left image | scene-only ground truth, side by side with a gap.
-void writeSnapshot(const std::string& path, const ecs::SimFrame& frame) {
+void writeSnapshot(const std::string& path, const core::SimFrame& frame) {
   const int gap = 8;
   cv::Mat canvas(frame.left.rows, 2 * frame.left.cols + gap, frame.left.type(), cv::Scalar::all(255));
   frame.left.copyTo(canvas(cv::Rect(0, 0, frame.left.cols, frame.left.rows)));
@@ -277,7 +279,7 @@ void writeSnapshot(const std::string& path, const ecs::SimFrame& frame) {
 // What a run renders: the scenario, its drift script, the frame rate and count, and the
 // calibration in force.
 struct Scenario {
-  ecs::SimRigConfig config;
+  core::SimRigConfig config;
   std::vector<DriftStep> drift;
   double fps = 0.0;
   int64_t frames = 0;
@@ -287,15 +289,15 @@ struct Scenario {
 Scenario loadScenario(const Options& o) {
   Scenario s;
   try {
-    s.config = ecs::loadSimRigConfig(o.config);
+    s.config = core::loadSimRigConfig(o.config);
   } catch (const std::exception& e) {
-    throw ecs::ConfigError("--config", "'" + o.config + "': " + e.what());
+    throw core::ConfigError("--config", "'" + o.config + "': " + e.what());
   }
   if (!o.drift.empty()) {
     try {
       s.drift = loadDriftScript(o.drift);
     } catch (const std::exception& e) {
-      throw ecs::ConfigError("--drift", "'" + o.drift + "': " + e.what());
+      throw core::ConfigError("--drift", "'" + o.drift + "': " + e.what());
     }
   }
   s.fps = o.fps > 0.0 ? o.fps : s.config.fps;
@@ -320,8 +322,8 @@ class ScenarioRun {
     for (int64_t k = 0; k < s_.frames && (write_bag_ || !snapshot_written_); ++k) {
       const double time_s = static_cast<double>(k) / s_.fps;
       applyDrift(time_s);
-      const ecs::LightState light = schedule_.step(time_s);
-      const ecs::SimFrame frame = render(k, time_s, light);
+      const core::LightState light = schedule_.step(time_s);
+      const core::SimFrame frame = render(k, time_s, light);
       head_pose_.update(frame.world_from_left, frame.time_s);
       if (!snapshot_written_ && light.light_on && light.settled) writeSnapshotOf(frame, k, time_s);
       if (!write_bag_) continue;
@@ -354,16 +356,16 @@ class ScenarioRun {
     for (; next_drift_ < s_.drift.size() && s_.drift[next_drift_].time_s <= time_s; ++next_drift_) {
       const std::string refusal = sim_.setDrift(s_.drift[next_drift_].request, s_.drift[next_drift_].time_s);
       if (!refusal.empty())
-        throw ecs::ConfigError("--drift", "'" + o_.drift + "': drift[" + std::to_string(next_drift_) + "]: " + refusal);
+        throw core::ConfigError("--drift", "'" + o_.drift + "': drift[" + std::to_string(next_drift_) + "]: " + refusal);
     }
   }
 
-  ecs::SimFrame render(int64_t k, double time_s, const ecs::LightState& light) {
+  core::SimFrame render(int64_t k, double time_s, const core::LightState& light) {
     if (light.light_on && light.switched) ++light_windows_;
     // As the driver's sim light and sim source pass them: the schedule's level, and the command
     // with the scene time of its last switch (for a scenario with a light response model).
     if (light.switched) switch_time_s_ = time_s;
-    ecs::SimRenderRequest request;
+    core::SimRenderRequest request;
     request.time_s = time_s;
     request.light_level = light.light_level;
     request.noise_seed = static_cast<uint64_t>(k + 1);
@@ -373,7 +375,7 @@ class ScenarioRun {
     return sim_.render(request);
   }
 
-  void writeSnapshotOf(const ecs::SimFrame& frame, int64_t k, double time_s) {
+  void writeSnapshotOf(const core::SimFrame& frame, int64_t k, double time_s) {
     writeSnapshot(o_.snapshot, frame);
     snapshot_written_ = true;
     std::printf("render_scenario_bag: wrote %s (frame %lld, %.2f s: left image | scene-only ground truth)\n",
@@ -387,7 +389,7 @@ class ScenarioRun {
   }
 
   // The driver's topics, as its capture loop builds them.
-  void writeFrame(const ecs::SimFrame& frame, const ecs::LightState& light, const ros::Time& stamp) {
+  void writeFrame(const core::SimFrame& frame, const core::LightState& light, const ros::Time& stamp) {
     std_msgs::Header left_header, right_header;
     left_header.stamp = right_header.stamp = stamp;
     left_header.frame_id = o_.left_frame_id;
@@ -409,7 +411,7 @@ class ScenarioRun {
     if (o_.ground_truth) writeGroundTruth(frame, left_header, right_header);
   }
 
-  void writeGroundTruth(const ecs::SimFrame& frame, const std_msgs::Header& left_header,
+  void writeGroundTruth(const core::SimFrame& frame, const std_msgs::Header& left_header,
                         const std_msgs::Header& right_header) {
     const ros::Time& stamp = left_header.stamp;
     const std::string& encoding = s_.config.encoding;
@@ -474,8 +476,8 @@ class ScenarioRun {
 
   const Options& o_;
   const Scenario& s_;
-  ecs::SimRig sim_;
-  ecs::LightSchedule schedule_;
+  core::SimRig sim_;
+  core::LightSchedule schedule_;
   ecs_ros::HeadPoseTruth head_pose_;
   const ros::Time start_;
   const std::string prefix_;

@@ -26,9 +26,11 @@
 #include <vector>
 
 #include "embedded_calibration_stereo/core/depth/rectification.h"
-#include "embedded_calibration_stereo/core/geometry/atomic_file.h"
-#include "embedded_calibration_stereo/core/geometry/camera_info_yaml.h"
+#include "embedded_calibration_stereo/core/io/atomic_file.h"
+#include "embedded_calibration_stereo/core/io/camera_info_yaml.h"
 #include "embedded_calibration_stereo/core/sim/sim_rig.h"
+
+namespace core = embedded_calibration_stereo::core;
 
 namespace {
 
@@ -100,12 +102,12 @@ struct Timeline {
   }
 };
 
-void writeCalibration(const ecs::StereoRig& rig, const std::string& left_path, const std::string& right_path) {
-  ecs::RectificationOptions options;
-  const auto files = ecs::stereoCameraInfoFiles(rig, ecs::computeRectificationGeometry(rig, options), "stereo_left",
+void writeCalibration(const core::StereoRig& rig, const std::string& left_path, const std::string& right_path) {
+  core::RectificationOptions options;
+  const auto files = core::stereoCameraInfoFiles(rig, core::computeRectificationGeometry(rig, options), "stereo_left",
                                                 "stereo_right");
-  ecs::writeFileAtomically(left_path, ecs::cameraInfoYaml(files.first));
-  ecs::writeFileAtomically(right_path, ecs::cameraInfoYaml(files.second));
+  core::writeFileAtomically(left_path, core::cameraInfoYaml(files.first));
+  core::writeFileAtomically(right_path, core::cameraInfoYaml(files.second));
 }
 
 // What the command line asks for.
@@ -193,16 +195,16 @@ struct Recording {
 };
 
 // At time t both focal lengths step to `scale` x nominal, in both heads.
-void zoom(double scale, double t, ecs::SimRig* sim, ecs::SimRig* covered) {
-  ecs::DriftRequest drift;
+void zoom(double scale, double t, core::SimRig* sim, core::SimRig* covered) {
+  core::DriftRequest drift;
   drift.focal_scale = scale;
-  for (ecs::SimRig* rig : {sim, covered}) {
+  for (core::SimRig* rig : {sim, covered}) {
     const std::string refusal = rig->setDrift(drift, t);
     if (!refusal.empty()) throw std::runtime_error("zoom refused: " + refusal);
   }
 }
 
-void writeFrame(const ecs::SimFrame& frame, cv::VideoWriter writers[2], Recording* recording) {
+void writeFrame(const core::SimFrame& frame, cv::VideoWriter writers[2], Recording* recording) {
   const cv::Mat images[2] = {frame.left, frame.right};
   for (int c = 0; c < 2; ++c) {
     cv::Mat grey = images[c];
@@ -213,10 +215,10 @@ void writeFrame(const ecs::SimFrame& frame, cv::VideoWriter writers[2], Recordin
 }
 
 // Renders the videos and the calibration files (at the start and, as truth, at the end).
-Recording recordVideos(const VideoOptions& o, const ecs::SimRigConfig& config, int frames) {
-  ecs::SimRigConfig covered_config = config;
+Recording recordVideos(const VideoOptions& o, const core::SimRigConfig& config, int frames) {
+  core::SimRigConfig covered_config = config;
   covered_config.scene.enabled = false;
-  ecs::SimRig sim(config), covered(covered_config);
+  core::SimRig sim(config), covered(covered_config);
   const cv::Size size(config.rig.left.width, config.rig.left.height);
   const int fourcc = cv::VideoWriter::fourcc('F', 'F', 'V', '1');
   cv::VideoWriter writers[2] = {cv::VideoWriter(o.out + "/left.avi", cv::CAP_FFMPEG, fourcc, o.fps, size, false),
@@ -238,7 +240,7 @@ Recording recordVideos(const VideoOptions& o, const ecs::SimRigConfig& config, i
     const double level = timeline.exposedLevel(t, o.exposure / o.fps);
     // The image is linear in the light level: a frame lit for a fraction of its exposure is
     // rendered at that level (as the simulator renders its own light ramp).
-    const ecs::SimFrame frame = (is_covered ? covered : sim).render(t, level, 2 * k + 1);
+    const core::SimFrame frame = (is_covered ? covered : sim).render(t, level, 2 * k + 1);
     if (k == 0) {
       cv::imwrite(o.out + "/left_scene.png", frame.left_scene);
       cv::imwrite(o.out + "/right_scene.png", frame.right_scene);
@@ -294,7 +296,7 @@ int main(int argc, char** argv) {
   ::mkdir(o.out.c_str(), 0755);
 
   try {
-    const ecs::SimRigConfig config = ecs::loadSimRigConfig(o.config_path);
+    const core::SimRigConfig config = core::loadSimRigConfig(o.config_path);
     const int frames = static_cast<int>(std::lround(o.seconds * o.fps));
     const Recording recording = recordVideos(o, config, frames);
     const std::vector<uint64_t> hashes[2] = {decodedHashes(o.out + "/left.avi", recording.rendered[0], frames),

@@ -20,7 +20,7 @@
 
 #include "embedded_calibration_stereo/core/calibration/stereo_accuracy.h"
 
-using namespace ecs;
+using namespace embedded_calibration_stereo::core;
 
 namespace {
 

@@ -28,7 +28,7 @@
 #include "embedded_calibration_stereo/core/tracker/pattern_tracker.h"
 #include "embedded_calibration_stereo/core/sim/sim_rig.h"
 
-using namespace ecs;
+using namespace embedded_calibration_stereo::core;
 
 namespace {
 

@@ -23,9 +23,9 @@
 #include <thread>
 #include <vector>
 
-#include "embedded_calibration_stereo/core/geometry/atomic_file.h"
+#include "embedded_calibration_stereo/core/io/atomic_file.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 namespace {
 
 namespace fs = std::filesystem;
@@ -194,4 +194,4 @@ TEST(AtomicFile, AMissingDirectoryIsReportedByPath) {
 }
 
 }  // namespace
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

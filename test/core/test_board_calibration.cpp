@@ -22,12 +22,12 @@
 
 #include "embedded_calibration_stereo/core/calibration/board_calibration.h"
 #include "embedded_calibration_stereo/core/calibration/board_calibration_report.h"
-#include "embedded_calibration_stereo/core/geometry/camera_info_yaml.h"
+#include "embedded_calibration_stereo/core/io/camera_info_yaml.h"
 #include "embedded_calibration_stereo/test_support/flat_board_images.h"
 #include "embedded_calibration_stereo/test_support/run_command.h"
 #include "embedded_calibration_stereo/core/sim/sim_rig.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 namespace {
 
 constexpr int kCols = 11, kRows = 8;
@@ -434,4 +434,4 @@ TEST_F(CalibrateImagesTool, FailsClearlyOnBadInput) {
 }
 
 }  // namespace
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

@@ -7,6 +7,8 @@
 #include "embedded_calibration_stereo/core/calibration/bringup_check.h"
 #include "embedded_calibration_stereo/core/sim/sim_rig.h"
 
+namespace core = embedded_calibration_stereo::core;
+
 namespace {
 
 const std::string kConfig = std::string(ECS_SOURCE_DIR) + "/config/sim_rig.yaml";
@@ -18,7 +20,7 @@ TEST(BringupStamps, PairsByNearestStampAndMeasuresTheOffset) {
     if (k == 40) continue;                          // a right image lost
     right.push_back(10.0 + k / 30.0 + (k == 70 ? 0.015 : 0.010));  // one 15 ms late: within half a frame
   }
-  const ecs::StampPairing s = ecs::pairStereoStamps(left, right);
+  const core::StampPairing s = core::pairStereoStamps(left, right);
   EXPECT_EQ(s.left_frames, 100);
   EXPECT_EQ(s.right_frames, 99);
   EXPECT_NEAR(s.frame_period_s, 1.0 / 30.0, 1e-9);
@@ -31,7 +33,7 @@ TEST(BringupStamps, PairsByNearestStampAndMeasuresTheOffset) {
 TEST(BringupStamps, AnImageMoreThanHalfAFrameAwayIsNotPaired) {
   std::vector<double> left, right;
   for (int k = 0; k < 30; ++k) left.push_back(k / 30.0), right.push_back(k / 30.0 + (k == 10 ? 0.02 : 0.0));
-  const ecs::StampPairing s = ecs::pairStereoStamps(left, right);
+  const core::StampPairing s = core::pairStereoStamps(left, right);
   EXPECT_EQ(s.pairs.size(), 29u);
   EXPECT_NEAR(s.max_abs_offset_s, 0.0, 1e-12);
 }
@@ -41,7 +43,7 @@ TEST(BringupStamps, AnImageMoreThanHalfAFrameAwayIsNotPaired) {
 // frame, then fully.
 struct LightRun {
   std::vector<double> left, right;
-  std::vector<ecs::FrameMode> modes;
+  std::vector<core::FrameMode> modes;
 };
 
 LightRun lightRun(int lag, int right_extra_lag = 0) {
@@ -56,14 +58,14 @@ LightRun lightRun(int lag, int right_extra_lag = 0) {
     run.left.push_back(level(k, lag));
     run.right.push_back(level(k, lag + right_extra_lag));
     const bool settled = commanded(k) == commanded(k - 1) && commanded(k) == commanded(k - 2);
-    run.modes.push_back(ecs::FrameMode{true, commanded(k), settled});
+    run.modes.push_back(core::FrameMode{true, commanded(k), settled});
   }
   return run;
 }
 
 TEST(BringupLight, AFastLightLeavesNoSettledFrameChanging) {
   const LightRun run = lightRun(-1);  // the image changes in the command's frame, fully on the next
-  const ecs::LightTiming t = ecs::analyseLight(run.left, run.right, run.modes, ecs::BringupThresholds());
+  const core::LightTiming t = core::analyseLight(run.left, run.right, run.modes, core::BringupThresholds());
   ASSERT_TRUE(t.switched);
   EXPECT_NEAR(t.left_step, 100.0, 1e-9);
   ASSERT_EQ(t.switches.size(), 4u);
@@ -79,17 +81,17 @@ TEST(BringupLight, AFastLightLeavesNoSettledFrameChanging) {
 
 TEST(BringupLight, ALightThreeFramesSlowIsMeasuredAndItsSettledFramesCounted) {
   const LightRun run = lightRun(2);  // three frames later than the fast light
-  const ecs::LightTiming t = ecs::analyseLight(run.left, run.right, run.modes, ecs::BringupThresholds());
+  const core::LightTiming t = core::analyseLight(run.left, run.right, run.modes, core::BringupThresholds());
   ASSERT_EQ(t.switches.size(), 4u);
   EXPECT_EQ(t.switches[0].change_frame - t.switches[0].command_frame, 3);
   EXPECT_EQ(t.switches[0].done_frame - t.switches[0].command_frame, 4);
   // Settled from frame 22: 22 (still off), 23 (half) and the same at each of the four switches.
   EXPECT_EQ(t.settled_wrong, 4 * 2);
-  ecs::BringupMeasurements m;
+  core::BringupMeasurements m;
   m.light = t;
   m.has_modes = true;
   m.lit_frames = m.unlit_frames = 10;
-  const ecs::BringupVerdict v = ecs::judgeBringup(m, ecs::BringupThresholds());
+  const core::BringupVerdict v = core::judgeBringup(m, core::BringupThresholds());
   EXPECT_FALSE(v.ready);
   ASSERT_EQ(v.reasons.size(), 1u);
   EXPECT_NE(v.reasons[0].find("starts to change 3 frames after its command and is fully on 4 frames"),
@@ -100,7 +102,7 @@ TEST(BringupLight, ALightThreeFramesSlowIsMeasuredAndItsSettledFramesCounted) {
 
 TEST(BringupLight, CamerasAFrameApartSeeEachSwitchInDifferentFrames) {
   const LightRun run = lightRun(-1, 1);
-  const ecs::LightTiming t = ecs::analyseLight(run.left, run.right, run.modes, ecs::BringupThresholds());
+  const core::LightTiming t = core::analyseLight(run.left, run.right, run.modes, core::BringupThresholds());
   ASSERT_EQ(t.switches.size(), 4u);
   EXPECT_EQ(t.split_switches, 4);
   EXPECT_EQ(t.switches[0].right_middle - t.switches[0].left_middle, 1);
@@ -118,14 +120,14 @@ TEST(BringupLight, AnExposureFollowingTheLightIsTakenOut) {
     right.push_back(gain * run.right[k]);
     scene.push_back(gain * 90.0);
   }
-  const ecs::BringupThresholds th;
-  EXPECT_GT(ecs::analyseLight(left, right, run.modes, th).settled_wrong, 0);
-  const ecs::LightTiming t = ecs::analyseLight(ecs::withoutExposureChanges(left, scene),
-                                               ecs::withoutExposureChanges(right, scene), run.modes, th);
+  const core::BringupThresholds th;
+  EXPECT_GT(core::analyseLight(left, right, run.modes, th).settled_wrong, 0);
+  const core::LightTiming t = core::analyseLight(core::withoutExposureChanges(left, scene),
+                                               core::withoutExposureChanges(right, scene), run.modes, th);
   EXPECT_EQ(t.settled_wrong, 0);
   ASSERT_EQ(t.switches.size(), 4u);
   EXPECT_EQ(t.switches[0].done_frame, 21);
-  const std::vector<double> corrected = ecs::withoutExposureChanges(left, scene);
+  const std::vector<double> corrected = core::withoutExposureChanges(left, scene);
   const double unlit = corrected[10];
   for (size_t k = 0; k < corrected.size(); ++k) {
     if (run.left[k] == 80.0) {
@@ -140,12 +142,12 @@ TEST(BringupLight, ASettledFrameThatJumpsIsTheSceneNotTheLight) {
   LightRun run = lightRun(-1);
   run.left[30] += 30.0;
   run.right[30] += 30.0;
-  ecs::BringupMeasurements m;
-  m.light = ecs::analyseLight(run.left, run.right, run.modes, ecs::BringupThresholds());
+  core::BringupMeasurements m;
+  m.light = core::analyseLight(run.left, run.right, run.modes, core::BringupThresholds());
   EXPECT_EQ(m.light.settled_wrong_frames, std::vector<int>{30});
   m.has_modes = true;
   m.lit_frames = m.unlit_frames = 10;
-  const ecs::BringupVerdict v = ecs::judgeBringup(m, ecs::BringupThresholds());
+  const core::BringupVerdict v = core::judgeBringup(m, core::BringupThresholds());
   ASSERT_EQ(v.reasons.size(), 1u);
   EXPECT_NE(v.reasons[0].find("the scene or the exposure changed"), std::string::npos) << v.reasons[0];
   EXPECT_NE(v.reasons[0].find("first: stereo frame 30"), std::string::npos) << v.reasons[0];
@@ -154,11 +156,11 @@ TEST(BringupLight, ASettledFrameThatJumpsIsTheSceneNotTheLight) {
 TEST(BringupLight, NoStepIsNoLight) {
   std::vector<double> left(60), right(60);
   for (int k = 0; k < 60; ++k) left[k] = 100.0 + (k % 3), right[k] = 90.0 - (k % 2);
-  const ecs::LightTiming t = ecs::analyseLight(left, right, {}, ecs::BringupThresholds());
+  const core::LightTiming t = core::analyseLight(left, right, {}, core::BringupThresholds());
   EXPECT_FALSE(t.switched);
-  ecs::BringupMeasurements m;
+  core::BringupMeasurements m;
   m.light = t;
-  EXPECT_FALSE(ecs::judgeBringup(m, ecs::BringupThresholds()).ready);
+  EXPECT_FALSE(core::judgeBringup(m, core::BringupThresholds()).ready);
 }
 
 TEST(BringupImage, ClippedPixelsAreCountedInsideTheMaskOnly) {
@@ -171,7 +173,7 @@ TEST(BringupImage, ClippedPixelsAreCountedInsideTheMaskOnly) {
   cv::Mat surround = cv::Mat::zeros(grey.size(), CV_8UC1);
   surround(cv::Rect(0, 0, 60, 100)).setTo(255);
   grey(cv::Rect(90, 0, 10, 100)).setTo(20);                 // outside the surround: 400 at 255, 1000 at 20
-  const ecs::ImageLevels l = ecs::measureImage(grey, mask, surround);
+  const core::ImageLevels l = core::measureImage(grey, mask, surround);
   EXPECT_NEAR(l.clipped_fraction, 150.0 / 5000.0, 1e-12);
   EXPECT_NEAR(l.device_level, (100 * 255.0 + 4850 * 120.0) / 5000.0, 1e-9);
   EXPECT_NEAR(l.scene_level, (400 * 255.0 + 1000 * 20.0 + 2600 * 120.0) / 4000.0, 1e-9);
@@ -180,10 +182,10 @@ TEST(BringupImage, ClippedPixelsAreCountedInsideTheMaskOnly) {
 class BringupBoards : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
-    config_ = new ecs::SimRigConfig(ecs::loadSimRigConfig(kConfig));
-    ecs::SimRig sim(*config_);
-    lit_ = new ecs::SimFrame(sim.render(0.0, 1.0, 1));
-    unlit_ = new ecs::SimFrame(sim.render(0.0, 0.0, 2));
+    config_ = new core::SimRigConfig(core::loadSimRigConfig(kConfig));
+    core::SimRig sim(*config_);
+    lit_ = new core::SimFrame(sim.render(0.0, 1.0, 1));
+    unlit_ = new core::SimFrame(sim.render(0.0, 0.0, 2));
   }
   static void TearDownTestSuite() {
     delete config_;
@@ -196,20 +198,20 @@ class BringupBoards : public ::testing::Test {
     unlit.convertTo(b, CV_32FC1);
     return a - b;
   }
-  static ecs::SimRigConfig* config_;
-  static ecs::SimFrame *lit_, *unlit_;
+  static core::SimRigConfig* config_;
+  static core::SimFrame *lit_, *unlit_;
 };
-ecs::SimRigConfig* BringupBoards::config_ = nullptr;
-ecs::SimFrame* BringupBoards::lit_ = nullptr;
-ecs::SimFrame* BringupBoards::unlit_ = nullptr;
+core::SimRigConfig* BringupBoards::config_ = nullptr;
+core::SimFrame* BringupBoards::lit_ = nullptr;
+core::SimFrame* BringupBoards::unlit_ = nullptr;
 
 TEST_F(BringupBoards, TheProjectedGridLiesOnTheRenderedCorners) {
   for (bool right : {false, true}) {
-    const auto regions = ecs::projectBoardRegions(config_->device, config_->rig, right);
+    const auto regions = core::projectBoardRegions(config_->device, config_->rig, right);
     const auto& truth = right ? lit_->observations.right : lit_->observations.left;
     ASSERT_EQ(regions.size(), truth.size());
-    for (const ecs::BoardCorners& board : truth) {
-      const ecs::BoardRegion& region = regions[board.board_id];
+    for (const core::BoardCorners& board : truth) {
+      const core::BoardRegion& region = regions[board.board_id];
       EXPECT_DOUBLE_EQ(region.inside_fraction, 1.0);
       // Block 0's third point is inner corner (1, 1): id cols + 1.
       const int cols = config_->device.boards[0].cols;
@@ -223,9 +225,9 @@ TEST_F(BringupBoards, TheProjectedGridLiesOnTheRenderedCorners) {
 }
 
 TEST_F(BringupBoards, EveryLitBoardIsSeenAndACoveredOneIsNot) {
-  const ecs::BringupThresholds th;
-  const auto regions = ecs::projectBoardRegions(config_->device, config_->rig, false);
-  const auto clean = ecs::measureBoards(difference(lit_->left, unlit_->left), regions, th);
+  const core::BringupThresholds th;
+  const auto regions = core::projectBoardRegions(config_->device, config_->rig, false);
+  const auto clean = core::measureBoards(difference(lit_->left, unlit_->left), regions, th);
   ASSERT_EQ(clean.size(), 6u);
   // The lit squares differ by reflectance * (white - black) of full scale, blurred a little.
   const double expected = 0.5 * (0.95 - 0.05) * 255.0;
@@ -236,7 +238,7 @@ TEST_F(BringupBoards, EveryLitBoardIsSeenAndACoveredOneIsNot) {
   }
   // Board 2 covered in the lit frame: its true corners' hull, a square wider, shows the unlit image.
   cv::Mat covered = lit_->left.clone();
-  for (const ecs::BoardCorners& board : lit_->observations.left) {
+  for (const core::BoardCorners& board : lit_->observations.left) {
     if (board.board_id != 2) continue;
     std::vector<cv::Point2f> points;
     for (size_t i = 0; i < board.size(); ++i) points.emplace_back(board.u[i], board.v[i]);
@@ -249,7 +251,7 @@ TEST_F(BringupBoards, EveryLitBoardIsSeenAndACoveredOneIsNot) {
     cv::dilate(mask, mask, cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(41, 41)));
     unlit_->left.copyTo(covered, mask);
   }
-  const auto hidden = ecs::measureBoards(difference(covered, unlit_->left), regions, th);
+  const auto hidden = core::measureBoards(difference(covered, unlit_->left), regions, th);
   for (const auto& b : hidden) {
     if (b.board_id == 2) {
       EXPECT_LT(b.contrast, 5.0);
@@ -258,28 +260,28 @@ TEST_F(BringupBoards, EveryLitBoardIsSeenAndACoveredOneIsNot) {
       EXPECT_DOUBLE_EQ(b.seen_fraction, 1.0) << "board " << b.board_id;
     }
   }
-  ecs::BringupMeasurements m;
+  core::BringupMeasurements m;
   m.light.switched = true;
   m.lit_frames = m.unlit_frames = 1;
   m.boards[0] = hidden;
   m.boards[1] = clean;
-  const ecs::BringupVerdict v = ecs::judgeBringup(m, th);
+  const core::BringupVerdict v = core::judgeBringup(m, th);
   ASSERT_EQ(v.reasons.size(), 1u);
   EXPECT_NE(v.reasons[0].find("board 2 in the left camera: contrast"), std::string::npos) << v.reasons[0];
   m.boards[0] = clean;
-  EXPECT_TRUE(ecs::judgeBringup(m, th).ready);
+  EXPECT_TRUE(core::judgeBringup(m, th).ready);
 }
 
 TEST(BringupVerdict, StampsAndClippingAreNamedWithTheirFigures) {
-  ecs::BringupMeasurements m;
+  core::BringupMeasurements m;
   m.light.switched = true;
   m.lit_frames = m.unlit_frames = 10;
   std::vector<double> left, right;
   for (int k = 0; k < 50; ++k) left.push_back(k / 30.0), right.push_back(k / 30.0 + 0.010);
-  m.stamps = ecs::pairStereoStamps(left, right);
+  m.stamps = core::pairStereoStamps(left, right);
   m.clipped_fraction[1] = 0.2;
   m.clipped_frames[1] = 10;
-  const ecs::BringupVerdict v = ecs::judgeBringup(m, ecs::BringupThresholds());
+  const core::BringupVerdict v = core::judgeBringup(m, core::BringupThresholds());
   ASSERT_EQ(v.reasons.size(), 2u);
   EXPECT_NE(v.reasons[0].find("10.0 ms from the left's"), std::string::npos) << v.reasons[0];
   EXPECT_NE(v.reasons[1].find("20.0 % of the boards' pixels are clipped"), std::string::npos) << v.reasons[1];

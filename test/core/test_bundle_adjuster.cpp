@@ -26,7 +26,7 @@
 #include "embedded_calibration_stereo/core/calibration/corner_tracks.h"
 #include "embedded_calibration_stereo/test_support/synthetic_observations.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 namespace {
 
 struct Scenario {
@@ -357,4 +357,4 @@ TEST(BundleAdjuster, FixedCalibrationEvaluationSeparatesTruthFromADriftedRig) {
 }
 
 }  // namespace
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

@@ -14,7 +14,7 @@
 #include "embedded_calibration_stereo/core/calibration/bundle_adjuster.h"
 #include "embedded_calibration_stereo/test_support/synthetic_observations.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 namespace {
 
 // Every double of a summary that the solve computes (timings excluded).
@@ -92,4 +92,4 @@ TEST(BundleAdjusterRepeatability, SameInputGivesTheSameBitsWhateverTheHeapHistor
 }
 
 }  // namespace
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

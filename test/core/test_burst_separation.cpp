@@ -22,7 +22,7 @@
 #include "embedded_calibration_stereo/core/sim/sim_rig.h"
 #include "embedded_calibration_stereo/core/tracker/window_tracker.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 namespace {
 
 const std::string kConfig = std::string(ECS_SOURCE_DIR) + "/config/drive_photo.yaml";
@@ -179,4 +179,4 @@ TEST(WindowEnds, KeepsTheLightOnFramesNearestEachEnd) {
 }
 
 }  // namespace
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

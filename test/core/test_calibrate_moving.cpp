@@ -12,7 +12,7 @@
 
 #include "embedded_calibration_stereo/test_support/run_command.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 namespace {
 
 TEST(CalibrateMoving, AMinuteOfDrivePhotoCommitsNothingWorse) {
@@ -37,4 +37,4 @@ TEST(CalibrateMoving, AMinuteOfDrivePhotoCommitsNothingWorse) {
 }
 
 }  // namespace
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

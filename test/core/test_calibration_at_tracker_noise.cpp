@@ -29,11 +29,11 @@
 #include "embedded_calibration_stereo/core/calibration/bundle_adjuster.h"
 #include "embedded_calibration_stereo/core/calibration/calibration_filter.h"
 #include "embedded_calibration_stereo/core/calibration/stereo_accuracy.h"
-#include "embedded_calibration_stereo/core/geometry/config_io.h"
+#include "embedded_calibration_stereo/core/io/config_io.h"
 #include "embedded_calibration_stereo/test_support/synthetic_observations.h"
 #include "embedded_calibration_stereo/test_support/synthetic_window.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 namespace {
 
 // The tracker's corner RMS on drive_photo (test_tracker_motion): the head as configured, and the
@@ -274,4 +274,4 @@ TEST(CalibrationAtTrackerNoise, PrintsTheDimDevicesFigures) {
 }
 
 }  // namespace
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

@@ -3,9 +3,9 @@
 #include <gtest/gtest.h>
 
 #include "embedded_calibration_stereo/core/geometry/calibration_device.h"
-#include "embedded_calibration_stereo/core/geometry/config_io.h"
+#include "embedded_calibration_stereo/core/io/config_io.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 namespace {
 
 CalibrationDevice twoCopyDevice(int planes_per_copy) {
@@ -105,4 +105,4 @@ TEST(ConfigIo, MissingFileAndBadValuesNameTheParameter) {
 }
 
 }  // namespace
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

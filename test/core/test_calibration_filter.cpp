@@ -24,7 +24,7 @@
 #include "embedded_calibration_stereo/test_support/synthetic_observations.h"
 #include "embedded_calibration_stereo/test_support/synthetic_window.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 namespace {
 
 constexpr double kWindowCornerNoisePx = 0.023 / M_SQRT2;  // test_window_tracker, per coordinate
@@ -170,4 +170,4 @@ TEST(CalibrationFilter, ThePriorOfTheUnchangedGroupsBringsAKnockedWindowCloserAs
 }
 
 }  // namespace
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

@@ -8,20 +8,22 @@
 
 #include "embedded_calibration_stereo/core/calibration/calibration_health_policy.h"
 
+namespace core = embedded_calibration_stereo::core;
+
 namespace {
 
-using ecs::CalibrationHealth;
-using Policy = ecs::CalibrationHealthPolicy<std::string>;
+using core::CalibrationHealth;
+using Policy = core::CalibrationHealthPolicy<std::string>;
 using Outcome = Policy::Verified::Outcome;
 
-Policy makePolicy(ecs::CalibrationHealthPolicyOptions options = {}) {
+Policy makePolicy(core::CalibrationHealthPolicyOptions options = {}) {
   return Policy(options, [](const std::string& in_force, const std::string& other) { return in_force == other; });
 }
 
 // A report of `state` whose verification measured a disparity bias of `bias_px` (the only
 // signal, so severity() = bias_px / disparity_bias_degraded_px).
-ecs::HealthReport report(CalibrationHealth state, double bias_px = 0.0, const std::string& reason = "") {
-  ecs::HealthReport r;
+core::HealthReport report(CalibrationHealth state, double bias_px = 0.0, const std::string& reason = "") {
+  core::HealthReport r;
   r.state = state;
   r.board_age_s = 0.0;
   r.disparity_bias_px = bias_px;
@@ -29,16 +31,16 @@ ecs::HealthReport report(CalibrationHealth state, double bias_px = 0.0, const st
   return r;
 }
 
-ecs::CalibratorStatus confirmation(uint32_t epoch, double newest_frame_s) {
-  ecs::CalibratorStatus status;
+core::CalibratorStatus confirmation(uint32_t epoch, double newest_frame_s) {
+  core::CalibratorStatus status;
   status.epoch = epoch;
   status.in_force_confirmed = true;
   status.newest_frame_s = newest_frame_s;
   return status;
 }
 
-ecs::CalibratorStatus commit(uint32_t epoch, double newest_frame_s, double predicted_px) {
-  ecs::CalibratorStatus status;
+core::CalibratorStatus commit(uint32_t epoch, double newest_frame_s, double predicted_px) {
+  core::CalibratorStatus status;
   status.epoch = epoch;
   status.accepted = true;
   status.newest_frame_s = newest_frame_s;
@@ -129,7 +131,7 @@ TEST(CalibrationHealthPolicy, AFailedRestoreIsAFlagAndTheNextOneMayStart) {
 }
 
 TEST(CalibrationHealthPolicy, NoRollbackWhenRollbackIsOff) {
-  ecs::CalibrationHealthPolicyOptions options;
+  core::CalibrationHealthPolicyOptions options;
   options.rollback = false;
   Policy policy = makePolicy(options);
   policy.newCalibration(1, "A");
@@ -190,10 +192,10 @@ TEST(CalibrationHealthPolicy, AConfirmationFromAWindowOlderThanTheChangeCountsNo
   EXPECT_TRUE(policy.confirmsInForce(confirmation(2, 12.0), true));
   EXPECT_FALSE(policy.confirmsInForce(confirmation(1, 12.5), true)) << "another epoch's";
   EXPECT_FALSE(policy.confirmsInForce(confirmation(2, 12.5), false)) << "the monitor has no calibration";
-  ecs::CalibratorStatus accepted = confirmation(2, 12.5);
+  core::CalibratorStatus accepted = confirmation(2, 12.5);
   accepted.accepted = true;
   EXPECT_FALSE(policy.confirmsInForce(accepted, true)) << "a commit confirms nothing";
-  ecs::CalibratorStatus rejected = confirmation(2, 12.5);
+  core::CalibratorStatus rejected = confirmation(2, 12.5);
   rejected.in_force_confirmed = false;
   EXPECT_FALSE(policy.confirmsInForce(rejected, true)) << "a rejection for another reason confirms nothing";
   // While GOOD a confirmation changes nothing.
@@ -216,12 +218,12 @@ TEST(CalibrationHealthPolicy, ACommitPredictedWorseThanTheLimitWantsMoreBurstsUn
   policy.newCalibration(3, "C");
   EXPECT_FALSE(policy.published(report(CalibrationHealth::kUnknown), 5.0).calibration_wanted)
       << "not before its first verdict";
-  const ecs::HealthVerdict refining = policy.published(report(CalibrationHealth::kGood), 6.0);
+  const core::HealthVerdict refining = policy.published(report(CalibrationHealth::kGood), 6.0);
   EXPECT_TRUE(refining.calibration_wanted);
   EXPECT_NE(refining.reason.find("refining: the calibration's predicted error 0.120 px (limit 0.080 px)"),
             std::string::npos);
   // A solve of a window no newer than the commit's ends nothing; a later one does.
-  ecs::CalibratorStatus same_window = confirmation(3, 4.0);
+  core::CalibratorStatus same_window = confirmation(3, 4.0);
   policy.noteRefinement(same_window);
   EXPECT_TRUE(policy.published(report(CalibrationHealth::kGood), 7.0).calibration_wanted);
   policy.noteRefinement(confirmation(3, 8.0));
@@ -249,7 +251,7 @@ TEST(CalibrationHealthPolicy, RefinementsInARowAreBoundedUntilTheHealthLeavesGoo
 }
 
 TEST(CalibrationHealthPolicy, NoRefinementWhenTheLimitIsZero) {
-  ecs::CalibrationHealthPolicyOptions options;
+  core::CalibrationHealthPolicyOptions options;
   options.refine_predicted_px = 0.0;
   Policy policy = makePolicy(options);
   policy.noteRefinement(commit(1, 1.0, 0.5));
@@ -287,13 +289,13 @@ TEST(CalibrationHealthPolicy, AVerificationWaitsForTheSolvesBoardsUntilTheyComeO
 }
 
 TEST(CalibrationHealthPolicy, NoWaitForBoardsPosedPerFrameOrAZeroWait) {
-  ecs::CalibrationHealthPolicyOptions per_frame;
+  core::CalibrationHealthPolicyOptions per_frame;
   per_frame.boards_posed = false;
   Policy a = makePolicy(per_frame);
   a.newCalibration(1, "A");
   a.calibrationSet(false, 0.0);
   EXPECT_FALSE(a.waitingForBoards());
-  ecs::CalibrationHealthPolicyOptions no_wait;
+  core::CalibrationHealthPolicyOptions no_wait;
   no_wait.solve_boards_wait_s = 0.0;
   Policy b = makePolicy(no_wait);
   b.newCalibration(1, "A");
@@ -316,15 +318,15 @@ TEST(CalibrationHealthPolicy, ANewCalibrationDropsTheWaitAndTheVerificationKept)
 TEST(CalibrationHealthPolicy, AnImplausibleCalibrationIsBadAndACollapseOfDepthAtLeastDegraded) {
   Policy policy = makePolicy();
   policy.newCalibration(1, "A");
-  const ecs::CoverageCollapse collapse{0.03, 0.6};
-  const ecs::HealthReport good = report(CalibrationHealth::kGood, 0.0, "fine");
+  const core::CoverageCollapse collapse{0.03, 0.6};
+  const core::HealthReport good = report(CalibrationHealth::kGood, 0.0, "fine");
   EXPECT_EQ(policy.effectiveReport(good, std::nullopt).state, CalibrationHealth::kGood);
-  const ecs::HealthReport collapsed = policy.effectiveReport(good, collapse);
+  const core::HealthReport collapsed = policy.effectiveReport(good, collapse);
   EXPECT_EQ(collapsed.state, CalibrationHealth::kDegraded);
   EXPECT_EQ(collapsed.reason, "fine; " + collapse.text());
   EXPECT_EQ(policy.effectiveReport(report(CalibrationHealth::kBad), collapse).state, CalibrationHealth::kBad);
   policy.setImplausible("focal lengths far from the nominal ones");
-  const ecs::HealthReport implausible = policy.effectiveReport(good, collapse);
+  const core::HealthReport implausible = policy.effectiveReport(good, collapse);
   EXPECT_EQ(implausible.state, CalibrationHealth::kBad);
   EXPECT_EQ(implausible.reason, "focal lengths far from the nominal ones");
   policy.newCalibration(2, "B");
@@ -333,7 +335,7 @@ TEST(CalibrationHealthPolicy, AnImplausibleCalibrationIsBadAndACollapseOfDepthAt
 
 TEST(CalibrationHealthPolicy, SeverityIsTheLargestMeasuredSignalInUnitsOfItsDegradedThreshold) {
   const Policy policy = makePolicy();  // 0.08, 0.08, 0.35 px
-  ecs::HealthReport r;
+  core::HealthReport r;
   r.misalignment_px = 0.4;
   r.disparity_bias_px = 0.16;
   r.board_residual_px = 1.05;

@@ -22,7 +22,7 @@
 #include "embedded_calibration_stereo/test_support/synthetic_observations.h"
 #include "embedded_calibration_stereo/test_support/synthetic_window.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 namespace {
 
 const std::string kConfigDir = std::string(ECS_SOURCE_DIR) + "/config/";
@@ -296,9 +296,9 @@ TEST(CalibrationMonitor, ThermalRampAboutZCaughtBeforeThreeHundredthsOfADegree) 
 }
 
 }  // namespace
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 namespace {
 
 // A wrong calibration put in force (the right camera's focal length 0.5 % too long, as a bad
@@ -335,12 +335,12 @@ TEST(CalibrationMonitor, WrongCalibrationCaughtByFirstVerification) {
 TEST(CalibrationMonitor, RefusesBadOptionsAndInputs) {
   CalibrationMonitorOptions o;
   o.misalignment_bad_px = o.misalignment_degraded_px;
-  EXPECT_NE(o.Check().find("misalignment_bad_px"), std::string::npos) << o.Check();
+  EXPECT_NE(o.validate().find("misalignment_bad_px"), std::string::npos) << o.validate();
   EXPECT_THROW(CalibrationMonitor{o}, std::invalid_argument);
   o = CalibrationMonitorOptions();
   o.matching.lk_window_px = 12;
-  EXPECT_NE(o.Check().find("lk_window_px"), std::string::npos) << o.Check();
-  EXPECT_EQ(CalibrationMonitorOptions().Check(), "");
+  EXPECT_NE(o.validate().find("lk_window_px"), std::string::npos) << o.validate();
+  EXPECT_EQ(CalibrationMonitorOptions().validate(), "");
 
   const SimRigConfig config = loadSimRigConfig(kConfigDir + "drive_photo.yaml");
   CalibrationMonitor monitor{Head::options(2.0)};  // measures on every depth frame
@@ -363,9 +363,9 @@ TEST(CalibrationMonitor, RefusesBadOptionsAndInputs) {
 }
 
 }  // namespace
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 namespace {
 
 // A knock far beyond the band (0.5 deg about x: rows 5.7 px apart, the band is +-3 px) is still
@@ -381,9 +381,9 @@ TEST(CalibrationMonitor, LargeTiltKnockBadWithinTwoSeconds) {
 }
 
 }  // namespace
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 namespace {
 
 // A verification judges a calibration against board poses. A solve estimates the cameras and the
@@ -433,13 +433,13 @@ TEST(CalibrationMonitor, ASolvesCalibrationIsVerifiedAgainstItsSolvesBoards) {
 }
 
 // Options refused by parameter name, nested ones with their path; the sentence is the same as
-// Check() gives.
+// validate() gives.
 TEST(CalibrationMonitor, OptionProblemsNameTheParameter) {
   CalibrationMonitorOptions o;
   EXPECT_TRUE(o.problem().ok());
   o.misalignment_bad_px = o.misalignment_degraded_px / 2;
   EXPECT_EQ(o.problem().parameter, "misalignment_degraded_px");
-  EXPECT_EQ(o.Check(), o.problem().text());
+  EXPECT_EQ(o.validate(), o.problem().text());
   o = CalibrationMonitorOptions();
   o.matching.grid_rows = 0;
   EXPECT_EQ(o.problem().parameter, "matching.grid_rows");
@@ -450,4 +450,4 @@ TEST(CalibrationMonitor, OptionProblemsNameTheParameter) {
 }
 
 }  // namespace
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

@@ -8,7 +8,7 @@
 #include "embedded_calibration_stereo/core/geometry/camera_model.h"
 #include "embedded_calibration_stereo/core/geometry/stereo_rig.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 namespace {
 
 PinholeCamera headCamera() {
@@ -99,4 +99,4 @@ TEST(StereoRig, RotationHelpers) {
 }
 
 }  // namespace
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

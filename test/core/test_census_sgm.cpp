@@ -16,7 +16,7 @@
 
 #include "embedded_calibration_stereo/core/depth/census_sgm_matcher.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 namespace {
 
 // Random texture, smoothed a little so that matching is meaningful, at disparity `shift`, with
@@ -334,4 +334,4 @@ TEST(CensusSgm, RefusesBadParametersAndInputs) {
 }
 
 }  // namespace
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

@@ -9,6 +9,8 @@
 
 #include "embedded_calibration_stereo/core/calibration/depth_coverage_watch.h"
 
+namespace core = embedded_calibration_stereo::core;
+
 namespace {
 
 constexpr double kFps = 15.0;
@@ -20,7 +22,7 @@ double sortedMedian(std::vector<double> values) {
 
 // Feeds fraction(t) from t0 to t1 at kFps with +-0.03 uniform noise; returns what was fed.
 template <class F>
-std::vector<double> feed(ecs::DepthCoverageWatch* watch, double t0, double t1, F fraction, std::mt19937* rng) {
+std::vector<double> feed(core::DepthCoverageWatch* watch, double t0, double t1, F fraction, std::mt19937* rng) {
   std::uniform_real_distribution<double> noise(-0.03, 0.03);
   std::vector<double> fed;
   for (double t = t0; t < t1 - 1e-9; t += 1.0 / kFps) {
@@ -35,7 +37,7 @@ std::vector<double> feed(ecs::DepthCoverageWatch* watch, double t0, double t1, F
 
 TEST(DepthCoverageWatch, ACollapseIsSeenWithinTheRecentSpanAgainstTheMedianBefore) {
   std::mt19937 rng(1);
-  ecs::DepthCoverageWatch watch{ecs::DepthCoverageWatchOptions{}};
+  core::DepthCoverageWatch watch{core::DepthCoverageWatchOptions{}};
   const std::vector<double> before = feed(&watch, 0.0, 40.0, [](double) { return 0.6; }, &rng);
   EXPECT_FALSE(watch.collapse());
   // Depth empties (a calibration whose rectified images left the view).
@@ -53,7 +55,7 @@ TEST(DepthCoverageWatch, ACollapseIsSeenWithinTheRecentSpanAgainstTheMedianBefor
 
 TEST(DepthCoverageWatch, ACollapseLastsUntilDepthRecoversHoweverLong) {
   std::mt19937 rng(2);
-  ecs::DepthCoverageWatch watch{ecs::DepthCoverageWatchOptions{}};
+  core::DepthCoverageWatch watch{core::DepthCoverageWatchOptions{}};
   feed(&watch, 0.0, 30.0, [](double) { return 0.5; }, &rng);
   feed(&watch, 30.0, 300.0, [](double) { return 0.1; }, &rng);  // far longer than history_s
   ASSERT_TRUE(watch.collapse()) << "a collapse must not be learned as the new normal";
@@ -65,7 +67,7 @@ TEST(DepthCoverageWatch, ACollapseLastsUntilDepthRecoversHoweverLong) {
 TEST(DepthCoverageWatch, ASlowChangeOfSceneIsNoCollapse) {
   // From 60 % to 15 % over four minutes (driving into a bare corridor): the history follows.
   std::mt19937 rng(3);
-  ecs::DepthCoverageWatch watch{ecs::DepthCoverageWatchOptions{}};
+  core::DepthCoverageWatch watch{core::DepthCoverageWatchOptions{}};
   bool seen = false;
   std::uniform_real_distribution<double> noise(-0.03, 0.03);
   for (double t = 0.0; t < 240.0; t += 1.0 / kFps) {
@@ -77,12 +79,12 @@ TEST(DepthCoverageWatch, ASlowChangeOfSceneIsNoCollapse) {
 
 TEST(DepthCoverageWatch, NoVerdictOnAShortHistoryOrAViewWithLittleDepth) {
   std::mt19937 rng(4);
-  ecs::DepthCoverageWatch young{ecs::DepthCoverageWatchOptions{}};
+  core::DepthCoverageWatch young{core::DepthCoverageWatchOptions{}};
   feed(&young, 0.0, 5.0, [](double) { return 0.6; }, &rng);
   feed(&young, 5.0, 8.0, [](double) { return 0.0; }, &rng);  // history of 8 s: less than min_history_s
   EXPECT_FALSE(young.collapse());
 
-  ecs::DepthCoverageWatch dim{ecs::DepthCoverageWatchOptions{}};
+  core::DepthCoverageWatch dim{core::DepthCoverageWatchOptions{}};
   feed(&dim, 0.0, 30.0, [](double) { return 0.04; }, &rng);  // below min_reference: the sky
   feed(&dim, 30.0, 33.0, [](double) { return 0.0; }, &rng);
   EXPECT_FALSE(dim.collapse());
@@ -90,7 +92,7 @@ TEST(DepthCoverageWatch, NoVerdictOnAShortHistoryOrAViewWithLittleDepth) {
 
 TEST(DepthCoverageWatch, ARebaseAcceptsTheLevelOfNow) {
   std::mt19937 rng(5);
-  ecs::DepthCoverageWatch watch{ecs::DepthCoverageWatchOptions{}};
+  core::DepthCoverageWatch watch{core::DepthCoverageWatchOptions{}};
   feed(&watch, 0.0, 30.0, [](double) { return 0.6; }, &rng);
   feed(&watch, 30.0, 33.0, [](double) { return 0.2; }, &rng);
   ASSERT_TRUE(watch.collapse());
@@ -104,19 +106,19 @@ TEST(DepthCoverageWatch, ARebaseAcceptsTheLevelOfNow) {
 
 TEST(DepthCoverageWatch, TimeGoingBackStartsAgain) {
   std::mt19937 rng(6);
-  ecs::DepthCoverageWatch watch{ecs::DepthCoverageWatchOptions{}};
+  core::DepthCoverageWatch watch{core::DepthCoverageWatchOptions{}};
   feed(&watch, 100.0, 130.0, [](double) { return 0.6; }, &rng);
   feed(&watch, 0.0, 3.0, [](double) { return 0.1; }, &rng);  // a bag played again
   EXPECT_FALSE(watch.collapse());
 }
 
 TEST(DepthCoverageWatch, OptionsAreChecked) {
-  ecs::DepthCoverageWatchOptions o;
-  EXPECT_EQ(o.Check(), "");
+  core::DepthCoverageWatchOptions o;
+  EXPECT_EQ(o.validate(), "");
   o.collapse_ratio = 1.0;
-  EXPECT_NE(o.Check().find("collapse_ratio"), std::string::npos);
+  EXPECT_NE(o.validate().find("collapse_ratio"), std::string::npos);
   o = {};
   o.history_s = o.recent_s;
-  EXPECT_NE(o.Check().find("history_s"), std::string::npos);
-  EXPECT_THROW(ecs::DepthCoverageWatch{o}, std::invalid_argument);
+  EXPECT_NE(o.validate().find("history_s"), std::string::npos);
+  EXPECT_THROW(core::DepthCoverageWatch{o}, std::invalid_argument);
 }

@@ -20,7 +20,7 @@
 #include <string>
 #include <vector>
 
-#include "embedded_calibration_stereo/core/calibration/light_schedule.h"
+#include "embedded_calibration_stereo/core/light/light_schedule.h"
 #include "embedded_calibration_stereo/core/depth/device_image_learner.h"
 #include "embedded_calibration_stereo/core/depth/disparity.h"
 #include "embedded_calibration_stereo/core/depth/disparity_evaluation.h"
@@ -28,7 +28,7 @@
 #include "embedded_calibration_stereo/core/depth/separator.h"
 #include "embedded_calibration_stereo/core/sim/sim_rig.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 namespace {
 
 const std::string kConfigPath = std::string(ECS_SOURCE_DIR) + "/config/drive_photo.yaml";
@@ -270,7 +270,7 @@ TEST(DeviceImageLearner, LearnsOnDrivePhotoWithoutTruthAndFollowsAZoom) {
 TEST(DeviceImageLearner, RejectsWrongInputs) {
   DeviceLearnerOptions bad;
   bad.min_pairs = 1;
-  EXPECT_NE(bad.Check(), "");
+  EXPECT_NE(bad.validate(), "");
   const cv::Mat a(48, 64, CV_8UC1, cv::Scalar(10)), b(48, 64, CV_8UC1, cv::Scalar(20));
   EXPECT_THROW(learnDeviceImage({{a, b}, {a, b}}, bad, 0), std::invalid_argument);
   EXPECT_THROW(learnDeviceImage({{a, b}}, DeviceLearnerOptions(), 0), std::invalid_argument);
@@ -287,4 +287,4 @@ TEST(DeviceImageLearner, RejectsWrongInputs) {
 }
 
 }  // namespace
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

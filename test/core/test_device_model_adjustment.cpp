@@ -25,11 +25,11 @@
 #include "embedded_calibration_stereo/test_support/cramer_rao.h"
 #include "embedded_calibration_stereo/test_support/solution_errors.h"
 #include "embedded_calibration_stereo/core/calibration/bundle_adjuster.h"
-#include "embedded_calibration_stereo/core/geometry/config_io.h"
+#include "embedded_calibration_stereo/core/io/config_io.h"
 #include "embedded_calibration_stereo/core/calibration/quality_gate.h"
 #include "embedded_calibration_stereo/test_support/synthetic_observations.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 namespace {
 
 struct SimScenario {
@@ -423,4 +423,4 @@ TEST(DeviceModel, BoardPlacementOffByItsToleranceIsRefined) {
 }
 
 }  // namespace
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

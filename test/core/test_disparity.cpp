@@ -15,9 +15,9 @@
 #include "embedded_calibration_stereo/core/depth/disparity.h"
 #include "embedded_calibration_stereo/core/depth/disparity_evaluation.h"
 #include "embedded_calibration_stereo/core/depth/disparity_filling.h"
-#include "embedded_calibration_stereo/core/geometry/pfm_io.h"
+#include "embedded_calibration_stereo/core/io/pfm_io.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 namespace {
 
 // Band-limited random texture as a sum of sinusoids, so a shifted copy is exact (no resampling).
@@ -224,14 +224,14 @@ TEST(DisparityTest, RejectsWrongInput) {
 
 TEST(DisparityOptionsTest, CheckNamesProblemsAndClampFixesThem) {
   DisparityOptions o;
-  EXPECT_EQ(o.Check(), "");
+  EXPECT_EQ(o.validate(), "");
   EXPECT_TRUE(o.clamp().empty());
 
   o.algorithm = "bm";
   o.disparity_range = 60;
   o.correlation_window_size = 4;
   o.P2 = o.P1;
-  const std::string problem = o.Check();
+  const std::string problem = o.validate();
   EXPECT_NE(problem.find("disparity_range"), std::string::npos) << problem;
   EXPECT_NE(problem.find("correlation_window_size"), std::string::npos) << problem;
   EXPECT_NE(problem.find("P2"), std::string::npos) << problem;
@@ -242,29 +242,29 @@ TEST(DisparityOptionsTest, CheckNamesProblemsAndClampFixesThem) {
   EXPECT_EQ(o.disparity_range, 64);
   EXPECT_EQ(o.correlation_window_size, 5);
   EXPECT_GT(o.P2, o.P1);
-  EXPECT_EQ(o.Check(), "");
+  EXPECT_EQ(o.validate(), "");
 
   DisparityOptions sad;
   sad.algorithm = "sad";
   sad.correlation_window_size = 31;  // the 16-bit window sums allow 15 at most
-  EXPECT_NE(sad.Check(), "");
+  EXPECT_NE(sad.validate(), "");
   sad.clamp();
   EXPECT_EQ(sad.correlation_window_size, 15);
 
   DisparityOptions bad_names;
   bad_names.algorithm = "census";
   bad_names.sgbm_mode = "full";
-  EXPECT_NE(bad_names.Check().find("census"), std::string::npos);
+  EXPECT_NE(bad_names.validate().find("census"), std::string::npos);
   EXPECT_EQ(bad_names.clamp().size(), 2u);
-  EXPECT_EQ(bad_names.Check(), "");
+  EXPECT_EQ(bad_names.validate(), "");
 }
 
-// census_sgm's own options: each bad value named by Check() and moved by clamp() to the nearest
+// census_sgm's own options: each bad value named by validate() and moved by clamp() to the nearest
 // usable one; the range limit applies to census_sgm only.
 TEST(DisparityTest, CensusSgmOptionsCheckedAndClamped) {
   DisparityOptions o;
   EXPECT_EQ(o.algorithm, "census_sgm");
-  EXPECT_EQ(o.Check(), "");
+  EXPECT_EQ(o.validate(), "");
   o.sgm_paths = 6;
   o.sgm_census_threshold = -1;
   o.sgm_P1 = 70;
@@ -272,13 +272,13 @@ TEST(DisparityTest, CensusSgmOptionsCheckedAndClamped) {
   o.sgm_edge_scale = -3;
   o.median_size = 4;
   o.disparity_range = 1024;
-  const std::string problem = o.Check();
+  const std::string problem = o.validate();
   for (const char* name : {"sgm_paths", "sgm_census_threshold", "sgm_P1", "sgm_P2", "sgm_edge_scale",
                            "median_size", "disparity_range"})
     EXPECT_NE(problem.find(name), std::string::npos) << name << " not named in: " << problem;
   EXPECT_THROW(DisparityComputer{o}, std::invalid_argument);
   EXPECT_EQ(o.clamp().size(), 7u);
-  EXPECT_EQ(o.Check(), "");
+  EXPECT_EQ(o.validate(), "");
   EXPECT_EQ(o.sgm_paths, 5);  // 6: nearer 5 than 8
   EXPECT_EQ(o.sgm_census_threshold, 0);
   EXPECT_EQ(o.sgm_P1, 63);
@@ -288,7 +288,7 @@ TEST(DisparityTest, CensusSgmOptionsCheckedAndClamped) {
   DisparityOptions sad;
   sad.algorithm = "sad";
   sad.disparity_range = 1024;
-  EXPECT_EQ(sad.Check(), "");
+  EXPECT_EQ(sad.validate(), "");
 }
 
 // The mask: matched pixels 255; left of x = d (the right camera cannot see them) census_sgm
@@ -452,4 +452,4 @@ TEST(PfmTest, RoundTripInfForInvalidBottomUpLittleEndian) {
 }
 
 }  // namespace
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

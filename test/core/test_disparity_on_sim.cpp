@@ -18,7 +18,7 @@
 #include "embedded_calibration_stereo/core/depth/disparity.h"
 #include "embedded_calibration_stereo/test_support/sim_disparity_eval.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 namespace {
 
 // The gap the Separator may leave: separated lit frames against the light-off frames around
@@ -92,4 +92,4 @@ TEST(DisparityOnSim, ScoresCountInvalidAsBadAndSkipPixelsWithoutTruth) {
 }
 
 }  // namespace
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

@@ -6,21 +6,23 @@
 #include <chrono>
 #include <cmath>
 
-#include "embedded_calibration_stereo/core/calibration/frame_pacer.h"
-#include "embedded_calibration_stereo/core/calibration/input_arrivals.h"
+#include "embedded_calibration_stereo/core/driver/frame_pacer.h"
+#include "embedded_calibration_stereo/core/driver/input_arrivals.h"
 #include "embedded_calibration_stereo/core/calibration/verified_marking.h"
+
+namespace core = embedded_calibration_stereo::core;
 
 namespace {
 
-ecs::InputArrivalWatch fourInputs() {
-  return ecs::InputArrivalWatch({"image on /l", "camera_info on /li", "image on /r", "camera_info on /ri"},
+core::InputArrivalWatch fourInputs() {
+  return core::InputArrivalWatch({"image on /l", "camera_info on /li", "image on /r", "camera_info on /ri"},
                                 "they do not pair");
 }
 
 }  // namespace
 
 TEST(InputArrivalWatch, NamesTheInputsSilentOverAPeriodWithoutFrames) {
-  ecs::InputArrivalWatch watch = fourInputs();
+  core::InputArrivalWatch watch = fourInputs();
   EXPECT_EQ(watch.tick(), "") << "nothing arrived at all: the driver has not started, nothing to name";
   watch.arrived(0);
   watch.arrived(2);
@@ -33,13 +35,13 @@ TEST(InputArrivalWatch, NamesTheInputsSilentOverAPeriodWithoutFrames) {
 }
 
 TEST(InputArrivalWatch, SaysTheInputsDoNotPairWhenAllArriveButNoFrame) {
-  ecs::InputArrivalWatch watch = fourInputs();
+  core::InputArrivalWatch watch = fourInputs();
   for (size_t i = 0; i < 4; ++i) watch.arrived(i);
   EXPECT_EQ(watch.tick(), "they do not pair");
 }
 
 TEST(InputArrivalWatch, NothingIsMissingWhileFramesComeIn) {
-  ecs::InputArrivalWatch watch = fourInputs();
+  core::InputArrivalWatch watch = fourInputs();
   watch.arrived(0);
   watch.arrived(2);
   watch.frameIn();
@@ -51,10 +53,10 @@ TEST(InputArrivalWatch, NothingIsMissingWhileFramesComeIn) {
 }
 
 TEST(FramePacer, KeepsTheCadenceThroughSmallDelays) {
-  using Clock = ecs::FramePacer::Clock;
+  using Clock = core::FramePacer::Clock;
   const Clock::time_point start{};
   const auto period = std::chrono::milliseconds(100);
-  ecs::FramePacer pacer(10.0, start);
+  core::FramePacer pacer(10.0, start);
   EXPECT_EQ(pacer.next(start + std::chrono::milliseconds(20)), start + period);
   // The frame finished 50 ms late: the next one is still on the grid (a shorter wait).
   EXPECT_EQ(pacer.next(start + std::chrono::milliseconds(150)), start + 2 * period);
@@ -62,9 +64,9 @@ TEST(FramePacer, KeepsTheCadenceThroughSmallDelays) {
 }
 
 TEST(FramePacer, RestartsTheCadenceAfterAStallInsteadOfCatchingUp) {
-  using Clock = ecs::FramePacer::Clock;
+  using Clock = core::FramePacer::Clock;
   const Clock::time_point start{};
-  ecs::FramePacer pacer(10.0, start);
+  core::FramePacer pacer(10.0, start);
   pacer.next(start);
   // Stalled for a second: the next frame at once, then every period from there, not ten frames
   // back to back.
@@ -74,7 +76,7 @@ TEST(FramePacer, RestartsTheCadenceAfterAStallInsteadOfCatchingUp) {
 }
 
 TEST(VerifiedMarking, OnlyGoodByAVerificationAgainstTheBoardsAndOncePerEpoch) {
-  ecs::VerifiedMarking marking;
+  core::VerifiedMarking marking;
   EXPECT_FALSE(marking.due(false, 1.0, 3)) << "not GOOD";
   EXPECT_FALSE(marking.due(true, -1.0, 3)) << "GOOD by the scene rows alone (no verification)";
   EXPECT_FALSE(marking.due(true, std::nan(""), 3)) << "no verification age";

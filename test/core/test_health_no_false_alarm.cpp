@@ -10,7 +10,7 @@
 
 #include "embedded_calibration_stereo/test_support/run_command.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 namespace {
 
 TEST(HealthNoFalseAlarm, AMinuteOfDrivePhotoWithoutDriftStaysGood) {
@@ -31,4 +31,4 @@ TEST(HealthNoFalseAlarm, AMinuteOfDrivePhotoWithoutDriftStaysGood) {
 }
 
 }  // namespace
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

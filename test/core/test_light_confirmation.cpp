@@ -1,4 +1,4 @@
-// Light confirmation from the images (core/calibration/light_confirmation.h) on simulator
+// Light confirmation from the images (core/light/light_confirmation.h) on simulator
 // renderings: frames exposed while the light changed must be unsettled, whatever the driver's
 // delay between the command and the light (0 to 3 frames), and no settled frame may carry the
 // wrong light state.
@@ -17,8 +17,10 @@
 #include <opencv2/imgproc.hpp>
 #include <vector>
 
-#include "embedded_calibration_stereo/core/calibration/light_confirmation.h"
+#include "embedded_calibration_stereo/core/light/light_confirmation.h"
 #include "embedded_calibration_stereo/core/sim/sim_rig.h"
+
+namespace core = embedded_calibration_stereo::core;
 
 namespace {
 
@@ -27,20 +29,20 @@ const std::string kConfigPath = std::string(ECS_SOURCE_DIR) + "/config/sim_rig.y
 // Noise-free light-off and light-on renderings of both cameras, and the truth, rendered once.
 struct Renderings {
   cv::Mat off[2], on[2];
-  ecs::StereoObservation truth;
-  std::vector<ecs::VirtualBoard> boards;
+  core::StereoObservation truth;
+  std::vector<core::VirtualBoard> boards;
   double noise_sigma = 1.0;
 };
 
 const Renderings& renderings() {
   static const std::unique_ptr<Renderings> r = [] {
-    ecs::SimRigConfig config = ecs::loadSimRigConfig(kConfigPath);
+    core::SimRigConfig config = core::loadSimRigConfig(kConfigPath);
     auto out = std::make_unique<Renderings>();
     out->noise_sigma = config.noise_sigma;
     config.noise_sigma = 0.0;
-    const ecs::SimRig sim(config);
-    const ecs::SimFrame off = sim.render(0.0, 0.0, 1);
-    const ecs::SimFrame on = sim.render(0.0, 1.0, 1);
+    const core::SimRig sim(config);
+    const core::SimFrame off = sim.render(0.0, 0.0, 1);
+    const core::SimFrame on = sim.render(0.0, 1.0, 1);
     out->off[0] = off.left;
     out->off[1] = off.right;
     out->on[0] = on.left;
@@ -118,8 +120,8 @@ struct Outcome {
 // arrival the command is given, so it can act from the next frame on), renders what a driver
 // with the scenario's delay delivers, and checks every decision against the truth.
 Outcome run(const Scenario& s, int frames = 60, int command_on = 12, int command_off = 36) {
-  ecs::StereoLightConfirmer confirmer;
-  ecs::LightCommandWatch watch(3);
+  core::StereoLightConfirmer confirmer;
+  core::LightCommandWatch watch(3);
   std::vector<double> p[2];
   for (int k = 0; k < frames; ++k) {
     for (int c = 0; c < 2; ++c) {
@@ -132,7 +134,7 @@ Outcome run(const Scenario& s, int frames = 60, int command_on = 12, int command
   Outcome out;
   for (int k = 0; k < frames; ++k) {
     const cv::Mat left = frameAt(0, p[0][k], 1000 + 2 * k), right = frameAt(1, p[1][k], 1001 + 2 * k);
-    const auto decided = confirmer.push(ecs::regionLevel(left, s.mask[0]), ecs::regionLevel(right, s.mask[1]));
+    const auto decided = confirmer.push(core::regionLevel(left, s.mask[0]), core::regionLevel(right, s.mask[1]));
     watch.update(k >= command_on && k < command_off, decided);
     if (!out.watch_fault.empty() || !watch.fault().empty()) out.watch_fault = watch.fault();
     if (!decided) continue;
@@ -172,14 +174,14 @@ void expectClean(const Outcome& o, int on_frames_commanded, const std::string& w
 }  // namespace
 
 TEST(LightConfirmation, OptionsNameTheBadField) {
-  ecs::LightConfirmationOptions o;
+  core::LightConfirmationOptions o;
   EXPECT_EQ(o.validate(), "");
   o.min_step = 0;
   EXPECT_NE(o.validate().find("min_step"), std::string::npos);
-  o = ecs::LightConfirmationOptions();
+  o = core::LightConfirmationOptions();
   o.switch_fraction = 1.0;
   EXPECT_NE(o.validate().find("switch_fraction"), std::string::npos);
-  o = ecs::LightConfirmationOptions();
+  o = core::LightConfirmationOptions();
   o.plateau_fraction = 0.6;
   EXPECT_NE(o.validate().find("plateau_fraction"), std::string::npos);
 }
@@ -187,9 +189,9 @@ TEST(LightConfirmation, OptionsNameTheBadField) {
 // The blend is the physics of a switch during the exposure; check it against the simulator's
 // own rendering at an intermediate level (what its ramp renders), away from saturation.
 TEST(LightConfirmation, BlendMatchesTheSimulatorsIntermediateLevel) {
-  ecs::SimRigConfig config = ecs::loadSimRigConfig(kConfigPath);
+  core::SimRigConfig config = core::loadSimRigConfig(kConfigPath);
   config.noise_sigma = 0.0;
-  const ecs::SimRig sim(config);
+  const core::SimRig sim(config);
   const cv::Mat half = sim.render(0.0, 0.5, 1).left;
   const Renderings& r = renderings();
   cv::Mat off, on, blend;
@@ -248,16 +250,16 @@ TEST(LightConfirmation, TaughtBoardRegions) {
   const Renderings& r = renderings();
   Scenario s;
   for (int c = 0; c < 2; ++c) {
-    ecs::CameraPrior prior;
+    core::CameraPrior prior;
     prior.width = r.off[c].cols;
     prior.height = r.off[c].rows;
-    for (const ecs::BoardCorners& b : c == 0 ? r.truth.left : r.truth.right) {
+    for (const core::BoardCorners& b : c == 0 ? r.truth.left : r.truth.right) {
       const auto board = std::find_if(r.boards.begin(), r.boards.end(),
-                                      [&](const ecs::VirtualBoard& v) { return v.virtual_id == b.board_id; });
+                                      [&](const core::VirtualBoard& v) { return v.virtual_id == b.board_id; });
       ASSERT_NE(board, r.boards.end());
       const int cols = board->cols, rows = board->rows;
       const int outer[4] = {0, cols - 1, rows * cols - 1, (rows - 1) * cols};
-      ecs::BoardPrior bp;
+      core::BoardPrior bp;
       bp.board_id = b.board_id;
       bp.cols = cols;
       bp.rows = rows;
@@ -275,18 +277,18 @@ TEST(LightConfirmation, TaughtBoardRegions) {
       if (complete) prior.boards.push_back(bp);
     }
     ASSERT_GE(prior.boards.size(), 4u) << "camera " << c;
-    s.mask[c] = ecs::boardRegionMask(prior);
+    s.mask[c] = core::boardRegionMask(prior);
     ASSERT_EQ(s.mask[c].size(), r.off[c].size());
     // Every true corner of the taught boards lies inside the mask.
-    for (const ecs::BoardCorners& b : c == 0 ? r.truth.left : r.truth.right) {
-      if (std::none_of(prior.boards.begin(), prior.boards.end(), [&](const ecs::BoardPrior& p) { return p.board_id == b.board_id; }))
+    for (const core::BoardCorners& b : c == 0 ? r.truth.left : r.truth.right) {
+      if (std::none_of(prior.boards.begin(), prior.boards.end(), [&](const core::BoardPrior& p) { return p.board_id == b.board_id; }))
         continue;
       for (size_t i = 0; i < b.size(); ++i)
         EXPECT_GT(s.mask[c].at<uint8_t>(cvRound(b.v[i]), cvRound(b.u[i])), 0) << "board " << b.board_id;
     }
     // The device's step is larger in its regions than over the whole image.
-    const double region_step = ecs::regionLevel(r.on[c], s.mask[c]) - ecs::regionLevel(r.off[c], s.mask[c]);
-    const double whole_step = ecs::regionLevel(r.on[c], cv::Mat()) - ecs::regionLevel(r.off[c], cv::Mat());
+    const double region_step = core::regionLevel(r.on[c], s.mask[c]) - core::regionLevel(r.off[c], s.mask[c]);
+    const double whole_step = core::regionLevel(r.on[c], cv::Mat()) - core::regionLevel(r.off[c], cv::Mat());
     EXPECT_GT(region_step, 1.3 * whole_step) << "camera " << c;
   }
   for (int delay : {0, 2}) {
@@ -299,12 +301,12 @@ TEST(LightConfirmation, TaughtBoardRegions) {
 // No device in view when the light should be on: the images never change, the watch reports
 // the light as not working once the longest delay has passed; with the device lit it does not.
 TEST(LightConfirmation, WatchReportsALightThatDoesNotShow) {
-  ecs::StereoLightConfirmer confirmer;
-  ecs::LightCommandWatch watch(3);
+  core::StereoLightConfirmer confirmer;
+  core::LightCommandWatch watch(3);
   int first_fault = -1;
   for (int k = 0; k < 40; ++k) {
-    const auto decided = confirmer.push(ecs::regionLevel(frameAt(0, 0.0, 3 * k), cv::Mat()),
-                                        ecs::regionLevel(frameAt(1, 0.0, 3 * k + 1), cv::Mat()));
+    const auto decided = confirmer.push(core::regionLevel(frameAt(0, 0.0, 3 * k), cv::Mat()),
+                                        core::regionLevel(frameAt(1, 0.0, 3 * k + 1), cv::Mat()));
     watch.update(k >= 10, decided);
     if (!watch.fault().empty() && first_fault < 0) first_fault = k;
     if (decided && k >= 2) {
@@ -322,16 +324,16 @@ TEST(LightConfirmation, WatchReportsALightThatDoesNotShow) {
 // the light; a slow drift of the scene's brightness keeps the plateau settled.
 TEST(LightConfirmation, SceneChangesBelowHalfTheStepAreNotTheLight) {
   const Renderings& r = renderings();
-  const double step = ecs::regionLevel(r.on[0], cv::Mat()) - ecs::regionLevel(r.off[0], cv::Mat());
-  const double scene = ecs::regionLevel(r.off[0], cv::Mat());
-  ecs::LightLevelTracker tracker;
+  const double step = core::regionLevel(r.on[0], cv::Mat()) - core::regionLevel(r.off[0], cv::Mat());
+  const double scene = core::regionLevel(r.off[0], cv::Mat());
+  core::LightLevelTracker tracker;
   int settled_on = 0;
   for (int k = 0; k < 60; ++k) {
     const double p = k >= 10 && k < 20 ? 1.0 : 0.0;
     // A sudden brightening by step/3 at frame 30, then a slow drift of 0.05 % per frame.
     double gain = k >= 30 ? 1.0 + step / 3.0 / scene : 1.0;
     if (k >= 40) gain *= 1.0 + 0.0005 * (k - 40);
-    const auto decided = tracker.push(ecs::regionLevel(frameAt(0, p, 7 * k, gain), cv::Mat()));
+    const auto decided = tracker.push(core::regionLevel(frameAt(0, p, 7 * k, gain), cv::Mat()));
     if (!decided) continue;
     const int j = k - 1;
     const bool truth_on = j >= 10 && j < 20;
@@ -352,7 +354,7 @@ TEST(LightConfirmation, SceneChangesBelowHalfTheStepAreNotTheLight) {
 TEST(LightConfirmation, ForgettingLevelsWaitsForTheNextSwitch) {
   const Renderings& r = renderings();
   for (const bool on_at_forget : {true, false}) {
-    ecs::LightLevelTracker tracker;
+    core::LightLevelTracker tracker;
     cv::Mat regions = cv::Mat::zeros(r.off[0].size(), CV_8UC1);
     regions(cv::Rect(0, 0, regions.cols, regions.rows / 2)).setTo(255);
     // Light on for frames [10, 30) when forgetting at 20, on for [25, 45) otherwise.
@@ -361,7 +363,7 @@ TEST(LightConfirmation, ForgettingLevelsWaitsForTheNextSwitch) {
     for (int k = 0; k < 60; ++k) {
       if (k == forget_at) tracker.forgetLevels();
       const double p = k >= on_from && k < on_to ? 1.0 : 0.0;
-      const auto decided = tracker.push(ecs::regionLevel(frameAt(0, p, 5 * k), k >= forget_at ? regions : cv::Mat()));
+      const auto decided = tracker.push(core::regionLevel(frameAt(0, p, 5 * k), k >= forget_at ? regions : cv::Mat()));
       if (!decided) continue;
       const int j = k - 1;
       const bool truth_on = j >= on_from && j < on_to;

@@ -1,4 +1,4 @@
-// Where the LightController confirms its light (core/calibration/light_regions.h): the prior
+// Where the LightController confirms its light (core/light/light_regions.h): the prior
 // file's board regions are re-read when the file changes and refused when unusable; the whole
 // image decides until the taught regions have seen a switch; regions of another image size are
 // not used.
@@ -11,8 +11,10 @@
 #include <thread>
 #include <vector>
 
-#include "embedded_calibration_stereo/core/calibration/light_regions.h"
+#include "embedded_calibration_stereo/core/light/light_regions.h"
 #include "embedded_calibration_stereo/core/tracker/board_prior.h"
+
+namespace core = embedded_calibration_stereo::core;
 
 namespace {
 
@@ -29,13 +31,13 @@ struct TempDir {
 };
 
 // One camera with one 4 x 3 board whose outer corners span (x0, y0) .. (x0 + 60, y0 + 40).
-ecs::CameraPrior cameraPrior(const std::string& name, double x0, double y0) {
-  ecs::CameraPrior c;
+core::CameraPrior cameraPrior(const std::string& name, double x0, double y0) {
+  core::CameraPrior c;
   c.name = name;
   c.width = kWidth;
   c.height = kHeight;
   c.taught_frames = 1;
-  ecs::BoardPrior b;
+  core::BoardPrior b;
   b.board_id = 1;
   b.cols = 4;
   b.rows = 3;
@@ -50,11 +52,11 @@ ecs::CameraPrior cameraPrior(const std::string& name, double x0, double y0) {
 }
 
 // The file system's time stamps may be coarse: a rewrite must show a new one.
-void rewrite(const std::string& path, const ecs::PatternPrior& prior) {
+void rewrite(const std::string& path, const core::PatternPrior& prior) {
   const auto before = std::filesystem::exists(path) ? std::filesystem::last_write_time(path)
                                                     : std::filesystem::file_time_type::min();
   for (int i = 0; i < 200; ++i) {
-    ecs::writePatternPrior(path, prior);
+    core::writePatternPrior(path, prior);
     if (std::filesystem::last_write_time(path) != before) return;
     std::this_thread::sleep_for(std::chrono::milliseconds(10));
   }
@@ -74,13 +76,13 @@ cv::Mat frame(double base, double device) {
 TEST(BoardRegionsFile, ReadsAtFirstAndAgainOnlyWhenTheFileChanges) {
   TempDir dir;
   const std::string path = dir.path + "/prior.yaml";
-  ecs::BoardRegionsFile file(path, 1.0);
+  core::BoardRegionsFile file(path, 1.0);
   EXPECT_TRUE(file.refresh()) << "the first call reads (here: no file)";
   EXPECT_FALSE(file.taught());
   EXPECT_EQ(file.problem(), "");
   EXPECT_FALSE(file.refresh()) << "still no file: nothing new";
 
-  rewrite(path, ecs::PatternPrior{{cameraPrior("left", 100, 80), cameraPrior("right", 90, 80)}});
+  rewrite(path, core::PatternPrior{{cameraPrior("left", 100, 80), cameraPrior("right", 90, 80)}});
   EXPECT_TRUE(file.refresh()) << "a file that appeared was not read";
   ASSERT_TRUE(file.taught());
   EXPECT_EQ(file.problem(), "");
@@ -90,7 +92,7 @@ TEST(BoardRegionsFile, ReadsAtFirstAndAgainOnlyWhenTheFileChanges) {
   EXPECT_FALSE(file.refresh()) << "an unchanged file was read again";
 
   // One camera only: unusable, said why, no regions.
-  rewrite(path, ecs::PatternPrior{{cameraPrior("left", 100, 80)}});
+  rewrite(path, core::PatternPrior{{cameraPrior("left", 100, 80)}});
   EXPECT_TRUE(file.refresh()) << "a changed file was not read";
   EXPECT_FALSE(file.taught());
   EXPECT_NE(file.problem().find("expected 2 cameras"), std::string::npos) << file.problem();
@@ -107,11 +109,11 @@ TEST(BoardRegionsFile, ReadsAtFirstAndAgainOnlyWhenTheFileChanges) {
 TEST(DeviceLightConfirmer, TheTaughtRegionsDecideOnceTheyHaveSeenASwitch) {
   cv::Mat mask = cv::Mat::zeros(kHeight, kWidth, CV_8UC1);
   mask(cv::Rect(100, 80, 60, 40)).setTo(255);
-  ecs::DeviceLightConfirmer confirmer{ecs::LightConfirmationOptions()};
+  core::DeviceLightConfirmer confirmer{core::LightConfirmationOptions()};
   confirmer.setRegions(mask, mask);
   EXPECT_TRUE(confirmer.hasRegions());
   EXPECT_FALSE(confirmer.regionsInUse()) << "new regions know nothing before a switch";
-  std::vector<std::optional<ecs::ConfirmedLight>> decided;
+  std::vector<std::optional<core::ConfirmedLight>> decided;
   for (int i = 0; i < 12; ++i) {
     const double device = i < 5 ? 0.0 : 40.0;
     decided.push_back(confirmer.push(frame(50, device), frame(50, device)));
@@ -131,14 +133,14 @@ TEST(DeviceLightConfirmer, TheTaughtRegionsDecideOnceTheyHaveSeenASwitch) {
 TEST(DeviceLightConfirmer, NewRegionsNeverGuessTheState) {
   cv::Mat mask = cv::Mat::zeros(kHeight, kWidth, CV_8UC1);
   mask(cv::Rect(100, 80, 60, 40)).setTo(255);
-  ecs::DeviceLightConfirmer confirmer{ecs::LightConfirmationOptions()};
+  core::DeviceLightConfirmer confirmer{core::LightConfirmationOptions()};
   for (int i = 0; i < 10; ++i) {
     const double lit = i < 4 ? 0.0 : 40.0;  // the whole image steps with the light
     confirmer.push(frame(50 + lit, 0), frame(50 + lit, 0));
   }
   confirmer.setRegions(mask, mask);
   for (int i = 0; i < 6; ++i) {
-    const std::optional<ecs::ConfirmedLight> light = confirmer.push(frame(90, 0), frame(90, 0));
+    const std::optional<core::ConfirmedLight> light = confirmer.push(frame(90, 0), frame(90, 0));
     ASSERT_TRUE(light) << i;
     EXPECT_TRUE(light->light_on) << "frame " << i << " after new regions: the state was guessed";
   }
@@ -150,11 +152,11 @@ TEST(DeviceLightConfirmer, NewRegionsNeverGuessTheState) {
 TEST(DeviceLightConfirmer, RegionsOfAnotherImageSizeAreNotUsed) {
   cv::Mat small = cv::Mat::zeros(kHeight / 2, kWidth / 2, CV_8UC1);
   small(cv::Rect(0, 0, 20, 20)).setTo(255);
-  ecs::DeviceLightConfirmer confirmer{ecs::LightConfirmationOptions()};
+  core::DeviceLightConfirmer confirmer{core::LightConfirmationOptions()};
   confirmer.setRegions(small, small);
   EXPECT_FALSE(confirmer.fits(0, cv::Size(kWidth, kHeight)));
   EXPECT_TRUE(confirmer.fits(0, cv::Size(kWidth / 2, kHeight / 2)));
-  std::optional<ecs::ConfirmedLight> last;
+  std::optional<core::ConfirmedLight> last;
   for (int i = 0; i < 12; ++i) {
     const double lit = i < 5 ? 0.0 : 40.0;
     ASSERT_NO_THROW(last = confirmer.push(frame(50 + lit, 0), frame(50 + lit, 0))) << i;
@@ -162,6 +164,6 @@ TEST(DeviceLightConfirmer, RegionsOfAnotherImageSizeAreNotUsed) {
   ASSERT_TRUE(last);
   EXPECT_TRUE(last->light_on && last->settled);
   EXPECT_TRUE(confirmer.regionsInUse()) << "the whole-image levels of the regions' confirmation saw the switch";
-  EXPECT_TRUE(ecs::DeviceLightConfirmer(ecs::LightConfirmationOptions()).fits(0, cv::Size(1, 1)))
+  EXPECT_TRUE(core::DeviceLightConfirmer(core::LightConfirmationOptions()).fits(0, cv::Size(1, 1)))
       << "without regions every size fits";
 }

@@ -3,12 +3,14 @@
 
 #include <vector>
 
-#include "embedded_calibration_stereo/core/calibration/light_schedule.h"
+#include "embedded_calibration_stereo/core/light/light_schedule.h"
+
+namespace core = embedded_calibration_stereo::core;
 
 namespace {
 
-ecs::LightScheduleConfig config(double period_s, int calibration_frames, int settle_frames) {
-  ecs::LightScheduleConfig c;
+core::LightScheduleConfig config(double period_s, int calibration_frames, int settle_frames) {
+  core::LightScheduleConfig c;
   c.period_s = period_s;
   c.calibration_frames = calibration_frames;
   c.settle_frames = settle_frames;
@@ -16,8 +18,8 @@ ecs::LightScheduleConfig config(double period_s, int calibration_frames, int set
 }
 
 // Steps the schedule at `fps` for `frames` frames starting at t0.
-std::vector<ecs::LightState> run(ecs::LightSchedule* schedule, double t0, double fps, int frames) {
-  std::vector<ecs::LightState> states;
+std::vector<core::LightState> run(core::LightSchedule* schedule, double t0, double fps, int frames) {
+  std::vector<core::LightState> states;
   for (int i = 0; i < frames; ++i) states.push_back(schedule->step(t0 + i / fps));
   return states;
 }
@@ -32,7 +34,7 @@ TEST(LightSchedule, ValidateNamesTheBadField) {
 }
 
 TEST(LightSchedule, ZeroPeriodStaysOffUntilRequested) {
-  ecs::LightSchedule schedule(config(0.0, 5, 2));
+  core::LightSchedule schedule(config(0.0, 5, 2));
   for (const auto& s : run(&schedule, 0.0, 30.0, 300)) {
     EXPECT_FALSE(s.light_on);
     EXPECT_TRUE(s.settled);
@@ -42,7 +44,7 @@ TEST(LightSchedule, ZeroPeriodStaysOffUntilRequested) {
 
 TEST(LightSchedule, RequestSwitchesAtNextFrameAndSettlesAfterSettleFrames) {
   const int settle = 3;
-  ecs::LightSchedule schedule(config(0.0, 5, settle));
+  core::LightSchedule schedule(config(0.0, 5, settle));
   run(&schedule, 0.0, 30.0, 4);
   schedule.request(true);
   auto on = run(&schedule, 1.0, 30.0, 10);
@@ -73,7 +75,7 @@ TEST(LightSchedule, RequestSwitchesAtNextFrameAndSettlesAfterSettleFrames) {
 TEST(LightSchedule, PeriodicBurstsYieldCalibrationFramesSettledFrames) {
   const double fps = 20.0, period = 2.0;
   const int calib = 6, settle = 2;
-  ecs::LightSchedule schedule(config(period, calib, settle));
+  core::LightSchedule schedule(config(period, calib, settle));
   const auto states = run(&schedule, 100.0, fps, static_cast<int>(3 * period * fps));
   int bursts = 0;
   for (size_t i = 0; i < states.size(); ++i) {
@@ -96,7 +98,7 @@ TEST(LightSchedule, PeriodicBurstsYieldCalibrationFramesSettledFrames) {
 }
 
 TEST(LightSchedule, ReleasingTheRequestEndsABurst) {
-  ecs::LightSchedule schedule(config(10.0, 50, 1));
+  core::LightSchedule schedule(config(10.0, 50, 1));
   auto first = run(&schedule, 0.0, 30.0, 3);
   EXPECT_TRUE(first[0].light_on);
   schedule.request(false);
@@ -104,7 +106,7 @@ TEST(LightSchedule, ReleasingTheRequestEndsABurst) {
 }
 
 TEST(LightSchedule, FollowTracksSettlingOfAnExternalState) {
-  ecs::LightSchedule schedule(config(0.0, 5, 2));
+  core::LightSchedule schedule(config(0.0, 5, 2));
   const bool recorded[] = {false, true, true, true, true, false, false, false};
   const bool expected_settled[] = {true, false, false, true, true, false, false, true};
   for (int i = 0; i < 8; ++i) {
@@ -115,7 +117,7 @@ TEST(LightSchedule, FollowTracksSettlingOfAnExternalState) {
 }
 
 TEST(LightSchedule, ZeroSettleFramesSwitchesInstantly) {
-  ecs::LightSchedule schedule(config(0.0, 5, 0));
+  core::LightSchedule schedule(config(0.0, 5, 0));
   schedule.request(true);
   const auto s = schedule.step(0.0);
   EXPECT_TRUE(s.light_on);
@@ -125,9 +127,9 @@ TEST(LightSchedule, ZeroSettleFramesSwitchesInstantly) {
 
 namespace {
 
-ecs::LightScheduleConfig healthConfig(ecs::CalibrationTrigger trigger, double period_s, double min_interval_s,
+core::LightScheduleConfig healthConfig(core::CalibrationTrigger trigger, double period_s, double min_interval_s,
                                       double verification_period_s) {
-  ecs::LightScheduleConfig c = config(period_s, 10, 2);
+  core::LightScheduleConfig c = config(period_s, 10, 2);
   c.trigger = trigger;
   c.min_interval_s = min_interval_s;
   c.verification_period_s = verification_period_s;
@@ -139,7 +141,7 @@ struct Run {
   int first, length, settled;
   bool verification;
 };
-std::vector<Run> runs(const std::vector<ecs::LightState>& states) {
+std::vector<Run> runs(const std::vector<core::LightState>& states) {
   std::vector<Run> out;
   for (size_t i = 0; i < states.size(); ++i) {
     if (!states[i].light_on || (i > 0 && states[i - 1].light_on)) continue;
@@ -157,17 +159,17 @@ std::vector<Run> runs(const std::vector<ecs::LightState>& states) {
 }  // namespace
 
 TEST(LightSchedule, ValidateNamesTheHealthFields) {
-  EXPECT_EQ(healthConfig(ecs::CalibrationTrigger::kOnDemand, 0, 5, 6).validate(), "");
-  EXPECT_NE(healthConfig(ecs::CalibrationTrigger::kOnDemand, 0, -1, 6).validate().find("min_calibration_interval_s"),
+  EXPECT_EQ(healthConfig(core::CalibrationTrigger::kOnDemand, 0, 5, 6).validate(), "");
+  EXPECT_NE(healthConfig(core::CalibrationTrigger::kOnDemand, 0, -1, 6).validate().find("min_calibration_interval_s"),
             std::string::npos);
-  EXPECT_NE(healthConfig(ecs::CalibrationTrigger::kOnDemand, 0, 5, -1).validate().find("verification_period_s"),
+  EXPECT_NE(healthConfig(core::CalibrationTrigger::kOnDemand, 0, 5, -1).validate().find("verification_period_s"),
             std::string::npos);
 }
 
 // A flash: settle_frames + 1 frames on, exactly one of them settled, every verification period.
 TEST(LightSchedule, VerificationFlashesGiveOneSettledLightOnFrameEachPeriod) {
   const double fps = 30.0;
-  ecs::LightSchedule schedule(healthConfig(ecs::CalibrationTrigger::kPeriodic, 0.0, 0.0, 2.0));
+  core::LightSchedule schedule(healthConfig(core::CalibrationTrigger::kPeriodic, 0.0, 0.0, 2.0));
   const auto states = run(&schedule, 50.0, fps, static_cast<int>(7 * fps));
   const auto flashes = runs(states);
   ASSERT_EQ(flashes.size(), 3u);  // at 2, 4 and 6 s: the first period starts at the first frame
@@ -185,9 +187,9 @@ TEST(LightSchedule, OnDemandBurstsOnlyWhileDemandedAndAtMostOncePerMinIntervalAf
   const double fps = 30.0;
   for (const int frames : {10, 30}) {
     // No safety net (period 0), no flashes: the light stays off until demanded.
-    ecs::LightScheduleConfig c = healthConfig(ecs::CalibrationTrigger::kOnDemand, 0.0, 3.0, 0.0);
+    core::LightScheduleConfig c = healthConfig(core::CalibrationTrigger::kOnDemand, 0.0, 3.0, 0.0);
     c.calibration_frames = frames;
-    ecs::LightSchedule schedule(c);
+    core::LightSchedule schedule(c);
     auto idle = run(&schedule, 0.0, fps, 60);
     EXPECT_TRUE(runs(idle).empty());
     schedule.demand(true);
@@ -210,7 +212,7 @@ TEST(LightSchedule, OnDemandBurstsOnlyWhileDemandedAndAtMostOncePerMinIntervalAf
 // A burst cut short by set_light false counts from its start: the next one still waits.
 TEST(LightSchedule, OnDemandBurstCutShortStillWaitsTheIntervalFromItsStart) {
   const double fps = 30.0;
-  ecs::LightSchedule schedule(healthConfig(ecs::CalibrationTrigger::kOnDemand, 0.0, 3.0, 0.0));
+  core::LightSchedule schedule(healthConfig(core::CalibrationTrigger::kOnDemand, 0.0, 3.0, 0.0));
   schedule.demand(true);
   auto states = run(&schedule, 0.0, fps, 4);  // a burst from the first frame
   schedule.request(false);                     // cut short
@@ -224,7 +226,7 @@ TEST(LightSchedule, OnDemandBurstCutShortStillWaitsTheIntervalFromItsStart) {
 
 TEST(LightSchedule, OnDemandSafetyNetRestartsAfterEachDemandedBurst) {
   const double fps = 30.0;
-  ecs::LightSchedule schedule(healthConfig(ecs::CalibrationTrigger::kOnDemand, 4.0, 1.0, 0.0));
+  core::LightSchedule schedule(healthConfig(core::CalibrationTrigger::kOnDemand, 4.0, 1.0, 0.0));
   auto states = run(&schedule, 0.0, fps, static_cast<int>(3 * fps));  // burst at 0 (the first frame)
   schedule.demand(true);
   auto demanded = run(&schedule, 3.0, fps, 1);                        // burst at 3
@@ -240,7 +242,7 @@ TEST(LightSchedule, OnDemandSafetyNetRestartsAfterEachDemandedBurst) {
 }
 
 TEST(LightSchedule, VerifySoonFlashesAtTheNextFrameUnlessABurstVerifiesAlready) {
-  ecs::LightSchedule schedule(healthConfig(ecs::CalibrationTrigger::kPeriodic, 100.0, 0.0, 50.0));
+  core::LightSchedule schedule(healthConfig(core::CalibrationTrigger::kPeriodic, 100.0, 0.0, 50.0));
   // The first burst (12 frames) runs; verifySoon during it is answered by the burst's own frames.
   auto states = run(&schedule, 0.0, 30.0, 3);
   schedule.verifySoon();
@@ -269,10 +271,10 @@ TEST(LightSchedule, VerifySoonFlashesAtTheNextFrameUnlessABurstVerifiesAlready) 
 // learned against them), periodic or on demand; later bursts keep their own timing.
 TEST(LightSchedule, TheFirstBurstComesAfterTheDelayWithSettledLightOffFramesBeforeIt) {
   const double fps = 15.0;
-  for (const auto trigger : {ecs::CalibrationTrigger::kPeriodic, ecs::CalibrationTrigger::kOnDemand}) {
-    ecs::LightScheduleConfig c = healthConfig(trigger, 4.0, 1.0, 0.0);
+  for (const auto trigger : {core::CalibrationTrigger::kPeriodic, core::CalibrationTrigger::kOnDemand}) {
+    core::LightScheduleConfig c = healthConfig(trigger, 4.0, 1.0, 0.0);
     c.first_burst_delay_s = 0.5;
-    ecs::LightSchedule schedule(c);
+    core::LightSchedule schedule(c);
     schedule.demand(true);
     const auto states = run(&schedule, 10.0, fps, static_cast<int>(6 * fps));
     const auto bursts = runs(states);
@@ -280,27 +282,27 @@ TEST(LightSchedule, TheFirstBurstComesAfterTheDelayWithSettledLightOffFramesBefo
     // The first frame at or after 0.5 s (0.5 s is 7.5 frame periods at 15 fps).
     EXPECT_EQ(bursts[0].first, 8) << "the first burst 0.5 s after the first frame";
     for (int i = 0; i < bursts[0].first; ++i) EXPECT_TRUE(!states[i].light_on && states[i].settled) << i;
-    if (trigger == ecs::CalibrationTrigger::kPeriodic) {
+    if (trigger == core::CalibrationTrigger::kPeriodic) {
       ASSERT_EQ(bursts.size(), 2u);
       EXPECT_EQ(bursts[1].first, 68) << "then every period (4.5 s is 67.5 frame periods)";
     }
   }
-  ecs::LightScheduleConfig bad = config(1.0, 10, 2);
+  core::LightScheduleConfig bad = config(1.0, 10, 2);
   bad.first_burst_delay_s = -1.0;
   EXPECT_NE(bad.validate().find("first_burst_delay_s"), std::string::npos);
   // The parameter travels apart from the sentence: a refusal names it without parsing text.
   EXPECT_EQ(bad.problem().parameter, "first_burst_delay_s");
   EXPECT_EQ(bad.problem().problem, "must be >= 0");
-  ecs::LightScheduleConfig frames = config(1.0, 0, 2);
+  core::LightScheduleConfig frames = config(1.0, 0, 2);
   EXPECT_EQ(frames.problem().parameter, "calibration_frames");
   EXPECT_TRUE(config(1.0, 10, 2).problem().ok());
-  EXPECT_THROW(ecs::throwIfProblem(frames.problem()), ecs::ConfigError);
+  EXPECT_THROW(core::throwIfProblem(frames.problem()), core::ConfigError);
 }
 
 // A calibration that comes into force is checked against the boards at the next frame; the one
 // in force when the schedule first hears of it (start-up) and an unchanged epoch are not.
 TEST(LightSchedule, ANewCalibrationEpochFlashesAtTheNextFrameTheFirstDoesNot) {
-  ecs::LightSchedule schedule(healthConfig(ecs::CalibrationTrigger::kPeriodic, 0.0, 0.0, 50.0));
+  core::LightSchedule schedule(healthConfig(core::CalibrationTrigger::kPeriodic, 0.0, 0.0, 50.0));
   schedule.calibrationInForce(3);  // at start-up: what is in force is verified on the schedule
   const auto start = runs(run(&schedule, 0.0, 30.0, 10));
   EXPECT_TRUE(start.empty()) << "the epoch in force at start-up flashed";
@@ -315,11 +317,11 @@ TEST(LightSchedule, ANewCalibrationEpochFlashesAtTheNextFrameTheFirstDoesNot) {
 
 // Under the periodic trigger the health's demand neither bursts nor reads as demanded.
 TEST(LightSchedule, DemandIsIgnoredUnderThePeriodicTrigger) {
-  ecs::LightSchedule periodic(healthConfig(ecs::CalibrationTrigger::kPeriodic, 0.0, 0.0, 0.0));
+  core::LightSchedule periodic(healthConfig(core::CalibrationTrigger::kPeriodic, 0.0, 0.0, 0.0));
   periodic.demand(true);
   EXPECT_FALSE(periodic.demanded());
   EXPECT_TRUE(runs(run(&periodic, 0.0, 30.0, 60)).empty());
-  ecs::LightSchedule on_demand(healthConfig(ecs::CalibrationTrigger::kOnDemand, 0.0, 0.0, 0.0));
+  core::LightSchedule on_demand(healthConfig(core::CalibrationTrigger::kOnDemand, 0.0, 0.0, 0.0));
   on_demand.demand(true);
   EXPECT_TRUE(on_demand.demanded());
 }

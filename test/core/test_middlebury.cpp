@@ -11,7 +11,7 @@
 #include "embedded_calibration_stereo/core/depth/disparity.h"
 #include "embedded_calibration_stereo/core/depth/disparity_evaluation.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 namespace {
 
 struct MiddleburyPair {
@@ -152,4 +152,4 @@ TEST_F(MiddleburyTest, BlockMatchersWithAndWithoutFilling) {
 }
 
 }  // namespace
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

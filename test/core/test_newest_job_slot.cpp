@@ -7,7 +7,7 @@
 
 #include "embedded_calibration_stereo/core/tracker/newest_job_slot.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 namespace {
 
 TEST(NewestJobSlot, ANewerJobReplacesTheOneWaitingWhichIsHandedBack) {
@@ -36,4 +36,4 @@ TEST(NewestJobSlot, TheWorkerWaitsForAJobAndStopsWhenTold) {
 }
 
 }  // namespace
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

@@ -6,6 +6,8 @@
 
 #include "embedded_calibration_stereo/core/calibration/paced_queue.h"
 
+namespace core = embedded_calibration_stereo::core;
+
 namespace {
 
 // A worker that takes every item as soon as one may start, `solve_s` each, while items
@@ -15,8 +17,8 @@ struct Outcome {
   std::vector<int> dropped;
 };
 
-Outcome simulate(ecs::PacedQueueOptions options, const std::vector<double>& arrivals, double solve_s, double until) {
-  ecs::PacedQueue<int> queue(options);
+Outcome simulate(core::PacedQueueOptions options, const std::vector<double>& arrivals, double solve_s, double until) {
+  core::PacedQueue<int> queue(options);
   Outcome run;
   size_t next = 0;
   double busy_until = 0.0;
@@ -65,7 +67,7 @@ TEST(PacedQueue, AFloodIsSolvedAtMostOncePerIntervalKeepingTheNewest) {
 }
 
 TEST(PacedQueue, ReadyInSaysHowLongTheNextWaits) {
-  ecs::PacedQueue<int> queue({2.0, 3});
+  core::PacedQueue<int> queue({2.0, 3});
   EXPECT_LT(queue.readyIn(0.0), 0.0) << "nothing waits";
   queue.push(1);
   EXPECT_EQ(queue.readyIn(10.0), 0.0) << "the first starts at once";
@@ -77,7 +79,7 @@ TEST(PacedQueue, ReadyInSaysHowLongTheNextWaits) {
 }
 
 TEST(PacedQueue, OptionsAreChecked) {
-  EXPECT_EQ(ecs::PacedQueueOptions{}.check(), "");
-  EXPECT_NE(ecs::PacedQueueOptions({-1.0, 2}).check(), "");
-  EXPECT_NE(ecs::PacedQueueOptions({1.0, 0}).check(), "");
+  EXPECT_EQ(core::PacedQueueOptions{}.check(), "");
+  EXPECT_NE(core::PacedQueueOptions({-1.0, 2}).check(), "");
+  EXPECT_NE(core::PacedQueueOptions({1.0, 0}).check(), "");
 }

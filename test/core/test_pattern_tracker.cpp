@@ -12,12 +12,12 @@
 
 #include "embedded_calibration_stereo/core/tracker/board_prior.h"
 #include "embedded_calibration_stereo/core/tracker/board_teacher.h"
-#include "embedded_calibration_stereo/core/geometry/config_error.h"
+#include "embedded_calibration_stereo/core/io/config_error.h"
 #include "embedded_calibration_stereo/core/tracker/pattern_tracker.h"
 #include "embedded_calibration_stereo/core/sim/sim_rig.h"
 #include "embedded_calibration_stereo/test_support/corner_score.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 namespace {
 
 cv::Point2f tracker_test_apply(const cv::Matx33d& h, double x, double y) {
@@ -487,4 +487,4 @@ TEST(PatternTracker, OptionsCheckNamesTheBadField) {
 }
 
 }  // namespace
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

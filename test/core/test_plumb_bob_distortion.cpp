@@ -14,7 +14,7 @@
 #include "embedded_calibration_stereo/core/geometry/camera_model.h"
 #include "embedded_calibration_stereo/core/geometry/plumb_bob_distortion.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 namespace {
 
 // A wide-angle lens: every coefficient large enough to move the image edge by pixels (p1, p2
@@ -194,4 +194,4 @@ TEST(PlumbBobDistortion, CeresCostsMatchOpenCvProjectionAndJacobian) {
 }
 
 }  // namespace
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

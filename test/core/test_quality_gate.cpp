@@ -18,7 +18,7 @@
 #include "embedded_calibration_stereo/core/calibration/quality_gate.h"
 #include "embedded_calibration_stereo/test_support/synthetic_observations.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 namespace {
 
 struct Scenario {
@@ -119,7 +119,7 @@ TEST(QualityGate, AConfirmingSolveClearlyBetterKnownRefinesTheCalibrationInForce
   worse.rms_left_px = worse.rms_right_px = 1.2 * combinedRms(in_force);
   EXPECT_FALSE(gate.evaluate(worse, &in_force, p / 0.5).accepted);
   o.refine_ratio = 1.0;
-  EXPECT_NE(o.Check().find("refine_ratio"), std::string::npos);
+  EXPECT_NE(o.validate().find("refine_ratio"), std::string::npos);
 }
 
 TEST(QualityGate, SingleBoardSolveIsRejectedOrAccurate) {
@@ -554,7 +554,7 @@ TEST(QualityGateRules, InvalidOptionsRejectEveryCandidateWithTheProblem) {
   };
   const BundleAdjustmentSummary in_force = inForceFit(5.0);
   for (const auto& [options, problem] : invalid) {
-    EXPECT_TRUE(contains(options.Check(), problem)) << problem << ": " << options.Check();
+    EXPECT_TRUE(contains(options.validate(), problem)) << problem << ": " << options.validate();
     for (const BundleAdjustmentSummary* fit : {static_cast<const BundleAdjustmentSummary*>(nullptr), &in_force}) {
       const GateDecision d = QualityGate(options).evaluate(passingCandidate(), fit);
       EXPECT_FALSE(d.accepted) << problem;
@@ -566,7 +566,7 @@ TEST(QualityGateRules, InvalidOptionsRejectEveryCandidateWithTheProblem) {
                                    with([](GateOptions* o) { o->max_outlier_fraction = 1; }),
                                    with([](GateOptions* o) { o->min_boards_per_camera = 1; }),
                                    with([](GateOptions* o) { o->min_rms_improvement_rel = 0; })}) {
-    EXPECT_EQ(valid.Check(), "");
+    EXPECT_EQ(valid.validate(), "");
     EXPECT_TRUE(QualityGate(valid).evaluate(passingCandidate(), nullptr).accepted);
   }
 }
@@ -648,4 +648,4 @@ TEST(QualityGate, ASolveThatFitsClearlyBetterReplacesACalibrationThatStillFits) 
 }
 
 }  // namespace
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

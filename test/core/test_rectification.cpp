@@ -9,7 +9,7 @@
 
 #include "embedded_calibration_stereo/core/depth/rectification.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 namespace {
 
 // A head like the original one: 752x480, strong barrel distortion, 12 cm baseline, the right
@@ -253,4 +253,4 @@ TEST(RectificationGeometryTest, RejectsBadInput) {
 }
 
 }  // namespace
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

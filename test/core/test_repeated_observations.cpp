@@ -5,12 +5,14 @@
 
 #include "embedded_calibration_stereo/core/calibration/repeated_observations.h"
 
+namespace core = embedded_calibration_stereo::core;
+
 namespace {
 
-ecs::StereoObservation window(float shift) {
-  ecs::StereoObservation o;
+core::StereoObservation window(float shift) {
+  core::StereoObservation o;
   o.stamp = 10.0;
-  ecs::BoardCorners b;
+  core::BoardCorners b;
   b.board_id = 3;
   for (int i = 0; i < 12; ++i) {
     b.corner_ids.push_back(i);
@@ -27,16 +29,16 @@ ecs::StereoObservation window(float shift) {
 }  // namespace
 
 TEST(RepeatedObservations, ACopyIsRecognisedWhateverItsStamp) {
-  ecs::RepeatedObservations recent;
-  ecs::StereoObservation first = window(0.0f);
+  core::RepeatedObservations recent;
+  core::StereoObservation first = window(0.0f);
   EXPECT_FALSE(recent.repeats(first));
   first.stamp = 10.001;  // republished 1 ms later
   EXPECT_TRUE(recent.repeats(first));
 }
 
 TEST(RepeatedObservations, AnyChangeOfContentIsAnotherObservation) {
-  const ecs::StereoObservation base = window(0.0f);
-  std::vector<ecs::StereoObservation> variants(6, base);
+  const core::StereoObservation base = window(0.0f);
+  std::vector<core::StereoObservation> variants(6, base);
   variants[0].left[0].u[5] += 0.001f;  // one coordinate, a thousandth of a pixel
   variants[1].right[0].v[0] -= 0.5f;
   variants[2].left[0].corner_ids[2] = 40;
@@ -44,14 +46,14 @@ TEST(RepeatedObservations, AnyChangeOfContentIsAnotherObservation) {
   variants[4].scene[0].right_u += 1.0f;
   std::swap(variants[5].left, variants[5].right);  // boards seen by the other camera
   for (size_t i = 0; i < variants.size(); ++i) {
-    ecs::RepeatedObservations recent;
+    core::RepeatedObservations recent;
     ASSERT_FALSE(recent.repeats(base));
     EXPECT_FALSE(recent.repeats(variants[i])) << "variant " << i;
   }
 }
 
 TEST(RepeatedObservations, RemembersTheLastCapacityObservations) {
-  ecs::RepeatedObservations recent(3);
+  core::RepeatedObservations recent(3);
   for (int i = 0; i < 4; ++i) EXPECT_FALSE(recent.repeats(window(static_cast<float>(i))));
   EXPECT_TRUE(recent.repeats(window(3.0f)));
   EXPECT_TRUE(recent.repeats(window(1.0f)));

@@ -6,8 +6,10 @@
 
 #include "embedded_calibration_stereo/core/calibration/rollback_policy.h"
 
-using ecs::CalibrationHealth;
-using Policy = ecs::RollbackPolicy<std::string>;
+namespace core = embedded_calibration_stereo::core;
+
+using core::CalibrationHealth;
+using Policy = core::RollbackPolicy<std::string>;
 using Outcome = Policy::Outcome;
 
 TEST(RollbackPolicy, ACalibrationReplacedBeforeItsVerdictIsNeverTheReference) {

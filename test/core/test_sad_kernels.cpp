@@ -16,7 +16,7 @@
 
 #include "embedded_calibration_stereo/core/depth/sad_matcher.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 namespace {
 
 // Random texture, smoothed a little so that matching is meaningful, plus a horizontal shift.
@@ -215,4 +215,4 @@ TEST(SadKernelTest, AutoTakesTheWidestAndUnknownKernelsAreRefused) {
 }
 
 }  // namespace
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

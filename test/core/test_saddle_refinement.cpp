@@ -12,7 +12,7 @@
 
 #include "embedded_calibration_stereo/core/tracker/saddle_refinement.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 namespace {
 
 constexpr int kSize = 41, kScale = 8;
@@ -159,4 +159,4 @@ TEST(SaddleRefinement, RefusesWhatIsNotACorner) {
 }
 
 }  // namespace
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

@@ -29,12 +29,12 @@
 #include "embedded_calibration_stereo/core/calibration/scene_epipolar_cost.h"
 #include "embedded_calibration_stereo/core/calibration/scene_matches.h"
 #include "embedded_calibration_stereo/core/calibration/stereo_accuracy.h"
-#include "embedded_calibration_stereo/core/geometry/config_io.h"
+#include "embedded_calibration_stereo/core/io/config_io.h"
 #include "embedded_calibration_stereo/core/sim/sim_rig.h"
 #include "embedded_calibration_stereo/test_support/synthetic_observations.h"
 #include "embedded_calibration_stereo/test_support/synthetic_window.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 namespace {
 
 // The window tracker's corner RMS on drive_photo (test_window_tracker), per coordinate.
@@ -238,4 +238,4 @@ TEST(SceneMatches, LieOnTheTrueEpipolarLinesOfRenderedFrames) {
 }
 
 }  // namespace
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

@@ -16,7 +16,7 @@
 #include "embedded_calibration_stereo/core/depth/separator.h"
 #include "embedded_calibration_stereo/core/sim/sim_rig.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 namespace {
 
 const std::string kConfigPath = std::string(ECS_SOURCE_DIR) + "/config/sim_rig.yaml";
@@ -259,7 +259,7 @@ TEST(Separator, RejectsWrongInputs) {
   }
   SeparatorOptions bad;
   bad.tile_size = 2;
-  EXPECT_NE(bad.Check(), "");
+  EXPECT_NE(bad.validate(), "");
   EXPECT_THROW(ImageSeparator(bad, templ), std::invalid_argument);
   EXPECT_THROW(teachDeviceImage({}), std::invalid_argument);
   EXPECT_THROW(teachDeviceImage({cv::Mat(4, 4, CV_8UC1), cv::Mat(4, 5, CV_8UC1)}),
@@ -282,4 +282,4 @@ TEST(Separator, CubicFitRecoversAKnownCurve) {
 }
 
 }  // namespace
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

@@ -16,7 +16,7 @@
 #include "embedded_calibration_stereo/core/depth/rectification.h"
 #include "embedded_calibration_stereo/core/sim/sim_rig.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 namespace {
 
 constexpr double kPanelDepth = 2.0;
@@ -184,4 +184,4 @@ TEST(SimDepth, AWrongBaselineShowsAsDepthError) {
 }
 
 }  // namespace
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

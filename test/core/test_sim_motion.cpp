@@ -16,7 +16,7 @@
 #include "embedded_calibration_stereo/core/sim/trajectory.h"
 #include "embedded_calibration_stereo/test_support/symmetric_corner.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 namespace {
 
 const std::string kConfigDir = std::string(ECS_SOURCE_DIR) + "/config/";
@@ -461,4 +461,4 @@ TEST(SimMotion, ScenariosFillEveryPixelAlongTheTrajectory) {
 }
 
 }  // namespace
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

@@ -15,11 +15,11 @@
 #include <string>
 #include <vector>
 
-#include "embedded_calibration_stereo/core/calibration/light_schedule.h"
-#include "embedded_calibration_stereo/core/geometry/config_error.h"
+#include "embedded_calibration_stereo/core/light/light_schedule.h"
+#include "embedded_calibration_stereo/core/io/config_error.h"
 #include "embedded_calibration_stereo/core/sim/sim_rig.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 namespace {
 
 const std::string kDefaultConfig = std::string(ECS_SOURCE_DIR) + "/config/sim_rig.yaml";
@@ -531,4 +531,4 @@ TEST(SimOpticsConfig, OutOfRangeValuesNameTheKey) {
 }
 
 }  // namespace
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

@@ -16,11 +16,11 @@
 #include <string>
 #include <thread>
 
-#include "embedded_calibration_stereo/core/geometry/config_error.h"
+#include "embedded_calibration_stereo/core/io/config_error.h"
 #include "embedded_calibration_stereo/core/sim/sim_rig.h"
 #include "embedded_calibration_stereo/test_support/symmetric_corner.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 namespace {
 
 const std::string kDefaultConfig = std::string(ECS_SOURCE_DIR) + "/config/sim_rig.yaml";
@@ -541,4 +541,4 @@ TEST(SimRig, BgrEncodingReplicatesChannels) {
 }
 
 }  // namespace
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

@@ -13,10 +13,10 @@
 #include <sstream>
 #include <string>
 
-#include "embedded_calibration_stereo/core/geometry/config_error.h"
+#include "embedded_calibration_stereo/core/io/config_error.h"
 #include "embedded_calibration_stereo/core/sim/sim_rig.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 namespace {
 
 const std::string kConfigDir = std::string(ECS_SOURCE_DIR) + "/config/";
@@ -335,4 +335,4 @@ TEST(SimScenarioConfig, UndecodableImageIsRefusedWithItsKey) {
 }
 
 }  // namespace
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

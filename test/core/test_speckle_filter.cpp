@@ -10,7 +10,7 @@
 #include "embedded_calibration_stereo/core/depth/sad_matcher.h"
 #include "embedded_calibration_stereo/core/depth/speckle_filter.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 namespace {
 
 // Piecewise-smooth fixed-point disparity: random rectangles of constant or sloped disparity,
@@ -151,4 +151,4 @@ TEST(SpeckleFilter, ChecksItsInput) {
 }
 
 }  // namespace
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

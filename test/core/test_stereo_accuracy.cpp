@@ -23,11 +23,11 @@
 
 #include "embedded_calibration_stereo/core/calibration/bundle_adjuster.h"
 #include "embedded_calibration_stereo/core/calibration/stereo_accuracy.h"
-#include "embedded_calibration_stereo/core/geometry/config_io.h"
+#include "embedded_calibration_stereo/core/io/config_io.h"
 #include "embedded_calibration_stereo/test_support/solution_errors.h"
 #include "embedded_calibration_stereo/test_support/synthetic_observations.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 namespace {
 
 constexpr double kInf = std::numeric_limits<double>::infinity();
@@ -433,4 +433,4 @@ TEST(StereoAccuracyCalibrator, TrueErrorsMatchTheReportedCovarianceOverFiftyTria
 }
 
 }  // namespace
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

@@ -7,7 +7,7 @@
 
 #include "embedded_calibration_stereo/core/depth/stereo_device_template.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 namespace {
 
 cv::Mat grey(double value, int size = 64) { return cv::Mat(size, size, CV_8UC1, cv::Scalar(value)); }
@@ -126,4 +126,4 @@ TEST(LearnStereoDevice, SaysWhichCameraCouldNotBeLearned) {
 }
 
 }  // namespace
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

@@ -4,7 +4,7 @@
 
 #include "embedded_calibration_stereo/core/tracker/teaching_plan.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 namespace {
 
 using Step = TeachingPlan::LightOnStep;
@@ -150,4 +150,4 @@ TEST(TeachingPlan, AnEndedBurstIsTaughtOnTrackedHeldOrDropped) {
 }
 
 }  // namespace
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

@@ -25,9 +25,11 @@
 
 #include "embedded_calibration_stereo/test_support/run_command.h"
 
+namespace core = embedded_calibration_stereo::core;
+
 namespace {
 
-using ecs::runCommand;
+using core::runCommand;
 
 const std::string kBoardDir = "/usr/share/doc/opencv-doc/examples/data/";
 const std::string kSceneDir = "/usr/lib/python3/dist-packages/skimage/data/";

@@ -19,7 +19,7 @@
 #include "embedded_calibration_stereo/test_support/corner_score.h"
 #include "embedded_calibration_stereo/test_support/sim_prior.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 namespace {
 
 const std::string kConfigDir = std::string(ECS_SOURCE_DIR) + "/config/";
@@ -110,4 +110,4 @@ TEST(TrackerMotion, DrivePhotoDimDeviceNoBackground) {
 }
 
 }  // namespace
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

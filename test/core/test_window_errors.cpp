@@ -12,11 +12,11 @@
 #include <cstdio>
 
 #include "embedded_calibration_stereo/core/calibration/bundle_adjuster.h"
-#include "embedded_calibration_stereo/core/geometry/config_io.h"
+#include "embedded_calibration_stereo/core/io/config_io.h"
 #include "embedded_calibration_stereo/test_support/solution_errors.h"
 #include "embedded_calibration_stereo/test_support/synthetic_observations.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 namespace {
 
 // Adds the difference `noisy - exact` (one frame, same corners in the same order) to every frame.
@@ -101,4 +101,4 @@ TEST(WindowErrors, ErrorsSharedByTheFramesWidenTheReportedStddev) {
 }
 
 }  // namespace
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

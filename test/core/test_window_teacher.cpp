@@ -15,7 +15,7 @@
 #include "embedded_calibration_stereo/core/tracker/window_teacher.h"
 #include "embedded_calibration_stereo/test_support/corner_score.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 namespace {
 
 const std::string kConfig = std::string(ECS_SOURCE_DIR) + "/config/drive_photo.yaml";
@@ -180,4 +180,4 @@ TEST(WindowTeacher, DeviceImageBecomesAnEightBitGreyTeachingFrame) {
 }
 
 }  // namespace
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

@@ -19,7 +19,7 @@
 #include "embedded_calibration_stereo/test_support/corner_score.h"
 #include "embedded_calibration_stereo/test_support/sim_prior.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 namespace {
 
 const std::string kConfig = std::string(ECS_SOURCE_DIR) + "/config/drive_photo.yaml";
@@ -101,4 +101,4 @@ TEST(WindowTracker, RefusesAWindowItCannotLearnFrom) {
 }
 
 }  // namespace
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

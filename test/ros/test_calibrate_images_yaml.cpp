@@ -6,24 +6,26 @@
 
 #include <filesystem>
 
-#include "embedded_calibration_stereo/core/geometry/camera_info_yaml.h"
-#include "embedded_calibration_stereo/core/geometry/config_io.h"
+#include "embedded_calibration_stereo/core/io/camera_info_yaml.h"
+#include "embedded_calibration_stereo/core/io/config_io.h"
+
+namespace core = embedded_calibration_stereo::core;
 
 namespace {
 
 TEST(CalibrateImagesYaml, CameraCalibrationParsersReadsEveryField) {
   const cv::FileStorage config =
-      ecs::openYaml(std::string(ECS_SOURCE_DIR) + "/config/sim_rig.yaml");
-  const ecs::StereoRig rig = ecs::loadStereoRig(config["rig"], "rig");
-  const ecs::RectificationGeometry geometry =
-      ecs::computeRectificationGeometry(rig, ecs::RectificationOptions{});
-  const auto files = ecs::stereoCameraInfoFiles(rig, geometry, "narrow_stereo/left", "right");
+      core::openYaml(std::string(ECS_SOURCE_DIR) + "/config/sim_rig.yaml");
+  const core::StereoRig rig = core::loadStereoRig(config["rig"], "rig");
+  const core::RectificationGeometry geometry =
+      core::computeRectificationGeometry(rig, core::RectificationOptions{});
+  const auto files = core::stereoCameraInfoFiles(rig, geometry, "narrow_stereo/left", "right");
   const std::filesystem::path dir = std::filesystem::temp_directory_path() /
                                     ("ecs_calibrate_images_yaml_" + std::to_string(::getpid()));
   std::filesystem::create_directories(dir);
-  for (const ecs::CameraInfoFile* file : {&files.first, &files.second}) {
+  for (const core::CameraInfoFile* file : {&files.first, &files.second}) {
     const std::string path = (dir / "camera.yaml").string();
-    ecs::writeFileAtomically(path, ecs::cameraInfoYaml(*file));
+    core::writeFileAtomically(path, core::cameraInfoYaml(*file));
     std::string name;
     sensor_msgs::CameraInfo info;
     ASSERT_TRUE(camera_calibration_parsers::readCalibration(path, name, info));

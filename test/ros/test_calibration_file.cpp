@@ -17,6 +17,8 @@
 #include "embedded_calibration_stereo/ros/calibration_file.h"
 #include "embedded_calibration_stereo/ros/conversions.h"
 
+namespace core = embedded_calibration_stereo::core;
+
 using namespace embedded_calibration_stereo;
 
 namespace {
@@ -45,7 +47,7 @@ std::vector<std::string> listDir(const std::string& dir) {
 }
 
 sensor_msgs::CameraInfo calibration(double fx) {
-  ecs::PinholeCamera c;
+  core::PinholeCamera c;
   c.width = 752;
   c.height = 480;
   c.fx = fx;

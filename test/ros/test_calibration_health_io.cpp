@@ -6,6 +6,8 @@
 
 #include "embedded_calibration_stereo/ros/calibration_health_io.h"
 
+namespace core = embedded_calibration_stereo::core;
+
 using namespace embedded_calibration_stereo;
 
 namespace {
@@ -38,7 +40,7 @@ TEST(HealthFrameRecords, FindsTheFramesAndCalibrationsOfAStampAndForgetsTheOldes
 }
 
 TEST(CalibrationHealthIo, AnAcceptedStatusPlacesTheBoardsItNamesSolvedWithItsIntrinsics) {
-  std::vector<ecs::VirtualBoard> boards(3);
+  std::vector<core::VirtualBoard> boards(3);
   for (int i = 0; i < 3; ++i) boards[i].virtual_id = i;
   CalibrationStatus status;
   status.accepted = true;
@@ -68,8 +70,8 @@ TEST(CalibrationHealthIo, AnAcceptedStatusPlacesTheBoardsItNamesSolvedWithItsInt
 }
 
 TEST(CalibrationHealthIo, AVerdictsFiguresAreNaNForASignalNotMeasured) {
-  ecs::HealthReport report;
-  report.state = ecs::CalibrationHealth::kDegraded;
+  core::HealthReport report;
+  report.state = core::CalibrationHealth::kDegraded;
   report.misalignment_px = 0.2;
   report.board_rms_left_px = 0.3;
   report.epipolar_age_s = 0.5;
@@ -89,7 +91,7 @@ TEST(CalibrationHealthIo, TheStatusFieldsThePolicyDecidesOn) {
   status.newest_frame = ros::Time(100, 500000000);
   status.predicted_misalignment_rms_px = 0.05;
   status.predicted_disparity_bias_rms_px = 0.09;
-  const ecs::CalibratorStatus seen = toCalibratorStatus(status);
+  const core::CalibratorStatus seen = toCalibratorStatus(status);
   EXPECT_EQ(seen.epoch, 4u);
   EXPECT_FALSE(seen.accepted);
   EXPECT_TRUE(seen.in_force_confirmed);
@@ -99,11 +101,11 @@ TEST(CalibrationHealthIo, TheStatusFieldsThePolicyDecidesOn) {
 }
 
 TEST(CalibrationHealthIo, DiagnosticsSayARestoreFailedOrTheStateWithItsReason) {
-  using Policy = ecs::CalibrationHealthPolicy<std::string>;
+  using Policy = core::CalibrationHealthPolicy<std::string>;
   Policy policy({}, [](const std::string& a, const std::string& b) { return a == b; });
   policy.newCalibration(1, "A");
-  ecs::HealthReport report;
-  report.state = ecs::CalibrationHealth::kGood;
+  core::HealthReport report;
+  report.state = core::CalibrationHealth::kGood;
   policy.published(report, 1.0);
   diagnostic_updater::DiagnosticStatusWrapper ok;
   fillHealthDiagnostics(report, policy, "", {}, &ok);
@@ -111,18 +113,18 @@ TEST(CalibrationHealthIo, DiagnosticsSayARestoreFailedOrTheStateWithItsReason) {
   EXPECT_EQ(ok.message, "GOOD");
 
   policy.newCalibration(2, "B");
-  report.state = ecs::CalibrationHealth::kBad;
+  report.state = core::CalibrationHealth::kBad;
   ASSERT_EQ(policy.afterVerification(report).outcome, Policy::Verified::Outcome::kRestore);
   policy.restoreFinished("left/set_camera_info did not answer");
   diagnostic_updater::DiagnosticStatusWrapper failed;
-  report.state = ecs::CalibrationHealth::kDegraded;
+  report.state = core::CalibrationHealth::kDegraded;
   fillHealthDiagnostics(report, policy, "tilted", {}, &failed);
   EXPECT_EQ(failed.level, diagnostic_msgs::DiagnosticStatus::ERROR) << "a failed restore is an error";
   EXPECT_EQ(failed.message, policy.lastRestore());
 
   diagnostic_updater::DiagnosticStatusWrapper unknown;
   Policy fresh({}, [](const std::string& a, const std::string& b) { return a == b; });
-  report.state = ecs::CalibrationHealth::kUnknown;
+  report.state = core::CalibrationHealth::kUnknown;
   fillHealthDiagnostics(report, fresh, "no calibration", {}, &unknown);
   EXPECT_EQ(unknown.level, diagnostic_msgs::DiagnosticStatus::WARN);
   EXPECT_EQ(unknown.message, "no verdict yet: no calibration");

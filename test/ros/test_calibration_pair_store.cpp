@@ -28,6 +28,8 @@
 #include "embedded_calibration_stereo/ros/conversions.h"
 #include "embedded_calibration_stereo/ros/stereo_input_check.h"
 
+namespace core = embedded_calibration_stereo::core;
+
 using namespace embedded_calibration_stereo;
 using sensor_msgs::CameraInfo;
 
@@ -48,8 +50,8 @@ struct TempDir {
 
 // A rectified pair whose fx' is `fx` (both cameras), as the OnlineCalibrator commits it.
 std::pair<CameraInfo, CameraInfo> pairWithFocal(double fx) {
-  ecs::StereoRig rig;
-  for (ecs::PinholeCamera* c : {&rig.left, &rig.right}) {
+  core::StereoRig rig;
+  for (core::PinholeCamera* c : {&rig.left, &rig.right}) {
     c->width = kWidth;
     c->height = kHeight;
     c->fx = fx;
@@ -470,9 +472,9 @@ TEST(StereoCalibrationSet, UnwritableFolderRefusesAndKeepsTheCalibration) {
 
 // A rig of two 650 px cameras with radial distortion `k1`, the right one turned by 0.5 degrees
 // about y and 0.3 about x, 0.12 m apart: its rectification has an R of its own.
-ecs::StereoRig turnedRig(double k1) {
-  ecs::StereoRig rig;
-  for (ecs::PinholeCamera* c : {&rig.left, &rig.right}) {
+core::StereoRig turnedRig(double k1) {
+  core::StereoRig rig;
+  for (core::PinholeCamera* c : {&rig.left, &rig.right}) {
     c->width = kWidth;
     c->height = kHeight;
     c->fx = c->fy = 650.0;
@@ -494,7 +496,7 @@ ecs::StereoRig turnedRig(double k1) {
 // success and dropped.
 TEST(StereoCalibrationSet, AMonocularCalibrationKeepsTheStereoExtrinsics) {
   TempDir dir;
-  const ecs::StereoRig rig = turnedRig(-0.25);
+  const core::StereoRig rig = turnedRig(-0.25);
   const auto in_force = toStereoCameraInfo(rig);
   constexpr double kPairTimeoutS = 0.05;
   StereoCalibration c = makeCalibration(dir.path, kPairTimeoutS);

@@ -9,31 +9,33 @@
 #include <filesystem>
 #include <limits>
 
-#include "embedded_calibration_stereo/core/geometry/config_io.h"
+#include "embedded_calibration_stereo/core/io/config_io.h"
 #include "embedded_calibration_stereo/ros/calibration_file.h"
 #include "embedded_calibration_stereo/ros/calibration_session.h"
 #include "embedded_calibration_stereo/ros/conversions.h"
 #include "embedded_calibration_stereo/test_support/synthetic_observations.h"
 
+namespace core = embedded_calibration_stereo::core;
+
 namespace ecsr = embedded_calibration_stereo;
 
 namespace {
 
-std::vector<ecs::VirtualBoard> simBoards() {
-  cv::FileStorage fs = ecs::openYaml(std::string(ECS_SOURCE_DIR) + "/config/sim_rig.yaml");
-  return ecs::loadDevice(fs["device"], "device").virtualBoards();
+std::vector<core::VirtualBoard> simBoards() {
+  cv::FileStorage fs = core::openYaml(std::string(ECS_SOURCE_DIR) + "/config/sim_rig.yaml");
+  return core::loadDevice(fs["device"], "device").virtualBoards();
 }
 
 // Ten corners of the first row of board `id`, on both sides.
-ecs::StereoObservation observation(int id) {
-  ecs::BoardCorners b;
+core::StereoObservation observation(int id) {
+  core::BoardCorners b;
   b.board_id = id;
   for (int i = 0; i < 10; ++i) {
     b.corner_ids.push_back(i);
     b.u.push_back(100.0f + 10 * i);
     b.v.push_back(200.0f);
   }
-  ecs::StereoObservation o;
+  core::StereoObservation o;
   o.left = {b};
   o.right = {b};
   return o;
@@ -52,7 +54,7 @@ TEST(ObservationDefects, CleanObservationHasNone) {
   ASSERT_GE(boards.size(), 2u);
   EXPECT_TRUE(ecsr::observationDefects(observation(boards[1].virtual_id), boards).empty());
   // A board with only a few corners is usable data, not a defect of the message.
-  ecs::StereoObservation few = observation(boards[0].virtual_id);
+  core::StereoObservation few = observation(boards[0].virtual_id);
   few.left[0].corner_ids.resize(2);
   few.left[0].u.resize(2);
   few.left[0].v.resize(2);
@@ -63,7 +65,7 @@ TEST(ObservationDefects, NamesEachDefect) {
   const auto boards = simBoards();
   const int id = boards[0].virtual_id;
 
-  ecs::StereoObservation nan = observation(id);
+  core::StereoObservation nan = observation(id);
   nan.right[0].v[3] = std::numeric_limits<float>::quiet_NaN();
   auto defects = ecsr::observationDefects(nan, boards);
   ASSERT_EQ(defects.size(), 1u);
@@ -71,24 +73,24 @@ TEST(ObservationDefects, NamesEachDefect) {
   EXPECT_NE(defects[0].find("non-finite"), std::string::npos) << defects[0];
   EXPECT_EQ(defects[0].find("frame 0"), std::string::npos) << "single message: no frame index";
 
-  ecs::StereoObservation duplicate = observation(id);
+  core::StereoObservation duplicate = observation(id);
   duplicate.left[0].corner_ids[4] = duplicate.left[0].corner_ids[5];
   EXPECT_TRUE(anyContains(ecsr::observationDefects(duplicate, boards), "duplicate"));
 
-  ecs::StereoObservation outside = observation(id);
+  core::StereoObservation outside = observation(id);
   outside.left[0].corner_ids[0] = boards[0].cornerCount();  // one past the last corner
   EXPECT_TRUE(anyContains(ecsr::observationDefects(outside, boards), "outside the board"));
 
   EXPECT_TRUE(anyContains(ecsr::observationDefects(observation(1000), boards), "unknown board"));
 
-  ecs::StereoObservation lengths = observation(id);
+  core::StereoObservation lengths = observation(id);
   lengths.left[0].u.pop_back();
   EXPECT_TRUE(anyContains(ecsr::observationDefects(lengths, boards), "differ in length"));
 }
 
 TEST(MakeStatus, FillsEveryFieldInCameraInfoOrder) {
   ros::Time::init();
-  ecs::BundleAdjustmentSummary s;
+  core::BundleAdjustmentSummary s;
   s.rig.left.fx = 650;
   s.rig.left.fy = 651;
   s.rig.left.cx = 370;
@@ -108,7 +110,7 @@ TEST(MakeStatus, FillsEveryFieldInCameraInfoOrder) {
   s.baseline_stddev_m = 1e-4;
   s.rotation_stddev_deg = 0.02;
   s.solve_ms = 80;
-  ecs::GateDecision rejected{false, "rejected: too few boards"};
+  core::GateDecision rejected{false, "rejected: too few boards"};
   const auto status = ecsr::makeStatus(s, rejected);
   EXPECT_FALSE(status.accepted);
   EXPECT_EQ(status.reason, rejected.reason);
@@ -126,7 +128,7 @@ TEST(MakeStatus, FillsEveryFieldInCameraInfoOrder) {
   EXPECT_EQ(status.baseline_stddev_m, 1e-4);
   EXPECT_EQ(status.rotation_stddev_deg, 0.02);
   EXPECT_EQ(status.solve_ms, 80);
-  EXPECT_TRUE(ecsr::makeStatus(s, ecs::GateDecision{true, "ignored"}).reason.empty());
+  EXPECT_TRUE(ecsr::makeStatus(s, core::GateDecision{true, "ignored"}).reason.empty());
 }
 
 // The predicted depth accuracy comes from the solve's covariance: an uncertain rotation of the
@@ -134,10 +136,10 @@ TEST(MakeStatus, FillsEveryFieldInCameraInfoOrder) {
 // baseline a depth error of its relative sd at every depth; no covariance, no prediction.
 TEST(MakeStatus, CarriesThePredictedDepthAccuracyOfTheCovariance) {
   ros::Time::init();
-  ecs::BundleAdjustmentSummary s;
+  core::BundleAdjustmentSummary s;
   s.success = true;
-  s.rig = ecs::makeSimLikeStereoRig();
-  const ecs::GateDecision accepted{true, ""};
+  s.rig = core::makeSimLikeStereoRig();
+  const core::GateDecision accepted{true, ""};
   const std::vector<double> depths = {1, 2, 5, 10};
   auto status = ecsr::makeStatus(s, accepted);
   EXPECT_EQ(std::vector<double>(status.predicted_depths_m.begin(), status.predicted_depths_m.end()), depths);
@@ -162,7 +164,7 @@ TEST(MakeStatus, CarriesThePredictedDepthAccuracyOfTheCovariance) {
 }
 
 TEST(CarriesCalibration, TellsTheCommittedCalibrationFromAnother) {
-  ecs::StereoRig rig;
+  core::StereoRig rig;
   rig.left.width = rig.right.width = 752;
   rig.left.height = rig.right.height = 480;
   rig.left.fx = 652.4;

@@ -19,6 +19,8 @@
 #include "embedded_calibration_stereo/ros/conversions.h"
 #include "embedded_calibration_stereo/ros/stereo_input_check.h"
 
+namespace core = embedded_calibration_stereo::core;
+
 using namespace embedded_calibration_stereo;
 using sensor_msgs::CameraInfo;
 
@@ -28,8 +30,8 @@ constexpr uint32_t kWidth = 752, kHeight = 480;
 
 // A rectified pair as the OnlineCalibrator commits it (Bouguet, right P with Tx = -fx' * b).
 std::pair<CameraInfo, CameraInfo> validPair() {
-  ecs::StereoRig rig;
-  for (ecs::PinholeCamera* c : {&rig.left, &rig.right}) {
+  core::StereoRig rig;
+  for (core::PinholeCamera* c : {&rig.left, &rig.right}) {
     c->width = kWidth;
     c->height = kHeight;
     c->cx = 371.5;
@@ -282,8 +284,8 @@ TEST(CameraInfoCheck, RealLensesAndRectificationsPassTheLimitsRefuse) {
     EXPECT_EQ(consumerChecks(left, right), "") << "strong barrel";
   }
   for (const double alpha : {0.0, 1.0}) {
-    ecs::StereoRig rig;
-    for (ecs::PinholeCamera* c : {&rig.left, &rig.right}) {
+    core::StereoRig rig;
+    for (core::PinholeCamera* c : {&rig.left, &rig.right}) {
       c->width = kWidth;
       c->height = kHeight;
       c->fx = c->fy = 650.0;

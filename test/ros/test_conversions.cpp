@@ -9,12 +9,14 @@
 
 #include "embedded_calibration_stereo/ros/conversions.h"
 
+namespace core = embedded_calibration_stereo::core;
+
 using namespace embedded_calibration_stereo;
 
 namespace {
 
-ecs::PinholeCamera camera(double fx, double fy, double cx, double cy) {
-  ecs::PinholeCamera c;
+core::PinholeCamera camera(double fx, double fy, double cx, double cy) {
+  core::PinholeCamera c;
   c.width = 752;
   c.height = 480;
   c.fx = fx;
@@ -25,11 +27,11 @@ ecs::PinholeCamera camera(double fx, double fy, double cx, double cy) {
   return c;
 }
 
-ecs::StereoRig rig() {
-  ecs::StereoRig r;
+core::StereoRig rig() {
+  core::StereoRig r;
   r.left = camera(640, 642, 370, 245);
   r.right = camera(650, 651, 380, 238);
-  r.right_from_left.linear() = ecs::rotationFromVectorDeg(Eigen::Vector3d(0.4, -0.8, 0.3));
+  r.right_from_left.linear() = core::rotationFromVectorDeg(Eigen::Vector3d(0.4, -0.8, 0.3));
   r.right_from_left.translation() = Eigen::Vector3d(-0.12, 0.003, -0.002);
   return r;
 }
@@ -37,7 +39,7 @@ ecs::StereoRig rig() {
 }  // namespace
 
 TEST(Conversions, MonoCameraInfoIsPlumbBobWithIdentityRectification) {
-  const ecs::PinholeCamera c = camera(600, 610, 371.5, 239.25);
+  const core::PinholeCamera c = camera(600, 610, 371.5, 239.25);
   const sensor_msgs::CameraInfo info = toCameraInfo(c);
   EXPECT_EQ(info.distortion_model, "plumb_bob");
   ASSERT_EQ(info.D.size(), 5u);
@@ -51,7 +53,7 @@ TEST(Conversions, MonoCameraInfoIsPlumbBobWithIdentityRectification) {
     for (int j = 0; j < 3; ++j) EXPECT_EQ(info.P[4 * i + j], info.K[3 * i + j]);
     EXPECT_EQ(info.P[4 * i + 3], 0.0);
   }
-  ecs::PinholeCamera back;
+  core::PinholeCamera back;
   std::string error;
   ASSERT_TRUE(fromCameraInfo(info, &back, &error)) << error;
   EXPECT_EQ(back.width, c.width);
@@ -64,7 +66,7 @@ TEST(Conversions, MonoCameraInfoIsPlumbBobWithIdentityRectification) {
 }
 
 TEST(Conversions, StereoCameraInfoGivesImageGeometryTheRigBaseline) {
-  const ecs::StereoRig r = rig();
+  const core::StereoRig r = rig();
   const auto infos = toStereoCameraInfo(r);
   image_geometry::StereoCameraModel model;
   ASSERT_TRUE(model.fromCameraInfo(infos.first, infos.second));
@@ -95,12 +97,12 @@ TEST(Conversions, StereoCameraInfoGivesImageGeometryTheRigBaseline) {
 }
 
 TEST(Conversions, StereoCameraInfoRoundTripRecoversTheRig) {
-  const ecs::StereoRig r = rig();
+  const core::StereoRig r = rig();
   const auto infos = toStereoCameraInfo(r);
-  ecs::StereoRig back;
+  core::StereoRig back;
   std::string error;
   ASSERT_TRUE(fromStereoCameraInfo(infos.first, infos.second, &back, &error)) << error;
-  EXPECT_LT(ecs::rotationAngleDeg(back.right_from_left.rotation(), r.right_from_left.rotation()), 1e-7);
+  EXPECT_LT(core::rotationAngleDeg(back.right_from_left.rotation(), r.right_from_left.rotation()), 1e-7);
   EXPECT_LT((back.right_from_left.translation() - r.right_from_left.translation()).norm(), 1e-9);
   EXPECT_EQ(back.right.fx, r.right.fx);
   EXPECT_EQ(back.left.cy, r.left.cy);
@@ -109,7 +111,7 @@ TEST(Conversions, StereoCameraInfoRoundTripRecoversTheRig) {
 // R and P against cv::stereoRectify called here on the rig's K, D, R, T (Bouguet, zero
 // disparity at infinity) with the same alpha; alpha 0 is the default.
 TEST(Conversions, StereoRectificationIsOpenCvsForTheGivenAlpha) {
-  const ecs::StereoRig r = rig();
+  const core::StereoRig r = rig();
   const cv::Matx33d k1(r.left.fx, 0, r.left.cx, 0, r.left.fy, r.left.cy, 0, 0, 1);
   const cv::Matx33d k2(r.right.fx, 0, r.right.cx, 0, r.right.fy, r.right.cy, 0, 0, 1);
   const cv::Matx<double, 1, 5> d1(r.left.dist.data()), d2(r.right.dist.data());
@@ -138,7 +140,7 @@ TEST(Conversions, StereoRectificationIsOpenCvsForTheGivenAlpha) {
 }
 
 TEST(Conversions, StereoCameraInfoOfAnUnusableRigThrowsWithAReason) {
-  ecs::StereoRig r = rig();
+  core::StereoRig r = rig();
   r.right_from_left.translation().setZero();
   try {
     toStereoCameraInfo(r);
@@ -149,7 +151,7 @@ TEST(Conversions, StereoCameraInfoOfAnUnusableRigThrowsWithAReason) {
 }
 
 TEST(Conversions, UnusableCameraInfoIsRefusedWithAReason) {
-  ecs::PinholeCamera c;
+  core::PinholeCamera c;
   std::string error;
   sensor_msgs::CameraInfo info = toCameraInfo(camera(600, 600, 370, 240));
   info.K[0] = 0.0;
@@ -174,9 +176,9 @@ TEST(Conversions, UnusableCameraInfoIsRefusedWithAReason) {
 }
 
 TEST(Conversions, ObservationsRoundTrip) {
-  ecs::StereoObservation obs;
+  core::StereoObservation obs;
   obs.stamp = 1234.5;
-  ecs::BoardCorners b;
+  core::BoardCorners b;
   b.board_id = 4;
   b.corner_ids = {0, 1, 7, 34};
   b.u = {10.25f, 20.5f, 30.75f, 700.125f};
@@ -191,7 +193,7 @@ TEST(Conversions, ObservationsRoundTrip) {
   ASSERT_EQ(msg.right.size(), 2u);
   EXPECT_EQ(msg.left[0].board_id, 4);
   EXPECT_EQ(msg.right[1].corner_ids[3], 34);
-  const ecs::StereoObservation back = fromMsg(msg);
+  const core::StereoObservation back = fromMsg(msg);
   EXPECT_EQ(back.stamp, obs.stamp);
   EXPECT_EQ(back.cornerCount(), obs.cornerCount());
   EXPECT_EQ(back.left[0].corner_ids, obs.left[0].corner_ids);
@@ -211,7 +213,7 @@ TEST(Conversions, ObservationsRoundTrip) {
 
 TEST(Conversions, TransformStampedMapsChildPointsIntoTheParentFrame) {
   Eigen::Isometry3d parent_from_child = Eigen::Isometry3d::Identity();
-  parent_from_child.linear() = ecs::rotationFromVectorDeg(Eigen::Vector3d(3, -20, 45));
+  parent_from_child.linear() = core::rotationFromVectorDeg(Eigen::Vector3d(3, -20, 45));
   parent_from_child.translation() = Eigen::Vector3d(0.12, -0.01, 0.3);
   const auto msg = toTransformStamped(parent_from_child, "left", "right", ros::Time(5, 0));
   EXPECT_EQ(msg.header.frame_id, "left");

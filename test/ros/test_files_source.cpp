@@ -8,8 +8,10 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/videoio.hpp>
 
-#include "embedded_calibration_stereo/core/geometry/config_error.h"
+#include "embedded_calibration_stereo/core/io/config_error.h"
 #include "embedded_calibration_stereo/ros/frame_source.h"
+
+namespace core = embedded_calibration_stereo::core;
 
 using namespace embedded_calibration_stereo;
 
@@ -41,7 +43,7 @@ void writePairs(const std::string& dir, int count) {
 std::string expectConfigError(const FilesSourceParams& params) {
   try {
     makeFilesFrameSource(params);
-  } catch (const ecs::ConfigError& e) {
+  } catch (const core::ConfigError& e) {
     return e.parameter();
   }
   return "(accepted)";

@@ -2,8 +2,10 @@
 // checked; each names its parameter.
 #include <gtest/gtest.h>
 
-#include "embedded_calibration_stereo/core/geometry/config_error.h"
+#include "embedded_calibration_stereo/core/io/config_error.h"
 #include "embedded_calibration_stereo/ros/light_backend.h"
+
+namespace core = embedded_calibration_stereo::core;
 
 using namespace embedded_calibration_stereo;
 
@@ -12,7 +14,7 @@ namespace {
 std::string refusedParameter(const GpioLightParams& params) {
   try {
     makeGpioLight(params);
-  } catch (const ecs::ConfigError& e) {
+  } catch (const core::ConfigError& e) {
     return e.parameter();
   }
   return "(accepted)";

@@ -10,6 +10,8 @@
 
 #include "embedded_calibration_stereo/ros/light_burst.h"
 
+namespace core = embedded_calibration_stereo::core;
+
 namespace ecsr = embedded_calibration_stereo;
 using sensor_msgs::Image;
 using sensor_msgs::ImageConstPtr;
@@ -146,11 +148,11 @@ TEST(LightBurst, ReadsAStereoFrameWithoutCopyingOrSaysWhyNot) {
   };
   const ImageConstPtr left = colour("rgb8"), right = colour("rgb8");
   cv::Mat l, r;
-  ecs::ColorOrder order = ecs::ColorOrder::kBgr;
+  core::ColorOrder order = core::ColorOrder::kBgr;
   EXPECT_EQ(ecsr::readStereo(left, right, &l, &r, &order), "");
   EXPECT_EQ(l.data, left->data.data());
   EXPECT_EQ(r.data, right->data.data());
-  EXPECT_EQ(order, ecs::ColorOrder::kRgb);
+  EXPECT_EQ(order, core::ColorOrder::kRgb);
   EXPECT_TRUE(contains(ecsr::readStereo(left, colour("bgr8"), &l, &r, &order), "differ"));
   EXPECT_TRUE(contains(ecsr::readStereo(colour("yuv422"), colour("yuv422"), &l, &r, &order), "yuv422"));
   auto short_data = boost::make_shared<Image>(*left);

@@ -19,6 +19,8 @@
 #include "embedded_calibration_stereo/ros/reloading_calibration_store.h"
 #include "embedded_calibration_stereo/ros/set_camera_info_answer.h"
 
+namespace core = embedded_calibration_stereo::core;
+
 using namespace embedded_calibration_stereo;
 using sensor_msgs::CameraInfo;
 using XmlRpc::XmlRpcValue;
@@ -50,7 +52,7 @@ template <class F>
 std::string refused(F f) {
   try {
     f();
-  } catch (const ecs::ConfigError& e) {
+  } catch (const core::ConfigError& e) {
     return e.parameter();
   }
   return "";
@@ -138,8 +140,8 @@ namespace {
 constexpr uint32_t kWidth = 752, kHeight = 480;
 
 std::pair<CameraInfo, CameraInfo> pairWithFocal(double fx) {
-  ecs::StereoRig rig;
-  for (ecs::PinholeCamera* c : {&rig.left, &rig.right}) {
+  core::StereoRig rig;
+  for (core::PinholeCamera* c : {&rig.left, &rig.right}) {
     c->width = kWidth;
     c->height = kHeight;
     c->fx = fx;

@@ -13,6 +13,8 @@
 
 #include "embedded_calibration_stereo/ros/parameter_reader.h"
 
+namespace core = embedded_calibration_stereo::core;
+
 using embedded_calibration_stereo::ParameterReader;
 using XmlRpc::XmlRpcValue;
 
@@ -43,7 +45,7 @@ template <class F>
 std::string refusal(const std::string& parameter, F f) {
   try {
     f();
-  } catch (const ecs::ConfigError& e) {
+  } catch (const core::ConfigError& e) {
     EXPECT_EQ(e.parameter(), parameter);
     EXPECT_EQ(std::string(e.what()).rfind(parameter + ": ", 0), 0u) << e.what();
     return e.what();

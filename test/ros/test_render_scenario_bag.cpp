@@ -23,6 +23,8 @@
 #include "embedded_calibration_stereo/core/sim/trajectory.h"
 #include "embedded_calibration_stereo/test_support/run_command.h"
 
+namespace core = embedded_calibration_stereo::core;
+
 namespace {
 
 const std::string kConfig = std::string(ECS_SOURCE_DIR) + "/config/sim_rig.yaml";
@@ -34,7 +36,7 @@ struct Result {
 
 Result runTool(const std::string& args) {
   Result r;
-  r.status = ecs::runCommand(std::string(ECS_RENDER_SCENARIO_BAG) + " " + args + " 2>&1", &r.output);
+  r.status = core::runCommand(std::string(ECS_RENDER_SCENARIO_BAG) + " " + args + " 2>&1", &r.output);
   return r;
 }
 
@@ -68,7 +70,7 @@ TEST(RenderScenarioBag, WritesTheDriversTopicsWithTheScheduleAndTheDrift) {
   ASSERT_TRUE(std::filesystem::exists(bag_path));
   EXPECT_FALSE(std::filesystem::exists(bag_path + ".active"));
 
-  const ecs::SimRigConfig config = ecs::loadSimRigConfig(kConfig);
+  const core::SimRigConfig config = core::loadSimRigConfig(kConfig);
   rosbag::Bag bag(bag_path, rosbag::bagmode::Read);
   rosbag::View view(bag);
   std::map<std::string, std::string> types;
@@ -144,7 +146,7 @@ TEST(RenderScenarioBag, WritesTheDriversTopicsWithTheScheduleAndTheDrift) {
 // the tool's frame-to-frame difference).
 TEST(RenderScenarioBag, HeadPoseFollowsTheTrajectory) {
   const std::string scenario = std::string(ECS_SOURCE_DIR) + "/config/drive_photo.yaml";
-  const ecs::SimRigConfig config = ecs::loadSimRigConfig(scenario);
+  const core::SimRigConfig config = core::loadSimRigConfig(scenario);
   ASSERT_FALSE(config.trajectory.isStatic()) << "drive_photo should move";
   TempDir dir;
   ASSERT_FALSE(dir.path.empty());
@@ -160,7 +162,7 @@ TEST(RenderScenarioBag, HeadPoseFollowsTheTrajectory) {
     if (auto tf = m.instantiate<tf2_msgs::TFMessage>()) {
       ASSERT_EQ(tf->transforms.size(), 1u);
       const double t = (tf->transforms[0].header.stamp - ros::Time(50.0)).toSec();
-      const Eigen::Isometry3d truth = ecs::trajectoryPose(config.trajectory, t);
+      const Eigen::Isometry3d truth = core::trajectoryPose(config.trajectory, t);
       const auto& tr = tf->transforms[0].transform.translation;
       EXPECT_NEAR((Eigen::Vector3d(tr.x, tr.y, tr.z) - truth.translation()).norm(), 0.0, 1e-9) << "tf at " << t;
       ++tf_count;
@@ -170,19 +172,19 @@ TEST(RenderScenarioBag, HeadPoseFollowsTheTrajectory) {
     ASSERT_TRUE(odom);
     const double t = k / fps;
     EXPECT_NEAR((odom->header.stamp - ros::Time(50.0)).toSec(), t, 1e-6);
-    const Eigen::Isometry3d truth = ecs::trajectoryPose(config.trajectory, t);
+    const Eigen::Isometry3d truth = core::trajectoryPose(config.trajectory, t);
     const auto& p = odom->pose.pose;
     const Eigen::Quaterniond q(p.orientation.w, p.orientation.x, p.orientation.y, p.orientation.z);
     EXPECT_NEAR((Eigen::Vector3d(p.position.x, p.position.y, p.position.z) - truth.translation()).norm(), 0.0, 1e-9)
         << "frame " << k;
     EXPECT_LT(q.angularDistance(Eigen::Quaterniond(truth.rotation())), 1e-9) << "frame " << k;
-    largest_move_m = std::max(largest_move_m, (truth.translation() - ecs::trajectoryPose(config.trajectory, 0.0).translation()).norm());
+    largest_move_m = std::max(largest_move_m, (truth.translation() - core::trajectoryPose(config.trajectory, 0.0).translation()).norm());
     if (k > 0) {
       // Velocity half-way through the period, in the body frame there.
       const double mid = t - 0.5 / fps, h = 1e-4;
-      const Eigen::Isometry3d a = ecs::trajectoryPose(config.trajectory, mid - h);
-      const Eigen::Isometry3d b = ecs::trajectoryPose(config.trajectory, mid + h);
-      const Eigen::Isometry3d c = ecs::trajectoryPose(config.trajectory, mid);
+      const Eigen::Isometry3d a = core::trajectoryPose(config.trajectory, mid - h);
+      const Eigen::Isometry3d b = core::trajectoryPose(config.trajectory, mid + h);
+      const Eigen::Isometry3d c = core::trajectoryPose(config.trajectory, mid);
       const Eigen::Vector3d v_body = c.rotation().transpose() * (b.translation() - a.translation()) / (2 * h);
       const Eigen::AngleAxisd turn(a.rotation().transpose() * b.rotation());
       const Eigen::Vector3d w_body = turn.axis() * turn.angle() / (2 * h);

@@ -6,8 +6,10 @@
 #include <pty.h>
 #include <unistd.h>
 
-#include "embedded_calibration_stereo/core/geometry/config_error.h"
+#include "embedded_calibration_stereo/core/io/config_error.h"
 #include "embedded_calibration_stereo/ros/light_backend.h"
+
+namespace core = embedded_calibration_stereo::core;
 
 using namespace embedded_calibration_stereo;
 
@@ -39,8 +41,8 @@ struct Pty {
   }
 };
 
-ecs::LightState state(bool on) {
-  ecs::LightState s;
+core::LightState state(bool on) {
+  core::LightState s;
   s.light_on = on;
   return s;
 }
@@ -89,7 +91,7 @@ TEST(SerialLight, BadConfigurationNamesTheParameter) {
   try {
     makeSerialLight(params);
     FAIL() << "missing port accepted";
-  } catch (const ecs::ConfigError& e) {
+  } catch (const core::ConfigError& e) {
     EXPECT_EQ(e.parameter(), "serial_port");
     EXPECT_NE(std::string(e.what()).find("/dev/does_not_exist_ecs"), std::string::npos);
   }
@@ -99,7 +101,7 @@ TEST(SerialLight, BadConfigurationNamesTheParameter) {
   try {
     makeSerialLight(params);
     FAIL() << "bad baud accepted";
-  } catch (const ecs::ConfigError& e) {
+  } catch (const core::ConfigError& e) {
     EXPECT_EQ(e.parameter(), "serial_baud");
   }
   params.baud = 115200;
@@ -107,7 +109,7 @@ TEST(SerialLight, BadConfigurationNamesTheParameter) {
   try {
     makeSerialLight(params);
     FAIL() << "non-tty accepted";
-  } catch (const ecs::ConfigError& e) {
+  } catch (const core::ConfigError& e) {
     EXPECT_EQ(e.parameter(), "serial_port");
   }
 }

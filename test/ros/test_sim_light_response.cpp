@@ -5,23 +5,25 @@
 
 #include <memory>
 
-#include "embedded_calibration_stereo/core/calibration/light_schedule.h"
+#include "embedded_calibration_stereo/core/light/light_schedule.h"
 #include "embedded_calibration_stereo/ros/frame_source.h"
 #include "embedded_calibration_stereo/ros/light_backend.h"
+
+namespace core = embedded_calibration_stereo::core;
 
 using namespace embedded_calibration_stereo;
 
 namespace {
 
-std::shared_ptr<ecs::SimRig> responseRig() {
-  ecs::SimRigConfig c = ecs::loadSimRigConfig(std::string(ECS_SOURCE_DIR) + "/config/sim_rig.yaml");
+std::shared_ptr<core::SimRig> responseRig() {
+  core::SimRigConfig c = core::loadSimRigConfig(std::string(ECS_SOURCE_DIR) + "/config/sim_rig.yaml");
   c.scene.enabled = false;  // only the level matters here
   c.optics.light.model = "response";
   c.optics.light.rise_time_s = 0.05;
   c.optics.light.fall_time_s = 0.05;
   c.optics.light.delay_s = 0.01;
   c.optics.exposure.time_s = 0.008;
-  return std::make_shared<ecs::SimRig>(c);
+  return std::make_shared<core::SimRig>(c);
 }
 
 // Frame times k / 30; the light is requested on at frame 2 and off at frame 8.
@@ -31,13 +33,13 @@ std::vector<double> renderedLevels(bool with_command, std::vector<double>* sched
   auto rig = responseRig();
   auto light = with_command ? makeSimLight(level, command) : makeSimLight(level);
   auto source = with_command ? makeSimFrameSource(rig, level, command, 30.0) : makeSimFrameSource(rig, level, 30.0);
-  ecs::LightSchedule schedule(ecs::LightScheduleConfig{0.0, 10, 2});
+  core::LightSchedule schedule(core::LightScheduleConfig{0.0, 10, 2});
   std::vector<double> levels;
   for (int k = 0; k < 12; ++k) {
     if (k == 2) schedule.request(true);
     if (k == 8) schedule.request(false);
     const double t = k / 30.0;
-    const ecs::LightState state = schedule.step(t);
+    const core::LightState state = schedule.step(t);
     std::string error;
     EXPECT_TRUE(light->apply(state, &error)) << error;
     StereoFrame frame;

@@ -6,7 +6,9 @@
 #include "calibration_test_utils.h"
 #include "embedded_calibration_stereo/CalibrationMode.h"
 
-using ecs_test::Collector;
+namespace test_support = embedded_calibration_stereo::test_support;
+
+using test_support::Collector;
 using embedded_calibration_stereo::CalibrationMode;
 using sensor_msgs::CameraInfo;
 
@@ -15,7 +17,7 @@ namespace {
 const std::string kNs = "/killed";
 constexpr int kHookSteps = 9;  // calibration_file.h: durable steps of a commit
 
-double rectifiedFocal(double fx) { return ecs_test::pairWithFocal(fx).first.P[0]; }
+double rectifiedFocal(double fx) { return test_support::pairWithFocal(fx).first.P[0]; }
 
 std::vector<std::string> driverParams(const std::string& dir) {
   return {"_backend:=sim", "_fps:=10.0", "_left_camera_info_url:=file://" + dir + "/left.yaml",
@@ -54,7 +56,7 @@ std::pair<double, double> commitAndKill(const std::string& base, int kill_at, do
   Collector<CameraInfo> left(nh, "left/camera_info", 20), right(nh, "right/camera_info", 20);
   std::vector<std::string> env;
   if (kill_at > 0) env.push_back("ECS_TEST_CRASH_COMMIT_AT=" + std::to_string(kill_at));
-  ecs_test::DriverProcess driver(kNs, driverParams(dir), env, base + "/driver_" + std::to_string(kill_at) + ".log");
+  test_support::DriverProcess driver(kNs, driverParams(dir), env, base + "/driver_" + std::to_string(kill_at) + ".log");
   CameraInfo l, r;
   EXPECT_TRUE(publishedPair(left, right, &l, &r, 30.0)) << "the driver did not start\n" << driver.logTail();
   if (old_fx > 0) {
@@ -62,7 +64,7 @@ std::pair<double, double> commitAndKill(const std::string& base, int kill_at, do
   }
   EXPECT_TRUE(ros::service::waitForService(kNs + "/right/set_camera_info", 10000));
 
-  const auto next = ecs_test::pairWithFocal(new_fx);
+  const auto next = test_support::pairWithFocal(new_fx);
   sensor_msgs::SetCameraInfo srv;
   EXPECT_TRUE(callSet("left", next.first, &srv));
   EXPECT_TRUE(srv.response.success) << srv.response.status_message;
@@ -80,7 +82,7 @@ std::pair<double, double> commitAndKill(const std::string& base, int kill_at, do
         << "the driver was not killed at step " << kill_at << " (status " << status << ")\n"
         << driver.logTail();
   }
-  return ecs_test::shownFocals(dir + "/left.yaml", dir + "/right.yaml");
+  return test_support::shownFocals(dir + "/left.yaml", dir + "/right.yaml");
 }
 
 // A relaunched driver runs and publishes a consistent pair: the one the files show (`fx` > 0).
@@ -89,10 +91,10 @@ void expectRelaunchPublishes(const std::string& base, double fx) {
   ros::NodeHandle nh(kNs);
   Collector<CameraInfo> left(nh, "left/camera_info", 20), right(nh, "right/camera_info", 20);
   Collector<CalibrationMode> modes(nh, "calibration_mode", 20);
-  ecs_test::DriverProcess driver(kNs, driverParams(dir), {}, base + "/relaunch.log");
+  test_support::DriverProcess driver(kNs, driverParams(dir), {}, base + "/relaunch.log");
   CameraInfo l, r;
   ASSERT_TRUE(publishedPair(left, right, &l, &r, 30.0)) << "the relaunched driver does not run\n" << driver.logTail();
-  EXPECT_EQ(ecs_test::pairProblem(l, r), "");
+  EXPECT_EQ(test_support::pairProblem(l, r), "");
   if (fx > 0) {
     EXPECT_NEAR(l.P[0], rectifiedFocal(fx), 1e-3);
     EXPECT_NEAR(r.P[0], rectifiedFocal(fx), 1e-3);
@@ -106,12 +108,12 @@ void killAtEveryStep(bool from_regular_files) {
   const double old_fx = 560.0, new_fx = 600.0;
   for (int kill_at = 0; kill_at <= kHookSteps + 1; ++kill_at) {
     SCOPED_TRACE("kill at step " + std::to_string(kill_at));
-    const ecs_test::TempDir temp("ecs_calibration_commit_kill");
+    const test_support::TempDir temp("ecs_calibration_commit_kill");
     const std::string dir = temp.path + "/cal";
     if (from_regular_files) {
       // What a driver without calibration generations left: two regular files.
       std::string error;
-      const auto pair = ecs_test::pairWithFocal(old_fx);
+      const auto pair = test_support::pairWithFocal(old_fx);
       ASSERT_TRUE(embedded_calibration_stereo::writeCalibrationFileAtomic(dir + "/left.yaml", "l", pair.first, &error));
       ASSERT_TRUE(
           embedded_calibration_stereo::writeCalibrationFileAtomic(dir + "/right.yaml", "r", pair.second, &error));

@@ -8,7 +8,9 @@
 
 #include "calibration_test_utils.h"
 
-using ecs_test::Collector;
+namespace test_support = embedded_calibration_stereo::test_support;
+
+using test_support::Collector;
 using sensor_msgs::CameraInfo;
 
 namespace {
@@ -19,7 +21,7 @@ class CalibrationCorruptFile : public testing::Test {
  protected:
   void SetUp() override { ASSERT_FALSE(temp_.path.empty()); }
 
-  ecs_test::InProcessManager::Params params() const {
+  test_support::InProcessManager::Params params() const {
     return {{"backend", "sim"},
             {"fps", 10.0},
             {"left_camera_info_url", "file://" + left_path_},
@@ -31,7 +33,7 @@ class CalibrationCorruptFile : public testing::Test {
   void storePairs(const std::vector<double>& focals) {
     ASSERT_TRUE(manager_.load(kName, params()));
     for (const double fx : focals) {
-      const auto pair = ecs_test::pairWithFocal(fx);
+      const auto pair = test_support::pairWithFocal(fx);
       for (const bool left : {true, false}) {
         sensor_msgs::SetCameraInfo srv;
         srv.request.camera_info = left ? pair.first : pair.second;
@@ -39,8 +41,8 @@ class CalibrationCorruptFile : public testing::Test {
         ASSERT_TRUE(srv.response.success) << srv.response.status_message;
       }
     }
-    const auto shown = ecs_test::shownFocals(left_path_, right_path_);
-    const double stored = ecs_test::pairWithFocal(focals.back()).first.P[0];
+    const auto shown = test_support::shownFocals(left_path_, right_path_);
+    const double stored = test_support::pairWithFocal(focals.back()).first.P[0];
     ASSERT_NEAR(shown.first, stored, 1e-3);
     ASSERT_NEAR(shown.second, stored, 1e-3);
     ASSERT_TRUE(manager_.unload(kName));
@@ -53,7 +55,7 @@ class CalibrationCorruptFile : public testing::Test {
     Collector<CameraInfo> left(nh, "left/camera_info"), right(nh, "right/camera_info");
     Collector<diagnostic_msgs::DiagnosticArray> diagnostics(nh, "/diagnostics", 100);
     Collector<rosgraph_msgs::Log> log(nh, "/rosout", 1000);
-    ASSERT_TRUE(ecs_test::waitForRosoutPipe(log, 10.0));
+    ASSERT_TRUE(test_support::waitForRosoutPipe(log, 10.0));
     // Only frames of this driver: a pair the previous one (unloaded) published may still be
     // on its way to the collectors.
     const ros::Time loaded = ros::Time::now();
@@ -72,8 +74,8 @@ class CalibrationCorruptFile : public testing::Test {
           return false;
         },
         20.0));
-    EXPECT_EQ(ecs_test::pairProblem(*l, *r), "") << "the driver publishes a pair image_geometry would abort on";
-    const auto rectified = [](double fx) { return ecs_test::pairWithFocal(fx).first.P[0]; };
+    EXPECT_EQ(test_support::pairProblem(*l, *r), "") << "the driver publishes a pair image_geometry would abort on";
+    const auto rectified = [](double fx) { return test_support::pairWithFocal(fx).first.P[0]; };
     if (expected_fx > 0) {
       EXPECT_NEAR(l->P[0], rectified(expected_fx), 1e-3) << "not the expected calibration";
     } else {  // the simulator's nominal calibration: none of the test's
@@ -81,7 +83,7 @@ class CalibrationCorruptFile : public testing::Test {
     }
     std::string status;
     EXPECT_TRUE(
-        ecs_test::waitForDriverStatus(diagnostics, diagnostic_msgs::DiagnosticStatus::ERROR, needle, 10.0, &status))
+        test_support::waitForDriverStatus(diagnostics, diagnostic_msgs::DiagnosticStatus::ERROR, needle, 10.0, &status))
         << "no ERROR diagnostics naming " << needle;
     std::printf("  diagnostics: %s\n", status.c_str());
     EXPECT_TRUE(log.waitFor(
@@ -95,16 +97,16 @@ class CalibrationCorruptFile : public testing::Test {
     EXPECT_TRUE(manager_.unload(kName));
   }
 
-  const ecs_test::TempDir temp_{"ecs_calibration_corrupt_file"};
+  const test_support::TempDir temp_{"ecs_calibration_corrupt_file"};
   const std::string left_path_ = temp_.path + "/left.yaml", right_path_ = temp_.path + "/right.yaml";
-  ecs_test::InProcessManager manager_;
+  test_support::InProcessManager manager_;
 };
 
 }  // namespace
 
 TEST_F(CalibrationCorruptFile, TruncatedFileStartsOnThePreviousCalibration) {
   storePairs({560.0, 600.0});
-  const std::string text = ecs_test::fileBytes(right_path_);
+  const std::string text = test_support::fileBytes(right_path_);
   { std::ofstream(right_path_, std::ios::trunc) << text.substr(0, text.size() / 3); }
   expectStartsOn(560.0, "right_camera_info_url");
 }
@@ -116,9 +118,9 @@ TEST_F(CalibrationCorruptFile, OneCameraRecalibratedStartsOnThePreviousCalibrati
   std::string error;
   const std::string mono = temp_.path + "/mono.yaml";
   ASSERT_TRUE(embedded_calibration_stereo::writeCalibrationFileAtomic(mono, "stereo_left",
-                                                                      ecs_test::pairWithFocal(572.0).first, &error))
+                                                                      test_support::pairWithFocal(572.0).first, &error))
       << error;
-  { std::ofstream(left_path_, std::ios::trunc) << ecs_test::fileBytes(mono); }
+  { std::ofstream(left_path_, std::ios::trunc) << test_support::fileBytes(mono); }
   expectStartsOn(560.0, "fx'");
 }
 
@@ -126,13 +128,13 @@ TEST_F(CalibrationCorruptFile, CorruptFileWithoutHistoryStartsOnTheNominalCalibr
   { std::ofstream(left_path_) << "image_width: 752\nimage_height: [480\ncamera_matrix: {{{\n"; }
   std::string error;
   ASSERT_TRUE(embedded_calibration_stereo::writeCalibrationFileAtomic(right_path_, "stereo_right",
-                                                                      ecs_test::pairWithFocal(600.0).second, &error))
+                                                                      test_support::pairWithFocal(600.0).second, &error))
       << error;
   expectStartsOn(0.0, "left_camera_info_url");
 }
 
 TEST_F(CalibrationCorruptFile, ZeroFocalLengthStartsOnTheNominalCalibration) {
-  auto pair = ecs_test::pairWithFocal(600.0);
+  auto pair = test_support::pairWithFocal(600.0);
   pair.first.K[0] = 0.0;
   std::string error;
   ASSERT_TRUE(embedded_calibration_stereo::writeCalibrationFileAtomic(left_path_, "stereo_left", pair.first, &error));

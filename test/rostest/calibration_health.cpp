@@ -15,13 +15,15 @@
 #include "embedded_calibration_stereo/ros/calibration_session.h"
 #include "embedded_calibration_stereo/ros/conversions.h"
 
+namespace test_support = embedded_calibration_stereo::test_support;
+
 using embedded_calibration_stereo::CalibrationHealth;
 using embedded_calibration_stereo::CalibrationMode;
 using embedded_calibration_stereo::CalibrationStatus;
 using embedded_calibration_stereo::carriesCalibration;
-using ecs_test::Collector;
-using ecs_test::lastHealth;
-using ecs_test::latestPair;
+using test_support::Collector;
+using test_support::lastHealth;
+using test_support::latestPair;
 using sensor_msgs::CameraInfo;
 using Healths = std::vector<CalibrationHealth::ConstPtr>;
 
@@ -65,7 +67,7 @@ TEST(CalibrationHealth, GoodWrongCalibrationRolledBackKnockCalibratesOnDemand) {
   // 2. A wrong calibration through set_camera_info: the right camera tilted by 0.5 degrees.
   CameraInfo original_left, original_right;
   ASSERT_TRUE(latestPair(left, right, &original_left, &original_right));
-  const auto wrong = ecs_test::tilted(original_left, original_right, 0.5);
+  const auto wrong = test_support::tilted(original_left, original_right, 0.5);
   std::string message;
   ASSERT_TRUE(setCameraInfo("left/set_camera_info", wrong.first, &message)) << message;
   ASSERT_TRUE(setCameraInfo("right/set_camera_info", wrong.second, &message)) << message;
@@ -140,7 +142,7 @@ TEST(CalibrationHealth, GoodWrongCalibrationRolledBackKnockCalibratesOnDemand) {
       [&](const Healths& m) { return !m.empty() && m.back()->state >= CalibrationHealth::DEGRADED; }, 4.0))
       << lastHealth(health);
   const CalibrationHealth knock = *health.snapshot().back();
-  std::printf("knock 0.2 deg about x: %s after %.2f s, misalignment %.3f px (%s)\n", ecs_test::healthStateName(knock.state),
+  std::printf("knock 0.2 deg about x: %s after %.2f s, misalignment %.3f px (%s)\n", test_support::healthStateName(knock.state),
               (ros::WallTime::now() - knocked).toSec(), knock.misalignment_px, knock.reason.c_str());
   EXPECT_EQ(knock.epoch, restored_epoch) << "a knock is no new calibration: nothing to roll back";
   // A calibration burst: more settled light-on frames in a row than a verification flash has.

@@ -19,14 +19,16 @@
 #include "embedded_calibration_stereo/ros/calibration_session.h"
 #include "embedded_calibration_stereo/ros/conversions.h"
 
+namespace test_support = embedded_calibration_stereo::test_support;
+
 using embedded_calibration_stereo::CalibrationHealth;
 using embedded_calibration_stereo::CalibrationStatus;
 using embedded_calibration_stereo::carriesCalibration;
-using ecs_test::Collector;
-using ecs_test::lastHealth;
-using ecs_test::setPair;
-using ecs_test::tilted;
-using ecs_test::latestPair;
+using test_support::Collector;
+using test_support::lastHealth;
+using test_support::setPair;
+using test_support::tilted;
+using test_support::latestPair;
 using sensor_msgs::CameraInfo;
 using Healths = std::vector<CalibrationHealth::ConstPtr>;
 

@@ -14,7 +14,9 @@
 
 #include "calibration_test_utils.h"
 
-using ecs_test::Collector;
+namespace test_support = embedded_calibration_stereo::test_support;
+
+using test_support::Collector;
 using sensor_msgs::CameraInfo;
 using sensor_msgs::Image;
 using stereo_msgs::DisparityImage;
@@ -121,7 +123,7 @@ void expectDroppedAndResumed(const std::string& ns, const std::string& image_nam
     log.clear();
     std::string found;
     EXPECT_TRUE(feedUntil(
-        frames, bad.corrupt, [&] { return ecs_test::waitForLog(log, bad.needles, 0.0, &found); }, 15.0))
+        frames, bad.corrupt, [&] { return test_support::waitForLog(log, bad.needles, 0.0, &found); }, 15.0))
         << "no error naming " << ::testing::PrintToString(bad.needles);
     feedUntil(
         frames, bad.corrupt, [] { return false; }, 1.0);
@@ -161,7 +163,7 @@ TEST(CalibrationPairMismatch, OnlineCalibratorDropsABadPair) {
   std::string found;
   const ros::WallTime end = ros::WallTime::now() + ros::WallDuration(15.0);
   ros::WallRate rate(10.0);
-  while (ros::WallTime::now() < end && !ecs_test::waitForLog(log, needles, 0.0, &found)) {
+  while (ros::WallTime::now() < end && !test_support::waitForLog(log, needles, 0.0, &found)) {
     auto l = boost::make_shared<CameraInfo>(*left.snapshot().back());
     auto r = boost::make_shared<CameraInfo>(*right.snapshot().back());
     l->header.stamp = r->header.stamp = ros::Time::now();  // a stamp of no driver frame
@@ -170,7 +172,7 @@ TEST(CalibrationPairMismatch, OnlineCalibratorDropsABadPair) {
     right_pub.publish(r);
     rate.sleep();
   }
-  EXPECT_TRUE(ecs_test::waitForLog(log, needles, 0.0, &found)) << "no error from the OnlineCalibrator";
+  EXPECT_TRUE(test_support::waitForLog(log, needles, 0.0, &found)) << "no error from the OnlineCalibrator";
   std::printf("  %s\n", found.c_str());
   EXPECT_TRUE(headDisparityFlows(head, 3, 10.0)) << "the manager died";
 }
@@ -203,10 +205,10 @@ TEST(CalibrationPairMismatch, SetCameraInfoOfOneCameraNeverStopsDepth) {
   EXPECT_TRUE(headDisparityFlows(head, 5, 15.0)) << "depth stopped (the manager died?)";
   EXPECT_EQ(left.snapshot().back()->P[0], left_before.P[0]) << "a half pair was published";
   std::string found;
-  EXPECT_TRUE(ecs_test::waitForLog(log, {"staged left calibration discarded"}, 10.0, &found));
-  EXPECT_TRUE(ecs_test::waitForDriverStatus(diagnostics, diagnostic_msgs::DiagnosticStatus::ERROR,
+  EXPECT_TRUE(test_support::waitForLog(log, {"staged left calibration discarded"}, 10.0, &found));
+  EXPECT_TRUE(test_support::waitForDriverStatus(diagnostics, diagnostic_msgs::DiagnosticStatus::ERROR,
                                             "staged left calibration discarded", 5.0));
-  EXPECT_EQ(ecs_test::shownFocals(dir + "/left.yaml", dir + "/right.yaml"), std::make_pair(-1.0, -1.0))
+  EXPECT_EQ(test_support::shownFocals(dir + "/left.yaml", dir + "/right.yaml"), std::make_pair(-1.0, -1.0))
       << "a calibration file was written";
 
   srv.request.camera_info = right_before;
@@ -229,7 +231,7 @@ TEST(CalibrationPairMismatch, SetCameraInfoOfOneCameraNeverStopsDepth) {
   }
   EXPECT_TRUE(head.waitFor([&](const auto& m) { return std::abs(m.back()->f - new_right.P[0]) < 1e-3; }, 15.0))
       << "no disparity with the new calibration";
-  const auto shown = ecs_test::shownFocals(dir + "/left.yaml", dir + "/right.yaml");
+  const auto shown = test_support::shownFocals(dir + "/left.yaml", dir + "/right.yaml");
   EXPECT_NEAR(shown.first, new_left.P[0], 1e-3);
   EXPECT_NEAR(shown.second, new_right.P[0], 1e-3);
 }

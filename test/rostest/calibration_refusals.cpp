@@ -9,16 +9,18 @@
 #include "calibration_test_utils.h"
 #include "embedded_calibration_stereo/CalibrationMode.h"
 
-using ecs_test::Collector;
+namespace test_support = embedded_calibration_stereo::test_support;
+
+using test_support::Collector;
 using embedded_calibration_stereo::CalibrationMode;
 using sensor_msgs::CameraInfo;
 
 TEST(CalibrationRefusals, BadFieldsAreRefusedAndNothingIsPersisted) {
   ros::NodeHandle nh("/stereo");
-  const ecs_test::TempDir temp("ecs_calibration_refusals");
+  const test_support::TempDir temp("ecs_calibration_refusals");
   ASSERT_FALSE(temp.path.empty());
   const std::string left_path = temp.path + "/left.yaml", right_path = temp.path + "/right.yaml";
-  ecs_test::InProcessManager manager;
+  test_support::InProcessManager manager;
   ASSERT_TRUE(manager.load("/stereo/camera_driver", {{"backend", "sim"},
                                                      {"fps", 10.0},
                                                      {"left_camera_info_url", "file://" + left_path},
@@ -43,7 +45,7 @@ TEST(CalibrationRefusals, BadFieldsAreRefusedAndNothingIsPersisted) {
   ASSERT_TRUE(left.waitFor([&](const auto& m) { return m.back()->D[0] == k1[0]; }, 5.0));
   ASSERT_TRUE(right.waitFor([&](const auto& m) { return m.back()->D[0] == k1[1]; }, 5.0));
   const CameraInfo left_in_force = *left.snapshot().back(), right_in_force = *right.snapshot().back();
-  const std::string left_bytes = ecs_test::fileBytes(left_path), right_bytes = ecs_test::fileBytes(right_path);
+  const std::string left_bytes = test_support::fileBytes(left_path), right_bytes = test_support::fileBytes(right_path);
   ASSERT_FALSE(left_bytes.empty());
   ASSERT_FALSE(right_bytes.empty());
 
@@ -86,8 +88,8 @@ TEST(CalibrationRefusals, BadFieldsAreRefusedAndNothingIsPersisted) {
     }
   }
   // Nothing persisted, nothing put in force.
-  EXPECT_EQ(ecs_test::fileBytes(left_path), left_bytes);
-  EXPECT_EQ(ecs_test::fileBytes(right_path), right_bytes);
+  EXPECT_EQ(test_support::fileBytes(left_path), left_bytes);
+  EXPECT_EQ(test_support::fileBytes(right_path), right_bytes);
   const size_t seen = modes.snapshot().size();
   ASSERT_TRUE(modes.waitForCount(seen + 3, 5.0));
   EXPECT_EQ(modes.snapshot().back()->calibration_epoch, 2u);

@@ -24,13 +24,13 @@
 #include "embedded_calibration_stereo/ros/calibration_file.h"
 #include "embedded_calibration_stereo/ros/conversions.h"
 
-namespace ecs_test {
+namespace embedded_calibration_stereo::test_support {
 
 // A rectified pair of the simulated head's size (752x480) whose fx' is `fx` in both cameras,
 // as the OnlineCalibrator commits it (Bouguet R and P, right Tx = -fx' * 0.1 m).
 inline std::pair<sensor_msgs::CameraInfo, sensor_msgs::CameraInfo> pairWithFocal(double fx) {
-  ecs::StereoRig rig;
-  for (ecs::PinholeCamera* c : {&rig.left, &rig.right}) {
+  core::StereoRig rig;
+  for (core::PinholeCamera* c : {&rig.left, &rig.right}) {
     c->width = 752;
     c->height = 480;
     c->fx = fx;
@@ -141,4 +141,4 @@ class DriverProcess : public ChildProcess {
   }
 };
 
-}  // namespace ecs_test
+}  // namespace embedded_calibration_stereo::test_support

@@ -16,13 +16,15 @@
 #include "embedded_calibration_stereo/ros/calibration_session.h"
 #include "embedded_calibration_stereo/ros/conversions.h"
 
+namespace test_support = embedded_calibration_stereo::test_support;
+
 using embedded_calibration_stereo::CalibrationHealth;
 using embedded_calibration_stereo::CalibrationMode;
 using embedded_calibration_stereo::CalibrationStatus;
 using embedded_calibration_stereo::carriesCalibration;
 using embedded_calibration_stereo::VerifiedCalibration;
-using ecs_test::Collector;
-using ecs_test::lastHealth;
+using test_support::Collector;
+using test_support::lastHealth;
 using sensor_msgs::CameraInfo;
 using Pair = std::pair<CameraInfo, CameraInfo>;
 
@@ -61,14 +63,14 @@ class Head {
 
  private:
   std::string dir_;
-  ecs_test::InProcessManager manager_;
+  test_support::InProcessManager manager_;
 };
 
 // The pair the driver publishes now (the newest common stamp).
 Pair published(Collector<CameraInfo>& left, Collector<CameraInfo>& right) {
   Pair pair;
   EXPECT_TRUE(left.waitForCount(left.snapshot().size() + 2, 5.0));
-  EXPECT_TRUE(ecs_test::latestPair(left, right, &pair.first, &pair.second));
+  EXPECT_TRUE(test_support::latestPair(left, right, &pair.first, &pair.second));
   return pair;
 }
 
@@ -76,7 +78,7 @@ Pair published(Collector<CameraInfo>& left, Collector<CameraInfo>& right) {
 
 TEST(CalibrationVerifiedRestart, TheCalibrationVerifiedGoodIsKeptAcrossRestarts) {
   ros::NodeHandle nh("/stereo");
-  const ecs_test::TempDir temp("ecs_verified_restart");
+  const test_support::TempDir temp("ecs_verified_restart");
   ASSERT_FALSE(temp.path.empty());
   Collector<CalibrationHealth> health(nh, "calibration/health", 3000);
   Collector<CalibrationStatus> status(nh, "calibration/status");
@@ -90,7 +92,7 @@ TEST(CalibrationVerifiedRestart, TheCalibrationVerifiedGoodIsKeptAcrossRestarts)
   ASSERT_TRUE(head.startHealth());
   ASSERT_TRUE(modes.waitForCount(2, 20.0));
   const Pair good = published(left, right);
-  ecs_test::setPair(good, "/stereo/");
+  test_support::setPair(good, "/stereo/");
   ASSERT_TRUE(verified.waitFor(
       [&](const auto& m) { return !m.empty() && carries({m.back()->left, m.back()->right}, good); }, 30.0))
       << "the stored calibration was not marked verified: " << lastHealth(health);
@@ -99,9 +101,9 @@ TEST(CalibrationVerifiedRestart, TheCalibrationVerifiedGoodIsKeptAcrossRestarts)
 
   // 2. The health stops; a wrong calibration (right camera tilted 0.5 degrees) is committed.
   head.stopHealth();
-  const Pair wrong = ecs_test::tilted(good.first, good.second, 0.5);
+  const Pair wrong = test_support::tilted(good.first, good.second, 0.5);
   std::string error;
-  ecs_test::setPair(wrong, "/stereo/");
+  test_support::setPair(wrong, "/stereo/");
   ASSERT_TRUE(carries(published(left, right), wrong));
   head.stop();
 
@@ -131,7 +133,7 @@ TEST(CalibrationVerifiedRestart, TheCalibrationVerifiedGoodIsKeptAcrossRestarts)
   ASSERT_TRUE(embedded_calibration_stereo::writeCalibrationFileAtomic(temp.path + "/far.yaml", "stereo_left", far,
                                                                       &error))
       << error;
-  { std::ofstream(temp.path + "/left.yaml", std::ios::trunc) << ecs_test::fileBytes(temp.path + "/far.yaml"); }
+  { std::ofstream(temp.path + "/left.yaml", std::ios::trunc) << test_support::fileBytes(temp.path + "/far.yaml"); }
   left.clear();
   right.clear();
   ASSERT_TRUE(head.startDriver());

@@ -10,9 +10,11 @@
 #include "embedded_calibration_stereo/CalibrationStatus.h"
 #include "embedded_calibration_stereo/SetRigDrift.h"
 
+namespace test_support = embedded_calibration_stereo::test_support;
+
 using embedded_calibration_stereo::CalibrationMode;
 using embedded_calibration_stereo::CalibrationStatus;
-using ecs_test::Collector;
+using test_support::Collector;
 using sensor_msgs::CameraInfo;
 
 TEST(CalibratorAuto, CommitsADriftedFocalLengthAtTheNextWindow) {
@@ -41,7 +43,7 @@ TEST(CalibratorAuto, CommitsADriftedFocalLengthAtTheNextWindow) {
   EXPECT_GE(accepted.frames_used, 8u);
   EXPECT_LE(accepted.frames_used, 10u) << "frames of one window only";
   // The epoch reported is the one the driver stamps on its first frame carrying the commit.
-  const std::optional<uint32_t> published = ecs_test::epochPublishedWith(accepted, modes, left, right);
+  const std::optional<uint32_t> published = test_support::epochPublishedWith(accepted, modes, left, right);
   ASSERT_TRUE(published) << "the driver never published the committed calibration";
   EXPECT_NE(*published, epoch);
   EXPECT_EQ(accepted.epoch, *published);

@@ -35,11 +35,13 @@
 #include "embedded_calibration_stereo/StereoPatternObservation.h"
 #include "process_test_utils.h"
 
+namespace test_support = embedded_calibration_stereo::test_support;
+
 using embedded_calibration_stereo::CalibrationMode;
 using embedded_calibration_stereo::CalibrationStatus;
 using embedded_calibration_stereo::Recalibrate;
 using embedded_calibration_stereo::StereoPatternObservation;
-using ecs_test::Collector;
+using test_support::Collector;
 using sensor_msgs::CameraInfo;
 
 namespace {
@@ -355,11 +357,11 @@ TEST(CalibratorBounds, OfFiveConcurrentCallsOneRunsAndFourAreToldAtOnceWhoHoldsI
 
 TEST(CalibratorBounds, AKilledCallerEndsItsRequestTheLightGoesOffAndAutomaticCalibrationResumes) {
   ASSERT_TRUE(lightOffFor(2, 5.0));
-  const int manager = ecs_test::nodePid("/stereo/stereo_manager");
+  const int manager = test_support::nodePid("/stereo/stereo_manager");
   ASSERT_GT(manager, 0) << "cannot find the manager's pid";
   const size_t requests_before = fixture->light.requests().size();
-  const ecs_test::TempDir temp("ecs_calibrator_bounds_client");
-  ecs_test::ChildProcess client({"rosservice", "call", "--wait", "/stereo/calibration/recalibrate",
+  const test_support::TempDir temp("ecs_calibrator_bounds_client");
+  test_support::ChildProcess client({"rosservice", "call", "--wait", "/stereo/calibration/recalibrate",
                                  "{frames: 4000000000, timeout_s: 1000000000.0, dry_run: false}"},
                                 {}, temp.path + "/rosservice.log");
   ASSERT_TRUE(fixture->light.waitForRequest(requests_before, true, 20.0))
@@ -371,7 +373,7 @@ TEST(CalibratorBounds, AKilledCallerEndsItsRequestTheLightGoesOffAndAutomaticCal
   EXPECT_TRUE(isBusy(second.response())) << second.response().message;
   EXPECT_TRUE(contains(second.response().message, "rosservice")) << second.response().message;
 
-  const long rss_before = ecs_test::rssKb(manager);
+  const long rss_before = test_support::rssKb(manager);
   const size_t statuses_before = fixture->status.snapshot().size();
   const size_t requests_at_kill = fixture->light.requests().size();
   fixture->window.clear();
@@ -383,18 +385,18 @@ TEST(CalibratorBounds, AKilledCallerEndsItsRequestTheLightGoesOffAndAutomaticCal
   std::printf("light switched off %.2f s after the kill\n", (ros::WallTime::now() - killed).toSec());
   EXPECT_TRUE(lightOffFor(5, 5.0)) << "the light stayed on";
   std::string found;
-  EXPECT_TRUE(ecs_test::waitForLog(fixture->log, {"went away", "rosservice"}, 5.0, &found));
+  EXPECT_TRUE(test_support::waitForLog(fixture->log, {"went away", "rosservice"}, 5.0, &found));
   std::printf("logged: %s\n", found.c_str());
   // Automatic calibration resumes: the next burst of the driver's schedule is solved.
   EXPECT_TRUE(fixture->status.waitForCount(statuses_before + 1, 2 * kPeriodS + 5.0))
       << "no automatic calibration after the killed request";
-  const long rss_after = ecs_test::rssKb(manager);
+  const long rss_after = test_support::rssKb(manager);
   std::printf("manager RSS %ld kB at the kill, %ld kB %.1f s later; largest window %ld frames (%d reports)\n",
               rss_before, rss_after, (ros::WallTime::now() - killed).toSec(), fixture->window.largest(),
               fixture->window.reports());
   EXPECT_GT(fixture->window.reports(), 0) << "control: no diagnostics from the calibrator";
   EXPECT_LE(fixture->window.largest(), kMaxFrames);
-  EXPECT_TRUE(ecs_test::processRuns(manager));
+  EXPECT_TRUE(test_support::processRuns(manager));
   // And the calibrator serves the next request.
   AsyncCall next(5, 4.0);
   ASSERT_TRUE(next.wait(4.0 + 4 * kServiceTimeoutS + 5.0));
@@ -413,7 +415,7 @@ TEST(CalibratorBounds, ObservationsRepeatedUnderOneStampAreCountedOnce) {
   ASSERT_TRUE(call.ok());
   EXPECT_GE(fixture->relay.copies(), copies_before + 9 * 5) << "control: no copies were sent";
   std::string found;
-  EXPECT_TRUE(ecs_test::waitForLog(fixture->log, {"test/observations", "not after the previous one"}, 5.0, &found));
+  EXPECT_TRUE(test_support::waitForLog(fixture->log, {"test/observations", "not after the previous one"}, 5.0, &found));
   std::printf("logged: %s\n", found.c_str());
   // Ten live frames, none of the copies: the noise-free truth fits to the solver's tolerance and
   // the focal length is the truth's (copies inside would leave pixels of RMS or pull it 2 %).
@@ -443,7 +445,7 @@ TEST(CalibratorBounds, AnAutomaticWindowThatStopsGrowingEndsWithAReason) {
   ASSERT_TRUE(ros::service::call("set_light", on) && on.response.success);
   std::string found;
   // max_frames at 15 fps, then window_timeout_s (5 s), with a margin.
-  const bool ended = ecs_test::waitForLog(fixture->log, {"calibration window ended", "window_timeout_s", "solving"},
+  const bool ended = test_support::waitForLog(fixture->log, {"calibration window ended", "window_timeout_s", "solving"},
                                           kMaxFrames / 15.0 + 5.0 + 5.0, &found);
   const bool solved = fixture->status.waitFor(
       [&](const auto& statuses) { return window_status(statuses) != statuses.end(); }, 5.0);
@@ -460,5 +462,5 @@ TEST(CalibratorBounds, AnAutomaticWindowThatStopsGrowingEndsWithAReason) {
 
 int main(int argc, char** argv) {
   // 6 spinner threads: the proxy holds threads while it hangs or forwards
-  return ecs_test::runTestsWithFixture(argc, argv, "calibrator_bounds_test", 6, &fixture);
+  return test_support::runTestsWithFixture(argc, argv, "calibrator_bounds_test", 6, &fixture);
 }

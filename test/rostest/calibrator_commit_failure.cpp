@@ -12,10 +12,12 @@
 #include "embedded_calibration_stereo/Recalibrate.h"
 #include "embedded_calibration_stereo/SetRigDrift.h"
 
+namespace test_support = embedded_calibration_stereo::test_support;
+
 using embedded_calibration_stereo::CalibrationMode;
 using embedded_calibration_stereo::CalibrationStatus;
 using embedded_calibration_stereo::Recalibrate;
-using ecs_test::Collector;
+using test_support::Collector;
 using sensor_msgs::CameraInfo;
 
 TEST(CalibratorCommitFailure, RefusedSetCameraInfoLeavesTheStatusNotCommitted) {

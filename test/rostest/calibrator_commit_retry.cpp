@@ -21,10 +21,12 @@
 #include "embedded_calibration_stereo/Recalibrate.h"
 #include "embedded_calibration_stereo/SetRigDrift.h"
 
+namespace test_support = embedded_calibration_stereo::test_support;
+
 using embedded_calibration_stereo::CalibrationMode;
 using embedded_calibration_stereo::CalibrationStatus;
 using embedded_calibration_stereo::Recalibrate;
-using ecs_test::Collector;
+using test_support::Collector;
 using sensor_msgs::CameraInfo;
 
 TEST(CalibratorCommitRetry, AnAcceptedCalibrationNotStoredIsCommittedOnceTheDriverCanStoreIt) {
@@ -59,7 +61,7 @@ TEST(CalibratorCommitRetry, AnAcceptedCalibrationNotStoredIsCommittedOnceTheDriv
   ASSERT_NE(srv.response.message.find("right/set_camera_info"), std::string::npos) << srv.response.message;
   // Tried again and refused again while blocked: the driver publishes the calibration in force.
   std::string found;
-  ASSERT_TRUE(ecs_test::waitForLog(log, {"still not committed", "right/set_camera_info"}, 10.0, &found));
+  ASSERT_TRUE(test_support::waitForLog(log, {"still not committed", "right/set_camera_info"}, 10.0, &found));
   std::printf("logged: %s\n", found.c_str());
   ASSERT_TRUE(modes.waitForCount(modes.snapshot().size() + 2, 5.0));
   EXPECT_EQ(right.snapshot().back()->K, right_before.K);
@@ -72,10 +74,10 @@ TEST(CalibratorCommitRetry, AnAcceptedCalibrationNotStoredIsCommittedOnceTheDriv
   const CalibrationStatus committed = *status.snapshot().back();
   std::printf("committed %.1f s after the space was freed, epoch %u\n", (ros::WallTime::now() - freed).toSec(),
               committed.epoch);
-  EXPECT_TRUE(ecs_test::waitForLog(log, {"committed now"}, 5.0, &found));
+  EXPECT_TRUE(test_support::waitForLog(log, {"committed now"}, 5.0, &found));
   std::printf("logged: %s\n", found.c_str());
   // The driver publishes it, under the epoch the status reports.
-  const std::optional<uint32_t> published = ecs_test::epochPublishedWith(committed, modes, left, right);
+  const std::optional<uint32_t> published = test_support::epochPublishedWith(committed, modes, left, right);
   ASSERT_TRUE(published) << "the driver never published the calibration committed again";
   EXPECT_EQ(committed.epoch, *published);
   // Both files carry it.

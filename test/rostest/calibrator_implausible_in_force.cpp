@@ -11,6 +11,8 @@
 #include "embedded_calibration_stereo/Recalibrate.h"
 #include "embedded_calibration_stereo/ros/calibration_session.h"
 
+namespace test_support = embedded_calibration_stereo::test_support;
+
 using embedded_calibration_stereo::kInForceConfirmedReason;
 using embedded_calibration_stereo::Recalibrate;
 
@@ -40,7 +42,7 @@ std::string scaledDevice(const std::string& dir, double scale) {
 }
 
 // A dry-run request of 5 frames to a calibrator loaded with `device_config`; its status' reason.
-std::string dryRunReason(ecs_test::InProcessManager* manager, const std::string& device_config) {
+std::string dryRunReason(test_support::InProcessManager* manager, const std::string& device_config) {
   const std::string name = "/stereo/online_calibrator";
   EXPECT_TRUE(manager->load(name, {{"device_config", device_config}, {"auto_calibrate", false}},
                             "embedded_calibration_stereo/OnlineCalibrator",
@@ -62,8 +64,8 @@ std::string dryRunReason(ecs_test::InProcessManager* manager, const std::string&
 TEST(CalibratorImplausibleInForce, NeverConfirmsACalibrationFarFromTheNominalCameras) {
   ros::NodeHandle nh("/stereo");
   ASSERT_TRUE(ros::service::waitForService("/stereo/set_light", 20000));
-  const ecs_test::TempDir temp("ecs_calibrator_implausible");
-  ecs_test::InProcessManager manager;
+  const test_support::TempDir temp("ecs_calibrator_implausible");
+  test_support::InProcessManager manager;
   // Control: the head's own description; the calibration in force is the truth: confirmed.
   const std::string control = dryRunReason(&manager, scaledDevice(temp.path, 1.0));
   EXPECT_EQ(control.rfind(kInForceConfirmedReason, 0), 0u) << control;

@@ -18,9 +18,12 @@
 #include "embedded_calibration_stereo/ros/calibration_session.h"
 #include "embedded_calibration_stereo/ros/conversions.h"
 
+namespace core = embedded_calibration_stereo::core;
+namespace test_support = embedded_calibration_stereo::test_support;
+
 using embedded_calibration_stereo::CalibrationMode;
 using embedded_calibration_stereo::CalibrationStatus;
-using ecs_test::Collector;
+using test_support::Collector;
 using sensor_msgs::CameraInfo;
 using Statuses = std::vector<CalibrationStatus::ConstPtr>;
 
@@ -45,12 +48,12 @@ double trueError(Collector<CalibrationMode>& modes, Collector<CameraInfo>& left,
     };
     const auto l = at(left), r = at(right), tl = at(truth_left), tr = at(truth_right);
     if (!(l && r && tl && tr)) continue;
-    ecs::StereoRig published, truth;
+    core::StereoRig published, truth;
     std::string error;
     if (!embedded_calibration_stereo::fromStereoCameraInfo(*l, *r, &published, &error) ||
         !embedded_calibration_stereo::fromStereoCameraInfo(*tl, *tr, &truth, &error))
       return -1.0;
-    const ecs::StereoAccuracy a = ecs::evaluateStereoAccuracy(published, truth);
+    const core::StereoAccuracy a = core::evaluateStereoAccuracy(published, truth);
     return std::hypot(a.misalignment_px.rms, a.disparity_bias_px.rms);
   }
   return -1.0;

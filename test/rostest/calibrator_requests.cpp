@@ -28,11 +28,13 @@
 #include "embedded_calibration_stereo/SetRigDrift.h"
 #include "embedded_calibration_stereo/StereoPatternObservation.h"
 
+namespace test_support = embedded_calibration_stereo::test_support;
+
 using embedded_calibration_stereo::CalibrationMode;
 using embedded_calibration_stereo::CalibrationStatus;
 using embedded_calibration_stereo::Recalibrate;
 using embedded_calibration_stereo::StereoPatternObservation;
-using ecs_test::Collector;
+using test_support::Collector;
 using sensor_msgs::CameraInfo;
 
 namespace {
@@ -330,7 +332,7 @@ TEST(CalibratorRequests, ASecondCallIsAnsweredBusyAtOnceAndTheFirstCommitsWithTh
   // The epoch reported is the one the driver stamps on the first frame carrying the new
   // calibration (observed here on calibration_mode and camera_info), whatever the driver's
   // rule for counting set_camera_info calls.
-  const std::optional<uint32_t> published = ecs_test::epochPublishedWith(
+  const std::optional<uint32_t> published = test_support::epochPublishedWith(
       first.srv.response.status, fixture->modes, fixture->left, fixture->right);
   ASSERT_TRUE(published) << "the driver never published the committed calibration";
   std::printf("epoch before %u, reported %u, published with the new calibration %u\n", before.epoch,
@@ -350,7 +352,7 @@ TEST(CalibratorRequests, ObservationsWhoseStampsGoBackAreDroppedAndTheWindowStil
   ASSERT_TRUE(call.ok);
   EXPECT_GT(fixture->relay.replayed(), replayed_before + 5) << "control: nothing was replayed";
   std::string found;
-  EXPECT_TRUE(ecs_test::waitForLog(fixture->log, {"test/observations", "not after the previous one"}, 5.0, &found));
+  EXPECT_TRUE(test_support::waitForLog(fixture->log, {"test/observations", "not after the previous one"}, 5.0, &found));
   std::printf("logged: %s\n", found.c_str());
   // The replayed copies, 3 px off, stayed out of the window: the noise-free live frames fit to
   // the solver's tolerance (a copy inside would leave an RMS near a pixel).
@@ -361,7 +363,7 @@ TEST(CalibratorRequests, ObservationsWhoseStampsGoBackAreDroppedAndTheWindowStil
   EXPECT_LT(status.rms_left_px, 0.01);
   EXPECT_LT(status.rms_right_px, 0.01);
   const std::optional<uint32_t> published =
-      ecs_test::epochPublishedWith(status, fixture->modes, fixture->left, fixture->right);
+      test_support::epochPublishedWith(status, fixture->modes, fixture->left, fixture->right);
   ASSERT_TRUE(published);
   EXPECT_EQ(status.epoch, *published);
 
@@ -375,5 +377,5 @@ TEST(CalibratorRequests, ObservationsWhoseStampsGoBackAreDroppedAndTheWindowStil
 
 int main(int argc, char** argv) {
   // 3 spinner threads: the light proxy calls the driver from inside its callback
-  return ecs_test::runTestsWithFixture(argc, argv, "calibrator_requests_test", 3, &fixture);
+  return test_support::runTestsWithFixture(argc, argv, "calibrator_requests_test", 3, &fixture);
 }

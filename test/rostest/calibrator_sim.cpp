@@ -24,11 +24,14 @@
 #include "embedded_calibration_stereo/StereoPatternObservation.h"
 #include "embedded_calibration_stereo/ros/conversions.h"
 
+namespace core = embedded_calibration_stereo::core;
+namespace test_support = embedded_calibration_stereo::test_support;
+
 using embedded_calibration_stereo::CalibrationMode;
 using embedded_calibration_stereo::CalibrationStatus;
 using embedded_calibration_stereo::Recalibrate;
 using embedded_calibration_stereo::StereoPatternObservation;
-using ecs_test::Collector;
+using test_support::Collector;
 using sensor_msgs::CameraInfo;
 
 namespace {
@@ -126,7 +129,7 @@ TEST(CalibratorSim, TimesOutWithoutBoardsAndSwitchesTheLightOff) {
 TEST(CalibratorSim, DropsBadObservationsWithAnErrorNamingTheTopic) {
   fixture->relay.set(Relay::kCorrupt);
   std::string found;
-  EXPECT_TRUE(ecs_test::waitForLog(fixture->log, {"test/observations", "non-finite", "duplicate"}, 10.0, &found));
+  EXPECT_TRUE(test_support::waitForLog(fixture->log, {"test/observations", "non-finite", "duplicate"}, 10.0, &found));
   std::printf("logged: %s\n", found.c_str());
   fixture->relay.set(Relay::kNone);
   // Still alive: the service answers.
@@ -185,7 +188,7 @@ TEST(CalibratorSim, RecoversADriftedRigAndCommitsIt) {
   ASSERT_TRUE(fixture->truth_right.waitForCount(1, 5.0));
   const CameraInfo truth_left = *fixture->truth_left.snapshot().back();
   const CameraInfo truth_right = *fixture->truth_right.snapshot().back();
-  ecs::StereoRig truth;
+  core::StereoRig truth;
   std::string error;
   ASSERT_TRUE(embedded_calibration_stereo::fromStereoCameraInfo(truth_left, truth_right, &truth, &error)) << error;
   fixture->relay.set(Relay::kForward);
@@ -210,12 +213,12 @@ TEST(CalibratorSim, RecoversADriftedRigAndCommitsIt) {
               srv.response.status.rms_left_px, srv.response.status.rms_right_px);
   // The epoch reported is the one the driver stamps on its first frame carrying the commit.
   const std::optional<uint32_t> published_epoch =
-      ecs_test::epochPublishedWith(srv.response.status, fixture->modes, fixture->left, fixture->right);
+      test_support::epochPublishedWith(srv.response.status, fixture->modes, fixture->left, fixture->right);
   ASSERT_TRUE(published_epoch) << "the driver never published the committed calibration";
   EXPECT_NE(*published_epoch, epoch);
   EXPECT_EQ(srv.response.status.epoch, *published_epoch);
   waitFrames(2);
-  ecs::StereoRig published;
+  core::StereoRig published;
   ASSERT_TRUE(embedded_calibration_stereo::fromStereoCameraInfo(*fixture->left.snapshot().back(),
                                                                 *fixture->right.snapshot().back(), &published, &error))
       << error;
@@ -234,7 +237,7 @@ TEST(CalibratorSim, RecoversADriftedRigAndCommitsIt) {
     EXPECT_LT(std::abs(est.cx - ref.cx), 0.05) << name;
     EXPECT_LT(std::abs(est.cy - ref.cy), 0.05) << name;
   }
-  const double rotation_deg = ecs::rotationAngleDeg(published.right_from_left.linear(), truth.right_from_left.linear());
+  const double rotation_deg = core::rotationAngleDeg(published.right_from_left.linear(), truth.right_from_left.linear());
   std::printf("baseline %.6f %%, rotation %.5f deg\n", 100 * relative(published.baseline(), truth.baseline()),
               rotation_deg);
   EXPECT_LT(relative(published.baseline(), truth.baseline()), 1e-4);
@@ -251,7 +254,7 @@ TEST(CalibratorSim, RecoversADriftedRigAndCommitsIt) {
   const Eigen::Isometry3d left_from_right = tf2::transformToEigen(transforms[0]);
   const Eigen::Isometry3d truth_left_from_right = truth.leftFromRight();
   EXPECT_LT((left_from_right.translation() - truth_left_from_right.translation()).norm(), 1e-4 * truth.baseline());
-  EXPECT_LT(ecs::rotationAngleDeg(left_from_right.linear(), truth_left_from_right.linear()), 0.005);
+  EXPECT_LT(core::rotationAngleDeg(left_from_right.linear(), truth_left_from_right.linear()), 0.005);
   ASSERT_TRUE(fixture->status.waitFor([](const auto& m) { return !m.empty() && m.back()->accepted; }, 2.0));
 }
 
@@ -259,7 +262,7 @@ TEST(CalibratorSim, RecoversADriftedRigAndCommitsIt) {
 // becomes the calibration in force: /tf_static must follow it, not keep the last commit's.
 TEST(CalibratorSim, PutsACalibrationSetFromOutsideOnTfStatic) {
   ASSERT_TRUE(fixture->left.waitForCount(1, 5.0) && fixture->right.waitForCount(1, 5.0));
-  ecs::StereoRig rig;
+  core::StereoRig rig;
   std::string error;
   ASSERT_TRUE(embedded_calibration_stereo::fromStereoCameraInfo(*fixture->left.snapshot().back(),
                                                                 *fixture->right.snapshot().back(), &rig, &error))
@@ -282,7 +285,7 @@ TEST(CalibratorSim, PutsACalibrationSetFromOutsideOnTfStatic) {
       [&](const auto& all) {
         if (all.size() <= tf_before || all.back()->transforms.size() != 1) return false;
         const Eigen::Isometry3d left_from_right = tf2::transformToEigen(all.back()->transforms[0]);
-        return ecs::rotationAngleDeg(left_from_right.linear(), rig.leftFromRight().linear()) < 1e-3 &&
+        return core::rotationAngleDeg(left_from_right.linear(), rig.leftFromRight().linear()) < 1e-3 &&
                (left_from_right.translation() - rig.leftFromRight().translation()).norm() < 1e-6;
       },
       5.0))
@@ -290,5 +293,5 @@ TEST(CalibratorSim, PutsACalibrationSetFromOutsideOnTfStatic) {
 }
 
 int main(int argc, char** argv) {
-  return ecs_test::runTestsWithFixture(argc, argv, "calibrator_sim_test", 2, &fixture);
+  return test_support::runTestsWithFixture(argc, argv, "calibrator_sim_test", 2, &fixture);
 }

@@ -10,7 +10,7 @@
 #include "embedded_calibration_stereo/CalibrationMode.h"
 #include "embedded_calibration_stereo/CalibrationStatus.h"
 
-namespace ecs_test {
+namespace embedded_calibration_stereo::test_support {
 
 // The calibration_epoch the driver stamped on its first frame (calibration_mode) whose left and
 // right camera_info carry the intrinsics of `status` (fx, fy, cx, cy of both sides), observed
@@ -48,4 +48,4 @@ inline std::optional<uint32_t> epochPublishedWith(const embedded_calibration_ste
   return epoch;
 }
 
-}  // namespace ecs_test
+}  // namespace embedded_calibration_stereo::test_support

@@ -24,9 +24,11 @@
 #include "embedded_calibration_stereo/SceneMatch.h"
 #include "embedded_calibration_stereo/StereoPatternObservation.h"
 
+namespace test_support = embedded_calibration_stereo::test_support;
+
 using embedded_calibration_stereo::CalibrationStatus;
 using embedded_calibration_stereo::StereoPatternObservation;
-using ecs_test::Collector;
+using test_support::Collector;
 
 namespace {
 
@@ -101,8 +103,8 @@ double disparityRate(double seconds) {
 }  // namespace
 
 TEST(CalibratorWindowFlood, DisparityKeepsItsRateAndTheDroppedSolvesAreNamed) {
-  ASSERT_TRUE(ecs_test::waitUntil([] { return fixture->disparity.load() > 15; }, 40.0)) << "no disparity";
-  ASSERT_TRUE(ecs_test::waitUntil([] { return fixture->window_pub.getNumSubscribers() > 0; }, 10.0))
+  ASSERT_TRUE(test_support::waitUntil([] { return fixture->disparity.load() > 15; }, 40.0)) << "no disparity";
+  ASSERT_TRUE(test_support::waitUntil([] { return fixture->window_pub.getNumSubscribers() > 0; }, 10.0))
       << "the calibrator does not subscribe to calibration/window_observations";
   const double without = disparityRate(4.0);
   fixture->flooding = true;
@@ -119,12 +121,12 @@ TEST(CalibratorWindowFlood, DisparityKeepsItsRateAndTheDroppedSolvesAreNamed) {
   EXPECT_GT(without, 10.0) << "control: disparity";
   EXPECT_GE(with, 0.9 * without);
   std::string found;
-  EXPECT_TRUE(ecs_test::waitForLog(fixture->log, {"window observation dropped unsolved", "min_solve_interval_s"}, 5.0,
+  EXPECT_TRUE(test_support::waitForLog(fixture->log, {"window observation dropped unsolved", "min_solve_interval_s"}, 5.0,
                                    &found));
   std::printf("logged: %s\n", found.c_str());
   EXPECT_GE(solved, 3u) << "the flood's observations are still solved, paced";
 }
 
 int main(int argc, char** argv) {
-  return ecs_test::runTestsWithFixture(argc, argv, "calibrator_window_flood_test", 3, &fixture);
+  return test_support::runTestsWithFixture(argc, argv, "calibrator_window_flood_test", 3, &fixture);
 }

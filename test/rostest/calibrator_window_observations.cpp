@@ -17,11 +17,13 @@
 #include "embedded_calibration_stereo/SetRigDrift.h"
 #include "embedded_calibration_stereo/StereoPatternObservation.h"
 
+namespace test_support = embedded_calibration_stereo::test_support;
+
 using embedded_calibration_stereo::CalibrationMode;
 using embedded_calibration_stereo::CalibrationStatus;
 using embedded_calibration_stereo::StereoPatternObservation;
-using ecs_test::Collector;
-using ecs_test::waitUntil;
+using test_support::Collector;
+using test_support::waitUntil;
 using sensor_msgs::CameraInfo;
 
 namespace {
@@ -111,7 +113,7 @@ TEST(CalibratorWindowObservations, SolvesEachWindowObservationAndNotThePerFrameW
   StereoPatternObservation copy = *window;
   copy.header.stamp = modes.snapshot().back()->header.stamp;
   window_pub.publish(copy);
-  EXPECT_TRUE(ecs_test::waitForLog(log, {"window observation dropped", "a copy of one seen before"}, 5.0));
+  EXPECT_TRUE(test_support::waitForLog(log, {"window observation dropped", "a copy of one seen before"}, 5.0));
   // Another window (two boards fewer per camera) stamped before the solved one: dropped too.
   StereoPatternObservation older = *window;
   ASSERT_GE(older.left.size(), 5u);
@@ -122,7 +124,7 @@ TEST(CalibratorWindowObservations, SolvesEachWindowObservationAndNotThePerFrameW
     older.right.pop_back();
   }
   window_pub.publish(older);
-  EXPECT_TRUE(ecs_test::waitForLog(log, {"window observation dropped", "not after the previous one"}, 5.0));
+  EXPECT_TRUE(test_support::waitForLog(log, {"window observation dropped", "not after the previous one"}, 5.0));
   // The control: a later window (a newer stamp, one board fewer per camera, so that its status
   // tells itself from the duplicate's by its corner count) is solved, and its status is the second
   // one (the duplicate made none: the calibrator solves in arrival order).

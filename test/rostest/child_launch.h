@@ -8,7 +8,7 @@
 
 #include "process_test_utils.h"
 
-namespace ecs_test {
+namespace embedded_calibration_stereo::test_support {
 
 class ChildLaunch : public ChildProcess {
  public:
@@ -24,4 +24,4 @@ class ChildLaunch : public ChildProcess {
   }
 };
 
-}  // namespace ecs_test
+}  // namespace embedded_calibration_stereo::test_support

@@ -19,9 +19,12 @@
 #include "embedded_calibration_stereo/core/calibration/stereo_accuracy.h"
 #include "embedded_calibration_stereo/ros/conversions.h"
 
+namespace core = embedded_calibration_stereo::core;
+namespace test_support = embedded_calibration_stereo::test_support;
+
 using embedded_calibration_stereo::CalibrationStatus;
-using ecs_test::ChildLaunch;
-using ecs_test::Collector;
+using test_support::ChildLaunch;
+using test_support::Collector;
 using sensor_msgs::CameraInfo;
 
 namespace {
@@ -47,15 +50,15 @@ struct Scores {
 bool score(Collector<CameraInfo>& left, Collector<CameraInfo>& right, Collector<CameraInfo>& truth_left,
            Collector<CameraInfo>& truth_right, Scores* out) {
   CameraInfo l, r, tl, tr;
-  if (!ecs_test::latestPair(left, right, &l, &r) || !ecs_test::latestPair(truth_left, truth_right, &tl, &tr))
+  if (!test_support::latestPair(left, right, &l, &r) || !test_support::latestPair(truth_left, truth_right, &tl, &tr))
     return false;
-  ecs::StereoRig published, truth;
+  core::StereoRig published, truth;
   std::string error;
   if (!embedded_calibration_stereo::fromStereoCameraInfo(l, r, &published, &error) ||
       !embedded_calibration_stereo::fromStereoCameraInfo(tl, tr, &truth, &error))
     return false;
-  const ecs::StereoAccuracyOptions options;
-  const ecs::StereoAccuracy a = ecs::evaluateStereoAccuracy(published, truth, options);
+  const core::StereoAccuracyOptions options;
+  const core::StereoAccuracy a = core::evaluateStereoAccuracy(published, truth, options);
   const auto at_10m = std::find(options.depths_m.begin(), options.depths_m.end(), 10.0);
   if (at_10m == options.depths_m.end()) return false;
   out->misalignment_px = a.misalignment_px.rms;
@@ -71,7 +74,7 @@ bool score(Collector<CameraInfo>& left, Collector<CameraInfo>& right, Collector<
 
 TEST(ColdStart, FromANominalDescriptionTheHeadCalibratesItselfWithinTheTargets) {
   ros::NodeHandle nh;
-  ecs_test::TempDir dir("ecs_cold_start_test");
+  test_support::TempDir dir("ecs_cold_start_test");
   ASSERT_FALSE(dir.path.empty());
   const std::string source = ECS_SOURCE_DIR;
   const std::string nominal = dir.path + "/nominal_device.yaml";

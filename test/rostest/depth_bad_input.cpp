@@ -11,7 +11,9 @@
 
 #include "driver_test_utils.h"
 
-using ecs_test::Collector;
+namespace test_support = embedded_calibration_stereo::test_support;
+
+using test_support::Collector;
 using sensor_msgs::CameraInfo;
 using sensor_msgs::Image;
 
@@ -113,7 +115,7 @@ void expectRejected(const std::string& image_name, const std::string& output, co
   std::string found;
   std::set<ros::Time> bad_stamps, good_stamps;
   const bool logged = publishUntil(
-      pub, left, right, [&] { return ecs_test::waitForLog(log, needles, 0.0, &found); }, 15.0, &bad_stamps);
+      pub, left, right, [&] { return test_support::waitForLog(log, needles, 0.0, &found); }, 15.0, &bad_stamps);
   EXPECT_TRUE(logged) << "no /rosout error containing all of: " << ::testing::PrintToString(needles);
   // Control: valid frames after the bad ones, until the output of one of them arrives. The
   // nodelet handles its input in order, so by then every bad frame has been handled. The pipe
@@ -220,7 +222,7 @@ TEST(DisparityReconfigure, InvalidRangeAndWindowAreClampedWithAWarning) {
     ASSERT_TRUE(ros::service::call("disparity/set_parameters", srv));
     EXPECT_EQ(intParameter(srv.response.config, "disparity_range"), 48);
     EXPECT_EQ(intParameter(srv.response.config, "correlation_window_size") % 2, 1);
-    logged = ecs_test::waitForLog(log, {"clamped", "disparity_range 40 -> 48"}, 0.5);
+    logged = test_support::waitForLog(log, {"clamped", "disparity_range 40 -> 48"}, 0.5);
   }
   EXPECT_TRUE(logged) << "no clamping warning on /rosout";
   expectAccepted<stereo_msgs::DisparityImage>("image_rect", "disparity");

@@ -7,7 +7,9 @@
 #include "depth_test_utils.h"
 #include "driver_test_utils.h"
 
-using ecs_test::Collector;
+namespace test_support = embedded_calibration_stereo::test_support;
+
+using test_support::Collector;
 using stereo_msgs::DisparityImage;
 
 TEST(DepthInterop, StockAndOwnPipelinesAgreePerPixel) {
@@ -18,7 +20,7 @@ TEST(DepthInterop, StockAndOwnPipelinesAgreePerPixel) {
   ASSERT_TRUE(own.waitFor(
       [&](const std::vector<DisparityImage::ConstPtr>& m) {
         for (const auto& o : m) {
-          if (const auto s = ecs_test::findByStamp(stock.snapshot(), o->header.stamp)) {
+          if (const auto s = test_support::findByStamp(stock.snapshot(), o->header.stamp)) {
             a = s;
             b = o;
             return true;
@@ -47,7 +49,7 @@ TEST(DepthInterop, StockAndOwnPipelinesAgreePerPixel) {
   for (size_t i = 0; i < size_t(left->width) * left->height; ++i)
     if (da[i] >= a->min_disparity && db[i] >= b->min_disparity) differences.push_back(std::abs(da[i] - db[i]));
   ASSERT_GT(differences.size(), left->width * left->height / 4) << "few pixels valid in both";
-  const double median = ecs_test::median(differences);
+  const double median = test_support::median(differences);
   const double within_1px = std::count_if(differences.begin(), differences.end(), [](double e) { return e < 1.0; }) /
                             double(differences.size());
   std::printf("stock vs own pipeline over %zu pixels valid in both: median |difference| %.3f px, %.1f %% within 1 px\n",

@@ -16,7 +16,9 @@
 #include "embedded_calibration_stereo/DisparityCoverage.h"
 #include "driver_test_utils.h"
 
-using ecs_test::Collector;
+namespace test_support = embedded_calibration_stereo::test_support;
+
+using test_support::Collector;
 using sensor_msgs::CameraInfo;
 using sensor_msgs::Image;
 using stereo_msgs::DisparityImage;
@@ -30,7 +32,7 @@ TEST(DepthSim, ImageRectHasTheRawHeaderAndEncoding) {
   ASSERT_TRUE(left.waitFor(
       [&](const std::vector<Image::ConstPtr>& rects) {
         for (const auto& r : rects)
-          if ((source = ecs_test::findByStamp(raw.snapshot(), r->header.stamp))) {
+          if ((source = test_support::findByStamp(raw.snapshot(), r->header.stamp))) {
             rect = r;
             return true;
           }
@@ -69,11 +71,11 @@ void expectDisparityMatchesGroundTruth(const std::string& prefix, const std::str
   ASSERT_TRUE(disparity.waitFor(
       [&](const std::vector<DisparityImage::ConstPtr>& m) {
         for (const auto& d : m) {
-          truth = ecs_test::findByStamp(depth.snapshot(), d->header.stamp);
-          li = ecs_test::findByStamp(left_info.snapshot(), d->header.stamp);
-          ri = ecs_test::findByStamp(right_info.snapshot(), d->header.stamp);
-          cloud = ecs_test::findByStamp(points.snapshot(), d->header.stamp);
-          coverage = ecs_test::findByStamp(coverages.snapshot(), d->header.stamp);
+          truth = test_support::findByStamp(depth.snapshot(), d->header.stamp);
+          li = test_support::findByStamp(left_info.snapshot(), d->header.stamp);
+          ri = test_support::findByStamp(right_info.snapshot(), d->header.stamp);
+          cloud = test_support::findByStamp(points.snapshot(), d->header.stamp);
+          coverage = test_support::findByStamp(coverages.snapshot(), d->header.stamp);
           if (truth && li && ri && cloud && coverage) {
             disp = d;
             return true;
@@ -97,7 +99,7 @@ void expectDisparityMatchesGroundTruth(const std::string& prefix, const std::str
     Image::ConstPtr mask;
     ASSERT_TRUE(masks.waitFor(
         [&](const std::vector<Image::ConstPtr>& m) {
-          mask = ecs_test::findByStamp(m, disp->header.stamp);
+          mask = test_support::findByStamp(m, disp->header.stamp);
           return bool(mask);
         },
         5.0))
@@ -158,10 +160,10 @@ void expectDisparityMatchesGroundTruth(const std::string& prefix, const std::str
     }
   }
   ASSERT_GT(errors.size(), 500u) << "too few valid disparities";
-  const double median_error = ecs_test::median(errors);
+  const double median_error = test_support::median(errors);
   const double within_1px = std::count_if(errors.begin(), errors.end(), [](double e) { return e < 1.0; }) /
                             double(errors.size());
-  const double median_depth_error = ecs_test::median(depth_errors);
+  const double median_depth_error = test_support::median(depth_errors);
   std::printf("%s: disparity vs ground truth over %zu pixels: median |error| %.3f px, %.1f %% within 1 px; "
               "points2 median relative depth error %.4f\n",
               (prefix + "disparity").c_str(), errors.size(), median_error, 100 * within_1px, median_depth_error);
@@ -191,7 +193,7 @@ TEST(DepthSim, EpochSwitchRectifiesEachFrameWithItsOwnCalibration) {
         const auto infos = info.snapshot();
         const auto raws = raw.snapshot();
         for (const auto& r : m)
-          n += ecs_test::findByStamp(infos, r->header.stamp) && ecs_test::findByStamp(raws, r->header.stamp);
+          n += test_support::findByStamp(infos, r->header.stamp) && test_support::findByStamp(raws, r->header.stamp);
         return n >= 3;
       },
       20.0));
@@ -209,8 +211,8 @@ TEST(DepthSim, EpochSwitchRectifiesEachFrameWithItsOwnCalibration) {
         const auto infos = info.snapshot();
         const auto raws = raw.snapshot();
         for (const auto& r : m)
-          n += is_new(ecs_test::findByStamp(infos, r->header.stamp)) &&
-               ecs_test::findByStamp(raws, r->header.stamp) != nullptr;
+          n += is_new(test_support::findByStamp(infos, r->header.stamp)) &&
+               test_support::findByStamp(raws, r->header.stamp) != nullptr;
         return n >= 3;
       },
       15.0))
@@ -219,8 +221,8 @@ TEST(DepthSim, EpochSwitchRectifiesEachFrameWithItsOwnCalibration) {
   const auto infos = info.snapshot();
   const auto raws = raw.snapshot();
   for (const auto& r : rect.snapshot()) {
-    const auto i = ecs_test::findByStamp(infos, r->header.stamp);
-    const auto source = ecs_test::findByStamp(raws, r->header.stamp);
+    const auto i = test_support::findByStamp(infos, r->header.stamp);
+    const auto source = test_support::findByStamp(raws, r->header.stamp);
     if (!i || !source) continue;
     cv::Mat map1, map2, expected;
     cv::initUndistortRectifyMap(cv::Matx33d(i->K.data()), cv::Mat(i->D), cv::Matx33d(i->R.data()),

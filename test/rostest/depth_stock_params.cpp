@@ -6,7 +6,9 @@
 
 #include "driver_test_utils.h"
 
-using ecs_test::Collector;
+namespace test_support = embedded_calibration_stereo::test_support;
+
+using test_support::Collector;
 
 TEST(DepthStockParams, OurDisparityRunsOnStereoImageProcsDefaults) {
   // Stock's defaults, as its dynamic_reconfigure server would leave them on the parameter server.

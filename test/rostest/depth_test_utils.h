@@ -9,7 +9,7 @@
 #include <cmath>
 #include <vector>
 
-namespace ecs_test {
+namespace embedded_calibration_stereo::test_support {
 
 // Median of a non-empty vector (copied).
 inline double median(std::vector<double> v) {
@@ -34,4 +34,4 @@ inline std::vector<double> validDisparities(const stereo_msgs::DisparityImage& m
   return out;
 }
 
-}  // namespace ecs_test
+}  // namespace embedded_calibration_stereo::test_support

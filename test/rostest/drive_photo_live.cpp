@@ -32,12 +32,15 @@
 #include "embedded_calibration_stereo/ros/conversions.h"
 #include "embedded_calibration_stereo/test_support/corner_score.h"
 
+namespace core = embedded_calibration_stereo::core;
+namespace test_support = embedded_calibration_stereo::test_support;
+
 using embedded_calibration_stereo::CalibrationMode;
 using embedded_calibration_stereo::CalibrationStatus;
 using embedded_calibration_stereo::kInForceConfirmedReason;
 using embedded_calibration_stereo::SetRigDrift;
 using embedded_calibration_stereo::StereoPatternObservation;
-using ecs_test::Collector;
+using test_support::Collector;
 using sensor_msgs::CameraInfo;
 
 namespace {
@@ -55,7 +58,7 @@ constexpr double kMisalignmentPx = 0.05, kBiasPx = 0.12, kDepthError10mPct = 1.8
 // A commit is worse than the calibration it replaced when its combined error against the same
 // truth, hypot(misalignment RMS, bias RMS), is larger by more than this (px).
 constexpr double kWorsePx = 0.01;
-double combined(const ecs::StereoAccuracy& a) { return std::hypot(a.misalignment_px.rms, a.disparity_bias_px.rms); }
+double combined(const core::StereoAccuracy& a) { return std::hypot(a.misalignment_px.rms, a.disparity_bias_px.rms); }
 constexpr double kThermalDegPerS = 0.03;
 constexpr double kFps = 30.0;  // the driver's fps (drive_photo_live.test)
 // A burst starts within a period of the drift, may be dropped while the tracker's worker is busy
@@ -86,7 +89,7 @@ CameraInfo::ConstPtr byStamp(const std::vector<CameraInfo::ConstPtr>& messages, 
 // The published calibration and the truth of one frame.
 struct Frame {
   bool ok = false;
-  ecs::StereoRig published, truth;
+  core::StereoRig published, truth;
 };
 
 Frame frameAt(const ros::Time& stamp) {
@@ -102,11 +105,11 @@ Frame frameAt(const ros::Time& stamp) {
   return out;
 }
 
-ecs::StereoAccuracy accuracy(const ecs::StereoRig& estimate, const ecs::StereoRig& truth) {
-  return ecs::evaluateStereoAccuracy(estimate, truth);  // the calibrator's rectification (alpha 0)
+core::StereoAccuracy accuracy(const core::StereoRig& estimate, const core::StereoRig& truth) {
+  return core::evaluateStereoAccuracy(estimate, truth);  // the calibrator's rectification (alpha 0)
 }
 
-void print(const char* what, const ecs::StereoAccuracy& a) {
+void print(const char* what, const core::StereoAccuracy& a) {
   std::printf("%s: misalignment %.4f px RMS (max %.4f), disparity bias %.4f px RMS (max %.4f), depth error "
               "%.3f / %.3f / %.3f / %.3f %% at 1 / 2 / 5 / 10 m\n",
               what, a.misalignment_px.rms, a.misalignment_px.max, a.disparity_bias_px.rms, a.disparity_bias_px.max,
@@ -241,7 +244,7 @@ TEST(DrivePhotoLive, ZoomThermalAndKnockAreRecalibratedAndNoCommitIsWorse) {
   ASSERT_TRUE(committed.ok) << "no camera_info of frame " << committed_stamp;
   // The drift really happened: the calibration before it is far off.
   EXPECT_NEAR(committed.truth.left.fx / f.truth_left.snapshot().front()->K[0], 1.05, 0.01);
-  const ecs::StereoAccuracy a = accuracy(committed.published, committed.truth);
+  const core::StereoAccuracy a = accuracy(committed.published, committed.truth);
   print("after zoom, thermal rotation and knock", a);
   const double fx_left = std::abs(committed.published.left.fx / committed.truth.left.fx - 1);
   const double fx_right = std::abs(committed.published.right.fx / committed.truth.right.fx - 1);
@@ -284,8 +287,8 @@ TEST(DrivePhotoLive, ZoomThermalAndKnockAreRecalibratedAndNoCommitIsWorse) {
     const Frame now = frameAt(modes[i]->header.stamp), before = frameAt(modes[i - 1]->header.stamp);
     if (!now.ok || !before.ok) continue;  // the last frames' camera_info may still be on the way
     ++commits;
-    const ecs::StereoAccuracy new_a = accuracy(now.published, now.truth);
-    const ecs::StereoAccuracy old_a = accuracy(before.published, now.truth);
+    const core::StereoAccuracy new_a = accuracy(now.published, now.truth);
+    const core::StereoAccuracy old_a = accuracy(before.published, now.truth);
     std::printf("commit at %.3f (epoch %u -> %u):\n", modes[i]->header.stamp.toSec(), modes[i - 1]->calibration_epoch,
                 modes[i]->calibration_epoch);
     print("  replaced", old_a);
@@ -309,9 +312,9 @@ TEST(DrivePhotoLive, ZoomThermalAndKnockAreRecalibratedAndNoCommitIsWorse) {
   for (const auto& w : windows)
     for (const auto& t : truths)
       if (t->header.stamp == w->header.stamp) {
-        const ecs::StereoObservation tracked = embedded_calibration_stereo::fromMsg(*w),
+        const core::StereoObservation tracked = embedded_calibration_stereo::fromMsg(*w),
                                      truth = embedded_calibration_stereo::fromMsg(*t);
-        ecs::CornerScore left, right;
+        core::CornerScore left, right;
         left.add(tracked.left, truth.left);
         right.add(tracked.right, truth.right);
         std::printf("  window at %.3f s against the truth: left %s, right %s; %zu scene correspondences\n",
@@ -325,5 +328,5 @@ TEST(DrivePhotoLive, ZoomThermalAndKnockAreRecalibratedAndNoCommitIsWorse) {
 }
 
 int main(int argc, char** argv) {
-  return ecs_test::runTestsWithFixture(argc, argv, "drive_photo_live_test", 2, &fixture);
+  return test_support::runTestsWithFixture(argc, argv, "drive_photo_live_test", 2, &fixture);
 }

@@ -13,11 +13,13 @@
 #include "driver_test_utils.h"
 #include "embedded_calibration_stereo/CalibrationMode.h"
 
+namespace test_support = embedded_calibration_stereo::test_support;
+
 using embedded_calibration_stereo::CalibrationMode;
-using ecs_test::Collector;
+using test_support::Collector;
 
 TEST(DriverBackends, FilesReplayPublishesTheImagesWithTheirCsvLightStates) {
-  const ecs_test::TempDir temp("ecs_driver_files");
+  const test_support::TempDir temp("ecs_driver_files");
   const std::string& dir = temp.path;
   ASSERT_FALSE(dir.empty());
   // Pair i: left filled with 20*i+3, right with 20*i+13; light pattern from the CSV.
@@ -38,7 +40,7 @@ TEST(DriverBackends, FilesReplayPublishesTheImagesWithTheirCsvLightStates) {
   ros::NodeHandle nh("/files");
   Collector<sensor_msgs::Image> left(nh, "left/image_raw"), right(nh, "right/image_raw");
   Collector<CalibrationMode> modes(nh, "calibration_mode");
-  ecs_test::InProcessManager manager;
+  test_support::InProcessManager manager;
   ASSERT_TRUE(manager.load("/files/camera_driver",
                            {{"backend", "files"}, {"files_dir", dir}, {"files_light_csv", dir + "/light.csv"},
                             {"fps", 20.0}, {"settle_frames", 1},
@@ -95,11 +97,11 @@ TEST(DriverBackends, SerialLightWritesTheConfiguredStrings) {
     }
     return out;
   };
-  const ecs_test::TempDir temp("ecs_driver_serial");
+  const test_support::TempDir temp("ecs_driver_serial");
   const std::string& dir = temp.path;
   ros::NodeHandle nh("/serial");
   Collector<CalibrationMode> modes(nh, "calibration_mode");
-  ecs_test::InProcessManager manager;
+  test_support::InProcessManager manager;
   ASSERT_TRUE(manager.load("/serial/camera_driver",
                            {{"backend", "sim"}, {"light_backend", "serial"}, {"serial_port", std::string(slave_name)},
                             {"serial_baud", 57600}, {"serial_on", "\\x02LAMP ON\\r\\n"}, {"serial_off", "LAMP OFF\\n"},

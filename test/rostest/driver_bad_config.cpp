@@ -6,8 +6,10 @@
 
 #include "driver_test_utils.h"
 
-using ecs_test::Collector;
-using Params = ecs_test::InProcessManager::Params;
+namespace test_support = embedded_calibration_stereo::test_support;
+
+using test_support::Collector;
+using Params = test_support::InProcessManager::Params;
 
 namespace {
 
@@ -29,7 +31,7 @@ class DriverBadConfig : public testing::Test {
     std::vector<std::string> needles = {"CameraDriver cannot start", parameter};
     if (!detail.empty()) needles.push_back(detail);
     std::string found;
-    EXPECT_TRUE(ecs_test::waitForLog(*log_, needles, 10.0, &found)) << "no FATAL message naming " << parameter;
+    EXPECT_TRUE(test_support::waitForLog(*log_, needles, 10.0, &found)) << "no FATAL message naming " << parameter;
     std::printf("  %s -> \"%s\"\n", parameter.c_str(), found.c_str());
     manager_.unload(name);
   }
@@ -41,10 +43,10 @@ class DriverBadConfig : public testing::Test {
   }
 
   ros::NodeHandle nh_;
-  const ecs_test::TempDir temp_{"ecs_driver_bad_config"};
+  const test_support::TempDir temp_{"ecs_driver_bad_config"};
   const std::string& dir_ = temp_.path;
   std::unique_ptr<Collector<rosgraph_msgs::Log>> log_;
-  ecs_test::InProcessManager manager_;
+  test_support::InProcessManager manager_;
   int count_ = 0;
 };
 

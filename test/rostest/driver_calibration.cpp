@@ -12,8 +12,10 @@
 #include "embedded_calibration_stereo/CalibrationMode.h"
 #include "embedded_calibration_stereo/ros/calibration_file.h"
 
+namespace test_support = embedded_calibration_stereo::test_support;
+
 using embedded_calibration_stereo::CalibrationMode;
-using ecs_test::Collector;
+using test_support::Collector;
 using sensor_msgs::CameraInfo;
 
 namespace {
@@ -51,12 +53,12 @@ bool callSet(const std::string& side, const CameraInfo& info, sensor_msgs::SetCa
 
 TEST(DriverCalibration, SetCameraInfoPersistsAtomicallyAndSurvivesAReload) {
   ros::NodeHandle nh("/stereo");
-  const ecs_test::TempDir temp("ecs_driver_calibration");
+  const test_support::TempDir temp("ecs_driver_calibration");
   const std::string& dir = temp.path;
   ASSERT_FALSE(dir.empty());
   { std::ofstream(dir + "/plain_file") << "not a directory"; }
   const std::string left_path = dir + "/left.yaml";
-  ecs_test::InProcessManager manager;
+  test_support::InProcessManager manager;
   Collector<CalibrationMode> modes(nh, "calibration_mode");
   Collector<CameraInfo> left(nh, "left/camera_info"), right(nh, "right/camera_info");
 
@@ -88,7 +90,7 @@ TEST(DriverCalibration, SetCameraInfoPersistsAtomicallyAndSurvivesAReload) {
   ASSERT_TRUE(manager.unload(kName));
 
   // 2. Accepted: written to the URL, published with a new epoch from the next frames on.
-  const ecs_test::InProcessManager::Params params = {{"backend", "sim"}, {"fps", 10.0},
+  const test_support::InProcessManager::Params params = {{"backend", "sim"}, {"fps", 10.0},
                                                       {"left_camera_info_url", "file://" + left_path},
                                                       {"right_camera_info_url", "file://" + dir + "/right.yaml"}};
   modes.clear();
@@ -132,9 +134,9 @@ TEST(DriverCalibration, SetCameraInfoPersistsAtomicallyAndSurvivesAReload) {
 // half with the other's old one.
 TEST(DriverCalibration, APairChangesAtomicallyWhateverFieldsChange) {
   ros::NodeHandle nh("/stereo");
-  const ecs_test::TempDir temp("ecs_driver_pair_atomic");
+  const test_support::TempDir temp("ecs_driver_pair_atomic");
   ASSERT_FALSE(temp.path.empty());
-  ecs_test::InProcessManager manager;
+  test_support::InProcessManager manager;
   Collector<CalibrationMode> modes(nh, "calibration_mode", 1000);
   Collector<CameraInfo> left(nh, "left/camera_info", 1000), right(nh, "right/camera_info", 1000);
   ASSERT_TRUE(manager.load(kName, {{"backend", "sim"}, {"fps", 10.0},

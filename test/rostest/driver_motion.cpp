@@ -14,13 +14,16 @@
 #include "embedded_calibration_stereo/core/sim/sim_rig.h"
 #include "embedded_calibration_stereo/core/sim/trajectory.h"
 
-using ecs_test::Collector;
+namespace core = embedded_calibration_stereo::core;
+namespace test_support = embedded_calibration_stereo::test_support;
+
+using test_support::Collector;
 
 namespace {
 
 // Position and rotation error (m + rad) between the message and the trajectory at t.
-double poseError(const nav_msgs::Odometry& m, const ecs::SimTrajectory& trajectory, double t) {
-  const Eigen::Isometry3d truth = ecs::trajectoryPose(trajectory, t);
+double poseError(const nav_msgs::Odometry& m, const core::SimTrajectory& trajectory, double t) {
+  const Eigen::Isometry3d truth = core::trajectoryPose(trajectory, t);
   const auto& p = m.pose.pose;
   const Eigen::Quaterniond q(p.orientation.w, p.orientation.x, p.orientation.y, p.orientation.z);
   return (Eigen::Vector3d(p.position.x, p.position.y, p.position.z) - truth.translation()).norm() +
@@ -35,8 +38,8 @@ TEST(DriverMotion, HeadPoseFollowsTheTrajectoryAtFrameOverFps) {
   std::string config_path;
   ASSERT_TRUE(ros::param::get("~fps", fps));
   ASSERT_TRUE(ros::param::get("~sim_config", config_path));
-  const ecs::SimRigConfig config = ecs::loadSimRigConfig(config_path);
-  ASSERT_EQ(config.trajectory.kind, ecs::SimTrajectory::Kind::kDrive);
+  const core::SimRigConfig config = core::loadSimRigConfig(config_path);
+  ASSERT_EQ(config.trajectory.kind, core::SimTrajectory::Kind::kDrive);
   ASSERT_GT(config.trajectory.loop_s, 0.0);
   Collector<nav_msgs::Odometry> poses(nh, "ground_truth/head_pose");
   Collector<tf2_msgs::TFMessage> tf(nh, "/tf");

@@ -16,8 +16,11 @@
 #include "embedded_calibration_stereo/core/sim/sim_rig.h"
 #include "embedded_calibration_stereo/ros/conversions.h"
 
+namespace core = embedded_calibration_stereo::core;
+namespace test_support = embedded_calibration_stereo::test_support;
+
 using embedded_calibration_stereo::CalibrationMode;
-using ecs_test::Collector;
+using test_support::Collector;
 
 namespace {
 
@@ -122,7 +125,7 @@ TEST(DriverSim, GroundTruthAndDriftService) {
   ASSERT_TRUE(waitForDriver(20.0));
   std::string config_path;
   ASSERT_TRUE(ros::param::get("~sim_config", config_path));
-  const ecs::SimRigConfig config = ecs::loadSimRigConfig(config_path);
+  const core::SimRigConfig config = core::loadSimRigConfig(config_path);
 
   // Published calibration (no file yet: the nominal rig) and the truth both carry Tx.
   const auto left = ros::topic::waitForMessage<sensor_msgs::CameraInfo>("left/camera_info", ros::Duration(5));
@@ -196,7 +199,7 @@ TEST(DriverSim, SceneTimeIsTheFrameIndexOverFps) {
   for (const auto& r : rights)
     for (const auto& l : lefts)
       if (l->header.stamp == r->header.stamp) {
-        ecs::StereoRig rig;
+        core::StereoRig rig;
         std::string error;
         ASSERT_TRUE(embedded_calibration_stereo::fromStereoCameraInfo(*l, *r, &rig, &error)) << error;
         rotations.emplace_back(r->header.stamp, rig.right_from_left.rotation());

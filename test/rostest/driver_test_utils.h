@@ -17,7 +17,7 @@
 #include <string>
 #include <vector>
 
-namespace ecs_test {
+namespace embedded_calibration_stereo::test_support {
 
 template <class M>
 class Collector {
@@ -157,4 +157,4 @@ inline bool latestPair(Collector<sensor_msgs::CameraInfo>& left, Collector<senso
   return false;
 }
 
-}  // namespace ecs_test
+}  // namespace embedded_calibration_stereo::test_support

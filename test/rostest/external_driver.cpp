@@ -47,11 +47,13 @@
 #include "embedded_calibration_stereo/StereoPatternObservation.h"
 #include "embedded_calibration_stereo/ros/calibration_file.h"
 
+namespace test_support = embedded_calibration_stereo::test_support;
+
 using embedded_calibration_stereo::CalibrationMode;
 using embedded_calibration_stereo::CalibrationStatus;
 using embedded_calibration_stereo::Recalibrate;
 using embedded_calibration_stereo::StereoPatternObservation;
-using ecs_test::Collector;
+using test_support::Collector;
 
 namespace {
 
@@ -184,7 +186,7 @@ bool callService(const std::string& name, Srv* srv, double wait_s = 10.0) {
 
 TEST(ExternalDriver, ImagePublisherRunsTheHead) {
   ros::NodeHandle nh;
-  ecs_test::TempDir dir("ecs_external_driver");
+  test_support::TempDir dir("ecs_external_driver");
   ASSERT_FALSE(dir.path.empty());
 
   // 1. The videos and their truth.
@@ -206,7 +208,7 @@ TEST(ExternalDriver, ImagePublisherRunsTheHead) {
 
   // 2. The head's graph without our driver.
   const std::string left_url = "file://" + dir.path + "/left.yaml", right_url = "file://" + dir.path + "/right.yaml";
-  ecs_test::ChildLaunch head({"embedded_calibration_stereo", "external_driver.launch", "light_backend:=none",
+  test_support::ChildLaunch head({"embedded_calibration_stereo", "external_driver.launch", "light_backend:=none",
                               "calibration_period_s:=0", "driver_left_image:=left_camera/image_raw",
                               "driver_left_info:=left_camera/camera_info", "driver_right_image:=right_camera/image_raw",
                               "driver_right_info:=right_camera/camera_info", "calibration_store:=file",

@@ -23,10 +23,13 @@
 #include "embedded_calibration_stereo/core/geometry/stereo_rig.h"
 #include "embedded_calibration_stereo/ros/conversions.h"
 
+namespace core = embedded_calibration_stereo::core;
+namespace test_support = embedded_calibration_stereo::test_support;
+
 using embedded_calibration_stereo::CalibrationMode;
 using embedded_calibration_stereo::CalibrationStatus;
 using embedded_calibration_stereo::Recalibrate;
-using ecs_test::Collector;
+using test_support::Collector;
 using sensor_msgs::CameraInfo;
 
 namespace {
@@ -76,15 +79,15 @@ typename M::ConstPtr byStamp(const std::vector<typename M::ConstPtr>& messages, 
   return nullptr;
 }
 
-ecs::StereoRig stereoRig(const CameraInfo& left, const CameraInfo& right) {
-  ecs::StereoRig rig;
+core::StereoRig stereoRig(const CameraInfo& left, const CameraInfo& right) {
+  core::StereoRig rig;
   std::string error;
   EXPECT_TRUE(embedded_calibration_stereo::fromStereoCameraInfo(left, right, &rig, &error)) << error;
   return rig;
 }
 
 // Compares a published calibration with the truth of the same frame; prints every error.
-void expectWithinBounds(const ecs::StereoRig& published, const ecs::StereoRig& truth,
+void expectWithinBounds(const core::StereoRig& published, const core::StereoRig& truth,
                         const Eigen::Isometry3d& tf_left_from_right, const char* what) {
   const auto relative = [](double a, double b) { return std::abs(a - b) / std::abs(b); };
   for (const auto& [est, ref, name] : {std::make_tuple(published.left, truth.left, "left"),
@@ -100,9 +103,9 @@ void expectWithinBounds(const ecs::StereoRig& published, const ecs::StereoRig& t
   }
   const double baseline = relative(published.baseline(), truth.baseline());
   const double rotation =
-      ecs::rotationAngleDeg(published.right_from_left.linear(), truth.right_from_left.linear());
+      core::rotationAngleDeg(published.right_from_left.linear(), truth.right_from_left.linear());
   const double tf_rotation =
-      ecs::rotationAngleDeg(tf_left_from_right.linear(), truth.leftFromRight().linear());
+      core::rotationAngleDeg(tf_left_from_right.linear(), truth.leftFromRight().linear());
   const double tf_baseline = relative(tf_left_from_right.translation().norm(), truth.baseline());
   std::printf("%s: baseline %.4f %% (tf %.4f %%), rotation %.4f deg (tf %.4f deg)\n", what,
               100 * baseline, 100 * tf_baseline, rotation, tf_rotation);
@@ -115,7 +118,7 @@ void expectWithinBounds(const ecs::StereoRig& published, const ecs::StereoRig& t
 // The calibration the driver published with the first frame of `epoch`, the simulator's truth of
 // that frame and the latest /tf_static.
 struct Published {
-  ecs::StereoRig rig, truth;
+  core::StereoRig rig, truth;
   Eigen::Isometry3d tf_left_from_right = Eigen::Isometry3d::Identity();
 };
 
@@ -181,7 +184,7 @@ TEST(FullGraph, ZoomAndKnockAreRecalibratedAndDisparityNeverStops) {
               "solve %.0f ms\n",
               after.epoch, after.frames_used, after.corners_used, after.rms_left_px, after.rms_right_px,
               after.epipolar_rms_px, after.solve_ms);
-  const ecs::StereoRig before_zoom = stereoRig(*f.left.snapshot().front(), *f.right.snapshot().front());
+  const core::StereoRig before_zoom = stereoRig(*f.left.snapshot().front(), *f.right.snapshot().front());
   const Published zoomed = publishedAt(after.epoch);
   // The zoom really was a change: the calibration before it was 5 % off.
   EXPECT_NEAR(zoomed.truth.left.fx / before_zoom.left.fx, 1.05, 0.01);
@@ -240,5 +243,5 @@ TEST(FullGraph, ZoomAndKnockAreRecalibratedAndDisparityNeverStops) {
 }
 
 int main(int argc, char** argv) {
-  return ecs_test::runTestsWithFixture(argc, argv, "full_graph_test", 2, &fixture);
+  return test_support::runTestsWithFixture(argc, argv, "full_graph_test", 2, &fixture);
 }

@@ -44,12 +44,14 @@
 #include "embedded_calibration_stereo/StereoPatternObservation.h"
 #include "process_test_utils.h"
 
+namespace test_support = embedded_calibration_stereo::test_support;
+
 using embedded_calibration_stereo::BoardObservation;
 using embedded_calibration_stereo::CalibrationMode;
 using embedded_calibration_stereo::CalibrationStatus;
 using embedded_calibration_stereo::Recalibrate;
 using embedded_calibration_stereo::StereoPatternObservation;
-using ecs_test::Collector;
+using test_support::Collector;
 using sensor_msgs::CameraInfo;
 using sensor_msgs::Image;
 
@@ -442,12 +444,12 @@ TEST(GraphFuzz, Setup) {
       << "no calibration committed";
   // The tracker tracks whole bursts: its per-frame observations may not come before its first
   // window observation does.
-  ASSERT_TRUE(ecs_test::waitUntil([] { return fixture->observations.get() || fixture->windows.get(); }, 30.0))
+  ASSERT_TRUE(test_support::waitUntil([] { return fixture->observations.get() || fixture->windows.get(); }, 30.0))
       << "no observations from the tracker";
 }
 
 TEST(GraphFuzz, CorruptedInputsOnEveryTopicLeaveTheHeadRunningAndItsCalibrationConsistent) {
-  const int manager = ecs_test::nodePid("/stereo/stereo_manager");
+  const int manager = test_support::nodePid("/stereo/stereo_manager");
   ASSERT_GT(manager, 0) << "cannot find the manager's pid";
   int seed = static_cast<int>(kSeed);  // ~seed: another sequence, to explore (the suite uses kSeed)
   ros::param::get("~seed", seed);
@@ -500,10 +502,10 @@ TEST(GraphFuzz, CorruptedInputsOnEveryTopicLeaveTheHeadRunningAndItsCalibrationC
   }
   std::printf("fuzz: %d rounds, %d messages in %.1f s (seed %u); %d set_camera_info calls put in force at once\n",
               rounds, messages, (ros::WallTime::now() - start).toSec(), static_cast<unsigned>(seed), accepted);
-  ASSERT_TRUE(ecs_test::processRuns(manager)) << "the nodelet manager died";
+  ASSERT_TRUE(test_support::processRuns(manager)) << "the nodelet manager died";
 
   // The manager answers (its XML-RPC), disparity flows.
-  EXPECT_EQ(ecs_test::nodePid("/stereo/stereo_manager"), manager) << "the manager does not answer";
+  EXPECT_EQ(test_support::nodePid("/stereo/stereo_manager"), manager) << "the manager does not answer";
   const size_t disparity_before = f.disparity.count();
   EXPECT_TRUE(f.disparity.waitForCount(disparity_before + 15, 10.0)) << "disparity does not flow after the fuzzing";
   // The calibrator answers a request.
@@ -516,7 +518,7 @@ TEST(GraphFuzz, CorruptedInputsOnEveryTopicLeaveTheHeadRunningAndItsCalibrationC
   std::printf("recalibrate (dry run) after the fuzzing: %s in %.1f s: %s\n",
               recalibrate.response.success ? "success" : "false", (ros::WallTime::now() - asked).toSec(),
               recalibrate.response.message.c_str());
-  EXPECT_TRUE(ecs_test::processRuns(manager)) << "the nodelet manager died";
+  EXPECT_TRUE(test_support::processRuns(manager)) << "the nodelet manager died";
   EXPECT_EQ(f.off_image_left.count() + f.off_image_right.count(), 0)
       << "the driver published a calibration with a principal point off the image: left " << f.off_image_left.first()
       << "; right " << f.off_image_right.first();
@@ -527,5 +529,5 @@ TEST(GraphFuzz, CorruptedInputsOnEveryTopicLeaveTheHeadRunningAndItsCalibrationC
 }
 
 int main(int argc, char** argv) {
-  return ecs_test::runTestsWithFixture(argc, argv, "graph_fuzz_test", 3, &fixture);
+  return test_support::runTestsWithFixture(argc, argv, "graph_fuzz_test", 3, &fixture);
 }

@@ -30,9 +30,11 @@
 #include "embedded_calibration_stereo/CalibrationMode.h"
 #include "embedded_calibration_stereo/CalibrationStatus.h"
 
+namespace test_support = embedded_calibration_stereo::test_support;
+
 using embedded_calibration_stereo::CalibrationMode;
 using embedded_calibration_stereo::CalibrationStatus;
-using ecs_test::Collector;
+using test_support::Collector;
 
 namespace {
 
@@ -189,7 +191,7 @@ TEST(GraphStamps, FiftyModesStampedTwentySecondsAheadDoNotStallDisparity) {
   EXPECT_GT(frames, 40) << "control: the driver's frames";
   EXPECT_LE(gap, 2);
   std::string found;
-  EXPECT_TRUE(ecs_test::waitForLog(fixture->log, {"calibration_mode", "ahead of", "stamp_tolerance_s"}, 5.0, &found));
+  EXPECT_TRUE(test_support::waitForLog(fixture->log, {"calibration_mode", "ahead of", "stamp_tolerance_s"}, 5.0, &found));
   std::printf("logged: %s\n", found.c_str());
 }
 
@@ -217,7 +219,7 @@ TEST(GraphStamps, AStreamStampedFiveSecondsBackDoesNotBlockTheCalibrationWindows
   std::printf("%d driver frames; longest run without disparity %d frames\n", frames, gap);
   EXPECT_LE(gap, 2);
   std::string found;
-  EXPECT_TRUE(ecs_test::waitForLog(fixture->log, {"calibration_mode", "behind", "stamp_tolerance_s"}, 5.0, &found));
+  EXPECT_TRUE(test_support::waitForLog(fixture->log, {"calibration_mode", "behind", "stamp_tolerance_s"}, 5.0, &found));
   std::printf("logged: %s\n", found.c_str());
 }
 
@@ -226,7 +228,7 @@ TEST(GraphStamps, AFloodStampedAheadWithinTheToleranceKeepsDisparitysRate) {
   expectRateKept(30.0, aheadWithinTolerance, "calibration_mode stamped 0.5-1.9 s ahead");
   expectRateKept(200.0, aheadWithinTolerance, "calibration_mode stamped 0.5-1.9 s ahead");
   std::string found;
-  EXPECT_TRUE(ecs_test::waitForLog(fixture->log, {"calibration_mode", "graph_stamps", "dropped"}, 5.0, &found))
+  EXPECT_TRUE(test_support::waitForLog(fixture->log, {"calibration_mode", "graph_stamps", "dropped"}, 5.0, &found))
       << "no warning naming the topic and the publisher";
   std::printf("logged: %s\n", found.c_str());
 }
@@ -237,7 +239,7 @@ TEST(GraphStamps, AFloodStampedWithTheClockKeepsDisparitysRate) {
   expectRateKept(30.0, clock, "calibration_mode stamped with the clock, random flags,");
   expectRateKept(200.0, clock, "calibration_mode stamped with the clock, random flags,");
   std::string found;
-  EXPECT_TRUE(ecs_test::waitForLog(fixture->log, {"calibration_mode", "graph_stamps", "dropped"}, 5.0, &found))
+  EXPECT_TRUE(test_support::waitForLog(fixture->log, {"calibration_mode", "graph_stamps", "dropped"}, 5.0, &found))
       << "no warning naming the topic and the publisher";
   std::printf("logged: %s\n", found.c_str());
 }
@@ -247,11 +249,11 @@ TEST(GraphStamps, AFloodAtTheStampsOfTheDriversFramesKeepsDisparitysRate) {
   expectRateKept(30.0, latestFrame, "calibration_mode at the driver's latest stamp, random flags,");
   expectRateKept(200.0, latestFrame, "calibration_mode at the driver's latest stamp, random flags,");
   std::string found;
-  EXPECT_TRUE(ecs_test::waitForLog(fixture->log, {"calibration_mode", "graph_stamps", "second message"}, 5.0, &found))
+  EXPECT_TRUE(test_support::waitForLog(fixture->log, {"calibration_mode", "graph_stamps", "second message"}, 5.0, &found))
       << "no warning naming the topic and the publisher";
   std::printf("logged: %s\n", found.c_str());
 }
 
 int main(int argc, char** argv) {
-  return ecs_test::runTestsWithFixture(argc, argv, "graph_stamps_test", 3, &fixture);
+  return test_support::runTestsWithFixture(argc, argv, "graph_stamps_test", 3, &fixture);
 }

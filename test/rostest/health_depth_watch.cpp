@@ -18,12 +18,15 @@
 #include "embedded_calibration_stereo/core/sim/sim_rig.h"
 #include "embedded_calibration_stereo/ros/conversions.h"
 
+namespace core = embedded_calibration_stereo::core;
+namespace test_support = embedded_calibration_stereo::test_support;
+
 using embedded_calibration_stereo::CalibrationHealth;
 using embedded_calibration_stereo::CalibrationMode;
 using embedded_calibration_stereo::DisparityCoverage;
-using ecs_test::Collector;
-using ecs_test::lastHealth;
-using ecs_test::latestPair;
+using test_support::Collector;
+using test_support::lastHealth;
+using test_support::latestPair;
 using sensor_msgs::CameraInfo;
 using Healths = std::vector<CalibrationHealth::ConstPtr>;
 using Modes = std::vector<CalibrationMode::ConstPtr>;
@@ -94,7 +97,7 @@ TEST(HealthDepthWatch, ACollapseOfDepthLeavesGoodAndAnImplausibleCalibrationIsBa
   // publishes the simulator's truth): the simulated cameras are put in force, as a calibration.
   ASSERT_TRUE(left.waitForCount(1, 20.0)) << "no left/camera_info";
   EXPECT_EQ(left.snapshot().front()->K[0], 0.0) << "the driver published a calibration its device description has not";
-  const ecs::StereoRig truth = ecs::loadSimRigConfig(std::string(ECS_SOURCE_DIR) + "/config/sim_rig.yaml").rig;
+  const core::StereoRig truth = core::loadSimRigConfig(std::string(ECS_SOURCE_DIR) + "/config/sim_rig.yaml").rig;
   setCalibration(embedded_calibration_stereo::toStereoCameraInfo(truth));
 
   // 1. GOOD, and still GOOD once the coverage history spans its 10 s.
@@ -130,7 +133,7 @@ TEST(HealthDepthWatch, ACollapseOfDepthLeavesGoodAndAnImplausibleCalibrationIsBa
   // 4. A calibration whose focal lengths are 1.3x the device's nominal ones (the limit is 1.25x).
   CameraInfo in_force_left, in_force_right;
   ASSERT_TRUE(latestPair(left, right, &in_force_left, &in_force_right));
-  ecs::StereoRig rig;
+  core::StereoRig rig;
   std::string error;
   ASSERT_TRUE(embedded_calibration_stereo::fromStereoCameraInfo(in_force_left, in_force_right, &rig, &error)) << error;
   rig.left = rig.left.withFocalScale(1.3);

@@ -17,13 +17,16 @@
 #include "embedded_calibration_stereo/CalibrationHealth.h"
 #include "embedded_calibration_stereo/CalibrationMode.h"
 #include "embedded_calibration_stereo/CalibrationStatus.h"
-#include "embedded_calibration_stereo/core/geometry/config_io.h"
+#include "embedded_calibration_stereo/core/io/config_io.h"
 #include "embedded_calibration_stereo/ros/conversions.h"
+
+namespace core = embedded_calibration_stereo::core;
+namespace test_support = embedded_calibration_stereo::test_support;
 
 using embedded_calibration_stereo::CalibrationHealth;
 using embedded_calibration_stereo::CalibrationMode;
 using embedded_calibration_stereo::CalibrationStatus;
-using ecs_test::Collector;
+using test_support::Collector;
 using sensor_msgs::CameraInfo;
 using Healths = std::vector<CalibrationHealth::ConstPtr>;
 
@@ -76,19 +79,19 @@ TEST(HealthSolveBoards, ACalibrationIsVerifiedAgainstItsSolvesBoards) {
   const CameraInfo in_force_left = *left.snapshot().back(), in_force_right = *right.snapshot().back();
 
   // 1. An accepted solve of this calibration whose boards sit 3 mm to the side.
-  cv::FileStorage fs = ecs::openYaml(ECS_SOURCE_DIR "/config/sim_rig.yaml");
+  cv::FileStorage fs = core::openYaml(ECS_SOURCE_DIR "/config/sim_rig.yaml");
   CalibrationStatus solve;
   solve.header.stamp = ros::Time::now();
   solve.accepted = true;
   solve.left_intrinsics = intrinsics(in_force_left);
   solve.right_intrinsics = intrinsics(in_force_right);
-  for (const ecs::VirtualBoard& board : ecs::loadDevice(fs["device"], "device").virtualBoards()) {
+  for (const core::VirtualBoard& board : core::loadDevice(fs["device"], "device").virtualBoards()) {
     Eigen::Isometry3d moved = board.rig_from_board;
     moved.translation().x() += 0.003;
     solve.board_ids.push_back(static_cast<uint16_t>(board.virtual_id));
     solve.board_poses.push_back(embedded_calibration_stereo::toPoseMsg(moved));
   }
-  ASSERT_TRUE(ecs_test::waitUntil([&] { return status_pub.getNumSubscribers() > 0; }, 5.0));
+  ASSERT_TRUE(test_support::waitUntil([&] { return status_pub.getNumSubscribers() > 0; }, 5.0));
   status_pub.publish(solve);
   uint32_t epoch = commitPair(in_force_left, in_force_right, modes);
   ASSERT_NE(epoch, 0u);

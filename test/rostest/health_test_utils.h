@@ -13,7 +13,7 @@
 #include "embedded_calibration_stereo/CalibrationHealth.h"
 #include "embedded_calibration_stereo/ros/conversions.h"
 
-namespace ecs_test {
+namespace embedded_calibration_stereo::test_support {
 
 inline const char* healthStateName(uint8_t state) {
   static const char* names[] = {"UNKNOWN", "GOOD", "DEGRADED", "BAD"};
@@ -45,7 +45,7 @@ inline void setPair(const std::pair<sensor_msgs::CameraInfo, sensor_msgs::Camera
 inline std::pair<sensor_msgs::CameraInfo, sensor_msgs::CameraInfo> tilted(const sensor_msgs::CameraInfo& left,
                                                                           const sensor_msgs::CameraInfo& right,
                                                                           double degrees) {
-  ecs::StereoRig rig;
+  core::StereoRig rig;
   std::string error;
   EXPECT_TRUE(embedded_calibration_stereo::fromStereoCameraInfo(left, right, &rig, &error)) << error;
   rig.right_from_left.linear() =
@@ -54,4 +54,4 @@ inline std::pair<sensor_msgs::CameraInfo, sensor_msgs::CameraInfo> tilted(const 
   return embedded_calibration_stereo::toStereoCameraInfo(rig);
 }
 
-}  // namespace ecs_test
+}  // namespace embedded_calibration_stereo::test_support

@@ -36,10 +36,13 @@
 #include "embedded_calibration_stereo/core/sim/sim_rig.h"
 #include "embedded_calibration_stereo/ros/conversions.h"
 
+namespace core = embedded_calibration_stereo::core;
+namespace test_support = embedded_calibration_stereo::test_support;
+
 using embedded_calibration_stereo::CalibrationHealth;
 using embedded_calibration_stereo::CalibrationMode;
 using embedded_calibration_stereo::Recalibrate;
-using ecs_test::Collector;
+using test_support::Collector;
 
 namespace {
 
@@ -52,15 +55,15 @@ class FakeDriver {
   enum class Info { kCalibrated, kUncalibrated, kRightMissing };
 
   explicit FakeDriver(ros::NodeHandle& nh) {
-    ecs::SimRigConfig config = ecs::loadSimRigConfig(std::string(ECS_SOURCE_DIR) + "/config/sim_rig.yaml");
+    core::SimRigConfig config = core::loadSimRigConfig(std::string(ECS_SOURCE_DIR) + "/config/sim_rig.yaml");
     std::tie(left_info_, right_info_) = embedded_calibration_stereo::toStereoCameraInfo(config.rig);
     noise_sigma_ = config.noise_sigma;
     config.noise_sigma = 0.0;
-    ecs::SimRig sim(config);
-    ecs::DriftRequest zoom;
+    core::SimRig sim(config);
+    core::DriftRequest zoom;
     zoom.focal_scale = 1.03;
     sim.setDrift(zoom, 0.0);
-    const ecs::SimFrame off = sim.render(0.0, 0.0, 1), on = sim.render(0.0, 1.0, 1);
+    const core::SimFrame off = sim.render(0.0, 0.0, 1), on = sim.render(0.0, 1.0, 1);
     off.left.convertTo(off_[0], CV_32F);
     off.right.convertTo(off_[1], CV_32F);
     on.left.convertTo(on_[0], CV_32F);
@@ -175,14 +178,14 @@ bool callService(const std::string& name, Srv* srv) {
 TEST(LightControllerInputs, DelayedLightAndBadInputs) {
   using diagnostic_msgs::DiagnosticStatus;
   ros::NodeHandle nh;
-  ecs_test::TempDir dir("ecs_light_inputs");
+  test_support::TempDir dir("ecs_light_inputs");
   ASSERT_FALSE(dir.path.empty());
   Collector<rosgraph_msgs::Log> log(nh, "/rosout", 5000);
   Collector<diagnostic_msgs::DiagnosticArray> diagnostics(nh, "/diagnostics", 2000);
   Collector<CalibrationMode> modes(nh, "calibration_mode", 5000);
   // On demand with no calibration/health publisher but the test's (section E): the light
   // follows set_light only until then, as with the periodic trigger and no period.
-  ecs_test::ChildLaunch head({"embedded_calibration_stereo", "external_driver.launch", "light_backend:=sim",
+  test_support::ChildLaunch head({"embedded_calibration_stereo", "external_driver.launch", "light_backend:=sim",
                               "calibration_period_s:=0", "calibration_trigger:=on_demand", "health:=false",
                               "prior_file:=" + dir.path + "/prior.yaml"},
                              dir.path + "/head.log");
@@ -229,7 +232,7 @@ TEST(LightControllerInputs, DelayedLightAndBadInputs) {
   std::string seen;
   EXPECT_TRUE(waitForDiagnostic(diagnostics, from, DiagnosticStatus::ERROR, "light not working", 8.0, &seen))
       << "last light_controller status: " << seen;
-  EXPECT_TRUE(ecs_test::waitForLog(log, {"LightController", "the light is not working"}, 5.0));
+  EXPECT_TRUE(test_support::waitForLog(log, {"LightController", "the light is not working"}, 5.0));
   Recalibrate no_boards;
   no_boards.request.frames = 5;
   no_boards.request.timeout_s = 1.5;
@@ -247,7 +250,7 @@ TEST(LightControllerInputs, DelayedLightAndBadInputs) {
   from = diagnostics.snapshot().size();
   EXPECT_TRUE(waitForDiagnostic(diagnostics, from, DiagnosticStatus::WARN, "uncalibrated", 8.0, &seen))
       << "last light_controller status: " << seen;
-  EXPECT_TRUE(ecs_test::waitForLog(log, {"/stereo/left_driver/camera_info is uncalibrated"}, 5.0));
+  EXPECT_TRUE(test_support::waitForLog(log, {"/stereo/left_driver/camera_info is uncalibrated"}, 5.0));
   size_t count = modes.snapshot().size();
   EXPECT_TRUE(modes.waitForCount(count + 10, 5.0)) << "frames stopped with an uncalibrated camera_info";
 
@@ -257,7 +260,7 @@ TEST(LightControllerInputs, DelayedLightAndBadInputs) {
   EXPECT_TRUE(waitForDiagnostic(diagnostics, from, DiagnosticStatus::ERROR,
                                 "no camera_info on /stereo/right_driver/camera_info", 8.0, &seen))
       << "last light_controller status: " << seen;
-  EXPECT_TRUE(ecs_test::waitForLog(log, {"frames held back", "/stereo/right_driver/camera_info"}, 5.0));
+  EXPECT_TRUE(test_support::waitForLog(log, {"frames held back", "/stereo/right_driver/camera_info"}, 5.0));
   count = modes.snapshot().size();
   ros::WallDuration(1.0).sleep();  // a quiet second (the control below shows the pipe works)
   EXPECT_LE(modes.snapshot().size(), count + 1) << "frames went out without the right camera_info";

@@ -8,14 +8,16 @@
 
 #include "driver_test_utils.h"
 
-using ecs_test::Collector;
+namespace test_support = embedded_calibration_stereo::test_support;
+
+using test_support::Collector;
 using Params = std::map<std::string, XmlRpc::XmlRpcValue>;
 
 namespace {
 
 std::unique_ptr<nodelet::Loader> loader;                   // created in main, after ros::init
 std::unique_ptr<Collector<rosgraph_msgs::Log>> rosout;     // idem
-const ecs_test::TempDir temp_dir("ecs_nodelet_bad_config");
+const test_support::TempDir temp_dir("ecs_nodelet_bad_config");
 int loads = 0;
 
 // Parameters each nodelet needs besides the one under test (writable calibration files, no

@@ -19,7 +19,7 @@
 #include <utility>
 #include <vector>
 
-namespace ecs_test {
+namespace embedded_calibration_stereo::test_support {
 
 // The pid of node `name` (absolute), or -1.
 inline int nodePid(const std::string& name) {
@@ -152,4 +152,4 @@ class ChildProcess {
   int exit_status_ = -1;
 };
 
-}  // namespace ecs_test
+}  // namespace embedded_calibration_stereo::test_support

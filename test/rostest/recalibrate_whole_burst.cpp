@@ -15,8 +15,11 @@
 #include "embedded_calibration_stereo/SetRigDrift.h"
 #include "embedded_calibration_stereo/ros/conversions.h"
 
+namespace core = embedded_calibration_stereo::core;
+namespace test_support = embedded_calibration_stereo::test_support;
+
 using embedded_calibration_stereo::Recalibrate;
-using ecs_test::Collector;
+using test_support::Collector;
 using sensor_msgs::CameraInfo;
 
 namespace {
@@ -54,8 +57,8 @@ TEST(RecalibrateWholeBurst, ADefaultRequestAfterAZoomMeetsTheTargets) {
   EXPECT_EQ(answer.status.frames_used, 1u) << "one window observation: the burst tracked as a whole";
 
   CameraInfo l, r;
-  ASSERT_TRUE(truth_left.waitForCount(1, 5.0) && ecs_test::latestPair(truth_left, truth_right, &l, &r));
-  ecs::StereoRig truth;
+  ASSERT_TRUE(truth_left.waitForCount(1, 5.0) && test_support::latestPair(truth_left, truth_right, &l, &r));
+  core::StereoRig truth;
   std::string error;
   ASSERT_TRUE(embedded_calibration_stereo::fromStereoCameraInfo(l, r, &truth, &error)) << error;
   ASSERT_GE(answer.status.left_intrinsics.size(), 1u);

@@ -11,11 +11,13 @@
 #include "depth_test_utils.h"
 #include "driver_test_utils.h"
 
-using ecs_test::Collector;
+namespace test_support = embedded_calibration_stereo::test_support;
+
+using test_support::Collector;
 using sensor_msgs::Image;
 
 TEST(RectifierColor, ImageRectIsMonoAndImageRectColorTheInputsColour) {
-  const ecs_test::TempDir temp("ecs_rectifier_color");
+  const test_support::TempDir temp("ecs_rectifier_color");
   std::ifstream in(std::string(ECS_SOURCE_DIR) + "/config/sim_rig.yaml");
   std::stringstream text;
   text << in.rdbuf();
@@ -44,7 +46,7 @@ TEST(RectifierColor, ImageRectIsMonoAndImageRectColorTheInputsColour) {
   ASSERT_TRUE(color.waitFor(
       [&](const std::vector<Image::ConstPtr>& colours) {
         for (const auto& candidate : colours)
-          if ((m = ecs_test::findByStamp(mono.snapshot(), candidate->header.stamp))) {
+          if ((m = test_support::findByStamp(mono.snapshot(), candidate->header.stamp))) {
             c = candidate;
             return true;
           }

@@ -39,11 +39,13 @@
 #include "embedded_calibration_stereo/SetRigDrift.h"
 #include "embedded_calibration_stereo/ros/calibration_session.h"
 
+namespace test_support = embedded_calibration_stereo::test_support;
+
 using embedded_calibration_stereo::CalibrationMode;
 using embedded_calibration_stereo::CalibrationStatus;
-using ecs_test::ChildLaunch;
-using ecs_test::Collector;
-using ecs_test::waitUntil;
+using test_support::ChildLaunch;
+using test_support::Collector;
+using test_support::waitUntil;
 
 namespace {
 
@@ -128,7 +130,7 @@ bool lastRightRotation(const std::vector<tf2_msgs::TFMessage::ConstPtr>& message
 
 TEST(Replay, ReproducesTheRecordedCalibrationEpochs) {
   ros::NodeHandle nh;
-  ecs_test::TempDir dir("ecs_replay_test");
+  test_support::TempDir dir("ecs_replay_test");
   ASSERT_FALSE(dir.path.empty());
   const std::string bag_path = dir.path + "/run.bag";
   const std::string prior_file = dir.path + "/pattern_prior.yaml";

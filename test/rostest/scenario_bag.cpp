@@ -32,11 +32,14 @@
 #include "embedded_calibration_stereo/StereoPatternObservation.h"
 #include "embedded_calibration_stereo/test_support/run_command.h"
 
+namespace core = embedded_calibration_stereo::core;
+namespace test_support = embedded_calibration_stereo::test_support;
+
 using embedded_calibration_stereo::CalibrationMode;
 using embedded_calibration_stereo::CalibrationStatus;
 using embedded_calibration_stereo::StereoPatternObservation;
-using ecs_test::ChildLaunch;
-using ecs_test::Collector;
+using test_support::ChildLaunch;
+using test_support::Collector;
 
 namespace {
 
@@ -49,7 +52,7 @@ const std::string kManager = "/stereo/stereo_manager";
 std::string launchFile(const std::string& name) { return std::string(ECS_SOURCE_DIR) + "/launch/" + name; }
 
 // Exit status and output (stdout and stderr).
-int run(const std::string& command, std::string* output) { return ecs::runCommand(command + " 2>&1", output); }
+int run(const std::string& command, std::string* output) { return core::runCommand(command + " 2>&1", output); }
 
 // Light windows of the bag: the stamps of their first and last light-on frames.
 struct Window {
@@ -62,7 +65,7 @@ TEST(ScenarioBag, ReplaysThroughTheGraphWithoutErrors) {
   ros::NodeHandle nh;
   std::string scenario;
   ASSERT_TRUE(ros::param::get("~scenario", scenario));
-  ecs_test::TempDir dir("ecs_scenario_bag_test");
+  test_support::TempDir dir("ecs_scenario_bag_test");
   ASSERT_FALSE(dir.path.empty());
   const std::string bag_path = dir.path + "/scenario.bag";
 

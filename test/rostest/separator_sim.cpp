@@ -17,18 +17,20 @@
 #include "driver_test_utils.h"
 #include "embedded_calibration_stereo/CalibrationMode.h"
 
+namespace test_support = embedded_calibration_stereo::test_support;
+
 using embedded_calibration_stereo::CalibrationMode;
-using ecs_test::Collector;
-using ecs_test::waitUntil;
+using test_support::Collector;
+using test_support::waitUntil;
 using sensor_msgs::Image;
 
 namespace {
 
 constexpr int kTeachFrames = 4;
 std::unique_ptr<nodelet::Loader> loader;  // created in main, after ros::init
-ecs_test::TempDir calibration_dir("ecs_separator_sim");
+test_support::TempDir calibration_dir("ecs_separator_sim");
 
-void setParams(const std::string& name, const ecs_test::InProcessManager::Params& params) {
+void setParams(const std::string& name, const test_support::InProcessManager::Params& params) {
   for (const auto& p : params) ros::param::set(name + "/" + p.first, p.second);
 }
 
@@ -90,7 +92,7 @@ TEST(SeparatorSim, DepthModeRepublishesTheRawPointers) {
       [&](const std::vector<Image::ConstPtr>& m) {
         checked = 0;
         const auto raws = raw.snapshot();
-        for (const auto& s : m) checked += ecs_test::findByStamp(raws, s->header.stamp) != nullptr;
+        for (const auto& s : m) checked += test_support::findByStamp(raws, s->header.stamp) != nullptr;
         return checked >= 5;
       },
       20.0))
@@ -99,13 +101,13 @@ TEST(SeparatorSim, DepthModeRepublishesTheRawPointers) {
   const auto raws = raw.snapshot(), right_raws = right_raw.snapshot();
   int identical = 0, right_identical = 0;
   for (const auto& s : scene.snapshot()) {
-    const auto r = ecs_test::findByStamp(raws, s->header.stamp);
+    const auto r = test_support::findByStamp(raws, s->header.stamp);
     if (!r) continue;
     EXPECT_EQ(s.get(), r.get()) << "left image_scene at " << s->header.stamp << " is a copy";
     identical += s.get() == r.get();
   }
   for (const auto& s : right_scene.snapshot()) {
-    const auto r = ecs_test::findByStamp(right_raws, s->header.stamp);
+    const auto r = test_support::findByStamp(right_raws, s->header.stamp);
     if (r) right_identical += s.get() == r.get();
   }
   std::printf("depth mode: %d left and %d right image_scene messages are the image_raw objects themselves\n",
@@ -136,10 +138,10 @@ TEST(SeparatorSim, CalibrationModePublishesTheSeparatedScene) {
     const auto r = raws.snapshot(), t = truths.snapshot();
     const auto md = modes.snapshot();
     for (const auto& s : m) {
-      const auto source = ecs_test::findByStamp(r, s->header.stamp);
-      const auto mode = ecs_test::findByStamp(md, s->header.stamp);
+      const auto source = test_support::findByStamp(r, s->header.stamp);
+      const auto mode = test_support::findByStamp(md, s->header.stamp);
       if (source && mode && mode->light_on && mode->settled && source.get() != s.get() &&
-          ecs_test::findByStamp(t, s->header.stamp))
+          test_support::findByStamp(t, s->header.stamp))
         out.emplace_back(source, s);
     }
     return out;
@@ -155,8 +157,8 @@ TEST(SeparatorSim, CalibrationModePublishesTheSeparatedScene) {
   // Light-on settled frames before the template existed went out raw (depth never stops).
   int raw_light_on = 0;
   for (const auto& s : scene.snapshot()) {
-    const auto mode = ecs_test::findByStamp(modes.snapshot(), s->header.stamp);
-    const auto source = ecs_test::findByStamp(raw.snapshot(), s->header.stamp);
+    const auto mode = test_support::findByStamp(modes.snapshot(), s->header.stamp);
+    const auto source = test_support::findByStamp(raw.snapshot(), s->header.stamp);
     raw_light_on += mode && mode->light_on && source && source.get() == s.get();
   }
   EXPECT_GE(raw_light_on, kTeachFrames) << "light-on frames during the teach were not republished raw";
@@ -175,7 +177,7 @@ TEST(SeparatorSim, CalibrationModePublishesTheSeparatedScene) {
       EXPECT_EQ(s.encoding, r.encoding);
       ASSERT_EQ(s.width, r.width);
       ASSERT_EQ(s.height, r.height);
-      const auto t = ecs_test::findByStamp(truths, s.header.stamp);
+      const auto t = test_support::findByStamp(truths, s.header.stamp);
       const double p = psnr(view(s), view(*t));
       worst = std::min(worst, p);
       sum += p;
@@ -218,9 +220,9 @@ TEST(SeparatorSim, ReteachesAfterACalibrationEpochChange) {
         const auto r = raw.snapshot(), t = truth.snapshot();
         const auto md = modes.snapshot();
         for (const auto& s : m) {
-          const auto mode = ecs_test::findByStamp(md, s->header.stamp);
-          const auto source = ecs_test::findByStamp(r, s->header.stamp);
-          separated_truth = ecs_test::findByStamp(t, s->header.stamp);
+          const auto mode = test_support::findByStamp(md, s->header.stamp);
+          const auto source = test_support::findByStamp(r, s->header.stamp);
+          separated_truth = test_support::findByStamp(t, s->header.stamp);
           if (mode && source && separated_truth && mode->calibration_epoch > old_epoch && source.get() != s.get()) {
             separated = s;
             return true;
@@ -233,7 +235,7 @@ TEST(SeparatorSim, ReteachesAfterACalibrationEpochChange) {
   light.request.data = false;
   EXPECT_TRUE(ros::service::call("/sim/set_light", light));
   std::string found;
-  EXPECT_TRUE(ecs_test::waitForLog(log, {"Separator: device image taught", "epoch " + std::to_string(old_epoch + 1)},
+  EXPECT_TRUE(test_support::waitForLog(log, {"Separator: device image taught", "epoch " + std::to_string(old_epoch + 1)},
                                    5.0, &found));
   const double p = psnr(view(*separated), view(*separated_truth));
   std::printf("after the epoch change: '%s'; PSNR %.1f dB\n", found.c_str(), p);
@@ -274,14 +276,14 @@ TEST(SeparatorTeachService, TeachesFromCoveredSceneFrames) {
     return stamp;
   };
   const auto published = [&](const ros::Time& stamp) {
-    return scene.waitFor([&](const std::vector<Image::ConstPtr>& m) { return ecs_test::findByStamp(m, stamp) != nullptr; },
+    return scene.waitFor([&](const std::vector<Image::ConstPtr>& m) { return test_support::findByStamp(m, stamp) != nullptr; },
                          10.0);
   };
   for (int i = 0; i < 3; ++i) ASSERT_TRUE(published(publish(device))) << "teach frame " << i << " not republished";
   const cv::Mat mixed = scene_image + device;
   const ros::Time stamp = publish(mixed);
   ASSERT_TRUE(published(stamp));
-  const auto out = ecs_test::findByStamp(scene.snapshot(), stamp);
+  const auto out = test_support::findByStamp(scene.snapshot(), stamp);
   const double p = psnr(view(*out), scene_image), p_raw = psnr(mixed, scene_image);
   std::printf("teach service: separated PSNR %.1f dB vs the scene (raw %.1f dB)\n", p, p_raw);
   EXPECT_GE(p, 35.0);
@@ -347,7 +349,7 @@ TEST(SeparatorLearn, LearnsTheDeviceImageFromTheFirstBurstOnWithAMovingScene) {
     publishMonoFrame(left_pub, right_pub, mode_pub, image, mode);
     Image::ConstPtr out;
     EXPECT_TRUE(scene.waitFor(
-        [&](const std::vector<Image::ConstPtr>& m) { return (out = ecs_test::findByStamp(m, stamp)) != nullptr; },
+        [&](const std::vector<Image::ConstPtr>& m) { return (out = test_support::findByStamp(m, stamp)) != nullptr; },
         10.0))
         << "frame " << frame - 1 << " not republished";
     if (!out) return Out{};
@@ -366,7 +368,7 @@ TEST(SeparatorLearn, LearnsTheDeviceImageFromTheFirstBurstOnWithAMovingScene) {
   // Light-off frames until the log has `needle` (a learning run is taken at a frame's arrival).
   const auto waitLearned = [&](const std::string& needle, std::string* found) {
     for (int i = 0; i < 100; ++i) {
-      if (ecs_test::waitForLog(log, {"Separator", needle}, 0.05, found)) return true;
+      if (test_support::waitForLog(log, {"Separator", needle}, 0.05, found)) return true;
       publish(false, true, 0.0);
     }
     return false;
@@ -386,7 +388,7 @@ TEST(SeparatorLearn, LearnsTheDeviceImageFromTheFirstBurstOnWithAMovingScene) {
   double worst_early = 1e9;
   int separated_in_first = 0;
   for (int i = 8; i < 12; ++i) {
-    early = early || ecs_test::waitForLog(log, {"Separator", "from the first 8 light-on frames"}, 2.0, &found);
+    early = early || test_support::waitForLog(log, {"Separator", "from the first 8 light-on frames"}, 2.0, &found);
     const Out out = publish(true, true, 1.0);
     if (!out.raw) {
       ++separated_in_first;
@@ -479,23 +481,23 @@ TEST(SeparatorBadInput, MismatchedFramesAreReportedAndDropped) {
   std::vector<ros::Time> bad;
   std::string found;
   bad.push_back(publish("mono8", 80, "mono8", 40));
-  EXPECT_TRUE(ecs_test::waitForLog(log, {"Separator", "/bad/", "image_raw", "size"}, 10.0, &found))
+  EXPECT_TRUE(test_support::waitForLog(log, {"Separator", "/bad/", "image_raw", "size"}, 10.0, &found))
       << "no error naming the topic for a size mismatch";
   std::printf("size mismatch: %s\n", found.c_str());
   bad.push_back(publish("mono8", 80, "bgr8", 80));
-  EXPECT_TRUE(ecs_test::waitForLog(log, {"Separator", "/bad/", "image_raw", "bgr8"}, 10.0, &found))
+  EXPECT_TRUE(test_support::waitForLog(log, {"Separator", "/bad/", "image_raw", "bgr8"}, 10.0, &found))
       << "no error naming the topic for an encoding mismatch";
   std::printf("encoding mismatch: %s\n", found.c_str());
   bad.push_back(publish("32FC1", 80, "32FC1", 80));
-  EXPECT_TRUE(ecs_test::waitForLog(log, {"Separator", "/bad/", "image_raw", "32FC1"}, 10.0, &found))
+  EXPECT_TRUE(test_support::waitForLog(log, {"Separator", "/bad/", "image_raw", "32FC1"}, 10.0, &found))
       << "no error naming the topic for an unsupported encoding";
   std::printf("unsupported encoding: %s\n", found.c_str());
 
   const ros::Time good = publish("mono8", 80, "mono8", 80);
-  ASSERT_TRUE(scene.waitFor([&](const std::vector<Image::ConstPtr>& m) { return ecs_test::findByStamp(m, good) != nullptr; },
+  ASSERT_TRUE(scene.waitFor([&](const std::vector<Image::ConstPtr>& m) { return test_support::findByStamp(m, good) != nullptr; },
                             10.0))
       << "a valid frame after the bad ones did not go through";
-  for (const auto& stamp : bad) EXPECT_FALSE(ecs_test::findByStamp(scene.snapshot(), stamp)) << "bad frame published";
+  for (const auto& stamp : bad) EXPECT_FALSE(test_support::findByStamp(scene.snapshot(), stamp)) << "bad frame published";
   loader->unload("/bad/separator");
 }
 

@@ -19,9 +19,11 @@
 #include "driver_test_utils.h"
 #include "embedded_calibration_stereo/CalibrationMode.h"
 
+namespace test_support = embedded_calibration_stereo::test_support;
+
 using embedded_calibration_stereo::CalibrationMode;
-using ecs_test::Collector;
-using ecs_test::waitUntil;
+using test_support::Collector;
+using test_support::waitUntil;
 using sensor_msgs::CameraInfo;
 using sensor_msgs::Image;
 using stereo_msgs::DisparityImage;
@@ -368,9 +370,9 @@ TEST(DisparityReconfigure, UnusableValuesAreReplacedWithAWarningAndTheRestKept) 
   std::string found;
   for (int attempt = 0; attempt < 20 && !logged; ++attempt) {
     ASSERT_TRUE(ros::service::call("/reconfigure/disparity/set_parameters", bad));
-    logged = ecs_test::waitForLog(log, {"clamped", "algorithm census -> sgbm"}, 0.5, &found) &&
-             ecs_test::waitForLog(log, {"clamped", "disparity_range 40 -> 48"}, 0.5) &&
-             ecs_test::waitForLog(log, {"clamped", "correlation_window_size 6 -> 7"}, 0.5);
+    logged = test_support::waitForLog(log, {"clamped", "algorithm census -> sgbm"}, 0.5, &found) &&
+             test_support::waitForLog(log, {"clamped", "disparity_range 40 -> 48"}, 0.5) &&
+             test_support::waitForLog(log, {"clamped", "correlation_window_size 6 -> 7"}, 0.5);
   }
   EXPECT_TRUE(logged) << "no warning naming each replaced value on /rosout";
   std::printf("warning: %s\n", found.c_str());

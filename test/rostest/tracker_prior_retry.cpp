@@ -18,9 +18,11 @@
 #include "embedded_calibration_stereo/CalibrationMode.h"
 #include "embedded_calibration_stereo/StereoPatternObservation.h"
 
+namespace test_support = embedded_calibration_stereo::test_support;
+
 using embedded_calibration_stereo::CalibrationMode;
 using embedded_calibration_stereo::StereoPatternObservation;
-using ecs_test::Collector;
+using test_support::Collector;
 
 namespace {
 
@@ -39,18 +41,18 @@ TEST(TrackerPriorRetry, APriorThatCouldNotBeWrittenIsUsedAndWrittenOnceItCanBe) 
   Collector<rosgraph_msgs::Log> log(nh, "/rosout", 2000);
   ASSERT_TRUE(modes.waitForCount(2, 20.0)) << "no frames from the driver";
 
-  ecs_test::TempDir dir("ecs_tracker_prior_retry");
+  test_support::TempDir dir("ecs_tracker_prior_retry");
   ASSERT_FALSE(dir.path.empty());
   const std::string blocker = dir.path + "/blocked";
   std::ofstream(blocker) << "a file where the prior's directory should be\n";
   const std::string prior = blocker + "/pattern_prior.yaml";
-  ecs_test::ChildLaunch tracker({"embedded_calibration_stereo", "tracker.launch", "prior_file:=" + prior},
+  test_support::ChildLaunch tracker({"embedded_calibration_stereo", "tracker.launch", "prior_file:=" + prior},
                                 dir.path + "/tracker_launch.log");
   ASSERT_TRUE(tracker.started());
 
   // Teaching happens at the second burst (the first has no light-off frame before it).
   std::string found;
-  ASSERT_TRUE(ecs_test::waitForLog(log, {"could not be written", prior}, 30.0, &found)) << tracker.logTail();
+  ASSERT_TRUE(test_support::waitForLog(log, {"could not be written", prior}, 30.0, &found)) << tracker.logTail();
   std::printf("logged: %s\n", found.c_str());
   EXPECT_TRUE(observations.waitFor([](const auto& m) { return withBoards(m, 0); }, 10.0))
       << "the tracker does not track with the prior it could not write";
@@ -59,7 +61,7 @@ TEST(TrackerPriorRetry, APriorThatCouldNotBeWrittenIsUsedAndWrittenOnceItCanBe) 
   // Space freed: the prior is written within the retry period (3 s) and a margin.
   std::filesystem::remove(blocker);
   const ros::WallTime freed = ros::WallTime::now();
-  ASSERT_TRUE(ecs_test::waitForLog(log, {"prior written to", prior}, 10.0, &found)) << tracker.logTail();
+  ASSERT_TRUE(test_support::waitForLog(log, {"prior written to", prior}, 10.0, &found)) << tracker.logTail();
   std::printf("written %.1f s after the space was freed; logged: %s\n", (ros::WallTime::now() - freed).toSec(),
               found.c_str());
   ASSERT_TRUE(std::filesystem::exists(prior));

@@ -17,10 +17,13 @@
 #include "embedded_calibration_stereo/StereoPatternObservation.h"
 #include "embedded_calibration_stereo/core/tracker/board_prior.h"
 
+namespace core = embedded_calibration_stereo::core;
+namespace test_support = embedded_calibration_stereo::test_support;
+
 using embedded_calibration_stereo::BoardObservation;
 using embedded_calibration_stereo::CalibrationMode;
 using embedded_calibration_stereo::StereoPatternObservation;
-using ecs_test::Collector;
+using test_support::Collector;
 
 namespace {
 
@@ -98,8 +101,8 @@ TEST(TrackerSim, TeachesOnStartThenTracksEverySettledLightOnFrame) {
   // First window: teaching; the next one is tracked.
   ASSERT_TRUE(fixture->observations.waitForCount(1, 20.0)) << "no observation within 20 s";
   const ros::Time first = fixture->observations.snapshot().front()->header.stamp;
-  ecs::PatternPrior prior;
-  ASSERT_NO_THROW(prior = ecs::readPatternPrior(prior_file)) << prior_file;
+  core::PatternPrior prior;
+  ASSERT_NO_THROW(prior = core::readPatternPrior(prior_file)) << prior_file;
   ASSERT_EQ(prior.cameras.size(), 2u);
   // Written through a temporary file next to it (writeFileAtomically: "<file>.tmp.XXXXXX"),
   // renamed over the target: none may be left in the folder once the prior is there.
@@ -188,7 +191,7 @@ TEST(TrackerSim, TeachesOnStartThenTracksEverySettledLightOnFrame) {
 }
 
 TEST(TrackerSim, CorruptPriorIdlesWithAnErrorUntilTeach) {
-  ecs_test::TempDir dir("ecs_tracker_corrupt");
+  test_support::TempDir dir("ecs_tracker_corrupt");
   const std::string prior_file = dir.path + "/prior.yaml";
   std::ofstream(prior_file) << "%YAML:1.0\nformat: \"not a prior\"\ncameras: [ {\n";
   const std::string name = ros::this_node::getNamespace() + "/corrupt_tracker";
@@ -202,7 +205,7 @@ TEST(TrackerSim, CorruptPriorIdlesWithAnErrorUntilTeach) {
   ASSERT_TRUE(loader.load(name, "embedded_calibration_stereo/PatternTracker", remappings, {}));
 
   std::string error;
-  EXPECT_TRUE(ecs_test::waitForLog(fixture->log, {prior_file, "idle"}, 8.0, &error));
+  EXPECT_TRUE(test_support::waitForLog(fixture->log, {prior_file, "idle"}, 8.0, &error));
   std::printf("tracker_sim: corrupt prior error: %s\n", error.c_str());
   ASSERT_TRUE(waitForWindow(loaded, 6.0));
   EXPECT_TRUE(observations.snapshot().empty()) << "observations from a corrupt prior";
@@ -213,8 +216,8 @@ TEST(TrackerSim, CorruptPriorIdlesWithAnErrorUntilTeach) {
   ASSERT_TRUE(teach.call(srv));
   EXPECT_TRUE(srv.response.success) << srv.response.message;
   EXPECT_TRUE(observations.waitForCount(3, 15.0)) << "no observations after teach";
-  ecs::PatternPrior prior;
-  EXPECT_NO_THROW(prior = ecs::readPatternPrior(prior_file));
+  core::PatternPrior prior;
+  EXPECT_NO_THROW(prior = core::readPatternPrior(prior_file));
   EXPECT_EQ(prior.cameras.size(), 2u);
   EXPECT_TRUE(loader.unload(name));
 }
@@ -222,5 +225,5 @@ TEST(TrackerSim, CorruptPriorIdlesWithAnErrorUntilTeach) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  return ecs_test::runTestsWithFixture(argc, argv, "tracker_sim_test", 2, &fixture);
+  return test_support::runTestsWithFixture(argc, argv, "tracker_sim_test", 2, &fixture);
 }

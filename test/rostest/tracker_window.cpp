@@ -13,10 +13,12 @@
 #include "embedded_calibration_stereo/CalibrationMode.h"
 #include "embedded_calibration_stereo/StereoPatternObservation.h"
 
+namespace test_support = embedded_calibration_stereo::test_support;
+
 using embedded_calibration_stereo::BoardObservation;
 using embedded_calibration_stereo::CalibrationMode;
 using embedded_calibration_stereo::StereoPatternObservation;
-using ecs_test::Collector;
+using test_support::Collector;
 
 namespace {
 

@@ -33,8 +33,10 @@
 #include "depth_test_utils.h"
 #include "driver_test_utils.h"
 
+namespace test_support = embedded_calibration_stereo::test_support;
+
 using diagnostic_msgs::DiagnosticArray;
-using ecs_test::Collector;
+using test_support::Collector;
 using sensor_msgs::CameraInfo;
 using sensor_msgs::Image;
 using stereo_msgs::DisparityImage;
@@ -42,7 +44,7 @@ using stereo_msgs::DisparityImage;
 namespace {
 
 std::unique_ptr<nodelet::Loader> loader;  // created in main, after ros::init
-ecs_test::TempDir calibration_dir("ecs_zero_copy");
+test_support::TempDir calibration_dir("ecs_zero_copy");
 
 void setParams(const std::string& name, const std::map<std::string, XmlRpc::XmlRpcValue>& params) {
   for (const auto& p : params) ros::param::set(name + "/" + p.first, p.second);
@@ -108,13 +110,13 @@ TEST(ZeroCopy, SeparatorRepublishesTheDriverObjects) {
   ASSERT_TRUE(scene.waitFor(
       [&](const std::vector<Image::ConstPtr>& m) {
         int matched = 0;
-        for (const auto& s : m) matched += ecs_test::findByStamp(raw.snapshot(), s->header.stamp) != nullptr;
+        for (const auto& s : m) matched += test_support::findByStamp(raw.snapshot(), s->header.stamp) != nullptr;
         return matched >= 5;
       },
       30.0));
   int identical = 0;
   for (const auto& s : scene.snapshot()) {
-    const auto r = ecs_test::findByStamp(raw.snapshot(), s->header.stamp);
+    const auto r = test_support::findByStamp(raw.snapshot(), s->header.stamp);
     if (!r) continue;
     EXPECT_EQ(s.get(), r.get()) << "image_scene at " << s->header.stamp << " is not the image_raw object";
     identical += s.get() == r.get();
@@ -147,12 +149,12 @@ TEST(ZeroCopy, DisparityReceivesTheRectifierObjectsWithoutCopies) {
   const auto a = rect_a.snapshot(), b = rect_b.snapshot();
   int identical = 0, with_disparity = 0;
   for (const auto& m : a) {
-    const auto other = ecs_test::findByStamp(b, m->header.stamp);
+    const auto other = test_support::findByStamp(b, m->header.stamp);
     if (!other) continue;
     EXPECT_EQ(m.get(), other.get()) << "two subscriptions got different image_rect objects";
     EXPECT_EQ(m->data.data(), other->data.data());
     identical += m.get() == other.get();
-    with_disparity += ecs_test::findByStamp(disparity.snapshot(), m->header.stamp) != nullptr;
+    with_disparity += test_support::findByStamp(disparity.snapshot(), m->header.stamp) != nullptr;
   }
   EXPECT_GE(identical, 5);
   EXPECT_GE(with_disparity, 3) << "image_rect frames probed have no disparity of the same stamp";

@@ -30,19 +30,19 @@ namespace embedded_calibration_stereo {
 
 struct HealthParams {
   std::string device_config;
-  std::vector<ecs::VirtualBoard> boards;  // device_config's
-  std::optional<ecs::StereoRig> nominal;  // device_config's cameras, if it has them
+  std::vector<core::VirtualBoard> boards;  // device_config's
+  std::optional<core::StereoRig> nominal;  // device_config's cameras, if it has them
   // rollback, boards_posed (true: the boards sit at their poses, as the solve of the calibration
   // in force placed them or where device_config puts them for a calibration no solve here made;
   // false: each board's pose is fitted in each frame), solve_boards_wait_s, refine_predicted_px
   // (a commit predicted no better than a degraded calibration wants more bursts, which light
   // frames while GOOD), max_refinements; the DEGRADED thresholds are copied from `monitor`.
-  ecs::CalibrationHealthPolicyOptions policy;
+  core::CalibrationHealthPolicyOptions policy;
   int depth_every_n_frames = 2;  // measured here; the monitor's own stride is 1
   int queue_size = 5;
   double service_timeout_s = 2.0;
-  ecs::CalibrationMonitorOptions monitor;
-  ecs::DepthCoverageWatchOptions coverage;  // disparity_coverage of light-off frames
+  core::CalibrationMonitorOptions monitor;
+  core::DepthCoverageWatchOptions coverage;  // disparity_coverage of light-off frames
 };
 
 // The latest frames by stamp: each one's light and epoch (calibration_mode) and calibrations
@@ -74,7 +74,7 @@ HealthParams loadHealthParams(const ros::NodeHandle& pnh, const std::string& def
 
 // A verdict as published on calibration/health (its reason and calibration_wanted aside):
 // figures of signals not measured are NaN.
-CalibrationHealthPtr toHealthMsg(const ecs::HealthReport& report, uint32_t epoch, const ros::Time& stamp);
+CalibrationHealthPtr toHealthMsg(const core::HealthReport& report, uint32_t epoch, const ros::Time& stamp);
 
 // What the diagnostics show besides the report and the policy's state.
 struct HealthDiagnostics {
@@ -84,7 +84,7 @@ struct HealthDiagnostics {
 };
 // OK when GOOD, WARN when DEGRADED or without a verdict, ERROR when BAD, when the calibration in
 // force cannot be used or a restore failed; then the figures. `reason`: the policy's.
-void fillHealthDiagnostics(const ecs::HealthReport& report, const ecs::CalibrationHealthDecisions& policy,
+void fillHealthDiagnostics(const core::HealthReport& report, const core::CalibrationHealthDecisions& policy,
                            const std::string& reason, const HealthDiagnostics& extra,
                            diagnostic_updater::DiagnosticStatusWrapper* status);
 
@@ -97,15 +97,15 @@ std::future<std::string> restoreCalibration(
 CalibrationStatus rolledBackStatus(uint32_t epoch, const std::string& why);
 
 // The parts of a calibrator's status the policy decides on.
-ecs::CalibratorStatus toCalibratorStatus(const CalibrationStatus& status);
+core::CalibratorStatus toCalibratorStatus(const CalibrationStatus& status);
 
 // Board poses of an accepted solve, with the intrinsics it was solved with.
 struct SolvedBoards {
   std::vector<double> left, right;  // as CalibrationStatus: fx, fy, cx, cy, D
-  std::vector<ecs::VirtualBoard> boards;
+  std::vector<core::VirtualBoard> boards;
 };
 // An accepted status's boards (`boards` placed at its poses), or none when it places none.
-std::optional<SolvedBoards> solvedBoards(const CalibrationStatus& status, const std::vector<ecs::VirtualBoard>& boards);
+std::optional<SolvedBoards> solvedBoards(const CalibrationStatus& status, const std::vector<core::VirtualBoard>& boards);
 // Whether `solved` was solved with the intrinsics of `left` and `right`.
 bool solvedWith(const SolvedBoards& solved, const sensor_msgs::CameraInfo& left, const sensor_msgs::CameraInfo& right);
 

@@ -31,7 +31,7 @@ enum class CommitTarget {
   kNone,    // nowhere but /tf_static (bag replay: the camera_info comes from the bag)
 };
 
-// Reads "driver" | "none"; throws ecs::ConfigError otherwise.
+// Reads "driver" | "none"; throws core::ConfigError otherwise.
 CommitTarget parseCommitTarget(const std::string& name);
 
 // status.reason of a calibration accepted by the gate but, with commit "none", committed nowhere.
@@ -57,21 +57,21 @@ struct CalibratorParams {
   double commit_retry_s = 10.0;    // s between commits again of a calibration the driver could not store; 0: never
   // Automatic solves (windows, window observations): min_solve_interval_s apart at the least,
   // solve_queue_size waiting at most (the oldest dropped): paced_queue.h.
-  ecs::PacedQueueOptions solve_pacing;
+  core::PacedQueueOptions solve_pacing;
   CommitTarget commit = CommitTarget::kDriver;
   // cv::stereoRectify's alpha for the committed CameraInfo R and P: 0 every rectified pixel
   // valid, 1 every raw pixel kept, -1 OpenCV's default scaling.
   double rectification_alpha = 0.0;
-  ecs::BundleAdjustmentOptions adjustment;
-  ecs::BundleAdjustmentConfig terms;  // which distortion terms are estimated (k1 k2 by default)
-  ecs::GateOptions gate;
+  core::BundleAdjustmentOptions adjustment;
+  core::BundleAdjustmentConfig terms;  // which distortion terms are estimated (k1 k2 by default)
+  core::GateOptions gate;
   // Each window solved again with what the earlier ones taught as the prior of the parameter
   // groups it does not contradict (calibration_filter.h).
   bool prior_from_earlier_windows = true;
-  ecs::CalibrationFilterOptions filter;
+  core::CalibrationFilterOptions filter;
 };
 
-// Reads the private parameters; throws ecs::ConfigError naming a bad one.
+// Reads the private parameters; throws core::ConfigError naming a bad one.
 CalibratorParams loadCalibratorParams(const ros::NodeHandle& pnh, const std::string& default_device_config);
 
 // A recalibrate request within the calibrator's limits: `frames` (0: min_frames) at most
@@ -90,14 +90,14 @@ BoundedRequest boundRecalibrateRequest(uint32_t frames, double timeout_s, const 
 // The defects of one observation message that make the calibrator drop it (non-finite
 // coordinates, duplicate ids, ids outside the board, unknown board, mismatched lengths), from
 // the core validator; a board with merely few corners is not a defect. Empty when usable.
-std::vector<std::string> observationDefects(const ecs::StereoObservation& observation,
-                                            const std::vector<ecs::VirtualBoard>& boards);
+std::vector<std::string> observationDefects(const core::StereoObservation& observation,
+                                            const std::vector<core::VirtualBoard>& boards);
 
 // CalibrationStatus of a solve (every field filled; intrinsics fx, fy, cx, cy, k1, k2, p1, p2, k3).
 // The predicted accuracy for depth is that of the rig rectified with `rectification` (the
 // committed CameraInfo's), from the solve's covariance; zero without one.
-CalibrationStatus makeStatus(const ecs::BundleAdjustmentSummary& summary, const ecs::GateDecision& decision,
-                             const ecs::RectificationOptions& rectification = {});
+CalibrationStatus makeStatus(const core::BundleAdjustmentSummary& summary, const core::GateDecision& decision,
+                             const core::RectificationOptions& rectification = {});
 
 // The pair a successful commit sent to the driver's set_camera_info services.
 struct CommittedCalibration {
@@ -113,7 +113,7 @@ bool carriesCalibration(const sensor_msgs::CameraInfo& published, const sensor_m
 // CalibrationSession::commitAgain() needs to try again.
 struct UncommittedCalibration {
   CommittedCalibration infos;
-  ecs::StereoRig rig;
+  core::StereoRig rig;
   // The calibration in force it was gated against (the left one is put back when only the right
   // side is refused): committed again only while the driver still publishes these.
   sensor_msgs::CameraInfo left_in_force, right_in_force;
@@ -129,8 +129,8 @@ class CalibrationSession {
   // `nh`: the head's namespace (the driver's services are looked up there). `nominal`: the
   // device description's cameras; a solve whose focal lengths lie far from theirs
   // (checkNominalFocal) is not committed. None: no such check.
-  CalibrationSession(ros::NodeHandle nh, CalibratorParams params, ecs::CalibrationDevice device,
-                     std::optional<ecs::StereoRig> nominal = std::nullopt);
+  CalibrationSession(ros::NodeHandle nh, CalibratorParams params, core::CalibrationDevice device,
+                     std::optional<core::StereoRig> nominal = std::nullopt);
 
   // `left_info`/`right_info`: the calibration in force (null when none received yet);
   // `epoch`: its calibration_epoch. Commits unless `dry_run` or rejected. status.accepted is
@@ -146,7 +146,7 @@ class CalibrationSession {
   // `health_problem_s` (optional): the stamp (s) of the newest calibration/health verdict below
   // GOOD; when it is not older than what earlier windows taught, the stereo rotation and the
   // focal lengths (what the health's change model sees) get no prior from them.
-  CalibrationStatus solve(const std::vector<ecs::StereoObservation>& frames,
+  CalibrationStatus solve(const std::vector<core::StereoObservation>& frames,
                           const sensor_msgs::CameraInfo* left_info, const sensor_msgs::CameraInfo* right_info,
                           uint32_t epoch, bool dry_run, std::optional<CommittedCalibration>* committed,
                           std::optional<UncommittedCalibration>* uncommitted = nullptr,
@@ -156,31 +156,31 @@ class CalibrationSession {
   std::string commitAgain(const UncommittedCalibration& calibration);
 
   // The left->right optical transform of `rig` on /tf_static (also sent at every commit).
-  void broadcastTransform(const ecs::StereoRig& rig);
+  void broadcastTransform(const core::StereoRig& rig);
 
-  const ecs::CalibrationDevice& device() const { return device_; }
+  const core::CalibrationDevice& device() const { return device_; }
   // What the last solve took from earlier windows, in words ("" when nothing): for the log.
   const std::string& priorNote() const { return prior_note_; }
-  const std::vector<ecs::VirtualBoard>& boards() const { return boards_; }
+  const std::vector<core::VirtualBoard>& boards() const { return boards_; }
 
  private:
   // Why a pair fails the checks every consumer runs (stereo_input_check.h) or lies far from the
   // nominal cameras, or "".
   std::string implausibleCandidate(const CommittedCalibration& infos) const;
-  ecs::BundleAdjustmentSummary solveWindow(const std::vector<ecs::StereoObservation>& frames,
-                                           const sensor_msgs::CameraInfo& left_info, const ecs::StereoRig* in_force,
+  core::BundleAdjustmentSummary solveWindow(const std::vector<core::StereoObservation>& frames,
+                                           const sensor_msgs::CameraInfo& left_info, const core::StereoRig* in_force,
                                            std::optional<double> health_problem_s);
-  CalibrationStatus statusOf(const ecs::BundleAdjustmentSummary& candidate, const ecs::GateDecision& decision,
-                             const ecs::BundleAdjustmentSummary& in_force_fit, uint32_t epoch,
-                             const std::vector<ecs::StereoObservation>& frames) const;
-  void commitAccepted(const ecs::BundleAdjustmentSummary& candidate, bool learned,
+  CalibrationStatus statusOf(const core::BundleAdjustmentSummary& candidate, const core::GateDecision& decision,
+                             const core::BundleAdjustmentSummary& in_force_fit, uint32_t epoch,
+                             const std::vector<core::StereoObservation>& frames) const;
+  void commitAccepted(const core::BundleAdjustmentSummary& candidate, bool learned,
                       const sensor_msgs::CameraInfo& left_info, const sensor_msgs::CameraInfo& right_info,
                       CalibrationStatus* status, std::optional<CommittedCalibration>* committed,
                       std::optional<UncommittedCalibration>* uncommitted);
   // Empty on success, otherwise why the commit failed. When only the right one was refused, a
   // left calibration the driver stored (a driver without pairs) is restored to `left_in_force`;
   // our driver only staged it ("staged: ..." answer) and has already dropped it.
-  std::string commit(const CommittedCalibration& infos, const ecs::StereoRig& rig,
+  std::string commit(const CommittedCalibration& infos, const core::StereoRig& rig,
                      const sensor_msgs::CameraInfo& left_in_force);
   // *answer (optional): the driver's status message of an accepted call.
   bool callSetCameraInfo(const std::string& side, const sensor_msgs::CameraInfo& info, std::string* error,
@@ -188,15 +188,15 @@ class CalibrationSession {
 
   ros::NodeHandle nh_;
   CalibratorParams params_;
-  ecs::CalibrationDevice device_;
-  std::optional<ecs::StereoRig> nominal_;
-  std::vector<ecs::VirtualBoard> boards_;
-  ecs::BundleAdjuster adjuster_;
-  ecs::QualityGate gate_;
+  core::CalibrationDevice device_;
+  std::optional<core::StereoRig> nominal_;
+  std::vector<core::VirtualBoard> boards_;
+  core::BundleAdjuster adjuster_;
+  core::QualityGate gate_;
   // What earlier windows taught, valid while the calibration in force is the one it was
   // learned under (filter_in_force_: left, right; another one, a rollback or a calibration set
   // from outside, resets it). Touched by solve() and commitAgain() only: the worker thread.
-  ecs::CalibrationFilter filter_;
+  core::CalibrationFilter filter_;
   std::optional<std::pair<sensor_msgs::CameraInfo, sensor_msgs::CameraInfo>> filter_in_force_;
   std::optional<double> in_force_predicted_px_;  // our calibration in force's predicted hypot(misalignment, bias)
   std::string prior_note_;

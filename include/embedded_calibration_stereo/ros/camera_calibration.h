@@ -54,12 +54,12 @@ class StereoCalibration {
     std::string parameter;  // URL parameter, named in errors (e.g. "left_camera_info_url")
   };
 
-  // Resolves both URLs. Throws ecs::ConfigError naming the URL parameter when a URL cannot be
+  // Resolves both URLs. Throws core::ConfigError naming the URL parameter when a URL cannot be
   // resolved, or when both resolve to the same file. `width` x `height`: the cameras' images.
   // `nominal`: the device description's cameras, whose focal lengths every calibration must be
   // near (checkNominalFocal); none: no such check.
   StereoCalibration(const Camera& left, const Camera& right, uint32_t width, uint32_t height,
-                    double pair_timeout_s, std::optional<ecs::StereoRig> nominal = std::nullopt);
+                    double pair_timeout_s, std::optional<core::StereoRig> nominal = std::nullopt);
 
   // Loads the pair at start-up (see above); the fallbacks (the nominal calibration, or
   // uncalibrated messages carrying the image size) are used when there is no file at all or
@@ -139,7 +139,7 @@ class StereoCalibration {
   const Camera left_camera_, right_camera_;
   const uint32_t width_, height_;
   const std::chrono::duration<double> pair_timeout_;
-  const std::optional<ecs::StereoRig> nominal_;
+  const std::optional<core::StereoRig> nominal_;
   CalibrationPairStore store_;
 
   std::mutex write_mutex_;  // serialises load(), set() and expireStaged()

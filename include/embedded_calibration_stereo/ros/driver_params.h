@@ -1,12 +1,12 @@
 #pragma once
 // The camera driver's parameters (private namespace of the nodelet), read and validated in one
-// place. Every problem throws ecs::ConfigError whose message starts with the parameter name.
+// place. Every problem throws core::ConfigError whose message starts with the parameter name.
 // See the README for the table of parameters, defaults and units.
 #include <ros/node_handle.h>
 
 #include <string>
 
-#include "embedded_calibration_stereo/core/calibration/light_schedule.h"
+#include "embedded_calibration_stereo/core/light/light_schedule.h"
 #include "embedded_calibration_stereo/ros/frame_source.h"
 #include "embedded_calibration_stereo/ros/light_backend.h"
 
@@ -32,7 +32,7 @@ struct DriverParams {
   // The device description (its `rig`: the nominal cameras); every calibration's focal lengths
   // must lie near its (kNominalFocalFactor). Empty: sim_config with the sim backend, else none.
   std::string device_config;
-  ecs::LightScheduleConfig schedule;    // calibration_period_s, calibration_frames, settle_frames, trigger, ...
+  core::LightScheduleConfig schedule;    // calibration_period_s, calibration_frames, settle_frames, trigger, ...
   FilesSourceParams files;
   V4l2SourceParams v4l2;
   LightBackendParams light;  // light_backend (default: sim for the sim backend, else none), serial_*, gpio_*
@@ -42,7 +42,7 @@ struct DriverParams {
 // calibration_trigger (periodic | on_demand), min_calibration_interval_s, verification_period_s,
 // first_burst_delay_s.
 class ParameterReader;
-void readHealthSchedule(const ParameterReader& read, ecs::LightScheduleConfig* schedule);
+void readHealthSchedule(const ParameterReader& read, core::LightScheduleConfig* schedule);
 
 // Reads and validates the parameters. `default_sim_config` is used when sim_config is not set.
 // Checks types (ParameterReader), ranges and names (backend, light_backend, encodings, escapes);

@@ -1,7 +1,7 @@
 #pragma once
 // The LightController's input (docs/nodelets.md#lightcontroller): an external driver's
 // driver/left|right/image_raw and driver/left|right/camera_info, counted as they arrive
-// (ecs::InputArrivalWatch names the silent ones), filtered before the synchroniser (stamps far
+// (core::InputArrivalWatch names the silent ones), filtered before the synchroniser (stamps far
 // from the other inputs' and unreadable images never reach it, whose queue they would fill:
 // stamp_guard.h) and paired into stereo frames by stamp (ExactTime), or by nearest stamps
 // (ApproximateTime) for two independent drivers.
@@ -22,7 +22,7 @@
 #include <memory>
 #include <string>
 
-#include "embedded_calibration_stereo/core/calibration/input_arrivals.h"
+#include "embedded_calibration_stereo/core/driver/input_arrivals.h"
 #include "embedded_calibration_stereo/ros/lazy_synced_input.h"
 #include "embedded_calibration_stereo/ros/stamp_guard.h"
 
@@ -46,7 +46,7 @@ class ExternalStereoInput {
   /// The resolved topics: 0 left image, 1 left camera_info, 2 right image, 3 right camera_info.
   std::string topic(int index) const;
   /// The arrivals of the four topics and the frames paired (for naming a silent topic).
-  ecs::InputArrivalWatch& arrivals() { return *arrivals_; }
+  core::InputArrivalWatch& arrivals() { return *arrivals_; }
 
  private:
   using Image = sensor_msgs::Image;
@@ -62,7 +62,7 @@ class ExternalStereoInput {
   Frame frame_;
   image_transport::SubscriberFilter left_sub_, right_sub_;
   message_filters::Subscriber<CameraInfo> left_info_sub_, right_info_sub_;
-  std::unique_ptr<ecs::InputArrivalWatch> arrivals_;
+  std::unique_ptr<core::InputArrivalWatch> arrivals_;
   std::unique_ptr<StampGuard> guard_;  // the subscribers -> the admissions -> the synchroniser
   std::unique_ptr<AdmissionFilter<Image>> left_admit_, right_admit_;
   std::unique_ptr<AdmissionFilter<CameraInfo>> left_info_admit_, right_info_admit_;

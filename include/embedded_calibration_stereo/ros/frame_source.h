@@ -1,10 +1,10 @@
 #pragma once
 // Where the driver's stereo frames come from. One implementation per backend:
-//  - sim   (sim_frame_source.cpp): renders ecs::SimRig, with ground truth;
+//  - sim   (sim_frame_source.cpp): renders core::SimRig, with ground truth;
 //  - files (files_frame_source.cpp): replays image pairs or two videos, with an optional CSV
 //    of the light state per frame;
 //  - v4l2  (v4l2_frame_source.cpp): two V4L2 devices, or one side-by-side device split in halves.
-// Construction validates everything it can (paths, devices, sizes) and throws ecs::ConfigError
+// Construction validates everything it can (paths, devices, sizes) and throws core::ConfigError
 // naming the parameter, so that the driver's onInit fails loudly.
 //
 // Threading: a source is used by one thread at a time (the driver's capture thread).
@@ -25,7 +25,7 @@ struct StereoFrame {
   cv::Mat left, right;                 // CV_8UC1 ("mono8") or CV_8UC3 ("bgr8")
   std::string encoding;                // sensor_msgs encoding of left and right
   std::optional<bool> light_on;        // recorded light state (files backend with a CSV)
-  std::shared_ptr<const ecs::SimFrame> truth;  // sim backend only
+  std::shared_ptr<const core::SimFrame> truth;  // sim backend only
 };
 
 class FrameSource {
@@ -73,13 +73,13 @@ struct V4l2SourceParams {
 cv::Mat convertToEncoding(const cv::Mat& image, const std::string& encoding);
 
 // `sim` is shared with the driver, which changes its drift (sim/set_drift) from another
-// thread; ecs::SimRig guards its drift state itself. Frame k (from 0) is rendered at scene time
-// k / fps whatever the `time_s` given to grab(): a run is deterministic (ecs::SimRig::render).
+// thread; core::SimRig guards its drift state itself. Frame k (from 0) is rendered at scene time
+// k / fps whatever the `time_s` given to grab(): a run is deterministic (core::SimRig::render).
 // Throws std::invalid_argument when fps is not > 0.
-std::unique_ptr<FrameSource> makeSimFrameSource(std::shared_ptr<ecs::SimRig> sim,
+std::unique_ptr<FrameSource> makeSimFrameSource(std::shared_ptr<core::SimRig> sim,
                                                 SharedLightLevel light_level, double fps);
 // Same, with the light's command (from makeSimLight with the same object).
-std::unique_ptr<FrameSource> makeSimFrameSource(std::shared_ptr<ecs::SimRig> sim, SharedLightLevel light_level,
+std::unique_ptr<FrameSource> makeSimFrameSource(std::shared_ptr<core::SimRig> sim, SharedLightLevel light_level,
                                                 SharedLightCommand light_command, double fps);
 std::unique_ptr<FrameSource> makeFilesFrameSource(const FilesSourceParams& params);
 std::unique_ptr<FrameSource> makeV4l2FrameSource(const V4l2SourceParams& params);

@@ -119,7 +119,7 @@ class LazySyncedInput : public LazySubscription {
   using Topics = std::array<std::string, kTopics>;
 
   // `private_nh`: where image_transport reads its transport hint parameter and the guard its
-  // stamp_tolerance_s (throws ecs::ConfigError naming it when unusable); its namespace (the
+  // stamp_tolerance_s (throws core::ConfigError naming it when unusable); its namespace (the
   // nodelet's name) names the owner in warnings.
   LazySyncedInput(const ros::NodeHandle& nh, const ros::NodeHandle& private_nh, Topics topics,
                   bool approximate_sync, int queue_size, Callback callback)

@@ -4,13 +4,13 @@
 //  - sim:    sets the light level rendered by the sim backend;
 //  - serial: writes configurable byte strings to a tty (serial_light.cpp);
 //  - gpio:   drives a libgpiod v1 line (gpio_light.cpp; needs ECS_HAVE_GPIOD).
-// Construction opens the device and throws ecs::ConfigError naming the parameter on failure.
+// Construction opens the device and throws core::ConfigError naming the parameter on failure.
 //
 // Threading: apply() is called by one thread at a time (the driver's capture thread).
 #include <memory>
 #include <string>
 
-#include "embedded_calibration_stereo/core/calibration/light_schedule.h"
+#include "embedded_calibration_stereo/core/light/light_schedule.h"
 #include "embedded_calibration_stereo/ros/frame_source.h"
 
 namespace embedded_calibration_stereo {
@@ -21,7 +21,7 @@ class LightBackend {
   // Called once per frame, before the frame is grabbed, with the schedule's state for it.
   // Hardware backends write only when the commanded state differs from the last one written.
   // Returns false with the reason when the device could not be driven.
-  virtual bool apply(const ecs::LightState& state, std::string* error) = 0;
+  virtual bool apply(const core::LightState& state, std::string* error) = 0;
 };
 
 struct SerialLightParams {
@@ -49,7 +49,7 @@ class ParameterReader;
 // LightController's, docs/nodelets.md): light_backend one of sim, serial, gpio, none
 // (`default_backend` when absent); serial: serial_port required and not empty, serial_baud,
 // serial_on/serial_off with escapes (unescapeBytes); gpio: gpio_line required, >= 0, gpio_chip,
-// gpio_active_low. The other backend's parameters are not read. Throws ecs::ConfigError naming
+// gpio_active_low. The other backend's parameters are not read. Throws core::ConfigError naming
 // the parameter. Whether sim fits the camera backend is the caller's check.
 LightBackendParams readLightBackendParams(const ParameterReader& read, const std::string& default_backend);
 

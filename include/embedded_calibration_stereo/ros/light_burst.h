@@ -72,7 +72,7 @@ std::string stereoFormatProblem(const sensor_msgs::Image& left, const sensor_msg
 // A stereo frame as the core tracker takes it: the messages' pixels (they own them) and the
 // colour order, or why it cannot be read ("" when read): stereoFormatProblem, or cv_bridge's error.
 std::string readStereo(const sensor_msgs::ImageConstPtr& left, const sensor_msgs::ImageConstPtr& right,
-                       cv::Mat* left_image, cv::Mat* right_image, ecs::ColorOrder* order);
+                       cv::Mat* left_image, cv::Mat* right_image, core::ColorOrder* order);
 
 // A burst's image as the core takes it: the message's pixels (the message owns them), rgb8
 // converted to BGR. Throws cv_bridge::Exception when the message cannot be read.
@@ -81,6 +81,6 @@ cv::Mat windowImage(const sensor_msgs::ImageConstPtr& m);
 // One camera's frames of a burst (0 left, 1 right), through windowImage: keep the burst (its
 // messages) alive while they are used. A missing light-off frame (the burst under way has none
 // after it) is left out.
-ecs::WindowFrames windowFrames(const LightBurst& burst, int camera);
+core::WindowFrames windowFrames(const LightBurst& burst, int camera);
 
 }  // namespace embedded_calibration_stereo

@@ -1,6 +1,6 @@
 #pragma once
 // The one reader of the nodelets' private parameters. An absent parameter takes its default; a
-// present one of the wrong type is refused (ecs::ConfigError naming it), never silently replaced
+// present one of the wrong type is refused (core::ConfigError naming it), never silently replaced
 // by the default as NodeHandle::param() does. Types follow XmlRpc strictly:
 //   int     an XmlRpc int only (5.0 is refused, where roscpp's getParam(int) would round it);
 //   double  an XmlRpc double or int (a finite value);
@@ -19,7 +19,7 @@
 #include <string>
 #include <vector>
 
-#include "embedded_calibration_stereo/core/geometry/config_error.h"
+#include "embedded_calibration_stereo/core/io/config_error.h"
 
 namespace embedded_calibration_stereo {
 
@@ -62,7 +62,7 @@ class ParameterReader {
   Lookup lookup_;
 };
 
-// Checks of values already read (or derived from several), throwing ecs::ConfigError(name, ...).
+// Checks of values already read (or derived from several), throwing core::ConfigError(name, ...).
 template <class T>
 void checkRange(const std::string& name, const T& value, const T& min, const T& max);
 template <class T>
@@ -106,13 +106,13 @@ template <class T>
 void checkRange(const std::string& name, const T& value, const T& min, const T& max) {
   using parameter_reader_detail::show;
   if (!(value >= min && value <= max))
-    throw ecs::ConfigError(name, "must be in [" + show(min) + ", " + show(max) + "], got " + show(value));
+    throw core::ConfigError(name, "must be in [" + show(min) + ", " + show(max) + "], got " + show(value));
 }
 
 template <class T>
 void checkAtLeast(const std::string& name, const T& value, const T& min) {
   using parameter_reader_detail::show;
-  if (!(value >= min)) throw ecs::ConfigError(name, "must be >= " + show(min) + ", got " + show(value));
+  if (!(value >= min)) throw core::ConfigError(name, "must be >= " + show(min) + ", got " + show(value));
 }
 
 }  // namespace embedded_calibration_stereo

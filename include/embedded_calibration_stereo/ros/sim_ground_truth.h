@@ -23,17 +23,17 @@ namespace embedded_calibration_stereo {
 class SimGroundTruth {
  public:
   /// Advertises the ground-truth topics and sim/set_drift in `nh`'s namespace.
-  SimGroundTruth(ros::NodeHandle& nh, image_transport::ImageTransport& it, std::shared_ptr<ecs::SimRig> sim,
+  SimGroundTruth(ros::NodeHandle& nh, image_transport::ImageTransport& it, std::shared_ptr<core::SimRig> sim,
                  const std::string& left_frame_id);
   /// One frame's truth, with the headers of its published images.
-  void publish(const ecs::SimFrame& truth, const std_msgs::Header& left_header, const std_msgs::Header& right_header);
+  void publish(const core::SimFrame& truth, const std_msgs::Header& left_header, const std_msgs::Header& right_header);
   /// Drops the service (before the manager's callback queues go).
   void shutdown() { set_drift_srv_.shutdown(); }
 
  private:
   bool setDrift(SetRigDrift::Request& req, SetRigDrift::Response& res);
 
-  std::shared_ptr<ecs::SimRig> sim_;
+  std::shared_ptr<core::SimRig> sim_;
   HeadPoseTruth head_pose_;
   ros::Publisher left_info_pub_, right_info_pub_, observations_pub_, head_pose_pub_, tf_pub_;
   image_transport::Publisher left_scene_pub_, right_scene_pub_, depth_pub_;

@@ -36,7 +36,7 @@ constexpr double kDefaultStampToleranceS = 2.0;
 double steadySeconds();
 
 // Reads the private parameter stamp_tolerance_s (double, s, >= 0.01, default
-// kDefaultStampToleranceS); throws ecs::ConfigError naming it.
+// kDefaultStampToleranceS); throws core::ConfigError naming it.
 double readStampTolerance(const ros::NodeHandle& private_nh);
 
 class StampGuard {

@@ -78,7 +78,7 @@ std::string checkNominalFocal(const sensor_msgs::CameraInfo& info, const std::st
 // (checkNominalFocal). "" or the first problem.
 std::string checkCalibrationPair(const sensor_msgs::CameraInfo& left, const std::string& left_topic,
                                  const sensor_msgs::CameraInfo& right, const std::string& right_topic,
-                                 const std::optional<ecs::StereoRig>& nominal);
+                                 const std::optional<core::StereoRig>& nominal);
 
 // Two CameraInfos, each passing checkCameraInfo, form a rectified stereo pair: same size, the
 // same fx', fy' and cy' in both P (within kRectifiedPairTolerancePx), the left P's Tx (P[3])

@@ -30,7 +30,7 @@ namespace embedded_calibration_stereo {
 // What teaching hands back: a stereo prior (left, right), written to the file unless
 // write_error says why not, or an error.
 struct TeachOutcome {
-  ecs::PatternPrior prior;
+  core::PatternPrior prior;
   std::string error;        // empty when taught
   std::string write_error;  // taught, but the file could not be written (a full disk): empty when written
   std::string notes;  // the teacher's notes of both cameras
@@ -40,24 +40,24 @@ struct TeachOutcome {
 // Teaches left and right with the device's virtual boards seen by the nominal cameras of
 // `device` (as track_pattern teach --device does), then writes `path` (writeStereoPrior). Never
 // throws.
-TeachOutcome teachStereoPrior(const ecs::TeachFrame& left, const ecs::TeachFrame& right, ecs::ColorOrder order,
-                              const ecs::SimRigConfig& device, const std::string& path);
+TeachOutcome teachStereoPrior(const core::TeachFrame& left, const core::TeachFrame& right, core::ColorOrder order,
+                              const core::SimRigConfig& device, const std::string& path);
 
 // The same from one light burst of each camera (frames in BGR order when in colour): each taught
 // on the device image learned from the burst's light pairs (core/tracker/window_teacher.h), no
 // covered or still scene needed. The images taught on are written beside the prior
 // (taughtOnImagePath; a failure is only noted).
-TeachOutcome teachStereoPriorFromBurst(const ecs::WindowFrames& left, const ecs::WindowFrames& right,
-                                       const ecs::SimRigConfig& device, const std::string& path);
+TeachOutcome teachStereoPriorFromBurst(const core::WindowFrames& left, const core::WindowFrames& right,
+                                       const core::SimRigConfig& device, const std::string& path);
 
 // The same from a burst's messages (a burst under way has no light-off frame after it); an image
 // cv_bridge cannot read is an error. Never throws.
-TeachOutcome teachStereoPriorFromBurst(const LightBurst& burst, const ecs::SimRigConfig& device,
+TeachOutcome teachStereoPriorFromBurst(const LightBurst& burst, const core::SimRigConfig& device,
                                        const std::string& path);
 
 // Writes `prior` to `path` through a temporary file in the same directory and a rename
 // (creating missing directories). Returns "" on success, otherwise why not. Never throws.
-std::string writeStereoPrior(const std::string& path, const ecs::PatternPrior& prior);
+std::string writeStereoPrior(const std::string& path, const core::PatternPrior& prior);
 
 // PRIOR_left_device.png for PRIOR.yaml and camera "left".
 std::string taughtOnImagePath(const std::string& prior_path, const std::string& camera_name);
@@ -69,10 +69,10 @@ class TeachingRun {
   ~TeachingRun();
   // Teaches with teachStereoPrior on copies of the frames' images (the worker outlives the
   // caller's messages).
-  void start(const ecs::TeachFrame& left, const ecs::TeachFrame& right, ecs::ColorOrder order,
-             const ecs::SimRigConfig& device, const std::string& path);
+  void start(const core::TeachFrame& left, const core::TeachFrame& right, core::ColorOrder order,
+             const core::SimRigConfig& device, const std::string& path);
   // Teaches with teachStereoPriorFromBurst on the burst's messages (never written).
-  void start(LightBurst burst, const ecs::SimRigConfig& device, const std::string& path);
+  void start(LightBurst burst, const core::SimRigConfig& device, const std::string& path);
   // The outcome of the teaching started last, once it finished; nothing while it runs, or
   // when it was already taken.
   std::optional<TeachOutcome> finished();
@@ -102,7 +102,7 @@ class PriorWriteRetry {
  private:
   void retry();
   const std::string path_, logger_;
-  std::optional<ecs::PatternPrior> prior_;
+  std::optional<core::PatternPrior> prior_;
   std::string error_;
   ros::WallTimer timer_;
 };

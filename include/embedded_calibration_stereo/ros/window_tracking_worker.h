@@ -32,7 +32,7 @@ class WindowTrackingWorker {
 
   // Hands a burst (its frames kept) to the worker with the tracker in force (a new prior makes a
   // new tracker; the worker finishes with the one it got). A burst still waiting is dropped.
-  void submit(std::shared_ptr<ecs::WindowTracker> tracker, LightBurst burst);
+  void submit(std::shared_ptr<core::WindowTracker> tracker, LightBurst burst);
   // A burst that is not tracked, `why`: logged (throttled) and counted.
   void dropped(const EndedBurst& ended, const std::string& why);
   // Adds the window figures to the diagnostics.
@@ -40,7 +40,7 @@ class WindowTrackingWorker {
 
  private:
   struct Job {
-    std::shared_ptr<ecs::WindowTracker> tracker;
+    std::shared_ptr<core::WindowTracker> tracker;
     LightBurst burst;
   };
   void run();
@@ -48,7 +48,7 @@ class WindowTrackingWorker {
 
   ros::Publisher publisher_;
   const std::string logger_, device_config_;
-  ecs::NewestJobSlot<Job> jobs_;
+  core::NewestJobSlot<Job> jobs_;
   std::mutex mutex_;                             // guards the figures below
   std::string summary_ = "no burst yet";         // the last burst: tracked (corners, ms) or why not
   uint64_t tracked_ = 0, dropped_ = 0;

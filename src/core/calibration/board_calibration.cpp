@@ -19,7 +19,7 @@
 #include "embedded_calibration_stereo/core/calibration/quality_gate.h"
 #include "embedded_calibration_stereo/core/calibration/reprojection_cost.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 std::string ChessboardSpec::validate() const {
   if (cols < 2 || rows < 2) return "the board needs at least 2x2 inner corners";
@@ -417,4 +417,4 @@ BoardCalibrationResult calibrateStereoBoard(const ChessboardSpec& board, const c
   return out;
 }
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

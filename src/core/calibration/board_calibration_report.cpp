@@ -5,7 +5,7 @@
 #include <opencv2/imgproc.hpp>
 #include <sstream>
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 namespace {
 
@@ -144,4 +144,4 @@ cv::Mat residualPlot(const BoardCalibrationResult& r) {
   return plot;
 }
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

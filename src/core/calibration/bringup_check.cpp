@@ -5,7 +5,7 @@
 #include <cstdio>
 #include <opencv2/imgproc.hpp>
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 namespace {
 
@@ -477,4 +477,4 @@ BringupVerdict judgeBringup(const BringupMeasurements& m, const BringupThreshold
   return verdict;
 }
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

@@ -24,9 +24,9 @@
 #include "embedded_calibration_stereo/core/calibration/rig_prior_cost.h"
 #include "embedded_calibration_stereo/core/calibration/scene_epipolar_cost.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
-std::string BundleAdjustmentOptions::Check() const {
+std::string BundleAdjustmentOptions::validate() const {
   if (!(loss_scale_px > 0)) return "loss_scale_px must be > 0";
   if (max_iterations <= 0) return "max_iterations must be > 0";
   if (!(function_tolerance >= 0) || !(gradient_tolerance >= 0) || !(parameter_tolerance >= 0))
@@ -79,7 +79,7 @@ StereoRig rigFromParameters(const RigParameters& p, const StereoRig& like) {
   return rig;
 }
 
-std::string BundleAdjustmentConfig::Check() const {
+std::string BundleAdjustmentConfig::validate() const {
   if (constant_board_poses && !board_poses_from_layout)
     return "constant_board_poses requires board_poses_from_layout";
   if (estimate_k3 && !estimate_k2) return "estimate_k3 requires estimate_k2";
@@ -226,9 +226,9 @@ class AdjustmentRun {
 
   // Options, config, board pose mode and layout, image size, then the observations (1).
   bool validateInputs() {
-    std::string problem_text = options_.Check();
+    std::string problem_text = options_.validate();
     if (!problem_text.empty()) return fail("invalid options: " + problem_text);
-    problem_text = config_.Check();
+    problem_text = config_.validate();
     if (!problem_text.empty()) return fail("invalid config: " + problem_text);
     if (!input_.frames || (!input_.boards && !input_.device))
       return fail("no observations or no board layout given");
@@ -855,4 +855,4 @@ BundleAdjustmentSummary evaluateFixedCalibration(const StereoRig& rig,
   return BundleAdjuster(options, config).Solve(input);
 }
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

@@ -5,7 +5,7 @@
 #include <cmath>
 #include <stdexcept>
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 namespace {
 
@@ -69,7 +69,7 @@ const std::vector<std::string>& calibrationGroupNames() {
   return names;
 }
 
-std::string CalibrationFilterOptions::Check() const {
+std::string CalibrationFilterOptions::validate() const {
   if (!(change_probability > 0.0 && change_probability < 0.5)) return "change_probability must be in (0, 0.5)";
   if (!(covariance_scale >= 1.0)) return "covariance_scale must be >= 1";
   for (double walk : {focal_walk_rel, principal_point_walk_px, distortion_walk, rotation_walk_deg, translation_walk_m})
@@ -78,7 +78,7 @@ std::string CalibrationFilterOptions::Check() const {
 }
 
 CalibrationFilter::CalibrationFilter(CalibrationFilterOptions options) : options_(options) {
-  const std::string problem = options_.Check();
+  const std::string problem = options_.validate();
   if (!problem.empty()) throw std::invalid_argument("calibration filter: " + problem);
 }
 
@@ -143,4 +143,4 @@ std::optional<RigPrior> CalibrationFilter::priorFor(const BundleAdjustmentSummar
   return prior;
 }
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

@@ -3,7 +3,7 @@
 #include <algorithm>
 #include <cstdio>
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 namespace {
 
@@ -162,4 +162,4 @@ std::string CalibrationHealthDecisions::rollbackText(uint32_t epoch, const Healt
   return text;
 }
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

@@ -5,7 +5,7 @@
 #include <opencv2/calib3d.hpp>
 #include <opencv2/core/eigen.hpp>
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 namespace {
 
@@ -201,4 +201,4 @@ std::map<std::pair<int, int>, Eigen::Isometry3d> initialBoardPoses(
   return poses;
 }
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

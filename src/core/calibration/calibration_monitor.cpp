@@ -11,7 +11,7 @@
 
 #include "embedded_calibration_stereo/core/calibration/stereo_accuracy.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 namespace {
 
@@ -101,7 +101,7 @@ const char* toString(CalibrationHealth health) {
   return "UNKNOWN";
 }
 
-std::string CalibrationMonitorOptions::Check() const { return problem().text(); }
+std::string CalibrationMonitorOptions::validate() const { return problem().text(); }
 
 namespace {
 
@@ -748,7 +748,7 @@ HealthReport CalibrationMonitor::Impl::report() const {
 }
 
 CalibrationMonitor::CalibrationMonitor(CalibrationMonitorOptions options) : impl_(new Impl) {
-  const std::string invalid = options.Check();
+  const std::string invalid = options.validate();
   if (!invalid.empty()) throw std::invalid_argument("CalibrationMonitorOptions: " + invalid);
   impl_->options = std::move(options);
 }
@@ -769,4 +769,4 @@ bool CalibrationMonitor::addVerification(double t, const StereoObservation& obse
 }
 HealthReport CalibrationMonitor::report() const { return impl_->report(); }
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

@@ -4,7 +4,7 @@
 #include <map>
 #include <tuple>
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 namespace {
 
@@ -66,4 +66,4 @@ CornerTracks buildCornerTracks(const std::vector<BoardView>& views, bool shared_
   return out;
 }
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

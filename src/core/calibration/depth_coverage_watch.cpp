@@ -5,9 +5,9 @@
 #include <stdexcept>
 #include <vector>
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
-std::string DepthCoverageWatchOptions::Check() const {
+std::string DepthCoverageWatchOptions::validate() const {
   if (!(recent_s > 0.0)) return "recent_s must be > 0";
   if (!(history_s > recent_s)) return "history_s must be > recent_s";
   if (!(min_history_s >= 0.0 && min_history_s <= history_s)) return "min_history_s must be in [0, history_s]";
@@ -24,7 +24,7 @@ std::string CoverageCollapse::text() const {
 }
 
 DepthCoverageWatch::DepthCoverageWatch(DepthCoverageWatchOptions options) : options_(options) {
-  const std::string problem = options_.Check();
+  const std::string problem = options_.validate();
   if (!problem.empty()) throw std::invalid_argument("DepthCoverageWatchOptions: " + problem);
 }
 
@@ -58,4 +58,4 @@ void DepthCoverageWatch::rebase() {
   recent_.clear();
 }
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

@@ -9,7 +9,7 @@
 
 #include "embedded_calibration_stereo/core/calibration/device_model_cost.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 namespace {
 
@@ -164,4 +164,4 @@ CalibrationDevice DeviceModelBlocks::device() const {
   return d;
 }
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

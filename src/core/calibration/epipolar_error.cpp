@@ -3,7 +3,7 @@
 #include <cmath>
 #include <map>
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 double epipolarRms(const StereoRig& rig, const std::vector<BoardView>& views) {
   std::map<std::pair<int, int>, const BoardView*> left;
@@ -37,4 +37,4 @@ double epipolarRms(const StereoRig& rig, const std::vector<BoardView>& views) {
   return n > 0 ? std::sqrt(sum / n) : 0.0;
 }
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

@@ -4,7 +4,7 @@
 #include <map>
 #include <sstream>
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 namespace {
 
@@ -108,4 +108,4 @@ ValidatedObservations validateObservations(const std::vector<StereoObservation>&
   return out;
 }
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

@@ -6,7 +6,7 @@
 #include <iomanip>
 #include <sstream>
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 namespace {
 
@@ -39,7 +39,7 @@ std::string cameraStddevProblem(const char* side, const PinholeCamera& c, const 
 
 }  // namespace
 
-std::string GateOptions::Check() const {
+std::string GateOptions::validate() const {
   if (!(max_rms_px > 0) || !(max_epipolar_rms_px > 0)) return "RMS limits must be > 0";
   if (!(max_outlier_fraction >= 0 && max_outlier_fraction <= 1))
     return "max_outlier_fraction must be in [0, 1]";
@@ -199,7 +199,7 @@ GateDecision againstInForce(const BundleAdjustmentSummary& c, const BundleAdjust
 GateDecision QualityGate::evaluate(const BundleAdjustmentSummary& c, const BundleAdjustmentSummary* in_force_fit,
                                    std::optional<double> in_force_predicted_px) const {
   const GateOptions& o = options_;
-  const std::string options_problem = o.Check();
+  const std::string options_problem = o.validate();
   if (!options_problem.empty()) return rejected("invalid gate options: " + options_problem);
   std::string problem = candidateProblem(c, o);
   if (problem.empty()) problem = uncertaintyProblem(c, o);
@@ -210,4 +210,4 @@ GateDecision QualityGate::evaluate(const BundleAdjustmentSummary& c, const Bundl
   return againstInForce(c, *in_force_fit, o, in_force_predicted_px);
 }
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

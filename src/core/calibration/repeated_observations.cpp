@@ -3,7 +3,7 @@
 #include <algorithm>
 #include <cstring>
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 namespace {
 
@@ -58,4 +58,4 @@ bool RepeatedObservations::repeats(const StereoObservation& observation) {
   return false;
 }
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

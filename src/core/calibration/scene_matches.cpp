@@ -6,9 +6,9 @@
 #include <opencv2/video/tracking.hpp>
 #include <stdexcept>
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
-std::string SceneMatchOptions::Check() const { return problem().text(); }
+std::string SceneMatchOptions::validate() const { return problem().text(); }
 
 ConfigProblem SceneMatchOptions::problem() const {
   if (max_features < 10) return {"max_features", "must be >= 10"};
@@ -25,7 +25,7 @@ ConfigProblem SceneMatchOptions::problem() const {
 std::vector<SceneMatch> matchStereoScene(const cv::Mat& left, const cv::Mat& right, const StereoRig& rig,
                                          const SceneMatchOptions& options, SceneMatchBuffers* buffers,
                                          int* features_found) {
-  const std::string problem = options.Check();
+  const std::string problem = options.validate();
   if (!problem.empty()) throw std::invalid_argument("scene matching: " + problem);
   const cv::Size size(rig.left.width, rig.left.height);
   if (left.type() != CV_8UC1 || right.type() != CV_8UC1 || left.size() != size || right.size() != size)
@@ -94,4 +94,4 @@ std::vector<SceneMatch> matchStereoScene(const cv::Mat& left, const cv::Mat& rig
   return matches;
 }
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

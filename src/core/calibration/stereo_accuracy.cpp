@@ -8,7 +8,7 @@
 
 #include "embedded_calibration_stereo/core/geometry/plumb_bob_distortion.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 namespace {
 
@@ -286,4 +286,4 @@ StereoAccuracy predictStereoAccuracy(const StereoRig& estimate, const RigCovaria
   return acc.result();
 }
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

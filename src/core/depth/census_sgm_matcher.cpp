@@ -10,11 +10,13 @@
 #include "kernel_choice.h"
 #include "sgm_kernel.h"
 
-static_assert(2 * ecs::sgm_kernel::kCensusRadiusX + 1 == ecs::kCensusSgmWindow &&
-                  2 * ecs::sgm_kernel::kCensusRadiusY + 1 == ecs::kCensusSgmWindow,
+namespace core = embedded_calibration_stereo::core;
+
+static_assert(2 * core::sgm_kernel::kCensusRadiusX + 1 == core::kCensusSgmWindow &&
+                  2 * core::sgm_kernel::kCensusRadiusY + 1 == core::kCensusSgmWindow,
               "the kernel's census window is the one the header states");
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 namespace {
 
 // Rows of a band, and rows above it over which its paths from above are started: they are
@@ -170,4 +172,4 @@ void computeCensusSgmDisparity16(const cv::Mat& left, const cv::Mat& right,
   }, bands);
 }
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

@@ -13,9 +13,9 @@
 #include <stdexcept>
 #include <utility>
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
-std::string DeviceLearnerOptions::Check() const {
+std::string DeviceLearnerOptions::validate() const {
   std::vector<std::string> problems;
   if (min_pairs < 2) problems.push_back("min_pairs must be >= 2");
   if (max_pairs < min_pairs || max_pairs > 255) problems.push_back("max_pairs must be in [min_pairs, 255]");
@@ -406,7 +406,7 @@ void combine(const std::vector<Sample>& samples, double threshold, cv::Mat* devi
 
 LearnedDevice learnDeviceImage(const std::vector<LightPair>& pairs, const DeviceLearnerOptions& options,
                                uint32_t epoch) {
-  const std::string problems = options.Check();
+  const std::string problems = options.validate();
   if (!problems.empty()) throw std::invalid_argument("device image learner: " + problems);
   if (pairs.size() < 2) throw std::invalid_argument("device image learner: needs at least 2 light pairs");
   for (const LightPair& p : pairs) {
@@ -464,4 +464,4 @@ LearnedDevice learnDeviceImage(const std::vector<LightPair>& pairs, const Device
   return learned;
 }
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

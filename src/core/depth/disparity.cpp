@@ -10,7 +10,7 @@
 #include "embedded_calibration_stereo/core/depth/disparity_filling.h"
 #include "embedded_calibration_stereo/core/depth/sad_matcher.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 DisparityAlgorithm parseDisparityAlgorithm(const std::string& name) {
   if (name == "census_sgm") return DisparityAlgorithm::kCensusSgm;
@@ -74,7 +74,7 @@ int maxWindow(const std::string& algorithm) { return algorithm == "sad" ? 15 : 2
 
 int nearestOdd(int v) { return v % 2 == 0 ? v + 1 : v; }
 
-// Collects "field value -> fixed (why)" messages for clamp() and "field: problem" for Check().
+// Collects "field value -> fixed (why)" messages for clamp() and "field: problem" for validate().
 struct Problems {
   std::vector<std::string> items;
   void add(const std::string& s) { items.push_back(s); }
@@ -91,7 +91,7 @@ namespace {
 void checkCensusSgm(const DisparityOptions& o, Problems* problems);
 }  // namespace
 
-std::string DisparityOptions::Check() const {
+std::string DisparityOptions::validate() const {
   Problems p;
   if (!isKnown(algorithm, parseAlgorithmAsInt))
     p.add("algorithm '" + algorithm + "' unknown (census_sgm, sad, bm, sgbm)");
@@ -126,7 +126,7 @@ std::string DisparityOptions::Check() const {
 
 namespace {
 
-// census_sgm's own fields (Check() has the shared ones).
+// census_sgm's own fields (validate() has the shared ones).
 void checkCensusSgm(const DisparityOptions& o, Problems* problems) {
   Problems& p = *problems;
   const int sgm_census_threshold = o.sgm_census_threshold, sgm_paths = o.sgm_paths;
@@ -191,7 +191,7 @@ std::vector<std::string> DisparityOptions::clamp() {
 }
 
 DisparityComputer::DisparityComputer(const DisparityOptions& options) : options_(options) {
-  const std::string problem = options_.Check();
+  const std::string problem = options_.validate();
   if (!problem.empty()) throw std::invalid_argument("disparity options: " + problem);
   algorithm_ = parseDisparityAlgorithm(options_.algorithm);
   const DisparityOptions& o = options_;
@@ -333,4 +333,4 @@ DisparityOptions DisparityOptions::stereoImageProcDefaults(const std::string& al
   return o;
 }
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

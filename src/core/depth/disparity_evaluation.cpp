@@ -5,7 +5,7 @@
 #include <opencv2/imgproc.hpp>
 #include <stdexcept>
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 BadPixelStats evaluateBadPixels(const cv::Mat& disparity, const cv::Mat& ground_truth,
                                 double threshold_px) {
@@ -74,4 +74,4 @@ cv::Mat rectifiedDisparityFromDepth(const cv::Mat& left_depth, const Rectificati
   return disparity;
 }
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

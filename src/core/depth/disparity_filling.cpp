@@ -7,7 +7,7 @@
 #include <vector>
 #include "parallel_pieces.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 namespace {
 
@@ -76,4 +76,4 @@ void fillDisparityHoles(cv::Mat* disparity) {
   }, stripes);
 }
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

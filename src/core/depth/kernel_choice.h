@@ -9,7 +9,7 @@
 #include <string>
 #include <vector>
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 // True when this build has the AVX2 kernels and this CPU runs them.
 inline bool kernelsAvx2Available() {
@@ -40,4 +40,4 @@ const Kernel& kernelNamed(const std::string& matcher, const std::string& name, c
                               names + "auto)");
 }
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

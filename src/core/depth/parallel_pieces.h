@@ -4,7 +4,7 @@
 #include <algorithm>
 #include <opencv2/core/utility.hpp>
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 // The number of pieces to cut a cv::parallel_for_ over `units` rows into, each at least
 // `min_units` rows: four per thread. In a nodelet manager other stages (the Rectifier of the
@@ -16,4 +16,4 @@ inline int parallelPieces(int units, int min_units) {
   return std::max(1, std::min(cv::getNumThreads() * 4, units / min_units));
 }
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

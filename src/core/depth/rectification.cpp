@@ -4,7 +4,7 @@
 #include <opencv2/imgproc.hpp>
 #include <stdexcept>
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 RectificationMethod parseRectificationMethod(const std::string& name) {
   if (name == "bouguet") return RectificationMethod::kBouguet;
@@ -171,4 +171,4 @@ std::pair<cv::Mat, cv::Mat> RectificationMaps::rectify(const cv::Mat& left_raw,
   return out;
 }
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

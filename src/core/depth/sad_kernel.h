@@ -7,7 +7,7 @@
 #include <cstddef>
 #include <cstdint>
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 namespace sad_kernel {
 
 struct Problem {
@@ -39,4 +39,4 @@ const Kernel& baselineKernel();
 const Kernel& avx2Kernel();  // defined only when built with ECS_SAD_AVX2
 
 }  // namespace sad_kernel
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

@@ -21,7 +21,7 @@
 #error "define SAD_KERNEL_GETTER and SAD_KERNEL_NAME before including sad_kernel.inl"
 #endif
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 namespace sad_kernel {
 namespace {
 
@@ -470,4 +470,4 @@ const Kernel& SAD_KERNEL_GETTER() {
 }
 
 }  // namespace sad_kernel
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

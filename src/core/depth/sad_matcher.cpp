@@ -12,7 +12,7 @@
 #include "sad_kernel.h"
 #include "parallel_pieces.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 namespace {
 
 // One row of the prefilter: the 3x3 x-Sobel response of `row` (neighbours `above` and `below`,
@@ -180,4 +180,4 @@ void computeSadDisparity16(const cv::Mat& left, const cv::Mat& right, const SadM
   }, bands);
 }
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

@@ -10,7 +10,7 @@
 #include <utility>
 #include <vector>
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 SeparationMethod parseSeparationMethod(const std::string& name) {
   if (name == "paper_global_alpha") return SeparationMethod::kPaperGlobalAlpha;
@@ -23,7 +23,7 @@ std::string toString(SeparationMethod method) {
   return method == SeparationMethod::kPaperGlobalAlpha ? "paper_global_alpha" : "regional_alpha";
 }
 
-std::string SeparatorOptions::Check() const {
+std::string SeparatorOptions::validate() const {
   std::vector<std::string> problems;
   if (tile_size < 8 || tile_size > 256) problems.push_back("tile_size must be in [8,256]");
   if (pooling_radius < 0 || pooling_radius > 8) problems.push_back("pooling_radius must be in [0,8]");
@@ -140,7 +140,7 @@ AlphaCurve fitAlphaCurve(const std::vector<AlphaSample>& samples) {
 
 ImageSeparator::ImageSeparator(const SeparatorOptions& options, DeviceTemplate templ)
     : options_(options), template_(std::move(templ)) {
-  const std::string problem = options_.Check();
+  const std::string problem = options_.validate();
   if (!problem.empty()) throw std::invalid_argument("SeparatorOptions: " + problem);
   const cv::Mat& c = template_.device;
   if (c.empty() || c.depth() != CV_32F || (c.channels() != 1 && c.channels() != 3))
@@ -439,4 +439,4 @@ void separateStereo(const ImageSeparator& left, const ImageSeparator& right,
     if (error) std::rethrow_exception(error);
 }
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

@@ -5,7 +5,7 @@
 #include <cstddef>
 #include <cstdint>
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 namespace sgm_kernel {
 
 // The census of one image: kPlanes byte planes per row, bit i of a pixel's census in plane
@@ -72,4 +72,4 @@ const Kernel& baselineKernel();
 const Kernel& avx2Kernel();  // defined only when built with ECS_SGM_AVX2
 
 }  // namespace sgm_kernel
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

@@ -26,7 +26,7 @@
 #error "define SGM_KERNEL_GETTER and SGM_KERNEL_NAME before including sgm_kernel.inl"
 #endif
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 namespace sgm_kernel {
 namespace {
 
@@ -559,4 +559,4 @@ const Kernel& SGM_KERNEL_GETTER() {
 }
 
 }  // namespace sgm_kernel
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

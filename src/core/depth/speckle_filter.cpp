@@ -5,7 +5,7 @@
 #include <stdexcept>
 #include "parallel_pieces.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 int SpeckleFilter::root(int run) {
   while (runs_[run].parent != run) {
@@ -136,4 +136,4 @@ void SpeckleFilter::apply(cv::Mat* disparity, int new_value, int max_speckle_siz
   });
 }
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

@@ -3,7 +3,7 @@
 #include <algorithm>
 #include <stdexcept>
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 namespace {
 
@@ -134,4 +134,4 @@ bool DeviceLearningPlan::adopt(const StereoLearnResult& result) const {
   return !(has_template_ && result.residual_in_use >= 0.0 && result.residual_new > result.residual_in_use);
 }
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

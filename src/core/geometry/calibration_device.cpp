@@ -3,7 +3,7 @@
 #include <Eigen/LU>
 #include <cmath>
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 Eigen::Matrix4d MirrorPlane::reflection() const {
   const Eigen::Vector3d n = normal.normalized();
@@ -69,4 +69,4 @@ std::vector<VirtualBoard> CalibrationDevice::virtualBoards() const {
   return out;
 }
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

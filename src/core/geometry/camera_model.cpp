@@ -5,7 +5,7 @@
 
 #include "embedded_calibration_stereo/core/geometry/plumb_bob_distortion.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 std::string PinholeCamera::validate() const {
   if (width <= 0) return "width must be > 0";
@@ -76,4 +76,4 @@ PinholeCamera PinholeCamera::withFocalScale(double scale) const {
   return c;
 }
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

@@ -2,7 +2,7 @@
 
 #include <cmath>
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 std::string StereoRig::validate() const {
   std::string e = left.validate();
@@ -25,4 +25,4 @@ Eigen::Matrix3d rotationFromVectorDeg(const Eigen::Vector3d& rotvec_deg) {
   return Eigen::AngleAxisd(angle, rotvec_deg.normalized()).toRotationMatrix();
 }
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

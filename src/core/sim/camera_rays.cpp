@@ -7,7 +7,7 @@
 
 #include "embedded_calibration_stereo/core/geometry/plumb_bob_distortion.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 namespace sim {
 
 void CameraRays::jacobian(double x, double y, double J[4]) const {
@@ -77,4 +77,4 @@ CameraRays computeCameraRays(const PinholeCamera& camera) {
 }
 
 }  // namespace sim
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

@@ -9,7 +9,7 @@
 
 #include "embedded_calibration_stereo/core/geometry/camera_model.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 namespace sim {
 
 struct CameraRays {
@@ -29,4 +29,4 @@ CameraRays computeCameraRays(const PinholeCamera& camera);
 bool sameIntrinsics(const PinholeCamera& a, const PinholeCamera& b);
 
 }  // namespace sim
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

@@ -4,7 +4,7 @@
 #include <cmath>
 #include <limits>
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 namespace sim {
 
 namespace {
@@ -300,4 +300,4 @@ void renderDevice(const std::vector<VirtualBoard>& boards, const CameraRays& ray
 }
 
 }  // namespace sim
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

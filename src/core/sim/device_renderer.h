@@ -18,7 +18,7 @@
 #include "camera_rays.h"
 #include "embedded_calibration_stereo/core/geometry/calibration_device.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 namespace sim {
 
 // Device radiance as a fraction of full scale (CV_32F): `white` on lit white squares and the
@@ -28,4 +28,4 @@ void renderDevice(const std::vector<VirtualBoard>& boards, const CameraRays& ray
                   cv::Mat* radiance);
 
 }  // namespace sim
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

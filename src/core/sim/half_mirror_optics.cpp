@@ -6,7 +6,7 @@
 
 #include "device_renderer.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 namespace sim {
 
 namespace {
@@ -75,4 +75,4 @@ double deviceShiftPx(const std::vector<VirtualBoard>& boards, const PinholeCamer
 }
 
 }  // namespace sim
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

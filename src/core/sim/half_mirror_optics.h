@@ -20,7 +20,7 @@
 #include "camera_rays.h"
 #include "embedded_calibration_stereo/core/sim/sim_rig.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 namespace sim {
 
 // Lateral separation of the back-surface reflection from the front-surface one, metres.
@@ -50,4 +50,4 @@ double deviceShiftPx(const std::vector<VirtualBoard>& boards, const PinholeCamer
                      const Eigen::Isometry3d& rig_from_camera_a, const Eigen::Isometry3d& rig_from_camera_b);
 
 }  // namespace sim
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

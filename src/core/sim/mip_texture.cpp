@@ -3,7 +3,7 @@
 #include <algorithm>
 #include <opencv2/imgproc.hpp>
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 namespace sim {
 
 MipTexture::MipTexture(const cv::Mat& level0) {
@@ -36,4 +36,4 @@ MipTexture::MipTexture(const cv::Mat& level0) {
 }
 
 }  // namespace sim
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

@@ -13,7 +13,7 @@
 
 #include "scene_kernel.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 namespace sim {
 
 class MipTexture {
@@ -41,4 +41,4 @@ class MipTexture {
 };
 
 }  // namespace sim
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

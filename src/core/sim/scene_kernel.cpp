@@ -3,7 +3,7 @@
 
 #include <opencv2/core/utility.hpp>
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 namespace sim {
 namespace scene_kernel {
 
@@ -17,4 +17,4 @@ const Kernel& bestKernel() {
 
 }  // namespace scene_kernel
 }  // namespace sim
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

@@ -6,7 +6,7 @@
 // function or template instance with the rest of the program.
 //
 // Both kernels give the same images to float rounding (test_sim_textures compares them).
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 namespace sim {
 namespace scene_kernel {
 
@@ -70,4 +70,4 @@ const Kernel& bestKernel();
 
 }  // namespace scene_kernel
 }  // namespace sim
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

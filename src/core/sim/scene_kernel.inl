@@ -13,7 +13,7 @@
 #error "define SCENE_KERNEL_GETTER and SCENE_KERNEL_NAME before including scene_kernel.inl"
 #endif
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 namespace sim {
 namespace scene_kernel {
 namespace {
@@ -301,4 +301,4 @@ const Kernel& SCENE_KERNEL_GETTER() {
 
 }  // namespace scene_kernel
 }  // namespace sim
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

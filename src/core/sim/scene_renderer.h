@@ -18,7 +18,7 @@
 #include "mip_texture.h"
 #include "scene_kernel.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 namespace sim {
 
 struct PlaneInCamera;  // a plane as linear forms of the camera ray (scene_renderer.cpp)
@@ -68,4 +68,4 @@ cv::Mat loadPhotoTexture(const std::string& path);
 cv::Mat makeNoiseTexture(int width, int height, int seed);
 
 }  // namespace sim
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

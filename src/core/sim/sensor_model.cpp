@@ -5,7 +5,7 @@
 #include <opencv2/core/hal/intrin.hpp>
 #include <opencv2/imgproc.hpp>
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 namespace sim {
 
 uint64_t mixSeed(uint64_t x) {
@@ -177,4 +177,4 @@ void composeSensor(const SensorParams& p, const SensorLayers* layers, int camera
 }
 
 }  // namespace sim
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

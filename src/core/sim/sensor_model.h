@@ -16,7 +16,7 @@
 
 #include "embedded_calibration_stereo/core/sim/sim_rig.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 namespace sim {
 
 class LightResponse {
@@ -84,4 +84,4 @@ void composeSensor(const SensorParams& params, const SensorLayers* layers, int c
 uint64_t mixSeed(uint64_t x);
 
 }  // namespace sim
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

@@ -8,11 +8,11 @@
 #include "camera_rays.h"
 #include "device_renderer.h"
 #include "half_mirror_optics.h"
-#include "embedded_calibration_stereo/core/geometry/config_error.h"
+#include "embedded_calibration_stereo/core/io/config_error.h"
 #include "scene_renderer.h"
 #include "sensor_model.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 namespace {
 
@@ -388,4 +388,4 @@ SimFrame SimRig::render(const SimRenderRequest& request) const {
   return frame;
 }
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

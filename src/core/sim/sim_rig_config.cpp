@@ -5,11 +5,11 @@
 #include <set>
 #include <utility>
 
-#include "embedded_calibration_stereo/core/geometry/config_error.h"
-#include "embedded_calibration_stereo/core/geometry/config_io.h"
+#include "embedded_calibration_stereo/core/io/config_error.h"
+#include "embedded_calibration_stereo/core/io/config_io.h"
 #include "embedded_calibration_stereo/core/sim/sim_rig.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 namespace {
 
@@ -461,4 +461,4 @@ SimRigConfig loadSimRigConfig(const std::string& path) {
   return c;
 }
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

@@ -7,7 +7,7 @@
 #include <initializer_list>
 #include <cstdio>
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 namespace {
 
@@ -240,4 +240,4 @@ Eigen::Isometry3d trajectoryPose(const SimTrajectory& c, double time_s) {
   return c.start * motion;
 }
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

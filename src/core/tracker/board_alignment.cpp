@@ -11,7 +11,7 @@
 
 #include "board_geometry.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 namespace tracker {
 
 namespace {
@@ -595,4 +595,4 @@ AlignmentResult alignBoard(const AlignmentTemplate& t, const cv::Mat& gray, cons
 }
 
 }  // namespace tracker
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

@@ -27,7 +27,7 @@
 
 #include "embedded_calibration_stereo/core/tracker/board_prior.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 namespace tracker {
 
 struct AlignmentTemplate {
@@ -76,4 +76,4 @@ bool fitAlignmentStart(const AlignmentTemplate& t, const std::vector<int>& ids,
                        const std::vector<cv::Point2f>& pixels, cv::Matx33d* a);
 
 }  // namespace tracker
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

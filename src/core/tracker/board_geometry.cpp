@@ -7,7 +7,7 @@
 #include <limits>
 #include <opencv2/imgproc.hpp>
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 namespace tracker {
 
 cv::Matx33d homographyFromOuter(const BoardPrior& board, const std::vector<cv::Point2f>& outer) {
@@ -91,4 +91,4 @@ float saddleContrast(const BoxSampler& sampler, cv::Point2f p, cv::Point2f along
 }
 
 }  // namespace tracker
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

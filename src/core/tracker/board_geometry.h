@@ -6,7 +6,7 @@
 
 #include "embedded_calibration_stereo/core/tracker/board_prior.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 namespace tracker {
 
 inline cv::Point2f applyHomography(const cv::Matx33d& h, double x, double y) {
@@ -56,4 +56,4 @@ float saddleContrast(const BoxSampler& sampler, cv::Point2f p, cv::Point2f along
                      int bright);
 
 }  // namespace tracker
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

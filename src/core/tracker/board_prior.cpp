@@ -2,11 +2,11 @@
 
 #include <cmath>
 
-#include "embedded_calibration_stereo/core/geometry/atomic_file.h"
-#include "embedded_calibration_stereo/core/geometry/config_error.h"
-#include "embedded_calibration_stereo/core/geometry/config_io.h"
+#include "embedded_calibration_stereo/core/io/atomic_file.h"
+#include "embedded_calibration_stereo/core/io/config_error.h"
+#include "embedded_calibration_stereo/core/io/config_io.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 std::vector<cv::Point2f> BoardPrior::meanOuterCorners() const {
   std::vector<cv::Point2f> out(4);
@@ -186,4 +186,4 @@ PatternPrior readPatternPrior(const std::string& path) {
   return prior;
 }
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

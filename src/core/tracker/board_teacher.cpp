@@ -12,7 +12,7 @@
 
 #include "board_geometry.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 BoardLayout BoardLayout::plainChessboard(int cols, int rows) {
   BoardLayout layout;
@@ -498,4 +498,4 @@ TeachResult teachCamera(const std::vector<TeachFrame>& frames, const BoardLayout
   return result;
 }
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

@@ -8,10 +8,10 @@
 
 #include "board_alignment.h"
 #include "board_geometry.h"
-#include "embedded_calibration_stereo/core/geometry/config_error.h"
+#include "embedded_calibration_stereo/core/io/config_error.h"
 #include "embedded_calibration_stereo/core/tracker/pattern_tracker.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 using tracker::applyHomography;
 using tracker::BoxSampler;
@@ -758,4 +758,4 @@ void CameraTracker::acceptBoard(BoardAttempt& a, int index, double score, BoardC
   stats.prior_deviation_px = std::sqrt(d.dot(d) / 4.0);
 }
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

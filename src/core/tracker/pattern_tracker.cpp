@@ -5,9 +5,9 @@
 #include <opencv2/imgproc.hpp>
 #include <stdexcept>
 
-#include "embedded_calibration_stereo/core/geometry/config_error.h"
+#include "embedded_calibration_stereo/core/io/config_error.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 namespace {
 
@@ -99,4 +99,4 @@ StereoObservation PatternTracker::trackStereo(const cv::Mat& left, const cv::Mat
   return obs;
 }
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

@@ -5,7 +5,7 @@
 #include <cmath>
 #include <vector>
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 namespace {
 
@@ -112,4 +112,4 @@ bool fitSaddle(const cv::Mat& gray, cv::Point2f start, cv::Point2f along_col, cv
   return true;
 }
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

@@ -3,7 +3,7 @@
 #include <cmath>
 #include <opencv2/imgproc.hpp>
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 namespace {
 
@@ -108,4 +108,4 @@ bool SceneBackground::follow(const std::vector<BoardCorners>& tracked, double mo
   return true;
 }
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

@@ -1,6 +1,6 @@
 #include "embedded_calibration_stereo/core/tracker/teaching_plan.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 const char* toString(PriorState state) {
   switch (state) {
@@ -109,4 +109,4 @@ const char* TeachingPlan::teachesAt() const {
                                     : "teaching at the next settled light-on frame";
 }
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

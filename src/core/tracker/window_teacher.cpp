@@ -4,7 +4,7 @@
 
 #include <stdexcept>
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 TeachFrame teachFrameFromDevice(const cv::Mat& device) {
   if (device.empty() || device.depth() != CV_32F || (device.channels() != 1 && device.channels() != 3))
@@ -28,4 +28,4 @@ TeachResult teachCameraFromWindow(const WindowFrames& frames, const BoardLayout&
   return result;
 }
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

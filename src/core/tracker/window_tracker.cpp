@@ -5,19 +5,19 @@
 #include <opencv2/imgproc.hpp>
 #include <stdexcept>
 
-#include "embedded_calibration_stereo/core/geometry/config_error.h"
+#include "embedded_calibration_stereo/core/io/config_error.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
-std::string WindowTrackerOptions::Check() const {
+std::string WindowTrackerOptions::validate() const {
   std::vector<std::string> problems;
-  const std::string learner_problems = learner.Check();
+  const std::string learner_problems = learner.validate();
   if (!learner_problems.empty()) problems.push_back("learner: " + learner_problems);
   if (!(saddle_radius_squares > 0.1 && saddle_radius_squares < 0.5))
     problems.push_back("saddle_radius_squares must be in (0.1, 0.5)");
   if (max_saddle_radius_px < 2) problems.push_back("max_saddle_radius_px must be >= 2");
   if (min_light_on_frames < 1) problems.push_back("min_light_on_frames must be >= 1");
-  const std::string matching_problems = matching.Check();
+  const std::string matching_problems = matching.validate();
   if (!matching_problems.empty()) problems.push_back("matching: " + matching_problems);
   std::string joined;
   for (const std::string& p : problems) joined += (joined.empty() ? "" : "; ") + p;
@@ -118,7 +118,7 @@ WindowFrames windowEnds(const WindowFrames& frames, int per_end) {
 WindowTracker::WindowTracker(const PatternPrior& prior, const TrackerOptions& tracker_options,
                              const WindowTrackerOptions& options, std::optional<StereoRig> guide)
     : tracker_(prior, tracker_options), options_(options), guide_(std::move(guide)) {
-  const std::string problems = options.Check();
+  const std::string problems = options.validate();
   if (!problems.empty()) throw ConfigError("window tracker options", problems);
 }
 
@@ -180,4 +180,4 @@ WindowTrack WindowTracker::track(const WindowFrames& left, const WindowFrames& r
   return result;
 }
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

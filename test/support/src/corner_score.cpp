@@ -6,7 +6,7 @@
 #include <opencv2/core.hpp>
 #include <utility>
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 void CornerScore::add(const std::vector<BoardCorners>& tracked, const std::vector<BoardCorners>& truth_boards) {
   std::map<std::pair<int, int>, cv::Point2f> gt;
@@ -72,4 +72,4 @@ double WindowCornerErrors::sharedRms() const {
   return sums_.empty() ? 0.0 : std::sqrt(q / sums_.size());
 }
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

@@ -5,7 +5,7 @@
 #include <opencv2/calib3d.hpp>
 #include <opencv2/core/eigen.hpp>
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 CramerRaoBound freePoseCramerRaoBound(const StereoRig& truth, const std::vector<VirtualBoard>& boards,
                                       const StereoObservation& visible, int frames, double sigma_px) {
@@ -79,4 +79,4 @@ CramerRaoBound freePoseCramerRaoBound(const StereoRig& truth, const std::vector<
   return out;
 }
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

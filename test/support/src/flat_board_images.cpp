@@ -7,7 +7,7 @@
 #include "sim/camera_rays.h"
 #include "sim/device_renderer.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 namespace {
 
@@ -122,4 +122,4 @@ std::vector<Eigen::Isometry3d> flatBoardCalibrationPoses(const StereoRig& rig, i
   return poses;
 }
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

@@ -4,7 +4,7 @@
 
 #include <cstdio>
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 int runCommand(const std::string& command, std::string* out) {
   out->clear();
@@ -17,4 +17,4 @@ int runCommand(const std::string& command, std::string* out) {
   return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
 }
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

@@ -9,14 +9,14 @@
 #include <stdexcept>
 #include <utility>
 
-#include "embedded_calibration_stereo/core/calibration/light_schedule.h"
+#include "embedded_calibration_stereo/core/light/light_schedule.h"
 #include "embedded_calibration_stereo/core/depth/disparity_evaluation.h"
 #include "embedded_calibration_stereo/core/depth/rectification.h"
 #include "embedded_calibration_stereo/core/depth/separator.h"
 #include "embedded_calibration_stereo/core/sim/sim_rig.h"
 #include "embedded_calibration_stereo/core/tracker/window_tracker.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 std::vector<std::string> acceptedDisparityAlgorithms() {
   std::vector<std::string> names;
@@ -258,4 +258,4 @@ SimDisparitySet renderSimDisparitySet(const SimDisparitySetOptions& o) {
   return out;
 }
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

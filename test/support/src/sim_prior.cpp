@@ -2,7 +2,7 @@
 
 #include "embedded_calibration_stereo/core/tracker/board_teacher.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 PatternPrior teachSimPrior(const SimRig& sim, const SimFrame& light_on, const SimFrame& light_off) {
   const StereoRig& rig = sim.config().rig;
@@ -26,4 +26,4 @@ PatternPrior teachSimPrior(const SimRig& sim, double time_s) {
   return teachSimPrior(sim, on, off);
 }
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

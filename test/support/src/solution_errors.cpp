@@ -2,7 +2,7 @@
 
 #include <cmath>
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 std::vector<double> errorsInReportedStddevs(const BundleAdjustmentSummary& s,
                                             const StereoRig& truth) {
@@ -24,4 +24,4 @@ std::vector<double> errorsInReportedStddevs(const BundleAdjustmentSummary& s,
   return z;
 }
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

@@ -3,7 +3,7 @@
 #include <algorithm>
 #include <cmath>
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 namespace {
 
@@ -50,4 +50,4 @@ cv::Point2d symmetricCorner(const cv::Mat& img, cv::Point2d c, int radius) {
   return c;
 }
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

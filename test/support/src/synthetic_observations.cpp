@@ -4,7 +4,7 @@
 #include <cmath>
 #include <random>
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 namespace {
 
@@ -216,4 +216,4 @@ std::vector<SceneMatch> generateSyntheticSceneMatches(const StereoRig& rig, int 
   return matches;
 }
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

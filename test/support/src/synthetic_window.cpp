@@ -2,10 +2,10 @@
 
 #include <vector>
 
-#include "embedded_calibration_stereo/core/geometry/config_io.h"
+#include "embedded_calibration_stereo/core/io/config_io.h"
 #include "embedded_calibration_stereo/test_support/synthetic_observations.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 ScenarioHead loadScenarioHead(const std::string& config_path) {
   cv::FileStorage fs = openYaml(config_path);
@@ -40,4 +40,4 @@ BundleAdjustmentSummary solveSyntheticWindow(const ScenarioHead& head, const Ste
   return BundleAdjuster({}, terms).Solve(input);
 }
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

@@ -24,7 +24,7 @@
 #include "embedded_calibration_stereo/core/calibration/bundle_adjuster.h"
 #include "embedded_calibration_stereo/core/depth/rectification.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 struct ChessboardSpec {
   int cols = 0, rows = 0;  // inner corners across and down
@@ -106,4 +106,4 @@ BoardCalibrationResult calibrateStereoBoard(const ChessboardSpec& board, const c
                                             std::vector<StereoBoardDetection> detections,
                                             const BoardCalibrationOptions& options);
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

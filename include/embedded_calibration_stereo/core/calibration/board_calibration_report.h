@@ -9,7 +9,7 @@
 
 #include "embedded_calibration_stereo/core/calibration/board_calibration.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 // report.yaml text. `skipped` lists the image pairs left out, with the reason.
 std::string boardCalibrationReportYaml(const BoardCalibrationResult& result,
@@ -21,4 +21,4 @@ std::string boardCalibrationReportYaml(const BoardCalibrationResult& result,
 // corners on the image plane; one colour per image pair.
 cv::Mat residualPlot(const BoardCalibrationResult& result);
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

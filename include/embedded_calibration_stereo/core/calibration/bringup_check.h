@@ -24,7 +24,7 @@
 #include "embedded_calibration_stereo/core/geometry/calibration_device.h"
 #include "embedded_calibration_stereo/core/geometry/stereo_rig.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 struct BringupThresholds {
   double max_stamp_offset_s = 0.001;  // |right - left| stamp of one stereo frame
@@ -136,4 +136,4 @@ struct BringupVerdict {
 };
 BringupVerdict judgeBringup(const BringupMeasurements& m, const BringupThresholds& thresholds);
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

@@ -1,6 +1,6 @@
 #pragma once
 // Stereo bundle adjustment over the virtual calibration boards (Ceres), in the shape of
-// COLMAP's BundleAdjuster: Options (solver behaviour, with Check()), Config (which parameter
+// COLMAP's BundleAdjuster: Options (solver behaviour, with a validator), Config (which parameter
 // blocks are estimated and which are held), Solve(), Summary.
 //
 // Estimated: per camera fx, fy, cx, cy (skew fixed at zero) and the configured plumb_bob terms
@@ -68,7 +68,7 @@
 #include "embedded_calibration_stereo/core/geometry/observation.h"
 #include "embedded_calibration_stereo/core/geometry/stereo_rig.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 enum class BoardPoseMode { kAuto, kDeviceModel, kSharedAcrossFrames, kPerFrame };
 enum class RobustLoss { kNone, kHuber, kCauchy };
@@ -133,7 +133,7 @@ struct BundleAdjustmentOptions {
   double min_scene_sigma_px = 0.02;
 
   // Empty when usable, otherwise what is wrong.
-  std::string Check() const;
+  std::string validate() const;
 };
 
 // Which terms are estimated. Terms not estimated are held at their initial value (zero after
@@ -153,7 +153,7 @@ struct BundleAdjustmentConfig {
   bool board_poses_from_layout = false;
   bool constant_board_poses = false;
 
-  std::string Check() const;
+  std::string validate() const;
 };
 
 // The parameter vector of a rig in the bundle adjuster's order, that of
@@ -282,4 +282,4 @@ BundleAdjustmentSummary evaluateFixedCalibration(const StereoRig& rig,
                                                  BundleAdjustmentOptions options = {},
                                                  const CalibrationDevice* device = nullptr);
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

@@ -30,7 +30,7 @@
 
 #include "embedded_calibration_stereo/core/calibration/bundle_adjuster.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 struct CalibrationFilterOptions {
   // Chance that an unchanged group is taken as changed by one window (the test's level).
@@ -45,7 +45,7 @@ struct CalibrationFilterOptions {
   double rotation_walk_deg = 5e-4;
   double translation_walk_m = 2e-6;
   // Empty when usable, otherwise what is wrong (names the field).
-  std::string Check() const;
+  std::string validate() const;
 };
 
 // The groups' names, for messages: "left focal length", "left principal point", "left
@@ -62,7 +62,7 @@ double chiSquareQuantile(double upper_tail, int dof);
 
 class CalibrationFilter {
  public:
-  // Throws std::invalid_argument when options.Check() fails.
+  // Throws std::invalid_argument when options.validate() fails.
   explicit CalibrationFilter(CalibrationFilterOptions options = {});
 
   // Forget the state: the next window gets no prior (a calibration set from outside).
@@ -95,4 +95,4 @@ class CalibrationFilter {
   std::optional<State> state_;
 };
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

@@ -21,7 +21,7 @@
 #include "embedded_calibration_stereo/core/calibration/depth_coverage_watch.h"
 #include "embedded_calibration_stereo/core/calibration/rollback_policy.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 struct CalibrationHealthPolicyOptions {
   bool rollback = true;              // a new calibration that verifies worse is restored to its reference
@@ -240,4 +240,4 @@ class CalibrationHealthPolicy : public CalibrationHealthDecisions {
   std::optional<Calibration> restored_;  // sent back to the driver, not seen in force yet
 };
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

@@ -15,7 +15,7 @@
 #include "embedded_calibration_stereo/core/calibration/observation_validator.h"
 #include "embedded_calibration_stereo/core/geometry/stereo_rig.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 struct ZhangInitialization {
   bool ok = false;
@@ -49,4 +49,4 @@ std::map<std::pair<int, int>, Eigen::Isometry3d> initialBoardPoses(
     const std::vector<VirtualBoard>& boards, bool shared, bool from_layout,
     std::set<std::pair<int, int>>* failed);
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

@@ -49,9 +49,9 @@
 #include "embedded_calibration_stereo/core/geometry/calibration_device.h"
 #include "embedded_calibration_stereo/core/geometry/observation.h"
 #include "embedded_calibration_stereo/core/geometry/stereo_rig.h"
-#include "embedded_calibration_stereo/core/geometry/config_error.h"
+#include "embedded_calibration_stereo/core/io/config_error.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 struct CalibrationMonitorOptions {
   // Rectification of the product (the calibrator's), used for the depth mode's rows and for the
@@ -89,7 +89,7 @@ struct CalibrationMonitorOptions {
   double max_verification_age_s = 10.0;  // older: not used for the state
 
   // Empty when usable, otherwise what is wrong (names the field).
-  std::string Check() const;  // problem().text()
+  std::string validate() const;  // problem().text()
   ConfigProblem problem() const;
 };
 
@@ -124,7 +124,7 @@ struct HealthReport {
 
 class CalibrationMonitor {
  public:
-  // Throws std::invalid_argument when options.Check() fails.
+  // Throws std::invalid_argument when options.validate() fails.
   explicit CalibrationMonitor(CalibrationMonitorOptions options);
   ~CalibrationMonitor();
   CalibrationMonitor(CalibrationMonitor&&) noexcept;
@@ -156,4 +156,4 @@ class CalibrationMonitor {
   std::unique_ptr<Impl> impl_;
 };
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

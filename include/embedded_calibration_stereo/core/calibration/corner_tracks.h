@@ -16,7 +16,7 @@
 
 #include "embedded_calibration_stereo/core/calibration/observation_validator.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 struct CornerTrack {
   CameraSide camera = CameraSide::kLeft;
@@ -38,4 +38,4 @@ struct CornerTracks {
 CornerTracks buildCornerTracks(const std::vector<BoardView>& views, bool shared_across_frames,
                                double max_distance_from_median_px);
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

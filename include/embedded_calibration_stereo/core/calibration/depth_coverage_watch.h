@@ -17,7 +17,7 @@
 #include <optional>
 #include <string>
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 struct DepthCoverageWatchOptions {
   double recent_s = 2.0;        // the recent level: median over this span (s)
@@ -26,7 +26,7 @@ struct DepthCoverageWatchOptions {
   double collapse_ratio = 0.5;  // recent < ratio x reference: a collapse
   double min_reference = 0.05;  // a reference below this (a view with little depth): no verdict
   // Empty when usable; otherwise a message naming the bad field.
-  std::string Check() const;
+  std::string validate() const;
 };
 
 struct CoverageCollapse {
@@ -37,7 +37,7 @@ struct CoverageCollapse {
 
 class DepthCoverageWatch {
  public:
-  // Throws std::invalid_argument when options.Check() fails.
+  // Throws std::invalid_argument when options.validate() fails.
   explicit DepthCoverageWatch(DepthCoverageWatchOptions options);
 
   // The valid fraction (0..1) of the disparity image of time t (s). Times go forward; a time
@@ -60,4 +60,4 @@ class DepthCoverageWatch {
   std::deque<Sample> history_;  // samples not taken during a collapse, history_s up to the newest
 };
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

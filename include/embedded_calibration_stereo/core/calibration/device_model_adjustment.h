@@ -38,7 +38,7 @@
 
 #include "embedded_calibration_stereo/core/geometry/calibration_device.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 struct DeviceModelPriors {
   double angle_tolerance_rad = 0.0;
@@ -89,4 +89,4 @@ class DeviceModelBlocks {
   std::vector<std::vector<std::array<double, 4>>> nominal_planes_, planes_;
 };
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

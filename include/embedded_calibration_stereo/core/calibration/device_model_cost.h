@@ -22,7 +22,7 @@
 
 #include "embedded_calibration_stereo/core/calibration/reprojection_cost.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 constexpr int kDevicePoseSize = 7;
 constexpr int kMirrorPlaneSize = 4;
@@ -192,4 +192,4 @@ class MirrorPlanePriorCost {
   double angle_tol_, position_tol_;
 };
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

@@ -10,8 +10,8 @@
 #include "embedded_calibration_stereo/core/calibration/observation_validator.h"
 #include "embedded_calibration_stereo/core/geometry/stereo_rig.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 double epipolarRms(const StereoRig& rig, const std::vector<BoardView>& views);
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

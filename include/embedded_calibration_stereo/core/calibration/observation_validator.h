@@ -11,7 +11,7 @@
 #include "embedded_calibration_stereo/core/geometry/calibration_device.h"
 #include "embedded_calibration_stereo/core/geometry/observation.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 enum class CameraSide { kLeft = 0, kRight = 1 };
 
@@ -43,4 +43,4 @@ ValidatedObservations validateObservations(const std::vector<StereoObservation>&
                                            const std::vector<VirtualBoard>& boards,
                                            const ObservationValidationOptions& options);
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

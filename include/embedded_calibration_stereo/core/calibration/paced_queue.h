@@ -12,7 +12,7 @@
 #include <string>
 #include <utility>
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 struct PacedQueueOptions {
   double min_interval_s = 1.0;  // s between the starts of two solves (>= 0)
@@ -63,4 +63,4 @@ class PacedQueue {
   std::optional<double> last_start_;
 };
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

@@ -13,7 +13,7 @@
 
 #include "embedded_calibration_stereo/core/calibration/bundle_adjuster.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 struct GateOptions {
   double max_rms_px = 1.0;  // per camera, RMS of the corner reprojection error norm
@@ -52,7 +52,7 @@ struct GateOptions {
   // what the windows since the calibration in force taught (calibration_filter.h). 0: never.
   double refine_ratio = 0.0;
 
-  std::string Check() const;  // empty when usable
+  std::string validate() const;  // empty when usable
 };
 
 struct GateDecision {
@@ -92,4 +92,4 @@ class QualityGate {
 // RMS over both cameras (corner-count weighted).
 double combinedRms(const BundleAdjustmentSummary& s);
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

@@ -12,7 +12,7 @@
 
 #include "embedded_calibration_stereo/core/geometry/observation.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 // A 64-bit digest (FNV-1a) of an observation's content: board ids, corner ids, the bits of every
 // coordinate, scene matches; the stamp is left out.
@@ -31,4 +31,4 @@ class RepeatedObservations {
   std::deque<uint64_t> recent_;
 };
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

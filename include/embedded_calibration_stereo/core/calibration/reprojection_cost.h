@@ -19,7 +19,7 @@
 
 #include "embedded_calibration_stereo/core/geometry/plumb_bob_distortion.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 constexpr int kIntrinsicsSize = 9;
 constexpr int kBoardPoseSize = 7;
@@ -124,4 +124,4 @@ class RightCornerReprojectionCost {
   Eigen::Vector2d pixel_;
 };
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

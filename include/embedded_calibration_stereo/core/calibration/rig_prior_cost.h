@@ -19,7 +19,7 @@
 
 #include "embedded_calibration_stereo/core/calibration/reprojection_cost.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 class RigPriorCost : public ceres::CostFunction {
  public:
@@ -65,4 +65,4 @@ class RigPriorCost : public ceres::CostFunction {
   const double* weight_;
 };
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

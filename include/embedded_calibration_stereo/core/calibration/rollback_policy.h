@@ -17,7 +17,7 @@
 
 #include "embedded_calibration_stereo/core/calibration/calibration_monitor.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 // 0 GOOD, 1 DEGRADED, 2 BAD; -1 no verdict.
 inline int healthRank(CalibrationHealth state) {
@@ -98,4 +98,4 @@ class RollbackPolicy {
   std::optional<uint32_t> rejected_;
 };
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

@@ -23,7 +23,7 @@
 #include "embedded_calibration_stereo/core/geometry/camera_model.h"
 #include "embedded_calibration_stereo/core/geometry/observation.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 inline double scalarPart(double v) { return v; }
 template <typename T, int N>
@@ -91,4 +91,4 @@ class SceneEpipolarCost {
   const double* weight_;
 };
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

@@ -22,9 +22,9 @@
 
 #include "embedded_calibration_stereo/core/geometry/observation.h"
 #include "embedded_calibration_stereo/core/geometry/stereo_rig.h"
-#include "embedded_calibration_stereo/core/geometry/config_error.h"
+#include "embedded_calibration_stereo/core/io/config_error.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 struct SceneMatchOptions {
   int max_features = 200;            // FAST corners kept (strongest per grid cell)
@@ -34,7 +34,7 @@ struct SceneMatchOptions {
   int lk_levels = 3;
   double lk_max_backward_error_px = 0.3;
   // Empty when usable, otherwise what is wrong (names the field).
-  std::string Check() const;  // problem().text()
+  std::string validate() const;  // problem().text()
   ConfigProblem problem() const;
 };
 
@@ -45,9 +45,9 @@ struct SceneMatchBuffers {
 
 // The matches of one stereo frame. `left`, `right`: 8-bit grey (CV_8UC1) of the rig's image
 // size. `features_found` (optional): how many features were tried. Throws
-// std::invalid_argument for images of another type or size, or options that fail Check().
+// std::invalid_argument for images of another type or size, or options that fail validate().
 std::vector<SceneMatch> matchStereoScene(const cv::Mat& left, const cv::Mat& right, const StereoRig& rig,
                                          const SceneMatchOptions& options, SceneMatchBuffers* buffers = nullptr,
                                          int* features_found = nullptr);
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

@@ -49,7 +49,7 @@
 #include "embedded_calibration_stereo/core/depth/rectification.h"
 #include "embedded_calibration_stereo/core/geometry/stereo_rig.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 struct StereoAccuracyOptions {
   // The product's rectification (the calibrator's: Bouguet, its rectification_alpha).
@@ -92,4 +92,4 @@ StereoAccuracy evaluateStereoAccuracy(const StereoRig& estimate, const StereoRig
 StereoAccuracy predictStereoAccuracy(const StereoRig& estimate, const RigCovariance& covariance,
                                      const StereoAccuracyOptions& options = {});
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

@@ -8,7 +8,7 @@
 #include <cstdint>
 #include <optional>
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 class VerifiedMarking {
  public:
@@ -22,4 +22,4 @@ class VerifiedMarking {
   std::optional<uint32_t> done_epoch_;
 };
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

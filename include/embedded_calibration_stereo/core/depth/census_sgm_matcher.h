@@ -24,7 +24,7 @@
 #include <string>
 #include <vector>
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 constexpr int kCensusSgmWindow = 5;  // the census's window, pixels (square)
 
@@ -58,4 +58,4 @@ void computeCensusSgmDisparity16(const cv::Mat& left, const cv::Mat& right,
                                  const CensusSgmParams& params, cv::Mat* disparity,
                                  cv::Mat* occluded = nullptr);
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

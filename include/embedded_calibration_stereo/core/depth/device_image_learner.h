@@ -42,7 +42,7 @@
 
 #include "embedded_calibration_stereo/core/depth/separator.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 struct DeviceLearnerOptions {
   int max_pairs = 24;               // pairs kept (the oldest are dropped), >= min_pairs
@@ -60,7 +60,7 @@ struct DeviceLearnerOptions {
   // Variational refinement iterations per pyramid level of the flow (DIS; its medium preset has 5).
   int flow_refinement_iterations = 5;
   // Empty when usable; otherwise one message per problem, joined by "; ".
-  std::string Check() const;
+  std::string validate() const;
 };
 
 // One light-off frame and one light-on frame of one camera, a few frames apart.
@@ -104,4 +104,4 @@ struct LearnedDevice {
 LearnedDevice learnDeviceImage(const std::vector<LightPair>& pairs,
                                const DeviceLearnerOptions& options, uint32_t epoch);
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

@@ -26,7 +26,7 @@
 #include "embedded_calibration_stereo/core/depth/sad_matcher.h"
 #include "embedded_calibration_stereo/core/depth/speckle_filter.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 constexpr float kInvalidDisparity = std::numeric_limits<float>::quiet_NaN();
 inline bool isValidDisparity(float d) { return d == d; }  // false only for NaN
@@ -79,7 +79,7 @@ struct DisparityOptions {
   int median_size = 3;
 
   // Empty when the options are usable; otherwise one message per problem, joined by "; ".
-  std::string Check() const;
+  std::string validate() const;
   // Moves every invalid value to the nearest valid one; returns what changed (empty if none).
   std::vector<std::string> clamp();
 
@@ -103,7 +103,7 @@ struct DisparityOptions {
 // buffers); the matchers themselves run on cv::parallel_for_ (cv::setNumThreads bounds them).
 class DisparityComputer {
  public:
-  // Throws std::invalid_argument with Check()'s message when the options are invalid.
+  // Throws std::invalid_argument with validate()'s message when the options are invalid.
   explicit DisparityComputer(const DisparityOptions& options);
   const DisparityOptions& options() const { return options_; }
 
@@ -125,4 +125,4 @@ class DisparityComputer {
   cv::Mat occluded_;                    // census_sgm: pixels hidden from the right camera
 };
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

@@ -5,7 +5,7 @@
 
 #include "embedded_calibration_stereo/core/depth/rectification.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 struct BadPixelStats {
   int evaluated = 0;       // pixels with ground truth (ground truth > 0)
@@ -35,4 +35,4 @@ cv::Mat loadScaledGroundTruth(const std::string& path, double scale);
 // edges are not blended. Throws std::invalid_argument when the depth map does not fit the maps.
 cv::Mat rectifiedDisparityFromDepth(const cv::Mat& left_depth, const RectificationMaps& maps);
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

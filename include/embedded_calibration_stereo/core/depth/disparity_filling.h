@@ -8,8 +8,8 @@
 // Threading: works on its argument only; rows run on cv::parallel_for_.
 #include <opencv2/core.hpp>
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 void fillDisparityHoles(cv::Mat* disparity);
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

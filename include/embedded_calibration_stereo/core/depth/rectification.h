@@ -18,7 +18,7 @@
 
 #include "embedded_calibration_stereo/core/geometry/stereo_rig.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 enum class RectificationMethod { kBouguet, kFusiello };
 
@@ -92,4 +92,4 @@ class RectificationMaps {
 cv::Matx33d cameraMatrix(const PinholeCamera& camera);
 cv::Mat distortionVector(const PinholeCamera& camera);
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

@@ -23,7 +23,7 @@
 #include <string>
 #include <vector>
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 struct SadMatcherParams {
   int window_size = 9;        // odd, 3..15 (the int16 window sums must not overflow)
@@ -50,4 +50,4 @@ cv::Mat computeSadDisparity16(const cv::Mat& left, const cv::Mat& right,
 void computeSadDisparity16(const cv::Mat& left, const cv::Mat& right, const SadMatcherParams& params,
                            cv::Mat* disparity);
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

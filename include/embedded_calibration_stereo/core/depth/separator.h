@@ -51,7 +51,7 @@
 #include <string>
 #include <vector>
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 enum class SeparationMethod { kPaperGlobalAlpha, kRegionalAlpha };
 
@@ -75,7 +75,7 @@ struct SeparatorOptions {
   double max_alpha = 2.0;      // both methods: alpha is clamped to [0, max_alpha]
 
   // Empty when usable; otherwise one message per problem, joined by "; ".
-  std::string Check() const;
+  std::string validate() const;
 };
 
 // The cubic F of the paper's model: alpha = c0 + c1 s + c2 s^2 + c3 s^3 with
@@ -173,4 +173,4 @@ void separateStereo(const ImageSeparator& left, const ImageSeparator& right,
                     const cv::Mat& left_raw, const cv::Mat& right_raw, cv::Mat* left_scene,
                     cv::Mat* right_scene);
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

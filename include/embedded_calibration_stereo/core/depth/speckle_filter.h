@@ -14,7 +14,7 @@
 #include <opencv2/core.hpp>
 #include <vector>
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 class SpeckleFilter {
  public:
@@ -42,4 +42,4 @@ class SpeckleFilter {
   std::vector<std::vector<uint8_t>> stripe_codes_;  // per stripe: one row's pixel classes
 };
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

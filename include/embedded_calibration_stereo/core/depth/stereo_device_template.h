@@ -17,7 +17,7 @@
 #include "embedded_calibration_stereo/core/depth/separator.h"
 #include "embedded_calibration_stereo/core/tracker/window_tracker.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 // Both cameras' separators, immutable once built.
 struct StereoSeparator {
@@ -119,4 +119,4 @@ class DeviceLearningPlan {
   bool has_template_ = false;
 };
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

@@ -12,7 +12,7 @@
 #include <string>
 #include <vector>
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 struct Chessboard {
   int id = 0;            // index in the device, 0..n-1
@@ -68,4 +68,4 @@ struct CalibrationDevice {
   int virtualBoardCount() const { return static_cast<int>(boards.size() * copies.size()); }
 };
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

@@ -6,7 +6,7 @@
 #include <array>
 #include <string>
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 struct PinholeCamera {
   int width = 0;
@@ -43,4 +43,4 @@ struct PinholeCamera {
   PinholeCamera withFocalScale(double scale) const;
 };
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

@@ -4,7 +4,7 @@
 #include <cstdint>
 #include <vector>
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 struct BoardCorners {
   int board_id = 0;              // VirtualBoard::virtual_id
@@ -34,4 +34,4 @@ struct StereoObservation {
   }
 };
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

@@ -12,7 +12,7 @@
 // Threading: pure functions.
 #include <Eigen/Core>
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 namespace plumb_bob {
 
 constexpr int kCoefficientCount = 5;  // k1, k2, p1, p2, k3
@@ -49,4 +49,4 @@ inline void distortWithJacobian(const double* d, double x, double y, double* xd,
 }
 
 }  // namespace plumb_bob
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

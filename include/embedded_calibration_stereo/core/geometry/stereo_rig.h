@@ -5,7 +5,7 @@
 
 #include "embedded_calibration_stereo/core/geometry/camera_model.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 struct StereoRig {
   PinholeCamera left;
@@ -26,4 +26,4 @@ double rotationAngleDeg(const Eigen::Matrix3d& a, const Eigen::Matrix3d& b);
 // Rotation from a rotation vector given in degrees.
 Eigen::Matrix3d rotationFromVectorDeg(const Eigen::Vector3d& rotvec_deg);
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

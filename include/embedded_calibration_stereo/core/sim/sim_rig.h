@@ -31,9 +31,9 @@
 #include "embedded_calibration_stereo/core/geometry/observation.h"
 #include "embedded_calibration_stereo/core/geometry/stereo_rig.h"
 #include "embedded_calibration_stereo/core/sim/trajectory.h"
-#include "embedded_calibration_stereo/core/geometry/config_error.h"
+#include "embedded_calibration_stereo/core/io/config_error.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 // A textured planar rectangle of the scene, in the world frame (a mover's: in its own frame).
 // The texture is multi-scale noise from texture_seed, or a photograph (texture_image).
@@ -226,4 +226,4 @@ class SimRig {
   std::unique_ptr<Impl> impl_;
 };
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

@@ -20,9 +20,9 @@
 #include <Eigen/Geometry>
 #include <string>
 #include <vector>
-#include "embedded_calibration_stereo/core/geometry/config_error.h"
+#include "embedded_calibration_stereo/core/io/config_error.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 struct SimWaypoint {
   double t_s = 0.0;
@@ -63,4 +63,4 @@ const char* trajectoryKindName(SimTrajectory::Kind kind);
 // world_from_body at scene time t (seconds).
 Eigen::Isometry3d trajectoryPose(const SimTrajectory& trajectory, double time_s);
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

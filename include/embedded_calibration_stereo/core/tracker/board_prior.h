@@ -28,7 +28,7 @@
 #include <string>
 #include <vector>
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 struct BoardPrior {
   int board_id = 0;
@@ -75,4 +75,4 @@ struct PatternPrior {
 void writePatternPrior(const std::string& path, const PatternPrior& prior);
 PatternPrior readPatternPrior(const std::string& path);
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

@@ -27,7 +27,7 @@
 #include "embedded_calibration_stereo/core/geometry/camera_model.h"
 #include "embedded_calibration_stereo/core/tracker/pattern_tracker.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 // The boards one camera should see, and optionally how they project (for identification).
 struct BoardLayout {
@@ -64,4 +64,4 @@ struct TeachResult {
 TeachResult teachCamera(const std::vector<TeachFrame>& frames, const BoardLayout& layout,
                         const std::string& camera_name, ColorOrder order = ColorOrder::kBgr);
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

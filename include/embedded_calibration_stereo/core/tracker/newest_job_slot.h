@@ -10,7 +10,7 @@
 #include <optional>
 #include <utility>
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 template <class Job>
 class NewestJobSlot {
@@ -55,4 +55,4 @@ class NewestJobSlot {
   bool stopping_ = false;
 };
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

@@ -48,14 +48,14 @@
 #include "embedded_calibration_stereo/core/geometry/observation.h"
 #include "embedded_calibration_stereo/core/tracker/scene_background.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 namespace tracker {
 struct AlignmentTemplate;
 struct AlignmentResult;
 }
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 struct TrackerOptions {
   // Half-size of the cv::cornerSubPix window; 0 = automatic: on the background difference 0.6
@@ -224,4 +224,4 @@ class PatternTracker {
   std::vector<CameraTracker> cameras_;
 };
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

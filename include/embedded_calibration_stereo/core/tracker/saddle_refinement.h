@@ -15,7 +15,7 @@
 // Threading: a pure function; safe to call concurrently.
 #include <opencv2/core.hpp>
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 struct SaddleFitOptions {
   int radius_px = 5;            // half-size of the fitted square window (>= 2)
@@ -41,4 +41,4 @@ struct SaddleFit {
 bool fitSaddle(const cv::Mat& gray, cv::Point2f start, cv::Point2f along_col, cv::Point2f along_row,
                const SaddleFitOptions& options, SaddleFit* fit);
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

@@ -20,7 +20,7 @@
 
 #include "embedded_calibration_stereo/core/geometry/observation.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 class SceneBackground {
  public:
@@ -53,4 +53,4 @@ class SceneBackground {
   double last_motion_px_ = 0.0;
 };
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

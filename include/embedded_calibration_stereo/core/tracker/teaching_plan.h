@@ -7,7 +7,7 @@
 #include <cstddef>
 #include <string>
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 enum class PriorState { kLoaded, kMissing, kCorrupt, kTeaching, kTeachFailed };
 const char* toString(PriorState state);
@@ -101,4 +101,4 @@ class TeachingPlan {
   bool partial_ = false;       // the teaching running is on a burst under way
 };
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

@@ -15,7 +15,7 @@
 #include "embedded_calibration_stereo/core/tracker/board_teacher.h"
 #include "embedded_calibration_stereo/core/tracker/window_tracker.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 // The device image (CV_32FC1 or CV_32FC3, grey levels) as a teaching frame: grey, 8-bit,
 // rounded, negative values 0, no light-off frame. Throws std::invalid_argument on another type.
@@ -28,4 +28,4 @@ TeachResult teachCameraFromWindow(const WindowFrames& frames, const BoardLayout&
                                   const DeviceLearnerOptions& learner = windowLearnerOptions(),
                                   cv::Mat* taught_on = nullptr);
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

@@ -36,7 +36,7 @@
 #include "embedded_calibration_stereo/core/tracker/pattern_tracker.h"
 #include "embedded_calibration_stereo/core/tracker/saddle_refinement.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 // The device image learner's options a window is learned with by default.
 DeviceLearnerOptions windowLearnerOptions();
@@ -57,7 +57,7 @@ struct WindowTrackerOptions {
   bool scene_matches = true;
   SceneMatchOptions matching;
   // Empty when usable; otherwise one message per problem, joined by "; ".
-  std::string Check() const;
+  std::string validate() const;
 };
 
 // One camera's frames of one window: the settled light-on frames in time order, and the settled
@@ -117,4 +117,4 @@ class WindowTracker {
 int refineCornersBySaddleFit(const cv::Mat& image, const CameraPrior& prior, const WindowTrackerOptions& options,
                              std::vector<BoardCorners>* boards);
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

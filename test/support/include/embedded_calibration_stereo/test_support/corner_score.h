@@ -11,7 +11,7 @@
 
 #include "embedded_calibration_stereo/core/geometry/observation.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 struct CornerScore {
   // A reported corner farther than this from the true corner of its id is a wrong id (a slipped
@@ -47,4 +47,4 @@ struct WindowCornerErrors {
   int count_ = 0;
 };
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

@@ -13,7 +13,7 @@
 
 #include "embedded_calibration_stereo/core/calibration/bundle_adjuster.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 struct CramerRaoBound {
   CameraStddev left_stddev, right_stddev;  // fx, fy, cx, cy, k1, k2 (p1, p2, k3 zero)
@@ -26,4 +26,4 @@ struct CramerRaoBound {
 CramerRaoBound freePoseCramerRaoBound(const StereoRig& truth, const std::vector<VirtualBoard>& boards,
                                       const StereoObservation& visible, int frames, double sigma_px);
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

@@ -15,7 +15,7 @@
 #include "embedded_calibration_stereo/core/geometry/observation.h"
 #include "embedded_calibration_stereo/core/geometry/stereo_rig.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 struct FlatBoardImageOptions {
   double white = 0.85;        // radiance of white squares and margin, fraction of full scale
@@ -52,4 +52,4 @@ std::vector<Eigen::Isometry3d> flatBoardCalibrationPoses(const StereoRig& rig, i
                                                          const FlatBoardPoseOptions& options,
                                                          uint64_t seed);
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

@@ -5,8 +5,8 @@
 // Threading: reentrant.
 #include <string>
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 int runCommand(const std::string& command, std::string* out);
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

@@ -25,7 +25,7 @@
 
 #include "embedded_calibration_stereo/core/depth/disparity.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 // The names among "sad", "bm", "sgbm", "census_sgm" that parseDisparityAlgorithm accepts, in
 // that order: a matcher added under one of these names is picked up without a change here.
@@ -81,4 +81,4 @@ SimDisparitySet renderSimDisparitySet(const SimDisparitySetOptions& options);
 // Runs one matcher over samples and sums its scores.
 DisparityScore scoreMatcher(const DisparityOptions& options, const std::vector<RectifiedSample>& samples);
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

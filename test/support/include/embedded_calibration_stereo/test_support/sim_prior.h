@@ -5,11 +5,11 @@
 #include "embedded_calibration_stereo/core/sim/sim_rig.h"
 #include "embedded_calibration_stereo/core/tracker/board_prior.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 PatternPrior teachSimPrior(const SimRig& sim, const SimFrame& light_on, const SimFrame& light_off);
 
 // Renders the light-on (noise seed 1) and light-off (seed 2) frames at scene time `time_s`.
 PatternPrior teachSimPrior(const SimRig& sim, double time_s);
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

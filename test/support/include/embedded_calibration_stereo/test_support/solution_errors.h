@@ -5,11 +5,11 @@
 
 #include "embedded_calibration_stereo/core/calibration/bundle_adjuster.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 // |estimate - truth| / reported sd for fx, fy, cx, cy, k1, k2 of the left then the right
 // camera, then the baseline and the stereo rotation angle (14 values).
 std::vector<double> errorsInReportedStddevs(const BundleAdjustmentSummary& solution,
                                             const StereoRig& truth);
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

@@ -6,7 +6,7 @@
 // tests measure the renderer with it.
 #include <opencv2/core.hpp>
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 // Bicubic (Keys, a = -0.5) sample of a CV_32F image at (x, y), borders replicated.
 double bicubicSample(const cv::Mat& image, double x, double y);
@@ -15,4 +15,4 @@ double bicubicSample(const cv::Mat& image, double x, double y);
 // `start`, on a CV_32F image.
 cv::Point2d symmetricCorner(const cv::Mat& image, cv::Point2d start, int radius);
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

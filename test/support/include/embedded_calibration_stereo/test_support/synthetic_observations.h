@@ -11,7 +11,7 @@
 #include "embedded_calibration_stereo/core/geometry/observation.h"
 #include "embedded_calibration_stereo/core/geometry/stereo_rig.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 struct SyntheticObservationOptions {
   int frames = 1;
@@ -89,4 +89,4 @@ struct RigErrors {
 };
 RigErrors compareRigs(const StereoRig& estimate, const StereoRig& truth);
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

@@ -13,7 +13,7 @@
 #include "embedded_calibration_stereo/core/geometry/calibration_device.h"
 #include "embedded_calibration_stereo/core/geometry/stereo_rig.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 // A scenario's true rig and device (the config's `rig` and `device`).
 struct ScenarioHead {
@@ -42,4 +42,4 @@ struct SyntheticWindow {
 BundleAdjustmentSummary solveSyntheticWindow(const ScenarioHead& head, const StereoRig& truth,
                                              const SyntheticWindow& window, int* scene_wrong_count = nullptr);
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

@@ -1,10 +1,10 @@
-#include "embedded_calibration_stereo/core/geometry/config_io.h"
+#include "embedded_calibration_stereo/core/io/config_io.h"
 
 #include <cmath>
 #include <fstream>
 #include <opencv2/core.hpp>
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 cv::FileStorage openYaml(const std::string& path) {
   std::ifstream probe(path);
@@ -139,4 +139,4 @@ CalibrationDevice loadDevice(const cv::FileNode& node, const std::string& path) 
   return dev;
 }
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

@@ -1,10 +1,10 @@
-#include "embedded_calibration_stereo/core/calibration/light_confirmation.h"
+#include "embedded_calibration_stereo/core/light/light_confirmation.h"
 
 #include <cmath>
 #include <opencv2/imgproc.hpp>
 #include <vector>
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 std::string LightConfirmationOptions::validate() const { return problem().text(); }
 
@@ -145,4 +145,4 @@ void LightCommandWatch::update(bool commanded_on, const std::optional<ConfirmedL
              " frames ago, and no frame since shows a steady light";
 }
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

@@ -8,7 +8,7 @@
 #include <string>
 #include <vector>
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 class InputArrivalWatch {
  public:
@@ -35,4 +35,4 @@ class InputArrivalWatch {
   uint64_t frames_in_ = 0, frames_in_at_tick_ = 0;
 };
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

@@ -1,4 +1,4 @@
-#include "embedded_calibration_stereo/core/geometry/pfm_io.h"
+#include "embedded_calibration_stereo/core/io/pfm_io.h"
 
 #include <cmath>
 #include <cstdint>
@@ -9,7 +9,7 @@
 #include <stdexcept>
 #include <vector>
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 namespace {
 
 bool hostIsLittleEndian() {
@@ -75,4 +75,4 @@ cv::Mat readPfm(const std::string& path) {
   return image;
 }
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

@@ -1,11 +1,11 @@
-#include "embedded_calibration_stereo/core/geometry/camera_info_yaml.h"
+#include "embedded_calibration_stereo/core/io/camera_info_yaml.h"
 
 
 #include <cstdio>
 #include <sstream>
 #include <stdexcept>
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 namespace {
 
@@ -52,4 +52,4 @@ std::string cameraInfoYaml(const CameraInfoFile& f) {
   return s.str();
 }
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

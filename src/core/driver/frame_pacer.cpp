@@ -1,6 +1,6 @@
-#include "embedded_calibration_stereo/core/calibration/frame_pacer.h"
+#include "embedded_calibration_stereo/core/driver/frame_pacer.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 FramePacer::FramePacer(double fps, Clock::time_point start)
     : period_(std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(1.0 / fps))), next_(start) {}
@@ -11,4 +11,4 @@ FramePacer::Clock::time_point FramePacer::next(Clock::time_point now) {
   return next_;
 }
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

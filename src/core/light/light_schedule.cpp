@@ -1,9 +1,9 @@
-#include "embedded_calibration_stereo/core/calibration/light_schedule.h"
+#include "embedded_calibration_stereo/core/light/light_schedule.h"
 
 #include <algorithm>
 #include <cmath>
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 std::string LightScheduleConfig::validate() const { return problem().text(); }
 
@@ -104,4 +104,4 @@ LightState LightSchedule::advance(bool commanded_on) {
   return state;
 }
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

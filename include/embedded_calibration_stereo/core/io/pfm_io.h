@@ -5,7 +5,7 @@
 #include <opencv2/core.hpp>
 #include <string>
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 // Writes a CV_32FC1 or CV_32FC3 image, little endian. Non-finite values (NaN = invalid
 // disparity) are written as +inf, Middlebury's "unknown". Throws std::runtime_error on I/O
@@ -16,4 +16,4 @@ void writePfm(const std::string& path, const cv::Mat& image);
 // std::runtime_error with the reason when the file is missing or malformed.
 cv::Mat readPfm(const std::string& path);
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

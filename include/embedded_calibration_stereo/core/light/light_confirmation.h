@@ -25,9 +25,9 @@
 #include <string>
 
 #include "embedded_calibration_stereo/core/tracker/board_prior.h"
-#include "embedded_calibration_stereo/core/geometry/config_error.h"
+#include "embedded_calibration_stereo/core/io/config_error.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 struct LightConfirmationOptions {
   // Smallest change of a camera's level (grey levels) taken as the light switching, until the
@@ -123,4 +123,4 @@ class LightCommandWatch {
   std::string fault_;
 };
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

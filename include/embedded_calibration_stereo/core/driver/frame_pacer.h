@@ -7,7 +7,7 @@
 // Threading: plain values; used by one thread (the capture thread).
 #include <chrono>
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 class FramePacer {
  public:
@@ -24,4 +24,4 @@ class FramePacer {
   Clock::time_point next_;
 };
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

@@ -24,9 +24,9 @@
 #include <cstdint>
 #include <optional>
 #include <string>
-#include "embedded_calibration_stereo/core/geometry/config_error.h"
+#include "embedded_calibration_stereo/core/io/config_error.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 enum class CalibrationTrigger { kPeriodic, kOnDemand };
 
@@ -106,4 +106,4 @@ class LightSchedule {
   int64_t frames_since_switch_ = 1 << 30;  // "long ago": the initial off state is settled
 };
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

@@ -1,11 +1,11 @@
-#include "embedded_calibration_stereo/core/calibration/light_regions.h"
+#include "embedded_calibration_stereo/core/light/light_regions.h"
 
 #include <stdexcept>
 #include <system_error>
 
 #include "embedded_calibration_stereo/core/tracker/board_prior.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 BoardRegionsFile::BoardRegionsFile(std::string path, double margin_squares)
     : path_(std::move(path)), margin_squares_(margin_squares) {}
@@ -62,4 +62,4 @@ std::optional<ConfirmedLight> DeviceLightConfirmer::push(const cv::Mat& left, co
   return decided;
 }
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

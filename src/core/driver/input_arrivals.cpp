@@ -1,8 +1,8 @@
-#include "embedded_calibration_stereo/core/calibration/input_arrivals.h"
+#include "embedded_calibration_stereo/core/driver/input_arrivals.h"
 
 #include <utility>
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 InputArrivalWatch::InputArrivalWatch(std::vector<std::string> inputs, std::string unpaired)
     : inputs_(std::move(inputs)),
@@ -25,4 +25,4 @@ std::string InputArrivalWatch::tick() {
   return missing;
 }
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

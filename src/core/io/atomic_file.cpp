@@ -1,4 +1,4 @@
-#include "embedded_calibration_stereo/core/geometry/atomic_file.h"
+#include "embedded_calibration_stereo/core/io/atomic_file.h"
 
 #include <fcntl.h>
 #include <sys/stat.h>
@@ -8,7 +8,7 @@
 #include <cstring>
 #include <stdexcept>
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 namespace {
 
@@ -59,4 +59,4 @@ void writeFileAtomically(const std::string& path, const std::string& content) {
   }
 }
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

@@ -11,11 +11,11 @@
 #include <utility>
 #include <vector>
 
-#include "embedded_calibration_stereo/core/geometry/atomic_file.h"
+#include "embedded_calibration_stereo/core/io/atomic_file.h"
 #include "embedded_calibration_stereo/core/depth/rectification.h"
 #include "embedded_calibration_stereo/core/geometry/stereo_rig.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 // The fields of sensor_msgs/CameraInfo that a calibration file holds.
 struct CameraInfoFile {
@@ -37,4 +37,4 @@ std::pair<CameraInfoFile, CameraInfoFile> stereoCameraInfoFiles(
 // The text of the file, numbers with 17 significant digits (doubles round-trip exactly).
 std::string cameraInfoYaml(const CameraInfoFile& file);
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

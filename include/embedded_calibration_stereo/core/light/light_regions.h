@@ -12,9 +12,9 @@
 #include <optional>
 #include <string>
 
-#include "embedded_calibration_stereo/core/calibration/light_confirmation.h"
+#include "embedded_calibration_stereo/core/light/light_confirmation.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 // The board regions of a prior file, re-read when it appears, changes or goes away.
 class BoardRegionsFile {
@@ -75,4 +75,4 @@ class DeviceLightConfirmer {
   cv::Mat masks_[2];
 };
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

@@ -4,7 +4,7 @@
 #include <stdexcept>
 #include <string>
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 // What a validator found: the parameter and what is wrong with it, kept apart so that a caller
 // can refuse the parameter by name without reading the sentence (both empty: nothing wrong).
@@ -31,4 +31,4 @@ inline void throwIfProblem(const ConfigProblem& p) {
   if (!p.ok()) throw ConfigError(p.parameter, p.problem);
 }
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

@@ -6,7 +6,7 @@
 // Threading: safe from any thread; two writers of the same path: the last rename wins.
 #include <string>
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 // Writes `content` to `path` through a temporary file in the same directory (mkstemp), fsync,
 // rename over the target and fsync of the directory. The file gets 0666 minus the umask. Throws
@@ -14,4 +14,4 @@ namespace ecs {
 // disk full...); the target is then unchanged and no temporary file is left.
 void writeFileAtomically(const std::string& path, const std::string& content);
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core

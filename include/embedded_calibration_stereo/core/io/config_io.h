@@ -5,10 +5,10 @@
 #include <string>
 
 #include "embedded_calibration_stereo/core/geometry/calibration_device.h"
-#include "embedded_calibration_stereo/core/geometry/config_error.h"
+#include "embedded_calibration_stereo/core/io/config_error.h"
 #include "embedded_calibration_stereo/core/geometry/stereo_rig.h"
 
-namespace ecs {
+namespace embedded_calibration_stereo::core {
 
 // Opens a YAML file for reading; throws ConfigError(path, ...) when missing or unparsable.
 cv::FileStorage openYaml(const std::string& path);
@@ -31,4 +31,4 @@ double readDouble(const cv::FileNode& node, const std::string& key, const std::s
 Eigen::Vector3d readVector3(const cv::FileNode& node, const std::string& key,
                             const std::string& path);
 
-}  // namespace ecs
+}  // namespace embedded_calibration_stereo::core
