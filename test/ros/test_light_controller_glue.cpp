@@ -11,6 +11,7 @@
 #include <utility>
 #include <vector>
 
+#include "embedded_calibration_stereo/parameter_table.h"
 #include "embedded_calibration_stereo/ros/conversions.h"
 #include "embedded_calibration_stereo/ros/driver_calibration_watch.h"
 #include "embedded_calibration_stereo/ros/light_backend.h"
@@ -27,25 +28,7 @@ using XmlRpc::XmlRpcValue;
 
 namespace {
 
-class Params {
- public:
-  Params& set(const std::string& name, const XmlRpcValue& value) {
-    values_[name] = value;
-    return *this;
-  }
-  // The reader refers to this object: keep it alive while reading.
-  ParameterReader reader() const {
-    return ParameterReader([this](const std::string& name, XmlRpcValue* value) {
-      const auto it = values_.find(name);
-      if (it == values_.end()) return false;
-      *value = it->second;
-      return true;
-    });
-  }
-
- private:
-  std::map<std::string, XmlRpcValue> values_;
-};
+using Params = embedded_calibration_stereo::test_support::ParameterTable;
 
 // The parameter named by the ConfigError `f` throws ("" when it does not throw).
 template <class F>

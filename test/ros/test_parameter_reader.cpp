@@ -11,6 +11,7 @@
 #include <string>
 #include <vector>
 
+#include "embedded_calibration_stereo/parameter_table.h"
 #include "embedded_calibration_stereo/ros/parameter_reader.h"
 
 namespace core = embedded_calibration_stereo::core;
@@ -20,25 +21,7 @@ using XmlRpc::XmlRpcValue;
 
 namespace {
 
-class Params {
- public:
-  Params& set(const std::string& name, const XmlRpcValue& value) {
-    values_[name] = value;
-    return *this;
-  }
-  // The reader refers to this object: keep it alive while reading.
-  ParameterReader reader() const {
-    return ParameterReader([this](const std::string& name, XmlRpcValue* value) {
-      const auto it = values_.find(name);
-      if (it == values_.end()) return false;
-      *value = it->second;
-      return true;
-    });
-  }
-
- private:
-  std::map<std::string, XmlRpcValue> values_;
-};
+using Params = embedded_calibration_stereo::test_support::ParameterTable;
 
 // The message of the ConfigError `f` throws, after checking it names `parameter`.
 template <class F>

@@ -107,8 +107,10 @@ CFG_PARAM = re.compile(r'gen\.add\(\s*"([A-Za-z_0-9]+)"')
 TOPIC_CALL = re.compile(
     r'(?:advertise(?:Camera|Service)?|subscribe|serviceClient)\s*(?:<[^;()]*?>)?\s*\(\s*(?:[a-z_]+,\s*)?"([^"]+)"')
 NODELETS = {
-    'CameraDriver': ['src/ros/driver_params.cpp', 'src/nodelets/camera_driver.cpp'],
-    'LightController': ['src/nodelets/light_controller.cpp', 'src/ros/driver_params.cpp:readHealthSchedule'],
+    'CameraDriver': ['src/ros/driver_params.cpp', 'src/ros/light_backend.cpp:readLightBackendParams',
+                     'src/nodelets/camera_driver.cpp'],
+    'LightController': ['src/ros/light_controller_params.cpp', 'src/ros/light_backend.cpp:readLightBackendParams',
+                        'src/ros/driver_params.cpp:readHealthSchedule', 'src/nodelets/light_controller.cpp'],
     'PatternTracker': ['src/nodelets/pattern_tracker.cpp'],
     'OnlineCalibrator': ['src/ros/calibration_session.cpp', 'src/nodelets/online_calibrator.cpp'],
     'CalibrationHealth': ['src/ros/calibration_health_io.cpp', 'src/nodelets/calibration_health.cpp'],
