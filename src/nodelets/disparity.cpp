@@ -1,13 +1,6 @@
-// Disparity nodelet: disparity (stereo_msgs/DisparityImage) and points2 (sensor_msgs/PointCloud2)
-// of rectified stereo frames (left|right/image_rect with left|right/camera_info of the same
-// stamp), with stereo_image_proc's topic and parameter names, and disparity_mask (mono8: 255
-// matched, 128 hidden from the right camera, 0 no reliable match; the last two filled when
-// hole_filling is on). The matcher is the core's DisparityComputer (census_sgm, sad, bm or sgbm),
-// configured by dynamic_reconfigure (cfg/Disparity.cfg). Lazy: the inputs are subscribed only
-// while someone subscribes to disparity, points2 or disparity_mask. With each disparity
-// computed, disparity_coverage (DisparityCoverage) says how much of it is valid.
-// Diagnostics (StageDiagnostics): rates, latency, algorithm and range, time per frame and input
-// copies (colour inputs are converted to mono8, a copy; mono8 inputs must be shared).
+// Disparity nodelet: disparity, points2 and disparity_mask of rectified stereo frames with
+// stereo_image_proc's topic and parameter names; the matcher is the core's DisparityComputer,
+// configured by dynamic_reconfigure. Topics, parameters and behaviour: docs/nodelets.md#disparity.
 #include <cv_bridge/cv_bridge.h>
 #include <dynamic_reconfigure/server.h>
 #include <image_geometry/stereo_camera_model.h>

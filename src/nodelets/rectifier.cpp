@@ -1,17 +1,6 @@
-// Rectifier nodelet: rectifies each stereo frame (left|right/image_scene with the CameraInfo of
-// the same stamp) with stereo_image_proc's conventions: left|right/image_rect mono8 and
-// left|right/image_rect_color in the input's encoding (the very same message for mono8 inputs;
-// colour inputs are rectified once, image_rect converted from it), and publishes
-// the rectification applied on left|right/camera_info_rect (the input K and D with the R and P
-// of the method: identical to camera_info for bouguet, the Fusiello R and P for fusiello; a
-// disparity node must read camera_info_rect when the method is fusiello).
-//
-// Maps are keyed by the CameraInfo content of the frame (ExactTime synchronisation of the images
-// with their CameraInfo), so a frame is always rectified with the calibration it was taken with:
-// when the CameraInfo changes, the new maps are built on a worker thread (std::async) and frames
-// of the new calibration are dropped until they are ready (never rectified with the old maps).
-// Diagnostics (StageDiagnostics): rates, latency, method, maps state, the calibration epoch of
-// the last rectified frame (from calibration_mode, for the report only) and input copies.
+// Rectifier nodelet: rectifies each stereo frame with the calibration it was taken with, under
+// stereo_image_proc's topic names; maps are rebuilt off the image thread when the CameraInfo
+// changes. Topics, parameters and behaviour: docs/nodelets.md#rectifier.
 #include <cv_bridge/cv_bridge.h>
 #include <image_transport/image_transport.h>
 #include <pluginlib/class_list_macros.hpp>
