@@ -23,6 +23,7 @@
 #include <sstream>
 #include <thread>
 
+#include "embedded_calibration_stereo/rectified_pair.h"
 #include "embedded_calibration_stereo/ros/calibration_file.h"
 #include "embedded_calibration_stereo/ros/camera_calibration.h"
 #include "embedded_calibration_stereo/ros/conversions.h"
@@ -35,7 +36,7 @@ using sensor_msgs::CameraInfo;
 
 namespace {
 
-constexpr uint32_t kWidth = 752, kHeight = 480;
+constexpr uint32_t kWidth = test_support::kPairWidth, kHeight = test_support::kPairHeight;
 constexpr int kCommitSteps = 9;  // calibration_file.h: the test hook's steps
 
 struct TempDir {
@@ -48,20 +49,7 @@ struct TempDir {
   std::string path;
 };
 
-// A rectified pair whose fx' is `fx` (both cameras), as the OnlineCalibrator commits it.
-std::pair<CameraInfo, CameraInfo> pairWithFocal(double fx) {
-  core::StereoRig rig;
-  for (core::PinholeCamera* c : {&rig.left, &rig.right}) {
-    c->width = kWidth;
-    c->height = kHeight;
-    c->fx = fx;
-    c->fy = fx;
-    c->cx = 376;
-    c->cy = 240;
-  }
-  rig.right_from_left.translation() = Eigen::Vector3d(-0.1, 0, 0);
-  return toStereoCameraInfo(rig);
-}
+using test_support::pairWithFocal;
 
 std::string fileBytes(const std::string& path) {
   std::ifstream in(path, std::ios::binary);

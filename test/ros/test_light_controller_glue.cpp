@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "embedded_calibration_stereo/parameter_table.h"
+#include "embedded_calibration_stereo/rectified_pair.h"
 #include "embedded_calibration_stereo/ros/conversions.h"
 #include "embedded_calibration_stereo/ros/driver_calibration_watch.h"
 #include "embedded_calibration_stereo/ros/light_backend.h"
@@ -120,21 +121,9 @@ TEST(SetCameraInfoAnswer, OnlyASuccessfulAnswerWithThePrefixIsStaged) {
 
 namespace {
 
-constexpr uint32_t kWidth = 752, kHeight = 480;
+constexpr uint32_t kWidth = test_support::kPairWidth, kHeight = test_support::kPairHeight;
 
-std::pair<CameraInfo, CameraInfo> pairWithFocal(double fx) {
-  core::StereoRig rig;
-  for (core::PinholeCamera* c : {&rig.left, &rig.right}) {
-    c->width = kWidth;
-    c->height = kHeight;
-    c->fx = fx;
-    c->fy = fx;
-    c->cx = 376;
-    c->cy = 240;
-  }
-  rig.right_from_left.translation() = Eigen::Vector3d(-0.1, 0, 0);
-  return toStereoCameraInfo(rig);
-}
+using test_support::pairWithFocal;
 
 }  // namespace
 
