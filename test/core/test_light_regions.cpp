@@ -13,21 +13,18 @@
 
 #include "embedded_calibration_stereo/core/light/light_regions.h"
 #include "embedded_calibration_stereo/core/tracker/board_prior.h"
+#include "embedded_calibration_stereo/temp_dir.h"
 
 namespace core = embedded_calibration_stereo::core;
+namespace test_support = embedded_calibration_stereo::test_support;
 
 namespace {
 
 constexpr int kWidth = 320, kHeight = 240;
 
-struct TempDir {
-  TempDir() {
-    char name[] = "/tmp/ecs_light_regions_XXXXXX";
-    EXPECT_NE(::mkdtemp(name), nullptr);
-    path = name;
-  }
-  ~TempDir() { std::filesystem::remove_all(path); }
-  std::string path;
+// A fresh folder per test.
+struct TempDir : test_support::TempDir {
+  TempDir() : test_support::TempDir("ecs_light_regions") {}
 };
 
 // One camera with one 4 x 3 board whose outer corners span (x0, y0) .. (x0 + 60, y0 + 40).

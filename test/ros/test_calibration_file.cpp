@@ -16,6 +16,7 @@
 
 #include "embedded_calibration_stereo/ros/calibration_file.h"
 #include "embedded_calibration_stereo/ros/conversions.h"
+#include "embedded_calibration_stereo/temp_dir.h"
 
 namespace core = embedded_calibration_stereo::core;
 
@@ -24,14 +25,9 @@ using namespace embedded_calibration_stereo;
 namespace {
 
 // A temporary directory removed with everything in it when the test ends.
-struct TempDir {
-  TempDir() {
-    char name[] = "/tmp/ecs_calibration_file_XXXXXX";
-    EXPECT_NE(mkdtemp(name), nullptr);
-    path = name;
-  }
-  ~TempDir() { std::filesystem::remove_all(path); }
-  std::string path;
+// A fresh folder per test.
+struct TempDir : test_support::TempDir {
+  TempDir() : test_support::TempDir("ecs_calibration_file") {}
 };
 
 std::vector<std::string> listDir(const std::string& dir) {

@@ -28,6 +28,7 @@
 #include "embedded_calibration_stereo/ros/camera_calibration.h"
 #include "embedded_calibration_stereo/ros/conversions.h"
 #include "embedded_calibration_stereo/ros/stereo_input_check.h"
+#include "embedded_calibration_stereo/temp_dir.h"
 
 namespace core = embedded_calibration_stereo::core;
 
@@ -39,14 +40,9 @@ namespace {
 constexpr uint32_t kWidth = test_support::kPairWidth, kHeight = test_support::kPairHeight;
 constexpr int kCommitSteps = 9;  // calibration_file.h: the test hook's steps
 
-struct TempDir {
-  TempDir() {
-    char name[] = "/tmp/ecs_pair_store_XXXXXX";
-    EXPECT_NE(::mkdtemp(name), nullptr);
-    path = name;
-  }
-  ~TempDir() { std::filesystem::remove_all(path); }
-  std::string path;
+// A fresh folder per test.
+struct TempDir : test_support::TempDir {
+  TempDir() : test_support::TempDir("ecs_pair_store") {}
 };
 
 using test_support::pairWithFocal;

@@ -10,6 +10,7 @@
 
 #include "embedded_calibration_stereo/core/io/config_error.h"
 #include "embedded_calibration_stereo/ros/frame_source.h"
+#include "embedded_calibration_stereo/temp_dir.h"
 
 namespace core = embedded_calibration_stereo::core;
 
@@ -18,14 +19,9 @@ using namespace embedded_calibration_stereo;
 namespace {
 
 // A temporary directory removed with everything in it when the test ends.
-struct TempDir {
-  TempDir() {
-    char name[] = "/tmp/ecs_files_source_XXXXXX";
-    EXPECT_NE(mkdtemp(name), nullptr);
-    path = name;
-  }
-  ~TempDir() { std::filesystem::remove_all(path); }
-  std::string path;
+// A fresh folder per test.
+struct TempDir : test_support::TempDir {
+  TempDir() : test_support::TempDir("ecs_files_source") {}
 };
 
 // Pair i: left filled with 10*i+1, right with 10*i+5. Written in reverse order so that

@@ -20,6 +20,7 @@
 #include "embedded_calibration_stereo/ros/parameter_reader.h"
 #include "embedded_calibration_stereo/ros/reloading_calibration_store.h"
 #include "embedded_calibration_stereo/ros/set_camera_info_answer.h"
+#include "embedded_calibration_stereo/temp_dir.h"
 
 namespace core = embedded_calibration_stereo::core;
 
@@ -151,14 +152,9 @@ TEST(DriverCalibrationWatch, CountsEachCamerasCalibrationChangesNotTheFirstNorTh
 
 namespace {
 
-struct TempDir {
-  TempDir() {
-    char name[] = "/tmp/ecs_reloading_store_XXXXXX";
-    EXPECT_NE(::mkdtemp(name), nullptr);
-    path = name;
-  }
-  ~TempDir() { std::filesystem::remove_all(path); }
-  std::string path;
+// A fresh folder per test.
+struct TempDir : test_support::TempDir {
+  TempDir() : test_support::TempDir("ecs_reloading_store") {}
 };
 
 struct StoreFixture {
