@@ -188,6 +188,7 @@ CalibrationStatus rolledBackStatus(uint32_t epoch, const std::string& why) {
   status.header.stamp = ros::Time::now();
   status.epoch = epoch;
   status.accepted = false;
+  status.outcome = CalibrationStatus::OUTCOME_ROLLED_BACK;
   status.reason = "rolled back: " + why;
   return status;
 }

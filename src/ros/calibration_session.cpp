@@ -157,11 +157,52 @@ std::vector<std::string> observationDefects(const core::StereoObservation& obser
   return defects;
 }
 
+// The message's constants are the core's outcomes.
+static_assert(CalibrationStatus::OUTCOME_UNSPECIFIED == static_cast<uint8_t>(core::CalibrationOutcome::kUnspecified) &&
+                  CalibrationStatus::OUTCOME_COMMITTED == static_cast<uint8_t>(core::CalibrationOutcome::kCommitted) &&
+                  CalibrationStatus::OUTCOME_ACCEPTED_NOT_COMMITTED ==
+                      static_cast<uint8_t>(core::CalibrationOutcome::kAcceptedNotCommitted) &&
+                  CalibrationStatus::OUTCOME_DRY_RUN_ACCEPTABLE ==
+                      static_cast<uint8_t>(core::CalibrationOutcome::kDryRunAcceptable) &&
+                  CalibrationStatus::OUTCOME_IN_FORCE_CONFIRMED ==
+                      static_cast<uint8_t>(core::CalibrationOutcome::kInForceConfirmed) &&
+                  CalibrationStatus::OUTCOME_REJECTED == static_cast<uint8_t>(core::CalibrationOutcome::kRejected) &&
+                  CalibrationStatus::OUTCOME_SOLVE_FAILED == static_cast<uint8_t>(core::CalibrationOutcome::kSolveFailed) &&
+                  CalibrationStatus::OUTCOME_NOT_PLAUSIBLE ==
+                      static_cast<uint8_t>(core::CalibrationOutcome::kNotPlausible) &&
+                  CalibrationStatus::OUTCOME_COMMIT_FAILED ==
+                      static_cast<uint8_t>(core::CalibrationOutcome::kCommitFailed) &&
+                  CalibrationStatus::OUTCOME_MISSING_INPUTS ==
+                      static_cast<uint8_t>(core::CalibrationOutcome::kMissingInputs) &&
+                  CalibrationStatus::OUTCOME_NOT_SOLVED == static_cast<uint8_t>(core::CalibrationOutcome::kNotSolved) &&
+                  CalibrationStatus::OUTCOME_ROLLED_BACK == static_cast<uint8_t>(core::CalibrationOutcome::kRolledBack),
+              "CalibrationStatus.msg's OUTCOME_ constants must be core::CalibrationOutcome's values");
+
+void setOutcome(CalibrationStatus* status, core::CalibrationOutcome outcome) {
+  status->outcome = static_cast<uint8_t>(outcome);
+  status->accepted = core::outcomeAccepted(outcome);
+  status->in_force_confirmed = outcome == core::CalibrationOutcome::kInForceConfirmed;
+}
+
+CalibrationStatus statusWithoutSolve(const std::string& reason, uint32_t epoch, core::CalibrationOutcome outcome) {
+  CalibrationStatus status;
+  status.header.stamp = ros::Time::now();
+  status.epoch = epoch;
+  status.reason = reason;
+  setOutcome(&status, outcome);
+  return status;
+}
+
+std::string recalibrateMessage(const CalibrationStatus& status) {
+  // A committed status has a reason only when its epoch could not be read back.
+  return status.outcome == CalibrationStatus::OUTCOME_COMMITTED && status.reason.empty() ? "committed" : status.reason;
+}
+
 CalibrationStatus makeStatus(const core::BundleAdjustmentSummary& summary, const core::GateDecision& decision,
                              const core::RectificationOptions& rectification) {
   CalibrationStatus status;
   status.header.stamp = ros::Time::now();
-  status.accepted = decision.accepted;
+  setOutcome(&status, core::judgedOutcome(true, decision, false, true));
   status.reason = decision.accepted ? "" : decision.reason;
   status.frames_used = static_cast<uint32_t>(summary.frames_used);
   status.corners_used = static_cast<uint32_t>(summary.corners_used);
@@ -206,21 +247,18 @@ CalibrationSession::CalibrationSession(ros::NodeHandle nh, CalibratorParams para
       gate_(params_.gate),
       filter_(params_.filter) {}
 
-CalibrationStatus CalibrationSession::solve(const std::vector<core::StereoObservation>& frames,
-                                            const sensor_msgs::CameraInfo* left_info,
-                                            const sensor_msgs::CameraInfo* right_info, uint32_t epoch,
-                                            bool dry_run, std::optional<CommittedCalibration>* committed,
-                                            std::optional<UncommittedCalibration>* uncommitted,
-                                            std::optional<double> health_problem_s) {
-  committed->reset();
-  if (uncommitted) uncommitted->reset();
-  if (!left_info || !right_info) {
-    CalibrationStatus status;
-    status.header.stamp = ros::Time::now();
-    status.epoch = epoch;
-    status.reason = "no left/right camera_info received: image size and calibration in force unknown";
-    return status;
+SolveResult CalibrationSession::solve(const SolveRequest& request) {
+  const std::vector<core::StereoObservation>& frames = request.frames;
+  const uint32_t epoch = request.epoch;
+  const bool dry_run = request.dry_run;
+  SolveResult result;
+  if (!request.left_info || !request.right_info) {
+    result.status = statusWithoutSolve("no left/right camera_info received: image size and calibration in force unknown",
+                                       epoch, core::CalibrationOutcome::kMissingInputs);
+    return result;
   }
+  const sensor_msgs::CameraInfo* left_info = request.left_info.get();
+  const sensor_msgs::CameraInfo* right_info = request.right_info.get();
   core::StereoRig in_force;
   std::string error;
   const bool have_in_force = fromStereoCameraInfo(*left_info, *right_info, &in_force, &error);
@@ -232,7 +270,7 @@ CalibrationStatus CalibrationSession::solve(const std::vector<core::StereoObserv
     in_force_predicted_px_.reset();
   }
   const core::BundleAdjustmentSummary candidate =
-      solveWindow(frames, *left_info, have_in_force ? &in_force : nullptr, health_problem_s);
+      solveWindow(frames, *left_info, have_in_force ? &in_force : nullptr, request.health_problem_s);
   // An implausible calibration in force (an outside driver's) is never confirmed: the solve is
   // judged on its own, as for an uncalibrated head.
   const bool judge_in_force = have_in_force && implausibleCandidate({*left_info, *right_info}).empty();
@@ -244,9 +282,13 @@ CalibrationStatus CalibrationSession::solve(const std::vector<core::StereoObserv
     decision.reason = "solve failed: " + candidate.message;
   } else {
     decision = gate_.evaluate(candidate, judge_in_force ? &in_force_fit : nullptr, in_force_predicted_px_);
-    if (decision.refinement) prior_note_ += (prior_note_.empty() ? "" : "; ") + decision.detail;
+    if (decision.outcome == core::GateOutcome::kRefinement) prior_note_ += (prior_note_.empty() ? "" : "; ") + decision.detail;
   }
-  CalibrationStatus status = statusOf(candidate, decision, in_force_fit, epoch, frames);
+  const core::CalibrationOutcome outcome =
+      core::judgedOutcome(candidate.success, decision, dry_run, params_.commit == CommitTarget::kDriver);
+  CalibrationStatus& status = result.status;
+  status = statusOf(candidate, decision, in_force_fit, epoch, frames);
+  setOutcome(&status, outcome);
   // A solve the gate found sound is what the next window learns from, committed or not (a
   // calibration in force confirmed is still measured better by the solve that confirmed it).
   const bool learn = !dry_run && candidate.covariance_ok && (decision.accepted || decision.in_force_confirmed);
@@ -254,12 +296,10 @@ CalibrationStatus CalibrationSession::solve(const std::vector<core::StereoObserv
     filter_.setState(candidate.rig, candidate.rig_covariance, frames.empty() ? 0.0 : frames.back().stamp);
     filter_in_force_.emplace(*left_info, *right_info);
   }
-  if (!decision.accepted || dry_run) {
-    if (decision.accepted) status.reason = "dry run: acceptable, not committed";
-    return status;
-  }
-  commitAccepted(candidate, learn, *left_info, *right_info, &status, committed, uncommitted);
-  return status;
+  if (outcome == core::CalibrationOutcome::kDryRunAcceptable) status.reason = "dry run: acceptable, not committed";
+  if (outcome == core::CalibrationOutcome::kCommitted || outcome == core::CalibrationOutcome::kAcceptedNotCommitted)
+    commitAccepted(candidate, learn, *left_info, *right_info, &result);
+  return result;
 }
 
 // The window's solve: on its own, then again with what earlier windows taught about the
@@ -313,14 +353,14 @@ CalibrationStatus CalibrationSession::statusOf(const core::BundleAdjustmentSumma
   CalibrationStatus status = makeStatus(candidate, decision, rectification);
   status.epoch = epoch;
   if (!frames.empty()) status.newest_frame.fromSec(frames.back().stamp);
-  if (decision.in_force_confirmed) {
+  if (status.in_force_confirmed) {
     char rms[96];
     std::snprintf(rms, sizeof(rms), " (RMS %.3f px; the new solve %.3f px, no better)", core::combinedRms(in_force_fit),
                   core::combinedRms(candidate));
     // The gate's words when the new solve fits better but changes too little to trust.
     status.reason = kInForceConfirmedReason +
-                    (decision.change_too_small ? " (" + decision.detail + ")" : std::string(rms));
-    status.in_force_confirmed = true;
+                    (decision.outcome == core::GateOutcome::kChangeTooSmall ? " (" + decision.detail + ")"
+                                                                           : std::string(rms));
   }
   return status;
 }
@@ -329,9 +369,8 @@ CalibrationStatus CalibrationSession::statusOf(const core::BundleAdjustmentSumma
 // became of it.
 void CalibrationSession::commitAccepted(const core::BundleAdjustmentSummary& candidate, bool learned,
                                         const sensor_msgs::CameraInfo& left_info,
-                                        const sensor_msgs::CameraInfo& right_info, CalibrationStatus* status,
-                                        std::optional<CommittedCalibration>* committed,
-                                        std::optional<UncommittedCalibration>* uncommitted) {
+                                        const sensor_msgs::CameraInfo& right_info, SolveResult* result) {
+  CalibrationStatus* status = &result->status;
   if (params_.commit == CommitTarget::kNone) {
     // A replay has no driver to commit to: announce the accepted geometry on /tf_static only,
     // and say in the status that no camera_info changed (the epoch in force stays `epoch`).
@@ -343,24 +382,23 @@ void CalibrationSession::commitAccepted(const core::BundleAdjustmentSummary& can
   try {
     std::tie(infos.left, infos.right) = toStereoCameraInfo(candidate.rig, params_.rectification_alpha);
   } catch (const std::invalid_argument& e) {  // a rig that cannot be rectified is not committed
-    status->accepted = false;
+    setOutcome(status, core::CalibrationOutcome::kNotPlausible);
     status->reason = std::string("not committed: ") + e.what();
     return;
   }
   // What every consumer checks (plausible principal points, P fitting K and R, distortion that
   // does not fold over): a solve that fails it would be refused downstream, or leave depth empty.
   if (const std::string problem = implausibleCandidate(infos); !problem.empty()) {
-    status->accepted = false;
+    setOutcome(status, core::CalibrationOutcome::kNotPlausible);
     status->reason = "not committed: the solve is not a plausible calibration: " + problem;
     return;
   }
   const std::string commit_error = commit(infos, candidate.rig, left_info);
   if (!commit_error.empty()) {
-    status->accepted = false;
+    setOutcome(status, core::CalibrationOutcome::kCommitFailed);
     status->reason = "not committed: " + commit_error;
-    if (uncommitted)
-      *uncommitted = UncommittedCalibration{infos, candidate.rig, left_info, right_info, *status,
-                                            core::QualityGate::predictedPx(candidate)};
+    result->uncommitted = UncommittedCalibration{infos, candidate.rig, left_info, right_info, *status,
+                                                 core::QualityGate::predictedPx(candidate)};
     return;
   }
   // status.epoch stays `epoch`: how far the driver moves its epoch per set_camera_info is the
@@ -368,7 +406,7 @@ void CalibrationSession::commitAccepted(const core::BundleAdjustmentSummary& can
   if (learned) filter_in_force_.emplace(infos.left, infos.right);
   const double predicted = core::QualityGate::predictedPx(candidate);
   in_force_predicted_px_ = predicted > 0.0 ? std::optional<double>(predicted) : std::nullopt;
-  *committed = std::move(infos);
+  result->committed = std::move(infos);
 }
 
 std::string CalibrationSession::implausibleCandidate(const CommittedCalibration& infos) const {

@@ -649,3 +649,44 @@ TEST(QualityGate, ASolveThatFitsClearlyBetterReplacesACalibrationThatStillFits) 
 
 }  // namespace
 }  // namespace embedded_calibration_stereo::core
+
+// The gate's decision as a value: each way out of evaluate() names its outcome, and the flags
+// agree with it.
+namespace embedded_calibration_stereo::core {
+namespace {
+
+TEST(QualityGateRules, EachDecisionNamesItsOutcome) {
+  BundleAdjustmentSummary candidate = passingCandidate();  // RMS 0.5 px
+  RigParameters sd = RigParameters::Constant(1e-3);  // a covariance: a predicted error for depth
+  candidate.rig_covariance = sd.cwiseProduct(sd).asDiagonal();
+  const QualityGate gate{GateOptions{}};
+  const auto outcome = [](const GateDecision& d) {
+    EXPECT_EQ(d.accepted, d.outcome == GateOutcome::kAccepted || d.outcome == GateOutcome::kRefinement) << d.reason;
+    EXPECT_EQ(d.in_force_confirmed,
+              d.outcome == GateOutcome::kInForceConfirmed || d.outcome == GateOutcome::kChangeTooSmall)
+        << d.reason;
+    return d.outcome;
+  };
+  EXPECT_EQ(outcome(gate.evaluate(candidate, nullptr)), GateOutcome::kAccepted);  // the first calibration
+  const BundleAdjustmentSummary drifted = inForceFit(0.8), same = inForceFit(0.5), better = inForceFit(0.4);
+  EXPECT_EQ(outcome(gate.evaluate(candidate, &drifted)), GateOutcome::kAccepted);
+  EXPECT_EQ(outcome(gate.evaluate(candidate, &same)), GateOutcome::kInForceConfirmed);
+  EXPECT_EQ(outcome(gate.evaluate(candidate, &better)), GateOutcome::kRejected);  // clearly worse: confirms nothing
+  BundleAdjustmentSummary unsolved = candidate;
+  unsolved.success = false;
+  EXPECT_EQ(outcome(gate.evaluate(unsolved, &same)), GateOutcome::kRejected);
+  // Confirming, but clearly better known than the calibration in force: a refinement.
+  GateOptions refine;
+  refine.refine_ratio = 0.85;
+  const double p = QualityGate::predictedPx(candidate);
+  ASSERT_GT(p, 0.0);
+  EXPECT_EQ(outcome(QualityGate(refine).evaluate(candidate, &same, p / 0.84)), GateOutcome::kRefinement);
+  EXPECT_EQ(outcome(QualityGate(refine).evaluate(candidate, &same, p / 0.86)), GateOutcome::kInForceConfirmed);
+  // A better fit that changes less than its own uncertainty.
+  GateOptions significance;
+  significance.min_change_in_predicted = 1e6;
+  EXPECT_EQ(outcome(QualityGate(significance).evaluate(candidate, &drifted)), GateOutcome::kChangeTooSmall);
+}
+
+}  // namespace
+}  // namespace embedded_calibration_stereo::core

@@ -249,3 +249,62 @@ TEST(BoundRecalibrateRequest, LimitsFramesAndTimeoutAndRefusesNonFiniteTimeouts)
   r = ecsr::boundRecalibrateRequest(10, 0.0, params);
   EXPECT_EQ(r.timeout_s, 4.0);
 }
+
+// CalibrationStatus.outcome: set with the flags that follow from it, in every status the
+// calibrator builds without a solve, and from the gate's decision in a solve's.
+TEST(CalibrationOutcome, TheStatusFlagsFollowTheOutcome) {
+  ros::Time::init();
+  using S = ecsr::CalibrationStatus;
+  ecsr::CalibrationStatus status;
+  for (const auto o : {core::CalibrationOutcome::kCommitted, core::CalibrationOutcome::kAcceptedNotCommitted,
+                       core::CalibrationOutcome::kDryRunAcceptable}) {
+    ecsr::setOutcome(&status, o);
+    EXPECT_EQ(status.outcome, static_cast<uint8_t>(o));
+    EXPECT_TRUE(status.accepted) << int(status.outcome);
+    EXPECT_FALSE(status.in_force_confirmed) << int(status.outcome);
+  }
+  ecsr::setOutcome(&status, core::CalibrationOutcome::kInForceConfirmed);
+  EXPECT_EQ(status.outcome, S::OUTCOME_IN_FORCE_CONFIRMED);
+  EXPECT_FALSE(status.accepted);
+  EXPECT_TRUE(status.in_force_confirmed);
+  ecsr::setOutcome(&status, core::CalibrationOutcome::kCommitFailed);  // an accepted solve the driver did not store
+  EXPECT_EQ(status.outcome, S::OUTCOME_COMMIT_FAILED);
+  EXPECT_FALSE(status.accepted);
+  EXPECT_FALSE(status.in_force_confirmed);
+
+  const ecsr::CalibrationStatus busy = ecsr::statusWithoutSolve("busy: ...", 4);
+  EXPECT_EQ(busy.outcome, S::OUTCOME_NOT_SOLVED);
+  EXPECT_EQ(busy.epoch, 4u);
+  EXPECT_EQ(busy.reason, "busy: ...");
+  EXPECT_FALSE(busy.accepted);
+  EXPECT_EQ(ecsr::statusWithoutSolve("no camera_info", 1, core::CalibrationOutcome::kMissingInputs).outcome,
+            S::OUTCOME_MISSING_INPUTS);
+
+  core::BundleAdjustmentSummary s;
+  s.success = true;
+  core::GateDecision decision;
+  decision.setOutcome(core::GateOutcome::kRefinement);
+  EXPECT_EQ(ecsr::makeStatus(s, decision).outcome, S::OUTCOME_COMMITTED);  // to be committed
+  decision.setOutcome(core::GateOutcome::kChangeTooSmall);
+  const ecsr::CalibrationStatus confirmed = ecsr::makeStatus(s, decision);
+  EXPECT_EQ(confirmed.outcome, S::OUTCOME_IN_FORCE_CONFIRMED);
+  EXPECT_TRUE(confirmed.in_force_confirmed);
+  decision.setOutcome(core::GateOutcome::kRejected);
+  EXPECT_EQ(ecsr::makeStatus(s, decision).outcome, S::OUTCOME_REJECTED);
+}
+
+TEST(CalibrationOutcome, TheRecalibrateMessageSaysCommittedOnlyForACommit) {
+  ecsr::CalibrationStatus status;
+  ecsr::setOutcome(&status, core::CalibrationOutcome::kCommitted);
+  EXPECT_EQ(ecsr::recalibrateMessage(status), "committed");
+  status.reason = "committed, but no frame with it on /stereo/calibration_mode within 2.0 s: ...";
+  EXPECT_EQ(ecsr::recalibrateMessage(status), status.reason);
+  core::CalibrationOutcome others[] = {core::CalibrationOutcome::kAcceptedNotCommitted,
+                                      core::CalibrationOutcome::kDryRunAcceptable,
+                                      core::CalibrationOutcome::kRejected};
+  for (const auto o : others) {
+    ecsr::setOutcome(&status, o);
+    status.reason = "";
+    EXPECT_EQ(ecsr::recalibrateMessage(status), "") << int(status.outcome);
+  }
+}

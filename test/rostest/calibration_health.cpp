@@ -90,7 +90,7 @@ TEST(CalibrationHealth, GoodWrongCalibrationRolledBackKnockCalibratesOnDemand) {
   ASSERT_TRUE(status.waitFor(
       [&](const std::vector<CalibrationStatus::ConstPtr>& m) {
         return !m.empty() && m.back()->epoch == wrong_epoch && !m.back()->accepted &&
-               m.back()->reason.find("rolled back") != std::string::npos;
+               m.back()->outcome == embedded_calibration_stereo::CalibrationStatus::OUTCOME_ROLLED_BACK;
       },
       5.0))
       << lastHealth(health);

@@ -63,7 +63,7 @@ TEST(CalibrationHealthChain, TheLastCalibrationVerifiedGoodIsRestoredNotTheUnver
   // The second one is found worse than the last one verified GOOD and rolled back to it.
   ASSERT_TRUE(status.waitFor(
       [&](const std::vector<CalibrationStatus::ConstPtr>& m) {
-        return !m.empty() && m.back()->reason.find("rolled back") != std::string::npos;
+        return !m.empty() && m.back()->outcome == embedded_calibration_stereo::CalibrationStatus::OUTCOME_ROLLED_BACK;
       },
       10.0))
       << "no rollback; " << lastHealth(health);

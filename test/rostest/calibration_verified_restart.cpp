@@ -114,7 +114,7 @@ TEST(CalibrationVerifiedRestart, TheCalibrationVerifiedGoodIsKeptAcrossRestarts)
   ASSERT_TRUE(head.startHealth());
   ASSERT_TRUE(status.waitFor(
       [](const auto& m) {
-        return !m.empty() && m.back()->reason.find("rolled back") != std::string::npos &&
+        return !m.empty() && m.back()->outcome == embedded_calibration_stereo::CalibrationStatus::OUTCOME_ROLLED_BACK &&
                m.back()->reason.find("verified before the restart") != std::string::npos;
       },
       40.0))

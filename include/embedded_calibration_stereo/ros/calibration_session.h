@@ -17,6 +17,7 @@
 #include "embedded_calibration_stereo/CalibrationStatus.h"
 #include "embedded_calibration_stereo/core/calibration/bundle_adjuster.h"
 #include "embedded_calibration_stereo/core/calibration/calibration_filter.h"
+#include "embedded_calibration_stereo/core/calibration/calibration_outcome.h"
 #include "embedded_calibration_stereo/core/calibration/paced_queue.h"
 #include "embedded_calibration_stereo/core/geometry/calibration_device.h"
 #include "embedded_calibration_stereo/core/geometry/observation.h"
@@ -94,10 +95,21 @@ std::vector<std::string> observationDefects(const core::StereoObservation& obser
                                             const std::vector<core::VirtualBoard>& boards);
 
 // CalibrationStatus of a solve (every field filled; intrinsics fx, fy, cx, cy, k1, k2, p1, p2, k3).
+// Its outcome is the gate's (accepted: kCommitted, what a commit then makes of it is the caller's).
 // The predicted accuracy for depth is that of the rig rectified with `rectification` (the
 // committed CameraInfo's), from the solve's covariance; zero without one.
 CalibrationStatus makeStatus(const core::BundleAdjustmentSummary& summary, const core::GateDecision& decision,
                              const core::RectificationOptions& rectification = {});
+
+// Sets status.outcome to `outcome`, and accepted and in_force_confirmed as they follow from it.
+void setOutcome(CalibrationStatus* status, core::CalibrationOutcome outcome);
+
+// The status of a request or job that ended without a solve (`outcome`: why, as a value).
+CalibrationStatus statusWithoutSolve(const std::string& reason, uint32_t epoch,
+                                     core::CalibrationOutcome outcome = core::CalibrationOutcome::kNotSolved);
+
+// The calibration/recalibrate answer's message for a solve's `status`: "committed", or its reason.
+std::string recalibrateMessage(const CalibrationStatus& status);
 
 // The pair a successful commit sent to the driver's set_camera_info services.
 struct CommittedCalibration {
@@ -121,6 +133,30 @@ struct UncommittedCalibration {
   double predicted_px = 0.0;  // its predicted hypot(misalignment, disparity bias) (QualityGate::predictedPx)
 };
 
+// What CalibrationSession::solve() solves.
+struct SolveRequest {
+  std::vector<core::StereoObservation> frames;  // the window
+  // The calibration in force (null when none received yet) and its calibration_epoch.
+  sensor_msgs::CameraInfoConstPtr left_info, right_info;
+  uint32_t epoch = 0;
+  bool dry_run = false;  // solve and gate only: nothing committed, nothing learned
+  // The stamp (s) of the newest calibration/health verdict below GOOD, if any: when it is not
+  // older than what earlier windows taught, the stereo rotation and the focal lengths (what the
+  // health's change model sees) get no prior from them.
+  std::optional<double> health_problem_s;
+};
+
+// What became of it.
+struct SolveResult {
+  // status.outcome says what became of the solve; status.epoch is always the request's.
+  CalibrationStatus status;
+  // After a commit: the pair sent to the driver; the caller reads the epoch the driver put in
+  // force from the driver's frames (see carriesCalibration).
+  std::optional<CommittedCalibration> committed;
+  // After a failed commit: what commitAgain() needs.
+  std::optional<UncommittedCalibration> uncommitted;
+};
+
 // Solve, gate and commit. Threading: solve() runs on the calibrator's worker thread only (it
 // blocks on service calls and on the solver); broadcastTransform() may also be called from a
 // subscriber callback (the calibration in force at start-up), so the broadcaster is guarded.
@@ -132,25 +168,14 @@ class CalibrationSession {
   CalibrationSession(ros::NodeHandle nh, CalibratorParams params, core::CalibrationDevice device,
                      std::optional<core::StereoRig> nominal = std::nullopt);
 
-  // `left_info`/`right_info`: the calibration in force (null when none received yet);
-  // `epoch`: its calibration_epoch. Commits unless `dry_run` or rejected. status.accepted is
-  // true only for a committed (or, in a dry run, an acceptable) calibration; a failed
-  // set_camera_info leaves accepted false with the reason "not committed: ..." (the next window
-  // solves again against the unchanged calibration in force: the retry). With commit "none" an
-  // acceptable calibration is published on /tf_static only: status.accepted is true, its reason
-  // kAcceptedNotCommittedReason and its epoch `epoch` (still in force: nothing was committed).
-  // status.epoch is always `epoch`: after a commit, `*committed` holds the pair sent to the
-  // driver, and the caller reads the epoch the driver put in force from the driver's frames
-  // (see carriesCalibration); `*committed` is reset otherwise. When a commit failed,
-  // `*uncommitted` (if given) holds what commitAgain() needs; it is reset otherwise.
-  // `health_problem_s` (optional): the stamp (s) of the newest calibration/health verdict below
-  // GOOD; when it is not older than what earlier windows taught, the stereo rotation and the
-  // focal lengths (what the health's change model sees) get no prior from them.
-  CalibrationStatus solve(const std::vector<core::StereoObservation>& frames,
-                          const sensor_msgs::CameraInfo* left_info, const sensor_msgs::CameraInfo* right_info,
-                          uint32_t epoch, bool dry_run, std::optional<CommittedCalibration>* committed,
-                          std::optional<UncommittedCalibration>* uncommitted = nullptr,
-                          std::optional<double> health_problem_s = std::nullopt);
+  // Solves the request's window, gates it against the calibration in force and commits it unless
+  // a dry run or rejected. status.accepted is true only for a committed (or, in a dry run, an
+  // acceptable) calibration; a failed set_camera_info leaves accepted false with the reason
+  // "not committed: ..." (the next window solves again against the unchanged calibration in
+  // force: the retry). With commit "none" an acceptable calibration is published on /tf_static
+  // only: status.accepted is true, its reason kAcceptedNotCommittedReason and its epoch the
+  // request's (still in force: nothing was committed).
+  SolveResult solve(const SolveRequest& request);
 
   // Commits `calibration` again (worker thread). Empty on success, otherwise why not.
   std::string commitAgain(const UncommittedCalibration& calibration);
@@ -175,8 +200,7 @@ class CalibrationSession {
                              const std::vector<core::StereoObservation>& frames) const;
   void commitAccepted(const core::BundleAdjustmentSummary& candidate, bool learned,
                       const sensor_msgs::CameraInfo& left_info, const sensor_msgs::CameraInfo& right_info,
-                      CalibrationStatus* status, std::optional<CommittedCalibration>* committed,
-                      std::optional<UncommittedCalibration>* uncommitted);
+                      SolveResult* result);
   // Empty on success, otherwise why the commit failed. When only the right one was refused, a
   // left calibration the driver stored (a driver without pairs) is restored to `left_in_force`;
   // our driver only staged it ("staged: ..." answer) and has already dropped it.

@@ -55,6 +55,14 @@ std::string GateOptions::validate() const {
   return "";
 }
 
+void GateDecision::setOutcome(GateOutcome value) {
+  outcome = value;
+  accepted = value == GateOutcome::kAccepted || value == GateOutcome::kRefinement;
+  refinement = value == GateOutcome::kRefinement;
+  change_too_small = value == GateOutcome::kChangeTooSmall;
+  in_force_confirmed = value == GateOutcome::kInForceConfirmed || value == GateOutcome::kChangeTooSmall;
+}
+
 double combinedRms(const BundleAdjustmentSummary& s) {
   const int n = s.corners_left + s.corners_right;
   if (n == 0) return 0.0;
@@ -75,16 +83,16 @@ double QualityGate::predictedPx(const BundleAdjustmentSummary& c) {
 
 namespace {
 
-GateDecision verdict(bool accepted, const std::string& why) {
+GateDecision verdict(GateOutcome outcome, const std::string& why) {
   GateDecision d;
-  d.accepted = accepted;
-  d.reason = (accepted ? "accepted: " : "rejected: ") + why;
+  d.setOutcome(outcome);
+  d.reason = (d.accepted ? "accepted: " : "rejected: ") + why;
   d.detail = why;
   return d;
 }
 
-GateDecision rejected(const std::string& why) { return verdict(false, why); }
-GateDecision accepted(const std::string& why) { return verdict(true, why); }
+GateDecision rejected(const std::string& why) { return verdict(GateOutcome::kRejected, why); }
+GateDecision accepted(const std::string& why) { return verdict(GateOutcome::kAccepted, why); }
 
 // Why the candidate cannot be accepted whatever is in force (its solve, its fit, how well its
 // parameters are known); empty when it passes.
@@ -126,9 +134,9 @@ GateDecision refineOr(GateDecision kept, const BundleAdjustmentSummary& c, const
     return kept;
   const double p = QualityGate::predictedPx(c);
   if (!(p > 0 && p < o.refine_ratio * *in_force_predicted_px)) return kept;
-  GateDecision refined = accepted("refinement of the calibration in force, predicted error " + fmt(p) +
-                                " px against " + fmt(*in_force_predicted_px) + " px");
-  refined.refinement = true;
+  GateDecision refined = verdict(GateOutcome::kRefinement, "refinement of the calibration in force, predicted error " +
+                                                                fmt(p) + " px against " + fmt(*in_force_predicted_px) +
+                                                                " px");
   refined.predicted_px = p;
   return refined;
 }
@@ -177,20 +185,20 @@ GateDecision againstInForce(const BundleAdjustmentSummary& c, const BundleAdjust
   if (candidate_rms * (1.0 + o.min_rms_improvement_rel) <= in_force_rms) {
     const Significance s = significance(c, in_force, o);
     if (!s.rejection.empty()) {
-      GateDecision kept = rejected(s.rejection);
       // The observations do not tell the two apart: the calibration in force stands.
-      kept.change_too_small = s.within_uncertainty;
-      kept.in_force_confirmed = s.within_uncertainty;
+      const GateDecision kept =
+          verdict(s.within_uncertainty ? GateOutcome::kChangeTooSmall : GateOutcome::kRejected, s.rejection);
       return refineOr(kept, c, o, in_force_predicted_px);
     }
     return accepted("RMS " + fmt(candidate_rms) + " px vs " + fmt(in_force_rms) + " px for the calibration in force" +
                   s.note);
   }
-  GateDecision kept = rejected("no significant improvement: RMS " + fmt(candidate_rms) + " px vs " +
-                             fmt(in_force_rms) + " px for the calibration in force (needs " +
-                             fmt(100 * o.min_rms_improvement_rel) + "% lower)");
   // A fresh solve clearly worse than the calibration in force confirms nothing: something failed.
-  kept.in_force_confirmed = candidate_rms <= in_force_rms * (1.0 + o.min_rms_improvement_rel);
+  const bool confirms = candidate_rms <= in_force_rms * (1.0 + o.min_rms_improvement_rel);
+  const GateDecision kept = verdict(confirms ? GateOutcome::kInForceConfirmed : GateOutcome::kRejected,
+                                    "no significant improvement: RMS " + fmt(candidate_rms) + " px vs " +
+                                        fmt(in_force_rms) + " px for the calibration in force (needs " +
+                                        fmt(100 * o.min_rms_improvement_rel) + "% lower)");
   return refineOr(kept, c, o, in_force_predicted_px);
 }
 

@@ -55,21 +55,35 @@ struct GateOptions {
   std::string validate() const;  // empty when usable
 };
 
+// What the gate decided, as a value to branch on (the reason is for people only).
+enum class GateOutcome {
+  kRejected,           // the candidate does not replace the calibration in force
+  kAccepted,           // it replaces the calibration in force (or is the first calibration)
+  kRefinement,         // accepted as a refinement of the calibration in force (GateOptions::refine_ratio)
+  kInForceConfirmed,   // rejected only because it fits no better (and not clearly worse) than the
+                       // calibration in force: these observations confirm the calibration in force
+  kChangeTooSmall,     // rejected because the change from the calibration in force lies within the
+                       // new solve's own uncertainty (GateOptions::min_change_in_predicted): also
+                       // a confirmation of the calibration in force
+};
+
 struct GateDecision {
+  // The flags are set by setOutcome(), from `outcome` (they stay first, for the brace-initialised
+  // decisions of callers): accepted for kAccepted and kRefinement, in_force_confirmed for
+  // kInForceConfirmed and kChangeTooSmall, change_too_small and refinement for their own value.
   bool accepted = false;
   std::string reason;  // why, in words, for CalibrationStatus.reason: "accepted: " or "rejected: " + detail
   std::string detail;  // the reason without its verdict
-  // Rejected because the change from the calibration in force lies within the new solve's own
-  // uncertainty (GateOptions::min_change_in_predicted).
   bool change_too_small = false;
-  // Rejected only because the candidate fits no better (and not clearly worse) than the
-  // calibration in force: the calibration in force is confirmed by these observations.
   bool in_force_confirmed = false;
-  // Accepted as a refinement of the calibration in force (GateOptions::refine_ratio).
   bool refinement = false;
   // The candidate's predicted hypot(misalignment, disparity bias) RMS (px) when the gate computed
   // it (min_change_in_predicted, refine_ratio), 0 otherwise.
   double predicted_px = 0.0;
+  GateOutcome outcome = GateOutcome::kRejected;
+
+  // Sets `outcome` and the flags derived from it.
+  void setOutcome(GateOutcome value);
 };
 
 class QualityGate {
