@@ -133,22 +133,9 @@ class CameraDriverNodelet : public GuardedNodelet {
   // (log and diagnostics).
   void loadCalibrations() {
     const cv::Size size = source_->imageSize();
-    std::optional<core::StereoRig> nominal;
-    if (!params_.device_config.empty()) {
-      try {
-        cv::FileStorage fs = core::openYaml(params_.device_config);
-        if (!fs["rig"].empty()) nominal = core::loadStereoRig(fs["rig"], "rig");
-      } catch (const std::exception& e) {
-        throw core::ConfigError("device_config", "'" + params_.device_config + "': " + e.what());
-      }
-    }
-    sensor_msgs::CameraInfo left_fallback, right_fallback;
-    if (nominal && nominal->left.width == size.width && nominal->left.height == size.height) {
-      std::tie(left_fallback, right_fallback) = toStereoCameraInfo(*nominal);
-    } else {
-      left_fallback.width = right_fallback.width = static_cast<uint32_t>(size.width);
-      left_fallback.height = right_fallback.height = static_cast<uint32_t>(size.height);
-    }
+    const std::optional<core::StereoRig> nominal =
+        params_.device_config.empty() ? std::nullopt : core::loadNominalRig(params_.device_config, "device_config");
+    const auto [left_fallback, right_fallback] = fallbackCameraInfos(nominal, size.width, size.height);
     calibration_ = std::make_unique<StereoCalibration>(
         StereoCalibration::Camera{params_.left_camera_name, params_.left_camera_info_url, "left_camera_info_url"},
         StereoCalibration::Camera{params_.right_camera_name, params_.right_camera_info_url, "right_camera_info_url"},
@@ -252,15 +239,8 @@ class CameraDriverNodelet : public GuardedNodelet {
     frames_published_ = 0;
     const uint32_t epoch = calibration_->inForce().epoch;
     const std::string calibration_problem = calibration_->problem();
-    if (!last_error_.empty()) {
-      status.summary(diagnostic_msgs::DiagnosticStatus::ERROR, last_error_);
-    } else if (!calibration_problem.empty()) {
-      status.summary(diagnostic_msgs::DiagnosticStatus::ERROR, calibration_problem);
-    } else if (rate < 0.9 * params_.fps) {
-      status.summaryf(diagnostic_msgs::DiagnosticStatus::WARN, "%.1f fps, below %.1f", rate, params_.fps);
-    } else {
-      status.summary(diagnostic_msgs::DiagnosticStatus::OK, "publishing");
-    }
+    const core::StatusSummary summary = core::driverSummary(last_error_, calibration_problem, rate, params_.fps);
+    status.summary(toDiagnosticLevel(summary.level), summary.text);
     status.add("frame rate (fps)", rate);
     status.add("configured fps", params_.fps);
     status.add("light on", last_light_on_);

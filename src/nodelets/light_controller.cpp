@@ -19,6 +19,7 @@
 #include "embedded_calibration_stereo/core/light/light_confirmation.h"
 #include "embedded_calibration_stereo/core/light/light_regions.h"
 #include "embedded_calibration_stereo/core/light/light_schedule.h"
+#include "embedded_calibration_stereo/ros/conversions.h"
 #include "embedded_calibration_stereo/ros/driver_calibration_watch.h"
 #include "embedded_calibration_stereo/ros/external_stereo_input.h"
 #include "embedded_calibration_stereo/ros/guarded_nodelet.h"
@@ -307,21 +308,14 @@ class LightControllerNodelet : public GuardedNodelet {
   }
 
   void diagnose(diagnostic_updater::DiagnosticStatusWrapper& status) {
-    using diagnostic_msgs::DiagnosticStatus;
-    const std::string fault = params_.light.backend != "none" ? watch_->fault() : "";
-    if (!light_error_.empty()) {
-      status.summary(DiagnosticStatus::ERROR, "light backend: " + light_error_);
-    } else if (!fault.empty()) {
-      status.summary(DiagnosticStatus::ERROR, "light not working: " + fault);
-    } else if (!missing_.empty()) {
-      status.summary(DiagnosticStatus::ERROR, "frames held back: " + missing_);
-    } else if (calibration_.uncalibrated(0) || calibration_.uncalibrated(1)) {
-      status.summary(DiagnosticStatus::WARN, "driver's camera_info uncalibrated");
-    } else if (frames_out_ == 0) {
-      status.summary(DiagnosticStatus::WARN, "no frame from the driver yet");
-    } else {
-      status.summary(DiagnosticStatus::OK, "confirming the light");
-    }
+    core::LightControllerState state;
+    state.backend_error = light_error_;
+    state.fault = params_.light.backend != "none" ? watch_->fault() : "";
+    state.held_back = missing_;
+    state.uncalibrated = calibration_.uncalibrated(0) || calibration_.uncalibrated(1);
+    state.frames_out = frames_out_;
+    const core::StatusSummary summary = core::lightControllerSummary(state);
+    status.summary(toDiagnosticLevel(summary.level), summary.text);
     status.add("light backend", params_.light.backend);
     status.add("calibration trigger",
                params_.schedule.trigger == core::CalibrationTrigger::kOnDemand ? "on_demand" : "periodic");

@@ -67,18 +67,10 @@ class OnlineCalibratorNodelet : public GuardedNodelet {
     ros::NodeHandle& pnh = getPrivateNodeHandle();
     const std::string package_path = ros::package::getPath("embedded_calibration_stereo");
     params_ = loadCalibratorParams(pnh, package_path.empty() ? "" : package_path + "/config/sim_rig.yaml");
-    core::CalibrationDevice device;
-    std::optional<core::StereoRig> nominal;
-    try {
-      cv::FileStorage fs = core::openYaml(params_.device_config);
-      device = core::loadDevice(fs["device"], "device");
-      if (!fs["rig"].empty()) nominal = core::loadStereoRig(fs["rig"], "rig");
-    } catch (const std::exception& e) {
-      throw core::ConfigError("device_config", "'" + params_.device_config + "': " + e.what());
-    }
+    const core::DeviceDescription device = core::loadDeviceDescription(params_.device_config, "device_config");
     status_pub_ = nh.advertise<CalibrationStatus>("calibration/status", 1, /*latch=*/true);
     calibration_ = std::make_unique<OnlineCalibration>(
-        getName(), params_, std::make_unique<CalibrationSession>(nh, params_, device, nominal),
+        getName(), params_, std::make_unique<CalibrationSession>(nh, params_, device.device, device.nominal),
         OnlineCalibration::Topics{nh.resolveName("calibration/observations"),
                                   nh.resolveName("calibration/window_observations"), nh.resolveName("calibration_mode")},
         [this](const CalibrationStatus& status) { status_pub_.publish(status); });

@@ -86,13 +86,9 @@ HealthParams loadHealthParams(const ros::NodeHandle& pnh, const std::string& def
   p.coverage.collapse_ratio = read.inRange("coverage_collapse_ratio", p.coverage.collapse_ratio, 0.01, 0.99);
   p.coverage.history_s = read.inRange("coverage_history_s", p.coverage.history_s, 10.0, 3600.0);
   p.coverage.min_history_s = std::min(p.coverage.min_history_s, p.coverage.history_s);
-  try {
-    cv::FileStorage fs = core::openYaml(p.device_config);
-    p.boards = core::loadDevice(fs["device"], "device").virtualBoards();
-    if (!fs["rig"].empty()) p.nominal = core::loadStereoRig(fs["rig"], "rig");
-  } catch (const std::exception& e) {
-    throw core::ConfigError("device_config", "'" + p.device_config + "': " + e.what());
-  }
+  const core::DeviceDescription device = core::loadDeviceDescription(p.device_config, "device_config");
+  p.boards = device.device.virtualBoards();
+  p.nominal = device.nominal;
   return p;
 }
 

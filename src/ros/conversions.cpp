@@ -1,5 +1,7 @@
 #include "embedded_calibration_stereo/ros/conversions.h"
 
+#include <diagnostic_msgs/DiagnosticStatus.h>
+
 #include <cmath>
 #include <sensor_msgs/distortion_models.h>
 
@@ -59,6 +61,28 @@ std::pair<sensor_msgs::CameraInfo, sensor_msgs::CameraInfo> toStereoCameraInfo(
   const core::RectificationGeometry g = core::computeRectificationGeometry(rig, options);
   setRectification(g.R1, g.P1, &left);
   setRectification(g.R2, g.P2, &right);
+  return {left, right};
+}
+
+uint8_t toDiagnosticLevel(core::StatusSummary::Level level) {
+  using diagnostic_msgs::DiagnosticStatus;
+  switch (level) {
+    case core::StatusSummary::Level::kOk:
+      return DiagnosticStatus::OK;
+    case core::StatusSummary::Level::kWarn:
+      return DiagnosticStatus::WARN;
+    case core::StatusSummary::Level::kError:
+      break;
+  }
+  return DiagnosticStatus::ERROR;
+}
+
+std::pair<sensor_msgs::CameraInfo, sensor_msgs::CameraInfo> fallbackCameraInfos(
+    const std::optional<core::StereoRig>& nominal, int width, int height) {
+  if (nominal && nominal->left.width == width && nominal->left.height == height) return toStereoCameraInfo(*nominal);
+  sensor_msgs::CameraInfo left, right;
+  left.width = right.width = static_cast<uint32_t>(width);
+  left.height = right.height = static_cast<uint32_t>(height);
   return {left, right};
 }
 

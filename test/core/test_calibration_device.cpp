@@ -1,9 +1,14 @@
 // Reflection geometry of the device's virtual copies: every virtual corner must be the mirror
 // image of its physical corner, with the same id, and virtual poses must stay proper rotations.
 #include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <cstdio>
+#include <fstream>
 
 #include "embedded_calibration_stereo/core/geometry/calibration_device.h"
 #include "embedded_calibration_stereo/core/io/config_io.h"
+#include "embedded_calibration_stereo/core/sim/sim_rig.h"
 
 namespace embedded_calibration_stereo::core {
 namespace {
@@ -102,6 +107,33 @@ TEST(ConfigIo, MissingFileAndBadValuesNameTheParameter) {
   } catch (const ConfigError& e) {
     EXPECT_EQ(e.parameter(), "rig.right");
   }
+}
+
+// The device_config file every nodelet reads: the simulator's loader of the same file is the
+// independent reference.
+TEST(ConfigIo, ADeviceDescriptionIsTheDeviceAndTheOptionalNominalRig) {
+  const std::string file = std::string(ECS_SOURCE_DIR) + "/config/sim_rig.yaml";
+  const DeviceDescription description = loadDeviceDescription(file, "device_config");
+  const SimRigConfig sim = loadSimRigConfig(file);
+  EXPECT_EQ(description.device.boards.size(), sim.device.boards.size());
+  ASSERT_TRUE(description.nominal.has_value());
+  EXPECT_EQ(description.nominal->left.fx, sim.rig.left.fx);
+  EXPECT_EQ(description.nominal->right_from_left.translation(), sim.rig.right_from_left.translation());
+  ASSERT_TRUE(loadNominalRig(file, "device_config").has_value());
+
+  const std::string bare = "/tmp/ecs_test_device_" + std::to_string(::getpid()) + ".yaml";
+  std::ofstream(bare) << "%YAML:1.0\nother: 1\n";
+  EXPECT_FALSE(loadNominalRig(bare, "device_config").has_value());
+  for (const std::string& path : {bare, std::string("/nonexistent/device.yaml")}) {
+    try {
+      loadDeviceDescription(path, "device_config");
+      ADD_FAILURE() << path << ": no device section, accepted";
+    } catch (const ConfigError& e) {
+      EXPECT_EQ(e.parameter(), "device_config");
+      EXPECT_NE(std::string(e.what()).find(path), std::string::npos) << e.what();
+    }
+  }
+  std::remove(bare.c_str());
 }
 
 }  // namespace

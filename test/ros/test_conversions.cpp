@@ -223,3 +223,28 @@ TEST(Conversions, TransformStampedMapsChildPointsIntoTheParentFrame) {
   const Eigen::Vector3d p(0.4, -1.0, 2.5);
   EXPECT_LT((back * p - parent_from_child * p).norm(), 1e-12);
 }
+
+// A driver with no calibration file publishes the drawing's cameras, or, when they do not have
+// the image's size, messages that image_geometry calls uncalibrated.
+TEST(Conversions, TheFallbackIsTheNominalPairOfTheImagesSizeOrUncalibrated) {
+  const core::StereoRig nominal = rig();
+  const auto [left, right] = fallbackCameraInfos(nominal, 752, 480);
+  EXPECT_EQ(left.K[0], 640);
+  EXPECT_EQ(left.K[4], 642);
+  EXPECT_EQ(right.K[0], 650);
+  EXPECT_EQ(right.K[5], 238);
+  image_geometry::StereoCameraModel model;
+  ASSERT_TRUE(model.fromCameraInfo(left, right));
+  EXPECT_NEAR(model.baseline(), nominal.right_from_left.translation().norm(), 1e-9);
+
+  for (const std::optional<core::StereoRig>& other : {std::optional<core::StereoRig>(), std::optional(nominal)}) {
+    const int width = other ? 640 : 752;  // the nominal cameras are 752x480: another size
+    const auto [l, r] = fallbackCameraInfos(other, width, 480);
+    for (const sensor_msgs::CameraInfo* info : {&l, &r}) {
+      EXPECT_EQ(info->width, static_cast<uint32_t>(width));
+      EXPECT_EQ(info->height, 480u);
+      for (double k : info->K) EXPECT_EQ(k, 0.0) << "uncalibrated: K all zero";
+      for (double p : info->P) EXPECT_EQ(p, 0.0);
+    }
+  }
+}

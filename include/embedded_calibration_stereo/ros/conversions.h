@@ -15,11 +15,13 @@
 #include <geometry_msgs/Pose.h>
 #include <geometry_msgs/TransformStamped.h>
 #include <sensor_msgs/CameraInfo.h>
+#include <optional>
 #include <string>
 #include <utility>
 
 #include "embedded_calibration_stereo/BoardObservation.h"
 #include "embedded_calibration_stereo/StereoPatternObservation.h"
+#include "embedded_calibration_stereo/core/driver/status_summary.h"
 #include "embedded_calibration_stereo/core/geometry/camera_model.h"
 #include "embedded_calibration_stereo/core/geometry/observation.h"
 #include "embedded_calibration_stereo/core/geometry/stereo_rig.h"
@@ -38,6 +40,15 @@ sensor_msgs::CameraInfo toCameraInfo(const core::PinholeCamera& camera);
 // (invalid camera, zero baseline, left and right sizes differ).
 std::pair<sensor_msgs::CameraInfo, sensor_msgs::CameraInfo> toStereoCameraInfo(
     const core::StereoRig& rig, double alpha = 0.0);
+
+// diagnostic_msgs::DiagnosticStatus's level (OK, WARN, ERROR) of a core summary.
+uint8_t toDiagnosticLevel(core::StatusSummary::Level level);
+
+// What a driver publishes before any calibration is stored: the nominal cameras of the drawing
+// (toStereoCameraInfo) when they have the image's size, otherwise uncalibrated messages that
+// carry only the size (K all zero: image_geometry and the consumers' checks call it uncalibrated).
+std::pair<sensor_msgs::CameraInfo, sensor_msgs::CameraInfo> fallbackCameraInfos(
+    const std::optional<core::StereoRig>& nominal, int width, int height);
 
 // K and D of a CameraInfo as a core camera (R and P are ignored). Accepts plumb_bob (or an
 // empty model) with 0, 4 or 5 coefficients. Returns false and explains why in *error when the

@@ -101,6 +101,36 @@ StereoRig loadStereoRig(const cv::FileNode& node, const std::string& path) {
   return rig;
 }
 
+namespace {
+
+// Runs `read` on the opened file; whatever it throws becomes ConfigError(parameter, ...).
+template <typename Read>
+auto readDeviceFile(const std::string& file, const std::string& parameter, Read read) {
+  try {
+    cv::FileStorage fs = openYaml(file);
+    return read(fs);
+  } catch (const std::exception& e) {
+    throw ConfigError(parameter, "'" + file + "': " + e.what());
+  }
+}
+
+std::optional<StereoRig> nominalRig(const cv::FileStorage& fs) {
+  if (fs["rig"].empty()) return std::nullopt;
+  return loadStereoRig(fs["rig"], "rig");
+}
+
+}  // namespace
+
+DeviceDescription loadDeviceDescription(const std::string& file, const std::string& parameter) {
+  return readDeviceFile(file, parameter, [](const cv::FileStorage& fs) {
+    return DeviceDescription{loadDevice(fs["device"], "device"), nominalRig(fs)};
+  });
+}
+
+std::optional<StereoRig> loadNominalRig(const std::string& file, const std::string& parameter) {
+  return readDeviceFile(file, parameter, nominalRig);
+}
+
 CalibrationDevice loadDevice(const cv::FileNode& node, const std::string& path) {
   if (node.empty() || !node.isMap()) throw ConfigError(path, "missing device section");
   CalibrationDevice dev;
