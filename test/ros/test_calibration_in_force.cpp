@@ -5,6 +5,7 @@
 
 #include "embedded_calibration_stereo/ros/calibration_in_force.h"
 #include "embedded_calibration_stereo/ros/conversions.h"
+#include "embedded_calibration_stereo/rectified_pair.h"
 
 namespace core = embedded_calibration_stereo::core;
 
@@ -13,21 +14,6 @@ using sensor_msgs::CameraInfo;
 using sensor_msgs::CameraInfoConstPtr;
 
 namespace {
-
-core::StereoRig rig(double right_fx = 648.7) {
-  core::StereoRig r;
-  r.left.width = r.right.width = 752;
-  r.left.height = r.right.height = 480;
-  r.left.fx = 652.4;
-  r.left.fy = 651.3;
-  r.left.cx = 372.9;
-  r.left.cy = 243.4;
-  r.left.dist = {-0.281, 0.0712, 0.00031, -0.00052, 0.0};
-  r.right = r.left;
-  r.right.fx = right_fx;
-  r.right_from_left.translation() << -0.1203, 0.0004, 0.0011;
-  return r;
-}
 
 CameraInfoConstPtr stamped(const CameraInfo& info, int frame) {
   CameraInfo copy = info;
@@ -41,7 +27,7 @@ struct Pair {
 
 Pair pair(double right_fx = 648.7) {
   Pair p;
-  std::tie(p.left, p.right) = ecsr::toStereoCameraInfo(rig(right_fx));
+  std::tie(p.left, p.right) = ecsr::toStereoCameraInfo(embedded_calibration_stereo::test_support::headRig(right_fx));
   return p;
 }
 

@@ -13,6 +13,7 @@
 #include "embedded_calibration_stereo/ros/calibration_file.h"
 #include "embedded_calibration_stereo/ros/calibration_session.h"
 #include "embedded_calibration_stereo/ros/conversions.h"
+#include "embedded_calibration_stereo/rectified_pair.h"
 #include "embedded_calibration_stereo/test_support/synthetic_observations.h"
 
 namespace core = embedded_calibration_stereo::core;
@@ -164,17 +165,7 @@ TEST(MakeStatus, CarriesThePredictedDepthAccuracyOfTheCovariance) {
 }
 
 TEST(CarriesCalibration, TellsTheCommittedCalibrationFromAnother) {
-  core::StereoRig rig;
-  rig.left.width = rig.right.width = 752;
-  rig.left.height = rig.right.height = 480;
-  rig.left.fx = 652.4;
-  rig.left.fy = 651.3;
-  rig.left.cx = 372.9;
-  rig.left.cy = 243.4;
-  rig.left.dist = {-0.281, 0.0712, 0.00031, -0.00052, 0.0};
-  rig.right = rig.left;
-  rig.right.fx = 648.7;
-  rig.right_from_left.translation() << -0.1203, 0.0004, 0.0011;
+  const core::StereoRig rig = embedded_calibration_stereo::test_support::headRig();
   const auto [left, right] = ecsr::toStereoCameraInfo(rig);
   EXPECT_TRUE(ecsr::carriesCalibration(left, left));
   EXPECT_TRUE(ecsr::carriesCalibration(right, right));

@@ -14,6 +14,23 @@ namespace embedded_calibration_stereo::test_support {
 
 constexpr uint32_t kPairWidth = 752, kPairHeight = 480;
 
+// A 752x480 head with strong barrel distortion and a 12 cm baseline; its cameras differ only in
+// the right one's fx.
+inline core::StereoRig headRig(double right_fx = 648.7) {
+  core::StereoRig rig;
+  rig.left.width = kPairWidth;
+  rig.left.height = kPairHeight;
+  rig.left.fx = 652.4;
+  rig.left.fy = 651.3;
+  rig.left.cx = 372.9;
+  rig.left.cy = 243.4;
+  rig.left.dist = {-0.281, 0.0712, 0.00031, -0.00052, 0.0};
+  rig.right = rig.left;
+  rig.right.fx = right_fx;
+  rig.right_from_left.translation() << -0.1203, 0.0004, 0.0011;
+  return rig;
+}
+
 inline std::pair<sensor_msgs::CameraInfo, sensor_msgs::CameraInfo> pairWithFocal(double fx) {
   core::StereoRig rig;
   for (core::PinholeCamera* c : {&rig.left, &rig.right}) {
