@@ -316,7 +316,7 @@ TEST(CensusSgm, PlaneAtSubpixelDisparity) {
 TEST(CensusSgm, RefusesBadParametersAndInputs) {
   cv::Mat left(40, 120, CV_8U, cv::Scalar(0)), right = left.clone(), d;
   CensusSgmParams p;
-  EXPECT_EQ(p.check(), "");
+  EXPECT_EQ(p.validate(), "");
   for (const auto& bad : std::vector<void (*)(CensusSgmParams*)>{
            [](CensusSgmParams* q) { q->paths = 4; },
            [](CensusSgmParams* q) { q->num_disparities = 40; },

@@ -79,7 +79,7 @@ TEST(PacedQueue, ReadyInSaysHowLongTheNextWaits) {
 }
 
 TEST(PacedQueue, OptionsAreChecked) {
-  EXPECT_EQ(core::PacedQueueOptions{}.check(), "");
-  EXPECT_NE(core::PacedQueueOptions({-1.0, 2}).check(), "");
-  EXPECT_NE(core::PacedQueueOptions({1.0, 0}).check(), "");
+  EXPECT_EQ(core::PacedQueueOptions{}.validate(), "");
+  EXPECT_NE(core::PacedQueueOptions({-1.0, 2}).validate(), "");
+  EXPECT_NE(core::PacedQueueOptions({1.0, 0}).validate(), "");
 }

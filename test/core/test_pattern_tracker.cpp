@@ -478,12 +478,12 @@ TEST(PatternTracker, PlainChessboardTeachAndTrack) {
 
 TEST(PatternTracker, OptionsCheckNamesTheBadField) {
   TrackerOptions o;
-  EXPECT_EQ(o.check(), "");
+  EXPECT_EQ(o.validate(), "");
   o.max_residual_px = 0;
-  EXPECT_NE(o.check().find("max_residual_px"), std::string::npos);
+  EXPECT_NE(o.validate().find("max_residual_px"), std::string::npos);
   o = TrackerOptions();
   o.min_board_corners = 3;
-  EXPECT_NE(o.check().find("min_board_corners"), std::string::npos);
+  EXPECT_NE(o.validate().find("min_board_corners"), std::string::npos);
 }
 
 }  // namespace

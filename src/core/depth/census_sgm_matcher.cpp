@@ -95,7 +95,7 @@ void censusBoth(const cv::Mat& left, const cv::Mat& right, const sgm_kernel::Ker
 
 }  // namespace
 
-std::string CensusSgmParams::check() const {
+std::string CensusSgmParams::validate() const {
   std::string problems;
   const auto add = [&problems](const std::string& s) { problems += (problems.empty() ? "" : "; ") + s; };
   if (num_disparities < 16 || num_disparities > 512 || num_disparities % 16 != 0)
@@ -120,7 +120,7 @@ void computeCensusSgmDisparity16(const cv::Mat& left, const cv::Mat& right,
     throw std::invalid_argument("census_sgm matcher: images must be non-empty mono8 (CV_8UC1)");
   if (left.size() != right.size())
     throw std::invalid_argument("census_sgm matcher: left and right sizes differ");
-  const std::string problem = params.check();
+  const std::string problem = params.validate();
   if (!problem.empty()) throw std::invalid_argument("census_sgm matcher: " + problem);
   const sgm_kernel::Kernel& kernel =
       kernelNamed("census_sgm", params.kernel, sgm_kernel::baselineKernel(), kAvx2Kernel);

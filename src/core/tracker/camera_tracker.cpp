@@ -250,7 +250,7 @@ CameraTracker::CameraTracker(CameraPrior prior, TrackerOptions options)
     : prior_(std::move(prior)), options_(options) {
   const std::string problem = prior_.validate();
   if (!problem.empty()) throw ConfigError("prior", problem);
-  const std::string bad_option = options_.check();
+  const std::string bad_option = options_.validate();
   if (!bad_option.empty()) throw ConfigError("tracker options", bad_option);
   auto templates = std::make_shared<std::vector<tracker::AlignmentTemplate>>();
   // Pixels away from every board (outside the taught margins, with a band for drift), every

@@ -44,7 +44,7 @@ std::string boardProblem(const TrackerOptions& o) {
 
 }  // namespace
 
-std::string TrackerOptions::check() const {
+std::string TrackerOptions::validate() const {
   const std::string problem = refinementProblem(*this);
   return problem.empty() ? boardProblem(*this) : problem;
 }

@@ -18,7 +18,7 @@ struct PacedQueueOptions {
   double min_interval_s = 1.0;  // s between the starts of two solves (>= 0)
   size_t capacity = 2;          // waiting solves (>= 1)
   // Empty when usable; otherwise a message naming the bad field.
-  std::string check() const {
+  std::string validate() const {
     if (!(min_interval_s >= 0.0)) return "min_interval_s must be >= 0";
     if (capacity < 1) return "capacity must be >= 1";
     return "";

@@ -43,7 +43,7 @@ struct CensusSgmParams {
   std::string kernel = "auto";   // "auto" (the widest this CPU runs), or one of censusSgmKernelNames()
 
   // Empty when usable; otherwise the problems, joined by "; ".
-  std::string check() const;
+  std::string validate() const;
 };
 
 // The kernels this build and CPU can run: "baseline" always, "avx2" on x86-64 CPUs with AVX2.

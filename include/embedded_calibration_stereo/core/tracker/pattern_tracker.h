@@ -101,7 +101,7 @@ struct TrackerOptions {
   // Track boards and cameras in parallel (cv::parallel_for_).
   bool parallel = true;
   // Empty when usable; otherwise a message naming the bad field.
-  std::string check() const;
+  std::string validate() const;
 };
 
 // Pixel order of 3-channel input. Mono8 (CV_8UC1) input ignores it.
