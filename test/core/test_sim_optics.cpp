@@ -440,6 +440,72 @@ TEST(SimOptics, ShotNoiseVarianceIsLinearInTheMean) {
   EXPECT_GT(cv::norm(rig.render(0.0, 0.0, 7).left, rig.render(0.0, 0.0, 8).left, cv::NORM_INF), 0.0);
 }
 
+// The Gaussian noise (noise_sigma, without the sensor model), measured as the image minus the
+// noise-free scene the rig renders beside it: its moments, its distribution against the normal
+// CDF (Kolmogorov-Smirnov, on the integer grey levels), and no correlation between neighbouring
+// pixels, the two cameras or two seeds.
+TEST(SimOptics, TheNoiseIsGaussianAndIndependent) {
+  SimRigConfig c = loadSimRigConfig(kDefaultConfig);
+  const double sigma = 12.0;  // wide against the 1-grey-level rounding
+  c.noise_sigma = sigma;
+  const SimRig rig(c);
+  std::vector<double> noise;
+  std::vector<cv::Mat> left, right;
+  for (uint64_t seed : {11, 12, 13, 14}) {
+    const SimFrame f = rig.render(0.0, 0.0, seed);
+    // Pixels 4 sigma from either end: no clipping.
+    const cv::Mat keep = (f.left_scene >= 4 * sigma) & (f.left_scene <= 255 - 4 * sigma) &
+                         (f.right_scene >= 4 * sigma) & (f.right_scene <= 255 - 4 * sigma);
+    left.push_back(cv::Mat(toFloat(f.left) - toFloat(f.left_scene)));
+    right.push_back(cv::Mat(toFloat(f.right) - toFloat(f.right_scene)));
+    left.back().setTo(std::nan(""), ~keep);
+    right.back().setTo(std::nan(""), ~keep);
+    for (int v = 0; v < keep.rows; ++v)
+      for (int u = 0; u < keep.cols; ++u)
+        if (keep.at<uchar>(v, u)) noise.push_back(left.back().at<double>(v, u));
+  }
+  ASSERT_GT(noise.size(), 500000u);
+  double sum = 0, sum2 = 0, sum4 = 0;
+  for (double d : noise) sum += d, sum2 += d * d;
+  const double n = static_cast<double>(noise.size()), mean = sum / n, var = sum2 / n - mean * mean;
+  for (double d : noise) sum4 += std::pow(d - mean, 4);
+  std::printf("[ figures  ] noise of sigma %.0f: mean %.4f, sd %.4f, kurtosis %.4f over %.0f pixels\n", sigma, mean,
+              std::sqrt(var), sum4 / n / (var * var), n);
+  EXPECT_NEAR(mean, 0.0, 0.05);
+  EXPECT_NEAR(std::sqrt(var), std::sqrt(sigma * sigma + 1.0 / 12), 0.05);  // + the rounding's variance
+  EXPECT_NEAR(sum4 / n / (var * var), 3.0, 0.03);
+  // The rounded deviate k has P(k) = Phi((k + 0.5) / sigma) - Phi((k - 0.5) / sigma): compare the
+  // cumulative counts at every half grey level.
+  std::sort(noise.begin(), noise.end());
+  double worst = 0.0;
+  for (int k = -60; k <= 60; ++k) {
+    const double below = std::upper_bound(noise.begin(), noise.end(), k + 0.0) - noise.begin();
+    const double phi = 0.5 * std::erfc(-(k + 0.5) / (sigma * std::sqrt(2.0)));
+    worst = std::max(worst, std::abs(below / n - phi));
+  }
+  std::printf("[ figures  ] Kolmogorov-Smirnov distance to the normal CDF %.5f\n", worst);
+  EXPECT_LT(worst, 1.63 / std::sqrt(n) * 2);  // twice the 1 % critical value
+
+  // Correlation coefficients over the pixels both keep.
+  const auto correlation = [](const cv::Mat& a, const cv::Mat& b) {
+    double sab = 0, saa = 0, sbb = 0;
+    for (int v = 0; v < a.rows; ++v)
+      for (int u = 0; u < a.cols; ++u) {
+        const double x = a.at<double>(v, u), y = b.at<double>(v, u);
+        if (std::isnan(x) || std::isnan(y)) continue;
+        sab += x * y, saa += x * x, sbb += y * y;
+      }
+    return sab / std::sqrt(saa * sbb);
+  };
+  const cv::Rect inner(1, 1, 750, 478);
+  const double next_column = correlation(left[0](inner), left[0](inner + cv::Point(1, 0)));
+  const double next_row = correlation(left[0](inner), left[0](inner + cv::Point(0, 1)));
+  const double cameras = correlation(left[0], right[0]), seeds = correlation(left[0], left[1]);
+  std::printf("[ figures  ] noise correlation: next column %.4f, next row %.4f, left/right %.4f, two seeds %.4f\n",
+              next_column, next_row, cameras, seeds);
+  for (double r : {next_column, next_row, cameras, seeds}) EXPECT_LT(std::abs(r), 0.01);
+}
+
 // --- Configuration ---------------------------------------------------------------------
 
 std::string writeOptics(const std::string& extra, const std::string& name) {
