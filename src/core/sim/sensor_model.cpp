@@ -166,7 +166,7 @@ void composeSensor(const SensorParams& p, const SensorLayers* layers, int camera
       const SensorLayers& l = layers[c];
       const cv::Range rows(band * band_rows, std::min(H, (band + 1) * band_rows));
       if (noisy)
-        kernel.normals(static_cast<unsigned>(mixSeed(l.seed ^ mixSeed(static_cast<uint64_t>(band) + 1)) >> 32), 0,
+        kernel.normals(static_cast<unsigned>(mixSeed(l.seed ^ mixSeed(static_cast<uint64_t>(band) + 1))), 0,
                        rows.size() * W, normal.ptr<float>(0));
       for (int row = rows.start; row < rows.end; ++row)
         composeRow(signal, l.scene.ptr<float>(row), l.device.ptr<float>(row), normal.ptr<float>(row - rows.start), W,
