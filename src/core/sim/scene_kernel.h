@@ -61,10 +61,6 @@ struct Kernel {
   // levels around log2 of the pixel's footprint on its plane.
   void (*shade)(const Plane* planes, const RowRays& rays, const RowHits& hits, const DepthLine& line, float* out,
                 float* depth);
-  // Standard normal deviates out[i] for the counters first + i, i in [0, count), of the stream
-  // `key` (the sensor noise): Box-Muller on a counter-based hash, so every kernel and any split
-  // of the counters give the same numbers, to float rounding.
-  void (*normals)(unsigned key, unsigned first, int count, float* out);
 };
 
 const Kernel& baselineKernel();

@@ -292,104 +292,10 @@ void castRow(const Plane& pc, int index, const RowRays& rays, int begin, int end
   for (; col < end; ++col) castScalar(pc, index, rays, col, hits);
 }
 
-// --- Gaussian noise --------------------------------------------------------------------
-// Counter i of a stream belongs to the pair i / 2: its two uniforms are the hashes of 2 (i / 2)
-// and 2 (i / 2) + 1 (xor the key); Box-Muller turns them into r cos(theta) for the even counter
-// and r sin(theta) for the odd one.
-
-constexpr float kMinusTwoLn2 = -1.3862944f;  // -2 ln 2: -2 ln u = kMinusTwoLn2 * log2 u
-constexpr float kTwoPi = 6.2831853f, kPi = 3.14159265f, kTwoTo24 = 5.9604645e-8f;
-
-// Chris Wellons' lowbias32: a bijective 32-bit integer hash.
-unsigned hash32(unsigned x) {
-  x ^= x >> 16;
-  x *= 0x7feb352dU;
-  x ^= x >> 15;
-  x *= 0x846ca68bU;
-  return x ^ (x >> 16);
-}
-
-// sin and cos of h in [-pi/2, pi/2] (Taylor to h^9 and h^10: within 4e-6).
-void halfAngle(float h, float* s, float* c) {
-  const float h2 = h * h;
-  *s = h * (1.0f + h2 * (-1.0f / 6 + h2 * (1.0f / 120 + h2 * (-1.0f / 5040 + h2 * (1.0f / 362880)))));
-  *c = 1.0f + h2 * (-0.5f + h2 * (1.0f / 24 + h2 * (-1.0f / 720 + h2 * (1.0f / 40320 + h2 * (-1.0f / 3628800)))));
-}
-
-void normalPair(unsigned key, unsigned pair, float* z0, float* z1) {
-  const float u1 = static_cast<float>((hash32((2 * pair) ^ key) >> 8) + 1) * kTwoTo24;  // (0, 1]
-  const float u2 = static_cast<float>(hash32((2 * pair + 1) ^ key) >> 8) * kTwoTo24;    // [0, 1)
-  const float r = sqrtf(maxf(kMinusTwoLn2 * log2f(u1), 0.0f));
-  float s, c;
-  halfAngle(0.5f * (kTwoPi * u2 - kPi), &s, &c);  // theta in [-pi, pi): its half angle
-  *z0 = r * (c * c - s * s);
-  *z1 = r * (2.0f * s * c);
-}
-
-#if CV_SIMD
-using VUint = cv::v_uint32;
-
-VUint hash32V(VUint x) {
-  x = x ^ (x >> 16);
-  x = x * cv::vx_setall_u32(0x7feb352dU);
-  x = x ^ (x >> 15);
-  x = x * cv::vx_setall_u32(0x846ca68bU);
-  return x ^ (x >> 16);
-}
-
-// kLanes pairs whose even counters are `even`: their even counters' deviates in *z0, the odd
-// ones' in *z1.
-void normalPairsV(const VUint& k, const VUint& even, VFloat* z0, VFloat* z1) {
-  const VFloat scale = splat(kTwoTo24);
-  const VFloat u1 = cv::v_cvt_f32(cv::v_reinterpret_as_s32((hash32V(even ^ k) >> 8) + cv::vx_setall_u32(1))) * scale;
-  const VFloat u2 = cv::v_cvt_f32(cv::v_reinterpret_as_s32(hash32V((even + cv::vx_setall_u32(1)) ^ k) >> 8)) * scale;
-  const VFloat r = cv::v_sqrt(cv::v_max(fastLog2(u1) * splat(kMinusTwoLn2), cv::vx_setzero_f32()));
-  const VFloat h = (u2 * splat(kTwoPi) - splat(kPi)) * splat(0.5f), h2 = h * h;
-  VFloat s = cv::v_fma(h2, splat(1.0f / 362880), splat(-1.0f / 5040));
-  s = cv::v_fma(h2, s, splat(1.0f / 120));
-  s = cv::v_fma(h2, s, splat(-1.0f / 6));
-  s = h * cv::v_fma(h2, s, splat(1.0f));
-  VFloat c = cv::v_fma(h2, splat(-1.0f / 3628800), splat(1.0f / 40320));
-  c = cv::v_fma(h2, c, splat(-1.0f / 720));
-  c = cv::v_fma(h2, c, splat(1.0f / 24));
-  c = cv::v_fma(h2, c, splat(-0.5f));
-  c = cv::v_fma(h2, c, splat(1.0f));
-  *z0 = r * (c * c - s * s);
-  *z1 = r * (splat(2.0f) * s * c);
-}
-#endif
-
-void normals(unsigned key, unsigned first, int count, float* out) {
-  int i = 0;
-  float z[2];
-  if (first % 2 == 1 && count > 0) {  // an odd first counter: the second half of its pair
-    normalPair(key, first / 2, &z[0], &z[1]);
-    out[i++] = z[1];
-  }
-#if CV_SIMD
-  alignas(64) unsigned lanes[kLanes];
-  for (int lane = 0; lane < kLanes; ++lane) lanes[lane] = 2 * lane;
-  const VUint k = cv::vx_setall_u32(key), step = cv::vx_setall_u32(2 * kLanes);
-  VUint even = cv::vx_load_aligned(lanes) + cv::vx_setall_u32(first + i);  // first + i is even here
-  for (; i + 2 * kLanes <= count; i += 2 * kLanes, even = even + step) {
-    VFloat z0, z1, lo, hi;
-    normalPairsV(k, even, &z0, &z1);
-    cv::v_zip(z0, z1, lo, hi);
-    cv::v_store(out + i, lo);
-    cv::v_store(out + i + kLanes, hi);
-  }
-#endif
-  for (; i < count; i += 2) {
-    normalPair(key, (first + i) / 2, &z[0], &z[1]);
-    out[i] = z[0];
-    if (i + 1 < count) out[i + 1] = z[1];
-  }
-}
-
 }  // namespace
 
 const Kernel& SCENE_KERNEL_GETTER() {
-  static const Kernel kernel{SCENE_KERNEL_NAME, castRow, shadeRow, normals};
+  static const Kernel kernel{SCENE_KERNEL_NAME, castRow, shadeRow};
   return kernel;
 }
 

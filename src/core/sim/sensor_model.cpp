@@ -156,7 +156,6 @@ void composeSensor(const SensorParams& p, const SensorLayers* layers, int camera
   const RowSignal signal{static_cast<float>(p.scene_gain), static_cast<float>(p.device_gain), p.sensor.enabled,
                          static_cast<float>(p.sensor.full_well_e / e_per_dn), static_cast<float>(1.0 / e_per_dn),
                          static_cast<float>(read_dn * read_dn), noisy ? static_cast<float>(p.noise_sigma) : 0.0f};
-  const scene_kernel::Kernel& kernel = p.kernel ? *p.kernel : scene_kernel::bestKernel();
   const int bands = (H + band_rows - 1) / band_rows;
   // Every camera's bands in one parallel pass: one hand-off to the threads per frame.
   cv::parallel_for_(cv::Range(0, cameras * bands), [&](const cv::Range& range) {
@@ -165,9 +164,11 @@ void composeSensor(const SensorParams& p, const SensorLayers* layers, int camera
       const int c = task / bands, band = task % bands;
       const SensorLayers& l = layers[c];
       const cv::Range rows(band * band_rows, std::min(H, (band + 1) * band_rows));
-      if (noisy)
-        kernel.normals(static_cast<unsigned>(mixSeed(l.seed ^ mixSeed(static_cast<uint64_t>(band) + 1))), 0,
-                       rows.size() * W, normal.ptr<float>(0));
+      if (noisy) {
+        cv::Mat n = normal.rowRange(0, rows.size());
+        cv::RNG rng(mixSeed(l.seed ^ mixSeed(static_cast<uint64_t>(band) + 1)));
+        rng.fill(n, cv::RNG::NORMAL, 0.0, 1.0);
+      }
       for (int row = rows.start; row < rows.end; ++row)
         composeRow(signal, l.scene.ptr<float>(row), l.device.ptr<float>(row), normal.ptr<float>(row - rows.start), W,
                    out[c].image.ptr<uchar>(row), out[c].scene.ptr<uchar>(row));

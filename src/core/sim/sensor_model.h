@@ -15,7 +15,6 @@
 #include <vector>
 
 #include "embedded_calibration_stereo/core/sim/sim_rig.h"
-#include "scene_kernel.h"
 
 namespace embedded_calibration_stereo::core {
 namespace sim {
@@ -61,15 +60,13 @@ class AutoExposure {
 // device_gain * device (grey levels); with the sensor model the signal is clipped at the full
 // well and gets noise of sigma sqrt(read_e^2 + gain_e_per_dn * signal) / gain_e_per_dn,
 // otherwise Gaussian noise of noise_sigma; then rounded and saturated to 8 bit. The noise is
-// drawn per band of `band_rows` rows from its own stream (keyed by the camera's seed and the
+// drawn per band of `band_rows` rows from its own stream (seeded from the camera's seed and the
 // band), so it does not depend on how the image is split between threads. Beside each image,
 // the noise-free scene at scene_gain, rounded the same way.
 struct SensorParams {
   double scene_gain = 1.0, device_gain = 0.0;
   double noise_sigma = 0.0;  // without the sensor model
   SimSensorConfig sensor;
-  // Draws the unit normal deviates (Kernel::normals); null: the widest kernel this CPU runs.
-  const scene_kernel::Kernel* kernel = nullptr;
 };
 struct SensorLayers {
   cv::Mat scene, device;  // CV_32F grey levels, the same size for every camera

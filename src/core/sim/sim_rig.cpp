@@ -372,7 +372,7 @@ SimFrame SimRig::render(const SimRenderRequest& request) const {
   impl_->updateLayers(1, config_, boards_, frame.truth.right, rig_from_camera[1], poses[1]);
   const uint64_t seed = sim::mixSeed(request.noise_seed);
   const uint64_t right_seed = sim::mixSeed(seed ^ 0x5bd1e995ULL);
-  const sim::SensorParams sensor{gain, gain * device_gain, config_.noise_sigma, optics.sensor, &impl_->scene.kernel()};
+  const sim::SensorParams sensor{gain, gain * device_gain, config_.noise_sigma, optics.sensor};
   const sim::SensorLayers layers[2] = {{impl_->layers[0].scene, impl_->layers[0].device, seed},
                                        {impl_->layers[1].scene, impl_->layers[1].device, right_seed}};
   sim::SensorImages sensed[2];  // fresh buffers: toEncoding() may share them with the frame
