@@ -10,13 +10,12 @@
 // last frame (core/calibration/stereo_accuracy.h), and whether the commit is worse.
 //   bench_calibrate_moving [--config FILE] [--minutes M] [--period S] [--frames N] [--fps F]
 //                          [--teach-frames K] [--min-change X] [--min-improvement R]
-//                          [--combine 0|1] [--align 0|1] [--free-poses 0|1]
+//                          [--align 0|1] [--free-poses 0|1]
 //                          [--truth-background 0|1] [--truth-noise SIGMA] [--saddle 0|1]
 //                          [--learn-window 0|1|2] [--off-frames K] [--scene 0|1] [--filter 0|1]
 //                          [--refine R]
 // --min-change / --min-improvement: the gate's min_change_in_predicted / min_rms_improvement_rel;
-// what limits the accuracy (docs/figures.md): --combine 1 tracks the mean of the window's frames
-// (one observation per window), --align 0 reports cornerSubPix corners instead of the whole-board
+// what limits the accuracy (docs/figures.md): --align 0 reports cornerSubPix corners instead of the whole-board
 // alignment's, --free-poses 1 solves with one free pose per virtual board instead of the rigid
 // device model, --truth-background 1 gives the tracker the simulator's scene of each frame as its
 // background (a still-world reference), --truth-noise S replaces tracking by the true corners
@@ -38,8 +37,10 @@
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <iterator>
 #include <optional>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include <opencv2/imgproc.hpp>
@@ -70,7 +71,6 @@ struct Args {
   std::string config;
   double minutes = 10.0, period_s = 10.0, fps = 10.0;
   int frames = 10, teach_frames = 5;
-  int combine = 0;  // 1: track the mean of the window's light-on frames (the scene moves, the boards do not)
   int align = 1;    // whole-board alignment of the tracker (TrackerOptions::whole_board_alignment)
   double min_improvement = GateOptions().min_rms_improvement_rel;
   double min_change = 0.0;  // GateOptions::min_change_in_predicted
@@ -198,54 +198,325 @@ PatternPrior teach(const SimRig& sim, double fps, int frames) {
   return prior;
 }
 
-}  // namespace
-
-int main(int argc, char** argv) {
+// The command line; nothing (and *status the exit code) when it is not usable.
+std::optional<Args> parseArgs(int argc, char** argv, int* status) {
   Args args;
   if (const char* dir = std::getenv("ECS_SOURCE_DIR")) args.config = std::string(dir) + "/config/drive_photo.yaml";
+  *status = 2;
+  using Set = void (*)(Args*, const char*);
+  static const std::pair<const char*, Set> kOptions[] = {
+      {"--config", [](Args* a, const char* v) { a->config = v; }},
+      {"--minutes", [](Args* a, const char* v) { a->minutes = std::atof(v); }},
+      {"--period", [](Args* a, const char* v) { a->period_s = std::atof(v); }},
+      {"--frames", [](Args* a, const char* v) { a->frames = std::atoi(v); }},
+      {"--fps", [](Args* a, const char* v) { a->fps = std::atof(v); }},
+      {"--teach-frames", [](Args* a, const char* v) { a->teach_frames = std::atoi(v); }},
+      {"--align", [](Args* a, const char* v) { a->align = std::atoi(v); }},
+      {"--truth-noise", [](Args* a, const char* v) { a->truth_noise = std::atof(v); }},
+      {"--min-improvement", [](Args* a, const char* v) { a->min_improvement = std::atof(v); }},
+      {"--min-change", [](Args* a, const char* v) { a->min_change = std::atof(v); }},
+      {"--free-poses", [](Args* a, const char* v) { a->free_poses = std::atoi(v); }},
+      {"--truth-background", [](Args* a, const char* v) { a->truth_background = std::atoi(v); }},
+      {"--learn-window", [](Args* a, const char* v) { a->learn_window = std::atoi(v); }},
+      {"--off-frames", [](Args* a, const char* v) { a->off_frames = std::max(1, std::atoi(v)); }},
+      {"--saddle", [](Args* a, const char* v) { a->saddle = std::atoi(v); }},
+      {"--light-off-gap", [](Args* a, const char* v) { a->light_off_gap = std::atoi(v); }},
+      {"--scene", [](Args* a, const char* v) { a->scene = std::atoi(v); }},
+      {"--filter", [](Args* a, const char* v) { a->filter = std::atoi(v); }},
+      {"--refine", [](Args* a, const char* v) { a->refine = std::atof(v); }},
+  };
   for (int i = 1; i < argc; ++i) {
-    const auto value = [&]() -> const char* {
-      if (i + 1 >= argc) {
-        std::fprintf(stderr, "%s needs a value\n", argv[i]);
-        std::exit(2);
-      }
-      return argv[++i];
-    };
-    if (!std::strcmp(argv[i], "--config")) args.config = value();
-    else if (!std::strcmp(argv[i], "--minutes")) args.minutes = std::atof(value());
-    else if (!std::strcmp(argv[i], "--period")) args.period_s = std::atof(value());
-    else if (!std::strcmp(argv[i], "--frames")) args.frames = std::atoi(value());
-    else if (!std::strcmp(argv[i], "--fps")) args.fps = std::atof(value());
-    else if (!std::strcmp(argv[i], "--teach-frames")) args.teach_frames = std::atoi(value());
-    else if (!std::strcmp(argv[i], "--combine")) args.combine = std::atoi(value());
-    else if (!std::strcmp(argv[i], "--align")) args.align = std::atoi(value());
-    else if (!std::strcmp(argv[i], "--truth-noise")) args.truth_noise = std::atof(value());
-    else if (!std::strcmp(argv[i], "--min-improvement")) args.min_improvement = std::atof(value());
-    else if (!std::strcmp(argv[i], "--min-change")) args.min_change = std::atof(value());
-    else if (!std::strcmp(argv[i], "--free-poses")) args.free_poses = std::atoi(value());
-    else if (!std::strcmp(argv[i], "--truth-background")) args.truth_background = std::atoi(value());
-    else if (!std::strcmp(argv[i], "--learn-window")) args.learn_window = std::atoi(value());
-    else if (!std::strcmp(argv[i], "--off-frames")) args.off_frames = std::max(1, std::atoi(value()));
-    else if (!std::strcmp(argv[i], "--saddle")) args.saddle = std::atoi(value());
-    else if (!std::strcmp(argv[i], "--light-off-gap")) args.light_off_gap = std::atoi(value());
-    else if (!std::strcmp(argv[i], "--scene")) args.scene = std::atoi(value());
-    else if (!std::strcmp(argv[i], "--filter")) args.filter = std::atoi(value());
-    else if (!std::strcmp(argv[i], "--refine")) args.refine = std::atof(value());
-    else {
+    const auto option = std::find_if(std::begin(kOptions), std::end(kOptions),
+                                     [&](const auto& o) { return !std::strcmp(argv[i], o.first); });
+    if (option == std::end(kOptions)) {
       std::fprintf(stderr, "usage: bench_calibrate_moving [--config FILE] [--minutes M] [--period S] [--frames N] "
                            "[--fps F] [--teach-frames K]   (default config: $ECS_SOURCE_DIR/config/drive_photo.yaml)\n");
-      return 2;
+      return std::nullopt;
     }
+    if (i + 1 >= argc) {
+      std::fprintf(stderr, "%s needs a value\n", argv[i]);
+      return std::nullopt;
+    }
+    option->second(&args, argv[++i]);
   }
   if (args.light_off_gap < 1) {
     std::fprintf(stderr, "bench_calibrate_moving: --light-off-gap must be >= 1\n");
-    return 2;
+    return std::nullopt;
   }
   if (args.config.empty() || args.frames < 1 || !(args.period_s > args.frames / args.fps)) {
     std::fprintf(stderr, "bench_calibrate_moving: need --config (or ECS_SOURCE_DIR), frames >= 1 and a period longer "
                          "than a window\n");
-    return 2;
+    return std::nullopt;
   }
+  *status = 0;
+  return args;
+}
+
+// A window's observations, with their tracked and true corner counts and errors.
+struct WindowObservations {
+  std::vector<StereoObservation> frames;
+  SimFrame last;  // the window's last light-on frame (its truth scores the calibrations)
+  int corners = 0, truth_corners = 0;
+  WindowCornerErrors errors;
+
+  // `obs` tracked on a frame whose true corners are `truth`'s.
+  void add(StereoObservation obs, const SimFrame& truth) {
+    for (const auto& b : obs.left) corners += b.size();
+    for (const auto& b : obs.right) corners += b.size();
+    for (const auto& b : truth.observations.left) truth_corners += b.size();
+    for (const auto& b : truth.observations.right) truth_corners += b.size();
+    errors.add(0, obs.left, truth.observations.left);
+    errors.add(1, obs.right, truth.observations.right);
+    frames.push_back(std::move(obs));
+  }
+};
+
+TrackerOptions trackerOptions(const Args& args) {
+  TrackerOptions o;
+  o.whole_board_alignment = args.align != 0;
+  return o;
+}
+
+WindowTrackerOptions windowTrackerOptions(const Args& args) {
+  WindowTrackerOptions o;
+  if (const char* it = std::getenv("LEARN_ITERATIONS")) o.learner.iterations = std::atoi(it);
+  o.scene_matches = args.scene != 0;
+  return o;
+}
+
+BundleAdjuster adjusterFor(const Args& args) {
+  BundleAdjustmentConfig terms;
+  terms.estimate_tangential = true;  // the scenario's lenses have p1, p2
+  BundleAdjustmentOptions adjustment;
+  if (args.free_poses) adjustment.board_pose_mode = BoardPoseMode::kSharedAcrossFrames;
+  return BundleAdjuster(adjustment, terms);
+}
+
+GateOptions gateOptions(const Args& args) {
+  GateOptions o;
+  o.min_rms_improvement_rel = args.min_improvement;
+  o.min_change_in_predicted = args.min_change;
+  o.refine_ratio = args.refine;
+  return o;
+}
+
+// The windows of a run, in time order: each one observed (tracked frame by frame, or as a whole),
+// solved, judged by the gate against the calibration in force, and committed when accepted.
+class MovingCalibration {
+ public:
+  MovingCalibration(const Args& args, const SimRigConfig& config, SimRig* sim, const PatternPrior& prior)
+      : args_(args),
+        config_(config),
+        sim_(sim),
+        prior_(prior),
+        tracker_(prior, trackerOptions(args)),
+        // The scene matching is guided by the nominal calibration, as the tracker nodelet's.
+        window_tracker_(prior, trackerOptions(args), windowTrackerOptions(args), config.rig),
+        adjuster_(adjusterFor(args)),
+        gate_(gateOptions(args)),
+        boards_(config.device.virtualBoards()),
+        in_force_(config.rig) {}  // the head starts calibrated
+
+  // Window w (from 1), starting at w periods.
+  void window(int w) {
+    const double t_start = w * args_.period_s;
+    // One drift event every other window, half a period before the window (the light is off).
+    std::string event;
+    if (w % 2 == 0) event = drift_.next(sim_, t_start - 0.5 * args_.period_s);
+    WindowObservations observed;
+    if (args_.learn_window)
+      observeWholeWindow(t_start, &observed);
+    else
+      observeFrames(t_start, &observed);
+    ++windows_;
+    std::string prior_note;
+    const BundleAdjustmentSummary candidate = solve(observed.frames, t_start, &prior_note);
+    const GateDecision decision = judge(candidate, observed.frames);
+    const StereoAccuracy old_a = evaluateStereoAccuracy(in_force_, observed.last.truth);
+    std::printf("t %6.1f s%s%s: %d of %d corners tracked (%.3f px RMS, %.3f px common to the window); %s\n", t_start,
+                event.empty() ? "" : ", after ", event.c_str(), observed.corners, observed.truth_corners,
+                observed.errors.rms(), observed.errors.sharedRms(), decision.reason.c_str());
+    if (!prior_note.empty()) std::printf("    filter: %s\n", prior_note.c_str());
+    if (args_.filter && candidate.success && candidate.covariance_ok && (decision.accepted || decision.in_force_confirmed))
+      filter_.setState(candidate.rig, candidate.rig_covariance, t_start);
+    if (!decision.accepted) {
+      ++rejected_;
+      print("in force:", old_a);
+      return;
+    }
+    commit(candidate, observed.last.truth, old_a);
+  }
+
+  // Prints the summary line; the exit code (1 when a commit was worse).
+  int summary(double wall_minutes) const {
+    std::printf("%d windows, %d commits, %d rejected, %d commits worse than the calibration they replaced; worst "
+                "committed misalignment %.4f px, bias %.4f px (%.1f min wall)\n",
+                windows_, commits_, rejected_, worse_, worst_after_mis_, worst_after_bias_, wall_minutes);
+    return worse_ > 0 ? 1 : 0;
+  }
+
+ private:
+  uint64_t frameIndex(double t) const { return static_cast<uint64_t>(std::llround(t * args_.fps)); }
+
+  // Every light-on frame tracked on its own.
+  void observeFrames(double t_start, WindowObservations* out) {
+    for (int k = 0; k < args_.frames; ++k) {
+      const double t = t_start + k / args_.fps;
+      out->last = sim_->render(t, 1.0, frameIndex(t));
+      out->add(trackFrame(out->last, t), out->last);
+    }
+  }
+
+  StereoObservation trackFrame(const SimFrame& frame, double t) {
+    if (args_.truth_background) tracker_.setBackground(frame.left_scene, frame.right_scene);
+    StereoObservation obs = tracker_.trackStereo(frame.left, frame.right, t);
+    if (args_.saddle) {
+      refineBySaddle(frame.left, prior_.cameras[0], &obs.left, args_.truth_background ? frame.left_scene : cv::Mat());
+      refineBySaddle(frame.right, prior_.cameras[1], &obs.right,
+                     args_.truth_background ? frame.right_scene : cv::Mat());
+    }
+    if (args_.truth_noise < 0) return obs;
+    obs = frame.observations;
+    cv::RNG rng(frameIndex(t));
+    for (auto* side : {&obs.left, &obs.right})
+      for (BoardCorners& b : *side)
+        for (size_t i = 0; i < b.size(); ++i) {
+          b.u[i] += static_cast<float>(rng.gaussian(args_.truth_noise));
+          b.v[i] += static_cast<float>(rng.gaussian(args_.truth_noise));
+        }
+    return obs;
+  }
+
+  // The window tracked as a whole, with its light-off frames (before it; with --learn-window 2
+  // after it too), rendered in time order where it matters: the simulated auto-exposure carries
+  // state from frame to frame.
+  void observeWholeWindow(double t_start, WindowObservations* out) {
+    WindowFrames window[2];
+    for (int k = 0; k < args_.frames; ++k) {
+      const double t = t_start + k / args_.fps;
+      out->last = sim_->render(t, 1.0, frameIndex(t));
+      if (k == 0) renderLightOff(t_start, true, window);
+      window[0].light_on.push_back(out->last.left);
+      window[1].light_on.push_back(out->last.right);
+      if (args_.learn_window == 2 && k + 1 == args_.frames) renderLightOff(t_start, false, window);
+    }
+    const double t = t_start + (args_.frames - 1) / args_.fps;
+    const auto w0 = std::chrono::steady_clock::now();
+    const WindowTrack tracked = window_tracker_.track(window[0], window[1], t);
+    std::printf("    window tracked in %.0f ms, %d saddle fits failed\n",
+                std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - w0).count(),
+                tracked.saddle_failures);
+    const StereoObservation& obs = tracked.observation;
+    if (!obs.scene.empty()) {
+      const std::vector<double> scene_distances = epipolarDistances(obs.scene, out->last.truth);
+      const size_t n = scene_distances.size();
+      std::printf("    %zu scene matches; distance to the true epipolar line: median %.3f px, 90 %% %.3f px, "
+                  "max %.2f px\n",
+                  n, scene_distances[n / 2], scene_distances[n * 9 / 10], scene_distances.back());
+    }
+    out->add(obs, out->last);
+  }
+
+  // The light-off frames on one side of the window. The live driver's settle_frames unsettled
+  // frames lie between: gap = settle_frames + 1.
+  void renderLightOff(double t_start, bool before, WindowFrames* window) {
+    for (int o = before ? args_.off_frames : 1; before ? o >= 1 : o <= args_.off_frames; o += before ? -1 : 1) {
+      const double t = before ? t_start - (args_.light_off_gap + o - 1) / args_.fps
+                              : t_start + (args_.frames - 1 + args_.light_off_gap + o - 1) / args_.fps;
+      const SimFrame f = sim_->render(t, 0.0, frameIndex(t));
+      (before ? window[0].light_off_before : window[0].light_off_after).push_back(f.left);
+      (before ? window[1].light_off_before : window[1].light_off_after).push_back(f.right);
+    }
+  }
+
+  // The window's solve; with --filter, again with what earlier windows taught as the prior of
+  // the groups this window does not contradict (*prior_note says which).
+  BundleAdjustmentSummary solve(const std::vector<StereoObservation>& frames, double t_start, std::string* prior_note) {
+    CalibrationInput input;
+    input.frames = &frames;
+    input.device = args_.free_poses ? nullptr : &config_.device;
+    input.boards = &boards_;
+    input.image_width = config_.rig.left.width;
+    input.image_height = config_.rig.left.height;
+    input.in_force = in_force_;
+    BundleAdjustmentSummary candidate = adjuster_.Solve(input);
+    if (!args_.filter || !candidate.success) return candidate;
+    std::vector<std::string> changed;
+    if (const std::optional<RigPrior> prior = filter_.priorFor(candidate, t_start, &changed)) {
+      input.rig_prior = prior;
+      const BundleAdjustmentSummary alone = candidate;
+      input.weights_from = &alone;
+      candidate = adjuster_.Solve(input);
+      *prior_note = "prior on " + std::to_string(prior->activeCount()) + " parameters";
+    } else {
+      *prior_note = filter_.hasState() ? "no prior" : "no state yet";
+    }
+    if (!changed.empty()) {
+      *prior_note += "; changed:";
+      for (const std::string& g : changed) *prior_note += " " + g + ",";
+      prior_note->pop_back();
+    }
+    return candidate;
+  }
+
+  GateDecision judge(const BundleAdjustmentSummary& candidate, const std::vector<StereoObservation>& frames) const {
+    GateDecision decision;
+    if (!candidate.success) {
+      decision.reason = "solve failed: " + candidate.message;
+      return decision;
+    }
+    const BundleAdjustmentSummary in_force_fit = evaluateFixedCalibration(
+        in_force_, frames, boards_, adjuster_.options(), args_.free_poses ? nullptr : &config_.device);
+    return gate_.evaluate(candidate, &in_force_fit, in_force_predicted_);
+  }
+
+  // The accepted calibration replaces the one in force; prints both against the truth.
+  void commit(const BundleAdjustmentSummary& candidate, const StereoRig& truth, const StereoAccuracy& old_a) {
+    ++commits_;
+    const StereoAccuracy new_a = evaluateStereoAccuracy(candidate.rig, truth);
+    const bool is_worse = combined(new_a) > combined(old_a) + kWorsePx;
+    worse_ += is_worse;
+    print("replaced:", old_a);
+    print(is_worse ? "new (WORSE):" : "new:", new_a);
+    if (candidate.covariance_ok) print("predicted:", predictStereoAccuracy(candidate.rig, candidate.rig_covariance));
+    const RigErrors e = compareRigs(candidate.rig, truth);
+    std::printf("    new: fx %.4f / %.4f %%, baseline %.4f %%%s\n", 100 * e.fx_rel[0], 100 * e.fx_rel[1],
+                100 * e.baseline_rel,
+                candidate.scene_matches_used
+                    ? (", " + std::to_string(candidate.scene_matches_used) + " scene matches at " +
+                       std::to_string(candidate.scene_sigma_px).substr(0, 5) + " px")
+                          .c_str()
+                    : "");
+    worst_after_mis_ = std::max(worst_after_mis_, new_a.misalignment_px.rms);
+    worst_after_bias_ = std::max(worst_after_bias_, new_a.disparity_bias_px.rms);
+    in_force_ = candidate.rig;
+    in_force_predicted_ = QualityGate::predictedPx(candidate);
+  }
+
+  const Args& args_;
+  const SimRigConfig& config_;
+  SimRig* sim_;
+  const PatternPrior prior_;
+  PatternTracker tracker_;
+  WindowTracker window_tracker_;
+  const BundleAdjuster adjuster_;
+  const QualityGate gate_;
+  const std::vector<VirtualBoard> boards_;
+  StereoRig in_force_;
+  std::optional<double> in_force_predicted_;  // of a committed solve (the start's is not known)
+  DriftScript drift_;
+  CalibrationFilter filter_;
+  int windows_ = 0, commits_ = 0, worse_ = 0, rejected_ = 0;
+  double worst_after_mis_ = 0, worst_after_bias_ = 0;
+};
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  int status = 0;
+  const std::optional<Args> parsed = parseArgs(argc, argv, &status);
+  if (!parsed) return status;
+  const Args& args = *parsed;
   const SimRigConfig config = loadSimRigConfig(args.config);
   SimRig sim(config);
   const auto t0 = std::chrono::steady_clock::now();
@@ -254,196 +525,8 @@ int main(int argc, char** argv) {
               "for %.1f min\n",
               args.config.c_str(), config.scene.movers.size(), prior.cameras[0].boards.size(),
               prior.cameras[1].boards.size(), args.teach_frames, args.frames, args.fps, args.period_s, args.minutes);
-
-  TrackerOptions tracker_options;
-  tracker_options.whole_board_alignment = args.align != 0;
-  PatternTracker tracker(prior, tracker_options);
-  WindowTrackerOptions window_options;
-  if (const char* it = std::getenv("LEARN_ITERATIONS")) window_options.learner.iterations = std::atoi(it);
-  window_options.scene_matches = args.scene != 0;
-  // The scene matching is guided by the nominal calibration, as the tracker nodelet's.
-  WindowTracker window_tracker(prior, tracker_options, window_options, config.rig);
-  BundleAdjustmentConfig terms;
-  terms.estimate_tangential = true;  // the scenario's lenses have p1, p2
-  BundleAdjustmentOptions adjustment;
-  if (args.free_poses) adjustment.board_pose_mode = BoardPoseMode::kSharedAcrossFrames;
-  const BundleAdjuster adjuster(adjustment, terms);
-  GateOptions gate_options;
-  gate_options.min_rms_improvement_rel = args.min_improvement;
-  gate_options.min_change_in_predicted = args.min_change;
-  gate_options.refine_ratio = args.refine;
-  const QualityGate gate{gate_options};
-  const std::vector<VirtualBoard> boards = config.device.virtualBoards();
-  StereoRig in_force = config.rig;  // the head starts calibrated
-  std::optional<double> in_force_predicted;  // of a committed solve (the start's is not known)
-  DriftScript drift;
-  CalibrationFilter filter;
-  int windows = 0, commits = 0, worse = 0, rejected = 0;
-  double worst_after_mis = 0, worst_after_bias = 0;
+  MovingCalibration run(args, config, &sim, prior);
   const int window_count = static_cast<int>(args.minutes * 60.0 / args.period_s);
-  for (int w = 1; w <= window_count; ++w) {
-    const double t_start = w * args.period_s;
-    // One drift event every other window, half a period before the window (the light is off).
-    std::string event = "";
-    if (w % 2 == 0) event = drift.next(&sim, t_start - 0.5 * args.period_s);
-    std::vector<StereoObservation> frames;
-    SimFrame last;
-    cv::Mat sum[2];
-    WindowFrames window[2];
-    int corners = 0, truth_corners = 0;
-    WindowCornerErrors errors;
-
-    for (int k = 0; k < args.frames; ++k) {
-      const double t = t_start + k / args.fps;
-      const uint64_t frame_index = static_cast<uint64_t>(std::llround(t * args.fps));
-      last = sim.render(t, 1.0, frame_index);
-      if (args.learn_window) {
-        if (k == 0) {
-          for (int c = 0; c < 2; ++c) window[c] = WindowFrames();
-          // The live driver's settle_frames unsettled frames lie between: gap = settle_frames + 1.
-          for (int o = args.off_frames; o >= 1; --o) {
-            const double tb = t_start - (args.light_off_gap + o - 1) / args.fps;
-            const SimFrame before = sim.render(tb, 0.0, static_cast<uint64_t>(std::llround(tb * args.fps)));
-            window[0].light_off_before.push_back(before.left);
-            window[1].light_off_before.push_back(before.right);
-          }
-        }
-        if (args.learn_window == 2 && k + 1 == args.frames) {
-          // After the window's last light-on frame (rendered in time order: the simulated
-          // auto-exposure carries state from frame to frame).
-          window[0].light_on.push_back(last.left);
-          window[1].light_on.push_back(last.right);
-          for (int o = 1; o <= args.off_frames; ++o) {
-            const double ta = t_start + (args.frames - 1 + args.light_off_gap + o - 1) / args.fps;
-            const SimFrame after = sim.render(ta, 0.0, static_cast<uint64_t>(std::llround(ta * args.fps)));
-            window[0].light_off_after.push_back(after.left);
-            window[1].light_off_after.push_back(after.right);
-          }
-        }
-        if (!(args.learn_window == 2 && k + 1 == args.frames)) {
-          window[0].light_on.push_back(last.left);
-          window[1].light_on.push_back(last.right);
-        }
-        if (k + 1 < args.frames) continue;
-        const auto w0 = std::chrono::steady_clock::now();
-        const WindowTrack tracked = window_tracker.track(window[0], window[1], t);
-        std::printf("    window tracked in %.0f ms, %d saddle fits failed\n",
-                    std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - w0).count(),
-                    tracked.saddle_failures);
-        StereoObservation obs = tracked.observation;
-        if (!obs.scene.empty()) {
-          const std::vector<double> scene_distances = epipolarDistances(obs.scene, last.truth);
-          const size_t n = scene_distances.size();
-          std::printf("    %zu scene matches; distance to the true epipolar line: median %.3f px, 90 %% %.3f px, "
-                      "max %.2f px\n",
-                      n, scene_distances[n / 2], scene_distances[n * 9 / 10], scene_distances.back());
-        }
-        for (const auto& b : obs.left) corners += b.size();
-        for (const auto& b : obs.right) corners += b.size();
-        for (const auto& b : last.observations.left) truth_corners += b.size();
-        for (const auto& b : last.observations.right) truth_corners += b.size();
-        errors.add(0, obs.left, last.observations.left);
-        errors.add(1, obs.right, last.observations.right);
-        frames.push_back(std::move(obs));
-        continue;
-      }
-      if (args.truth_background) tracker.setBackground(last.left_scene, last.right_scene);
-      StereoObservation obs = tracker.trackStereo(last.left, last.right, t);
-      if (args.saddle) {
-        refineBySaddle(last.left, prior.cameras[0], &obs.left, args.truth_background ? last.left_scene : cv::Mat());
-        refineBySaddle(last.right, prior.cameras[1], &obs.right, args.truth_background ? last.right_scene : cv::Mat());
-      }
-      if (args.truth_noise >= 0) {
-        obs = last.observations;
-        cv::RNG rng(frame_index);
-        for (auto* side : {&obs.left, &obs.right})
-          for (BoardCorners& b : *side)
-            for (size_t i = 0; i < b.size(); ++i) {
-              b.u[i] += static_cast<float>(rng.gaussian(args.truth_noise));
-              b.v[i] += static_cast<float>(rng.gaussian(args.truth_noise));
-            }
-      }
-      for (const auto& b : obs.left) corners += b.size();
-      for (const auto& b : obs.right) corners += b.size();
-      for (const auto& b : last.observations.left) truth_corners += b.size();
-      for (const auto& b : last.observations.right) truth_corners += b.size();
-      errors.add(0, obs.left, last.observations.left);
-      errors.add(1, obs.right, last.observations.right);
-      frames.push_back(std::move(obs));
-    }
-    ++windows;
-    CalibrationInput input;
-    input.frames = &frames;
-    input.device = args.free_poses ? nullptr : &config.device;
-    input.boards = &boards;
-    input.image_width = config.rig.left.width;
-    input.image_height = config.rig.left.height;
-    input.in_force = in_force;
-    BundleAdjustmentSummary candidate = adjuster.Solve(input);
-    std::string prior_note;
-    if (args.filter && candidate.success) {
-      // What earlier windows taught, as the prior of the groups this window does not contradict.
-      std::vector<std::string> changed;
-      if (const std::optional<RigPrior> prior = filter.priorFor(candidate, t_start, &changed)) {
-        input.rig_prior = prior;
-        const BundleAdjustmentSummary alone = candidate;
-        input.weights_from = &alone;
-        candidate = adjuster.Solve(input);
-        prior_note = "prior on " + std::to_string(prior->activeCount()) + " parameters";
-      } else {
-        prior_note = filter.hasState() ? "no prior" : "no state yet";
-      }
-      if (!changed.empty()) {
-        prior_note += "; changed:";
-        for (const std::string& g : changed) prior_note += " " + g + ",";
-        prior_note.pop_back();
-      }
-    }
-    GateDecision decision;
-    if (candidate.success) {
-      const BundleAdjustmentSummary in_force_fit =
-          evaluateFixedCalibration(in_force, frames, boards, adjuster.options(),
-                                   args.free_poses ? nullptr : &config.device);
-      decision = gate.evaluate(candidate, &in_force_fit, in_force_predicted);
-    } else {
-      decision.reason = "solve failed: " + candidate.message;
-    }
-    const StereoAccuracy old_a = evaluateStereoAccuracy(in_force, last.truth);
-    std::printf("t %6.1f s%s%s: %d of %d corners tracked (%.3f px RMS, %.3f px common to the window); %s\n", t_start,
-                event.empty() ? "" : ", after ", event.c_str(), corners, truth_corners, errors.rms(),
-                errors.sharedRms(), decision.reason.c_str());
-    if (!prior_note.empty()) std::printf("    filter: %s\n", prior_note.c_str());
-    if (args.filter && candidate.success && candidate.covariance_ok && (decision.accepted || decision.in_force_confirmed))
-      filter.setState(candidate.rig, candidate.rig_covariance, t_start);
-    if (!decision.accepted) {
-      ++rejected;
-      print("in force:", old_a);
-      continue;
-    }
-    ++commits;
-    const StereoAccuracy new_a = evaluateStereoAccuracy(candidate.rig, last.truth);
-    const bool is_worse = combined(new_a) > combined(old_a) + kWorsePx;
-    worse += is_worse;
-    print("replaced:", old_a);
-    print(is_worse ? "new (WORSE):" : "new:", new_a);
-    if (candidate.covariance_ok) print("predicted:", predictStereoAccuracy(candidate.rig, candidate.rig_covariance));
-    const RigErrors e = compareRigs(candidate.rig, last.truth);
-    std::printf("    new: fx %.4f / %.4f %%, baseline %.4f %%%s\n", 100 * e.fx_rel[0], 100 * e.fx_rel[1],
-                100 * e.baseline_rel,
-                candidate.scene_matches_used
-                    ? (", " + std::to_string(candidate.scene_matches_used) + " scene matches at " +
-                       std::to_string(candidate.scene_sigma_px).substr(0, 5) + " px")
-                          .c_str()
-                    : "");
-    worst_after_mis = std::max(worst_after_mis, new_a.misalignment_px.rms);
-    worst_after_bias = std::max(worst_after_bias, new_a.disparity_bias_px.rms);
-    in_force = candidate.rig;
-    in_force_predicted = QualityGate::predictedPx(candidate);
-  }
-  const double minutes =
-      std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count() / 60.0;
-  std::printf("%d windows, %d commits, %d rejected, %d commits worse than the calibration they replaced; worst "
-              "committed misalignment %.4f px, bias %.4f px (%.1f min wall)\n",
-              windows, commits, rejected, worse, worst_after_mis, worst_after_bias, minutes);
-  return worse > 0 ? 1 : 0;
+  for (int w = 1; w <= window_count; ++w) run.window(w);
+  return run.summary(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count() / 60.0);
 }
