@@ -341,13 +341,8 @@ class PatternTrackerNodelet : public GuardedNodelet {
   }
 
   void diagnose(diagnostic_updater::DiagnosticStatusWrapper& status) {
-    using Level = core::TeachingPlan::Level;
-    using diagnostic_msgs::DiagnosticStatus;
-    const core::TeachingPlan::Summary summary = plan_.summary(prior_write_->pending(), prior_write_->error());
-    status.summary(summary.level == Level::kOk     ? DiagnosticStatus::OK
-                   : summary.level == Level::kWarn ? DiagnosticStatus::WARN
-                                                   : DiagnosticStatus::ERROR,
-                   summary.text);
+    const core::StatusSummary summary = plan_.summary(prior_write_->pending(), prior_write_->error());
+    status.summary(toDiagnosticLevel(summary.level), summary.text);
     status.add("prior file", prior_file_);
     status.add("prior state", core::toString(plan_.state()));
     status.add("prior file written", !prior_write_->pending());

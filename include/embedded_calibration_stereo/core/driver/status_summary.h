@@ -1,6 +1,7 @@
 #pragma once
-// The one-line state that the CameraDriver's and the LightController's diagnostics lead with:
-// which of their problems a user sees first (docs/nodelets.md, each nodelet's "Diagnostics").
+// The one-line state a nodelet's diagnostics lead with (the PatternTracker's TeachingPlan gives
+// one too), and for the CameraDriver and the LightController which of their problems a user sees
+// first (docs/nodelets.md, each nodelet's "Diagnostics").
 //
 // Threading: pure functions.
 #include <cstdint>

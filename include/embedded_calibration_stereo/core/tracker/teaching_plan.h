@@ -7,6 +7,8 @@
 #include <cstddef>
 #include <string>
 
+#include "embedded_calibration_stereo/core/driver/status_summary.h"
+
 namespace embedded_calibration_stereo::core {
 
 enum class PriorState { kLoaded, kMissing, kCorrupt, kTeaching, kTeachFailed };
@@ -74,11 +76,9 @@ class TeachingPlan {
   // The simulator's scene is needed (teaching from it waits for a frame).
   bool needsGroundTruth() const { return from_ == TeachFrom::kGroundTruth && requested_; }
 
-  enum class Level { kOk, kWarn, kError };
-  struct Summary {
-    Level level = Level::kOk;
-    std::string text;
-  };
+  // The same summary as the driver's and the LightController's (one mapping to diagnostics).
+  using Summary = StatusSummary;
+  using Level = StatusSummary::Level;
   // The diagnostics summary. `prior_unwritten`: the prior in use is not in the file yet, for
   // `write_error`.
   Summary summary(bool prior_unwritten, const std::string& write_error) const;
