@@ -190,7 +190,7 @@ TEST(TrackPatternPhotos, RealChessboardOnRealScenes) {
     std::printf("  r = %.2f: found %d/%d (%.2f %%), wrong ids %d, RMS %.3f px against the clean photo's corners, "
                 "%.3f px against OpenCV's\n",
                 r, c.matched, c.reference, 100 * c.found(), c.wrong, s.rms(), c.rms());
-    EXPECT_GE(c.found(), r >= 0.4 ? 0.99 : 0.95) << "r = " << r;
+    EXPECT_GE(c.found(), 0.99) << "r = " << r;
     EXPECT_LE(s.rms(), 0.1) << "r = " << r;
     // OpenCV's corners carry its own error and the photos' departures from a smooth board model:
     // a looser bound that still catches a tracker that drifts from an independent detector.

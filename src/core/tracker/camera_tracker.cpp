@@ -1,7 +1,9 @@
 // CameraTracker: per-board prediction, re-centring, refinement and acceptance (see
 // pattern_tracker.h for the algorithm and the threading contract).
 #include <algorithm>
+#include <array>
 #include <cmath>
+#include <map>
 #include <opencv2/calib3d.hpp>
 #include <opencv2/imgproc.hpp>
 #include <stdexcept>
@@ -23,6 +25,14 @@ namespace {
 constexpr double kCoarseBlurPx = 3.0;
 // Fraction of the board's fitted contrast a corner's own samples must show to be reported.
 constexpr double kCornerContrast = 0.5;
+// An aligned board's contrast (bright minus dark) must be at least this fraction of the taught
+// one: a board seen dimmer than it was taught (a lower reflectance, a dimmer light, one tenth at
+// worst) is still there; a light-off frame shows none of it.
+constexpr double kMinContrastOfTaught = 0.05;
+// Gauss-Newton steps (each template) of an alignment that starts from the re-centred prediction:
+// the re-centring leaves a start up to a third of a square off, and on a dim board over a
+// textured scene the steps from there are short. A converged fit stops early.
+constexpr int kStepsFromPrediction = 24;
 
 struct RecentreResult {
   cv::Point2f shift;
@@ -53,6 +63,7 @@ int squareSign(const BoardPrior& board, int col, int row) {
 struct RecentreSample {
   cv::Point2f p;
   float sign;
+  int col, row;  // of the square (the margin's at -2 and cols / rows)
 };
 
 std::vector<RecentreSample> recentreSamples(const cv::Matx33d& h, const BoardPrior& board,
@@ -63,7 +74,7 @@ std::vector<RecentreSample> recentreSamples(const cv::Matx33d& h, const BoardPri
       const bool margin = r == -2 || c == -2 || r == board.rows || c == board.cols;
       const double x = c + 0.5, y = r + 0.5;
       const float sign = margin ? 1.0f : static_cast<float>(squareSign(board, c, r));
-      samples.push_back({applyHomography(h, x, y) + offsetNear(board, offsets, x, y), sign});
+      samples.push_back({applyHomography(h, x, y) + offsetNear(board, offsets, x, y), sign, c, r});
     }
   }
   return samples;
@@ -106,26 +117,78 @@ std::vector<RecentreSample> usableSamples(const std::vector<RecentreSample>& sam
   return usable;
 }
 
-// Correlation of the samples' signs with the box means at every shift of the window.
-void scoreShifts(const std::vector<RecentreSample>& usable, const BoxSampler& sampler, double sign_sum,
+// The scene under a board varies over it (a shadow, a lit wall, a face) and, at a low
+// reflectance, by more than the pattern's own contrast: a correlation of the box means themselves
+// then scores a board that is there below the pattern threshold. The correlation is taken on each
+// sample minus the mean of its four grid neighbours instead: the checker keeps its contrast (the
+// neighbours are of the other colour), while whatever the scene does over more than a square
+// cancels. Samples without four usable neighbours are left out; with too few left (a board half
+// out of the image), the box means themselves are correlated.
+struct GridFilter {
+  std::vector<std::array<int, 5>> rows;  // usable indices: the sample, then its neighbours (-1: none)
+  std::vector<double> expected;          // the filtered signs, mean removed
+  double expected_norm2 = 0.0;
+  // A sample minus the mean of its neighbours (the sample itself without neighbours).
+  static double value(const std::array<int, 5>& row, const std::vector<float>& v) {
+    if (row[1] < 0) return v[row[0]];
+    return v[row[0]] - 0.25 * (v[row[1]] + v[row[2]] + v[row[3]] + v[row[4]]);
+  }
+  std::vector<double> apply(const std::vector<float>& v) const {
+    std::vector<double> out;
+    for (const auto& row : rows) out.push_back(value(row, v));
+    return out;
+  }
+};
+
+GridFilter gridFilter(const std::vector<RecentreSample>& usable) {
+  constexpr size_t kMinRows = 16;
+  std::map<std::pair<int, int>, int> at;
+  for (size_t i = 0; i < usable.size(); ++i) at[{usable[i].col, usable[i].row}] = static_cast<int>(i);
+  GridFilter f;
+  for (size_t i = 0; i < usable.size(); ++i) {
+    std::array<int, 5> row{static_cast<int>(i), -1, -1, -1, -1};
+    const int dc[4] = {1, -1, 0, 0}, dr[4] = {0, 0, 1, -1};
+    bool complete = true;
+    for (int k = 0; k < 4 && complete; ++k) {
+      const auto it = at.find({usable[i].col + dc[k], usable[i].row + dr[k]});
+      complete = it != at.end();
+      if (complete) row[k + 1] = it->second;
+    }
+    if (complete) f.rows.push_back(row);
+  }
+  if (f.rows.size() < kMinRows) {
+    f.rows.clear();
+    for (size_t i = 0; i < usable.size(); ++i) f.rows.push_back({static_cast<int>(i), -1, -1, -1, -1});
+  }
+  std::vector<float> sign(usable.size());
+  for (size_t i = 0; i < usable.size(); ++i) sign[i] = usable[i].sign;
+  f.expected = f.apply(sign);
+  double mean = 0;
+  for (double e : f.expected) mean += e;
+  mean /= f.expected.size();
+  for (double& e : f.expected) e -= mean, f.expected_norm2 += e * e;
+  return f;
+}
+
+// Correlation of the filtered signs with the filtered box means at every shift of the window.
+void scoreShifts(const std::vector<RecentreSample>& usable, const BoxSampler& sampler, const GridFilter& filter,
                  ShiftScores* grid) {
-  const double n = static_cast<double>(usable.size());
-  const double sign_var = n - sign_sum * sign_sum / n;
   grid->scores = cv::Mat(grid->cells, grid->cells, CV_64F, cv::Scalar(-1.0));
+  std::vector<float> v(usable.size());
+  const double n = static_cast<double>(filter.rows.size());
   for (int iy = 0; iy < grid->cells; ++iy) {
     for (int ix = 0; ix < grid->cells; ++ix) {
       const cv::Point2f d = grid->shiftOf(ix, iy);
+      for (size_t i = 0; i < usable.size(); ++i) sampler.mean(usable[i].p + d, &v[i]);
       double sv = 0, v1 = 0, v2 = 0;
-      for (const RecentreSample& s : usable) {
-        float v = 0;
-        sampler.mean(s.p + d, &v);
-        sv += s.sign * v;
-        v1 += v;
-        v2 += static_cast<double>(v) * v;
+      for (size_t r = 0; r < filter.rows.size(); ++r) {
+        const double x = filter.value(filter.rows[r], v);
+        sv += filter.expected[r] * x;
+        v1 += x;
+        v2 += x * x;
       }
-      const double cov = sv - sign_sum * v1 / n;
       const double var = v2 - v1 * v1 / n;
-      const double score = var > 1e-9 ? cov / std::sqrt(var * sign_var) : 0.0;
+      const double score = var > 1e-9 ? sv / std::sqrt(var * filter.expected_norm2) : 0.0;
       grid->scores.at<double>(iy, ix) = score;
       if (score > grid->best) {
         grid->best = score;
@@ -165,16 +228,14 @@ RecentreResult recentre(const cv::Mat& gray, const cv::Matx33d& h, const BoardPr
   const BoxSampler sampler(gray, recentreRoi(samples, box, radius), box);
   const int r_int = static_cast<int>(std::ceil(radius));
   const std::vector<RecentreSample> usable = usableSamples(samples, sampler, r_int);
-  double sign_sum = 0.0;
-  for (const RecentreSample& s : usable) sign_sum += s.sign;
   RecentreResult result;
-  const double n = static_cast<double>(usable.size());
   if (usable.size() < 8) return result;
-  if (n - sign_sum * sign_sum / n <= 0) return result;  // all of one sign: no contrast to correlate
+  const GridFilter filter = gridFilter(usable);
+  if (filter.expected_norm2 <= 1e-9) return result;  // all of one sign: no contrast to correlate
   ShiftScores grid;
   grid.step = step;
   grid.cells = 2 * (r_int / step) + 1;
-  scoreShifts(usable, sampler, sign_sum, &grid);
+  scoreShifts(usable, sampler, filter, &grid);
   result.score = grid.best;
   result.shift = plateauCentroid(grid, square);
   return result;
@@ -697,15 +758,15 @@ bool CameraTracker::alignFrom(BoardAttempt& a, int index, int attempt, bool was_
     cv::Mat blurred;
     const double blur = std::min(kCoarseBlurPx - 0.5, options_.alignment_blur_px);
     cv::GaussianBlur(a.gray, blurred, cv::Size(), std::sqrt(kCoarseBlurPx * kCoarseBlurPx - blur * blur));
-    const tracker::AlignmentResult c = tracker::alignBoard(coarse, blurred, start, false, 6);
+    const tracker::AlignmentResult c = tracker::alignBoard(coarse, blurred, start, false, kStepsFromPrediction);
     started = c.ok;
     if (c.ok) start.a = c.a;
   }
   if (!started) return false;
-  const tracker::AlignmentResult fit = tracker::alignBoard(tmpl, a.gray, start, warm, warm ? 3 : 6);
+  const tracker::AlignmentResult fit = tracker::alignBoard(tmpl, a.gray, start, warm, warm ? 3 : from_refined ? 6 : kStepsFromPrediction);
   // The board's contrast in this frame (bright minus dark, as teaching measured it): present,
   // and not far below the taught one (a light-off frame has none).
-  if (!fit.ok || 2.0 * fit.contrast < std::max(options_.min_contrast, 0.1 * a.board.contrast)) return false;
+  if (!fit.ok || 2.0 * fit.contrast < std::max(options_.min_contrast, kMinContrastOfTaught * a.board.contrast)) return false;
   if (rmsTo(fit.a) > agree_px) return false;
   // From last frame's position only when the fit settled there: a board that moved by more
   // than the fine template's reach is found again from its refined corners.

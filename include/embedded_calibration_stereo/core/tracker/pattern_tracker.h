@@ -6,7 +6,8 @@
 //   1. predict every corner: homography of the board grid + per-corner offsets that absorb the
 //      lens distortion (learned when teaching, updated by tracking);
 //   2. re-centre: correlate the expected checker/margin brightness pattern (box samples at the
-//      square centres) over a +-search_radius_px window, so that a zoom step or a knock that
+//      square centres, each minus its four neighbours, so that a scene that varies over more than
+//      a square cancels) over a +-search_radius_px window, so that a zoom step or a knock that
 //      moves the board by more than a refinement window is followed without slipping a square
 //      (steady state: only the score at the last position is checked; the full search runs when
 //      it dropped below 85% of the last frame's, or when the board was not found that way);
