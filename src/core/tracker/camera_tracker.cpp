@@ -34,6 +34,10 @@ constexpr double kMinContrastOfTaught = 0.05;
 // textured scene the steps from there are short. A converged fit stops early.
 constexpr int kStepsFromPrediction = 24;
 
+// Gauss-Newton steps of the fine alignment: from last frame's result one or two suffice; from
+// the refined corners (within a fraction of a pixel) a few; from the re-centred prediction more.
+int fineSteps(bool warm, bool from_refined) { return warm ? 3 : from_refined ? 6 : kStepsFromPrediction; }
+
 struct RecentreResult {
   cv::Point2f shift;
   double score = -1.0;
@@ -763,7 +767,7 @@ bool CameraTracker::alignFrom(BoardAttempt& a, int index, int attempt, bool was_
     if (c.ok) start.a = c.a;
   }
   if (!started) return false;
-  const tracker::AlignmentResult fit = tracker::alignBoard(tmpl, a.gray, start, warm, warm ? 3 : from_refined ? 6 : kStepsFromPrediction);
+  const tracker::AlignmentResult fit = tracker::alignBoard(tmpl, a.gray, start, warm, fineSteps(warm, from_refined));
   // The board's contrast in this frame (bright minus dark, as teaching measured it): present,
   // and not far below the taught one (a light-off frame has none).
   if (!fit.ok || 2.0 * fit.contrast < std::max(options_.min_contrast, kMinContrastOfTaught * a.board.contrast)) return false;
