@@ -283,6 +283,45 @@ double measureEdgeBlur(const cv::Mat& gray, const std::vector<cv::Point2f>& corn
   return sigmas[sigmas.size() / 2];
 }
 
+// The board's polarity (which diagonal pair of a corner is bright) and its saddle contrast in the
+// light-on frames (scene included), from the corners found there.
+void learnPolarityAndContrast(const VirtualBoard& vb, const std::vector<std::vector<cv::Point2f>>& per_frame,
+                              const std::vector<cv::Mat>& light_on, BoardPrior* prior) {
+  const int n = vb.cornerCount();
+  const int frames = static_cast<int>(per_frame.size());
+  const int outer_ids[4] = {0, vb.cols - 1, n - 1, n - vb.cols};
+  const double spacing = prior->square_px;
+  const int box = std::max(1, static_cast<int>(std::lround(0.12 * spacing)));
+  double vote = 0;
+  std::vector<float> plus, minus;
+  for (int f = 0; f < frames; ++f) {
+    const tracker::BoxSampler sampler(light_on[f], cv::Rect(0, 0, light_on[f].cols, light_on[f].rows), box);
+    const cv::Matx33d h =
+        tracker::homographyFromOuter(*prior, {per_frame[f][outer_ids[0]], per_frame[f][outer_ids[1]],
+                                              per_frame[f][outer_ids[2]], per_frame[f][outer_ids[3]]});
+    for (int id = 0; id < n; ++id) {
+      const cv::Point2f g = tracker::gridPoint(id, vb.cols);
+      cv::Point2f ac, ar;
+      tracker::gridAxes(h, g.x, g.y, &ac, &ar);
+      const int parity = ((id % vb.cols + id / vb.cols) & 1) == 0 ? 1 : -1;
+      const float cp = tracker::saddleContrast(sampler, per_frame[f][id], ac, ar, parity);
+      const float cm = tracker::saddleContrast(sampler, per_frame[f][id], ac, ar, -parity);
+      if (!std::isfinite(cp) || !std::isfinite(cm)) continue;
+      plus.push_back(cp);
+      minus.push_back(cm);
+      vote += (cp > cm) ? 1 : -1;
+    }
+  }
+  prior->sign = vote >= 0 ? 1 : -1;
+  std::vector<float>& good = prior->sign > 0 ? plus : minus;
+  if (!good.empty()) {
+    std::nth_element(good.begin(), good.begin() + good.size() / 2, good.end());
+    prior->contrast = std::max(1.0f, good[good.size() / 2]);
+  } else {
+    prior->contrast = 1.0;
+  }
+}
+
 void learnBoard(const VirtualBoard& vb, const std::vector<std::vector<cv::Point2f>>& per_frame,
                 const std::vector<cv::Mat>& light_on, BoardPrior* prior) {
   prior->board_id = vb.virtual_id;
@@ -332,36 +371,7 @@ void learnBoard(const VirtualBoard& vb, const std::vector<std::vector<cv::Point2
     prior->edge_blur_px = blurs[blurs.size() / 2];
   }
 
-  // Polarity and contrast of the saddles in the light-on frames (scene included).
-  const int box = std::max(1, static_cast<int>(std::lround(0.12 * spacing)));
-  double vote = 0;
-  std::vector<float> plus, minus;
-  for (int f = 0; f < frames; ++f) {
-    const tracker::BoxSampler sampler(light_on[f], cv::Rect(0, 0, light_on[f].cols, light_on[f].rows), box);
-    const cv::Matx33d h =
-        tracker::homographyFromOuter(*prior, {per_frame[f][outer_ids[0]], per_frame[f][outer_ids[1]],
-                                              per_frame[f][outer_ids[2]], per_frame[f][outer_ids[3]]});
-    for (int id = 0; id < n; ++id) {
-      const cv::Point2f g = tracker::gridPoint(id, vb.cols);
-      cv::Point2f ac, ar;
-      tracker::gridAxes(h, g.x, g.y, &ac, &ar);
-      const int parity = ((id % vb.cols + id / vb.cols) & 1) == 0 ? 1 : -1;
-      const float cp = tracker::saddleContrast(sampler, per_frame[f][id], ac, ar, parity);
-      const float cm = tracker::saddleContrast(sampler, per_frame[f][id], ac, ar, -parity);
-      if (!std::isfinite(cp) || !std::isfinite(cm)) continue;
-      plus.push_back(cp);
-      minus.push_back(cm);
-      vote += (cp > cm) ? 1 : -1;
-    }
-  }
-  prior->sign = vote >= 0 ? 1 : -1;
-  std::vector<float>& good = prior->sign > 0 ? plus : minus;
-  if (!good.empty()) {
-    std::nth_element(good.begin(), good.begin() + good.size() / 2, good.end());
-    prior->contrast = std::max(1.0f, good[good.size() / 2]);
-  } else {
-    prior->contrast = 1.0;
-  }
+  learnPolarityAndContrast(vb, per_frame, light_on, prior);
 }
 
 // A region around a board also holds parts of its neighbours, which can keep the detector from
