@@ -24,6 +24,7 @@
 #include <vector>
 
 #include "embedded_calibration_stereo/test_support/run_command.h"
+#include "embedded_calibration_stereo/test_support/real_photos.h"
 
 namespace core = embedded_calibration_stereo::core;
 
@@ -31,8 +32,8 @@ namespace {
 
 using core::runCommand;
 
-const std::string kBoardDir = "/usr/share/doc/opencv-doc/examples/data/";
-const std::string kSceneDir = "/usr/lib/python3/dist-packages/skimage/data/";
+const std::string kBoardDir = embedded_calibration_stereo::test_support::kBoardPhotoDir;
+const std::string kSceneDir = embedded_calibration_stereo::test_support::kScenePhotoDir;
 const cv::Size kGrid(9, 6);
 constexpr double kWrongIdPx = 1.0;  // a slipped square is ~25 px off in these photos
 
@@ -56,11 +57,7 @@ std::string tempDir() {
 // OpenCV's corners on the clean photo in the tool's documented order for a plain board.
 bool referenceCorners(const cv::Mat& gray, std::vector<cv::Point2f>* out) {
   std::vector<cv::Point2f> c;
-  if (!cv::findChessboardCornersSB(gray, kGrid, c, cv::CALIB_CB_NORMALIZE_IMAGE | cv::CALIB_CB_EXHAUSTIVE |
-                                                       cv::CALIB_CB_ACCURACY))
-    return false;
-  cv::cornerSubPix(gray, c, cv::Size(5, 5), cv::Size(-1, -1),
-                   cv::TermCriteria(cv::TermCriteria::EPS + cv::TermCriteria::COUNT, 30, 0.001));
+  if (!embedded_calibration_stereo::test_support::openCvChessboardCorners(gray, kGrid, &c)) return false;
   // The four orderings of a 9x6 grid (reverse columns, reverse rows).
   double best = 1e30;
   for (int sym = 0; sym < 4; ++sym) {
@@ -76,17 +73,6 @@ bool referenceCorners(const cv::Mat& gray, std::vector<cv::Point2f>* out) {
     if (key < best) best = key, *out = o;
   }
   return best < 1e30;
-}
-
-// The scene photo as grey, scaled to cover `size` and centre-cropped.
-cv::Mat scene(const std::string& name, cv::Size size) {
-  const cv::Mat image = cv::imread(kSceneDir + name + ".png", cv::IMREAD_GRAYSCALE);
-  if (image.empty()) return image;
-  const double s = std::max(static_cast<double>(size.width) / image.cols, static_cast<double>(size.height) / image.rows);
-  cv::Mat scaled;
-  cv::resize(image, scaled, cv::Size(), s, s, s < 1 ? cv::INTER_AREA : cv::INTER_LINEAR);
-  const cv::Rect crop((scaled.cols - size.width) / 2, (scaled.rows - size.height) / 2, size.width, size.height);
-  return scaled(crop).clone();
 }
 
 // The corners of "board_id,corner_id,u,v" lines of board 0 by id (NaN where missing).
@@ -161,7 +147,7 @@ TEST(TrackPatternPhotos, RealChessboardOnRealScenes) {
     std::printf("  %-8s %-10s %5s  %4d/%-4d %12s %14.3f %6d\n", photo.c_str(), "(clean)", "", clean.matched,
                 clean.reference, "", clean.rms(), clean.wrong);
     for (const std::string& name : scenes) {
-      const cv::Mat background = scene(name, board.size());
+      const cv::Mat background = embedded_calibration_stereo::test_support::scenePhoto(name, board.size());
       ASSERT_FALSE(background.empty()) << "cannot read " << kSceneDir << name
                                        << ".png (Debian package python3-skimage; scripts/setup installs it)";
       for (double r : ratios) {

@@ -22,13 +22,14 @@
 
 #include "embedded_calibration_stereo/core/tracker/board_teacher.h"
 #include "embedded_calibration_stereo/core/tracker/pattern_tracker.h"
+#include "embedded_calibration_stereo/test_support/real_photos.h"
 
 namespace core = embedded_calibration_stereo::core;
 
 namespace {
 
-const std::string kBoardDir = "/usr/share/doc/opencv-doc/examples/data/";
-const std::string kSceneDir = "/usr/lib/python3/dist-packages/skimage/data/";
+const std::string kBoardDir = embedded_calibration_stereo::test_support::kBoardPhotoDir;
+const std::string kSceneDir = embedded_calibration_stereo::test_support::kScenePhotoDir;
 const cv::Size kGrid(9, 6);
 constexpr double kOffPx = 1.0;
 
@@ -45,16 +46,6 @@ struct Score {
   double found() const { return reference ? static_cast<double>(matched) / reference : 0.0; }
   double rms() const { return matched ? std::sqrt(sum_sq / matched) : 0.0; }
 };
-
-cv::Mat scene(const std::string& name, cv::Size size) {
-  const cv::Mat image = cv::imread(kSceneDir + name + ".png", cv::IMREAD_GRAYSCALE);
-  if (image.empty()) return image;
-  const double s = std::max(static_cast<double>(size.width) / image.cols, static_cast<double>(size.height) / image.rows);
-  cv::Mat scaled;
-  cv::resize(image, scaled, cv::Size(), s, s, s < 1 ? cv::INTER_AREA : cv::INTER_LINEAR);
-  const cv::Rect crop((scaled.cols - size.width) / 2, (scaled.rows - size.height) / 2, size.width, size.height);
-  return scaled(crop).clone();
-}
 
 // Corners by id (NaN where missing) of board 0.
 std::vector<cv::Point2f> byId(const std::vector<core::BoardCorners>& boards) {
@@ -97,11 +88,7 @@ Score score(const std::vector<core::BoardCorners>& boards, const std::vector<cv:
 // the tracker's corners to the nearest OpenCV corner (the orderings differ between detectors).
 double rmsToOpenCv(const cv::Mat& gray, const std::vector<cv::Point2f>& tracked) {
   std::vector<cv::Point2f> c;
-  if (!cv::findChessboardCornersSB(gray, kGrid, c, cv::CALIB_CB_NORMALIZE_IMAGE | cv::CALIB_CB_EXHAUSTIVE |
-                                                       cv::CALIB_CB_ACCURACY))
-    return NAN;
-  cv::cornerSubPix(gray, c, cv::Size(5, 5), cv::Size(-1, -1),
-                   cv::TermCriteria(cv::TermCriteria::EPS + cv::TermCriteria::COUNT, 30, 0.001));
+  if (!embedded_calibration_stereo::test_support::openCvChessboardCorners(gray, kGrid, &c)) return NAN;
   double sum = 0;
   int n = 0;
   for (const cv::Point2f& p : tracked) {
@@ -167,7 +154,7 @@ TEST(TrackerPhotoVariants, RealBoardsInRealScenesDownToReflectanceTenPercent) {
                 score(clean_tracker.track(board), reference).matched, to_opencv);
     ASSERT_LE(to_opencv, 0.15) << photo << ": the reference corners are not where OpenCV finds them";
     for (const std::string& scene_name : scenes) {
-      const cv::Mat background = scene(scene_name, board.size());
+      const cv::Mat background = embedded_calibration_stereo::test_support::scenePhoto(scene_name, board.size());
       ASSERT_FALSE(background.empty()) << "cannot read " << kSceneDir << scene_name << ".png (python3-skimage)";
       for (double r : ratios) {
         cv::Mat composite;
