@@ -51,9 +51,10 @@ void randomPair(cv::Size size, int shift, unsigned seed, cv::Mat* left, cv::Mat*
 //    L(k) = min(255, C(k) + min(L_q(k), L_q(k -+ 1) + P1, min L_q + P2') - min L_q), sums of
 //    bytes saturating at 255, L_q outside 0..ndisp - 1 = 255, P2' = max(P1 + 1,
 //    P2 * E / (E + |I - I_q|));
-//  - the sum: down = sat(sat(T + TL) + sat(TR + L)), then + sat(sat(B + BL) + sat(BR + R)) with
-//    eight paths, + R with five; disparities past ndisp up to the padded count sum to all-255
-//    paths (they take part in the rival and the right winners, never win);
+//  - the sum: down = sat(sat(T + TL) + sat(TR + L)), then sat(down + sat(sat(B + BL) +
+//    sat(BR + R))) with eight paths, sat(down + R) with five; disparities past ndisp up to the
+//    padded count sum to all-255 paths (they take part in the rival and the right winners,
+//    never win);
 //  - winner: least sum, lowest index on ties; uniqueness: best * round((100 + u) * 1024) <
 //    rival * 102400, the rival the least sum outside the winner and its neighbours;
 //  - right winners: least sum over the left pixels that meet the right pixel, the largest
@@ -134,8 +135,8 @@ struct Reference {
     if (p.paths == 8) B = path(left, cost, -1, 0), BL = path(left, cost, -1, 1), BR = path(left, cost, -1, -1);
     std::vector<int> S(cost.size());
     for (size_t i = 0; i < S.size(); ++i) {
-      S[i] = sat(sat(T[i] + TL[i]) + sat(TR[i] + Lp[i]));
-      S[i] += p.paths == 8 ? sat(sat(B[i] + BL[i]) + sat(BR[i] + R[i])) : R[i];
+      const int down = sat(sat(T[i] + TL[i]) + sat(TR[i] + Lp[i]));
+      S[i] = sat(down + (p.paths == 8 ? sat(sat(B[i] + BL[i]) + sat(BR[i] + R[i])) : R[i]));
     }
     cv::Mat out(left.size(), CV_16S);
     occluded->create(left.size(), CV_8U);

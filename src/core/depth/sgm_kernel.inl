@@ -12,9 +12,9 @@
 //     every path's minimum reach).
 //   - Up pass, rows bottom to top (eight paths only): the paths from below, below-left and
 //     below-right. With five paths, each row's up step follows its down step at once.
-//   - Per row, right to left: the path from the right, the sum of all paths in 16 bits, and the
-//     winner, its uniqueness, its sub-pixel offset and the right image's winners (for the
-//     left-right check, from the same sums).
+//   - Per row, right to left: the path from the right, the sum of all paths (bytes, saturating
+//     at 255), and the winner, its uniqueness and the right image's winners (for the left-right
+//     check, from the same sums); after the row, the sub-pixel offsets in one vectorised pass.
 #include <cstddef>
 #include <cstdint>
 #include <cstring>
@@ -33,7 +33,6 @@ namespace {
 constexpr int kDispScale = 16;  // cv::StereoMatcher::DISP_SCALE
 #if CV_SIMD
 constexpr int kLanes8 = cv::v_uint8::nlanes;
-constexpr int kLanes16 = cv::v_uint16::nlanes;
 #else
 #error "the census_sgm kernel needs universal intrinsics (SSE2, NEON or wider)"
 #endif
@@ -48,12 +47,8 @@ int absInt(int v) { return v < 0 ? -v : v; }
 #endif
 
 // Horizontal minima, the kernel's most frequent reductions: with AVX2, SSE4.1's PHMINPOSUW
-// finds the least of eight 16-bit lanes in one instruction.
+// finds the least of eight 16-bit lanes (here: bytes widened) in one instruction.
 #if CV_AVX2
-inline uint16_t minOf(const cv::v_uint16& v) {
-  const __m128i m = _mm_min_epu16(_mm256_castsi256_si128(v.val), _mm256_extracti128_si256(v.val, 1));
-  return static_cast<uint16_t>(_mm_cvtsi128_si32(_mm_minpos_epu16(m)));
-}
 inline uint8_t minOf(const cv::v_uint8& v) {
   __m128i m = _mm_min_epu8(_mm256_castsi256_si128(v.val), _mm256_extracti128_si256(v.val, 1));
   m = _mm_min_epu8(m, _mm_srli_epi16(m, 8));
@@ -61,7 +56,6 @@ inline uint8_t minOf(const cv::v_uint8& v) {
   return static_cast<uint8_t>(_mm_cvtsi128_si32(_mm_minpos_epu16(m)));
 }
 #else
-inline uint16_t minOf(const cv::v_uint16& v) { return cv::v_reduce_min(v); }
 inline uint8_t minOf(const cv::v_uint8& v) { return cv::v_reduce_min(v); }
 #endif
 
@@ -119,9 +113,12 @@ struct Scratch {
   uint8_t* band_costs;     // [row][x][k] eight paths: the costs of the band's rows y0..
   PathRow vertical[3][2];  // the three paths from the previous row: previous and current row
   uint8_t* down;           // [row][x][k] the down pass's sums, rows y0.. of the band
-  uint16_t* right_cost;    // [q] right image's best sum so far, entries as Problem::census_right
-  uint16_t* right_k;       // [q] its disparity index
+  uint8_t* right_cost;     // [q] right image's best sum so far, entries as Problem::census_right
+  uint8_t* right_k;        // [q] its disparity index, low byte
+  uint8_t* right_k_high;   // [q] its high byte (more than 256 disparities only)
   uint16_t* winner_k;      // [x] the left pixel's winning disparity index
+  int32_t* offset_num;     // [x] the sub-pixel offset's numerator, then the offset (1/16 px)
+  int32_t* offset_den;     // [x] its denominator (1 where there is no offset)
   const Penalties* penalties;
 };
 
@@ -150,9 +147,12 @@ size_t layOut(const Problem& p, int band_rows, uint8_t* base, Scratch* s) {
   const size_t band = rowElements(p) * static_cast<size_t>(p.paths == 5 ? 1 : band_rows);
   s->down = take(band);
   s->band_costs = p.paths == 5 ? s->costs : take(band);
-  s->right_cost = reinterpret_cast<uint16_t*>(take(right * 2));
-  s->right_k = reinterpret_cast<uint16_t*>(take(right * 2));
+  s->right_cost = take(right);
+  s->right_k = take(right);
+  s->right_k_high = take(right);
   s->winner_k = reinterpret_cast<uint16_t*>(take(W * 2));
+  s->offset_num = reinterpret_cast<int32_t*>(take(W * 4));
+  s->offset_den = reinterpret_cast<int32_t*>(take(W * 4));
   return used + 64;
 }
 
@@ -322,96 +322,133 @@ void downRow(const Problem& p, Scratch& s, int y, bool output, const uint8_t* co
 }
 
 // ---- winners -----------------------------------------------------------------------------
+// All paths' sum of one disparity in a byte, saturating at 255: the winner and its rivals lie
+// far below that, and byte lanes halve the work of every reduction and give the winner's index
+// from a lane mask rather than from a vector of indices.
+
+inline int firstBit(uint64_t m) { return __builtin_ctzll(m); }
+
+constexpr int kGroupLanes = 64;                            // lanes per 64-bit lane mask
+constexpr int kVectorsPerGroup = kGroupLanes / kLanes8;  // 2 with AVX2, 4 with 128-bit vectors
+
+// Bit i: whether lane kGroupLanes * g + i of the pixel's sums `s` (NV vectors) passes `test`,
+// which returns 0xFF in the lanes that pass.
+template <int NV, class Test>
+SGM_INLINE uint64_t laneMask(const cv::v_uint8* s, int g, const Test& test) {
+  uint64_t mask = 0;
+  for (int i = 0; i < kVectorsPerGroup && g * kVectorsPerGroup + i < NV; ++i) {
+    const uint32_t bits = static_cast<uint32_t>(cv::v_signmask(test(s[g * kVectorsPerGroup + i])));
+    mask |= static_cast<uint64_t>(bits) << (i * kLanes8);
+  }
+  return mask;
+}
 
 template <int NV>
-struct PixelSums {
-  cv::v_uint16 v[2 * NV];
-  void set(const cv::v_uint8& a, int j) { cv::v_expand(a, v[2 * j], v[2 * j + 1]); }
-  void add(const cv::v_uint8& a, int j) {
-    cv::v_uint16 lo, hi;
-    cv::v_expand(a, lo, hi);
-    v[2 * j] = v[2 * j] + lo;
-    v[2 * j + 1] = v[2 * j + 1] + hi;
-  }
-};
+constexpr int groups() { return (NV + kVectorsPerGroup - 1) / kVectorsPerGroup; }
 
-cv::v_uint16 laneIndices() {
-  alignas(64) uint16_t ramp[kLanes16];
-  for (int i = 0; i < kLanes16; ++i) ramp[i] = static_cast<uint16_t>(i);
+// The index of the first lane holding `best`, the least sum (so there is one).
+template <int NV>
+SGM_INLINE int firstLaneOf(const cv::v_uint8* s, uint8_t best) {
+  const cv::v_uint8 b = cv::vx_setall_u8(best);
+  const auto is_best = [&b](const cv::v_uint8& v) { return v == b; };
+  for (int g = 0; g + 1 < groups<NV>(); ++g) {
+    const uint64_t m = laneMask<NV>(s, g, is_best);
+    if (m) return g * kGroupLanes + firstBit(m);
+  }
+  const int g = groups<NV>() - 1;
+  return g * kGroupLanes + firstBit(laneMask<NV>(s, g, is_best));
+}
+
+// Whether every sum outside the winner k and its two neighbours is above `limit`.
+template <int NV>
+SGM_INLINE bool noRivalAtMost(const cv::v_uint8* s, int k, uint8_t limit) {
+  const cv::v_uint8 t = cv::vx_setall_u8(limit);
+  const auto at_most = [&t](const cv::v_uint8& v) { return cv::v_min(v, t) == v; };
+  for (int g = 0; g < groups<NV>(); ++g) {
+    uint64_t m = laneMask<NV>(s, g, at_most);
+    for (int i = k - 1 - g * kGroupLanes; i <= k + 1 - g * kGroupLanes; ++i)
+      if (i >= 0 && i < kGroupLanes) m &= ~(uint64_t{1} << i);
+    if (m) return false;
+  }
+  return true;
+}
+
+cv::v_uint8 laneRamp() {
+  alignas(64) uint8_t ramp[kLanes8];
+  for (int i = 0; i < kLanes8; ++i) ramp[i] = static_cast<uint8_t>(i);
   return cv::vx_load_aligned(ramp);
 }
 
-struct Winner {
-  int k;         // disparity index of the least sum
-  uint16_t best;
-};
-
-// The least sum and its index (the lowest index among equal sums), without a branch per vector:
-// each lane keeps its least sum and where it was first seen.
-template <int NV>
-SGM_INLINE Winner leastSum(const PixelSums<NV>& sums, const cv::v_uint16& lanes) {
-  const cv::v_uint16 step = cv::vx_setall_u16(static_cast<uint16_t>(kLanes16));
-  cv::v_uint16 m = sums.v[0], at = lanes, index = lanes;
-  for (int j = 1; j < 2 * NV; ++j) {
-    index = index + step;
-    at = cv::v_select(sums.v[j] < m, index, at);
-    m = cv::v_min(m, sums.v[j]);
-  }
-  const uint16_t best = minOf(m);
-  const uint16_t k = minOf(cv::v_select(m == cv::vx_setall_u16(best), at, cv::vx_setall_u16(0xFFFF)));
-  return {k, best};
-}
-
-// The least sum outside the winner k and its two neighbours (the uniqueness test's rival).
-template <int NV>
-SGM_INLINE uint16_t rivalSum(const PixelSums<NV>& sums, int k, const cv::v_uint16& lanes) {
-  const cv::v_uint16 from = cv::vx_setall_u16(static_cast<uint16_t>(k > 0 ? k - 1 : 0));
-  const cv::v_uint16 to = cv::vx_setall_u16(static_cast<uint16_t>(k + 1));
-  const cv::v_uint16 step = cv::vx_setall_u16(static_cast<uint16_t>(kLanes16));
-  cv::v_uint16 index = lanes, m = cv::vx_setall_u16(0xFFFF);
-  for (int j = 0; j < 2 * NV; ++j) {
-    const cv::v_uint16 excluded = (index >= from) & (index <= to);
-    m = cv::v_min(m, sums.v[j] | excluded);
-    index = index + step;
-  }
-  return minOf(m);
-}
-
 // Folds the sums of left pixel x into the right image's winners: entry q of right_cost/right_k
-// is right column width - 1 + right_off - q, which disparity index k of x meets at q0 + k.
+// is right column width - 1 + right_off - q, which disparity index k of x meets at q0 + k. On
+// ties the entry keeps the pixel folded first (the larger x).
 template <int NV>
-SGM_INLINE void foldRightWinners(const Problem& p, const PixelSums<NV>& sums, int x,
-                      const cv::v_uint16& lanes, Scratch& s) {
+SGM_INLINE void foldRightWinners(const Problem& p, const cv::v_uint8* sums, int x,
+                                 const cv::v_uint8& ramp, Scratch& s) {
+  constexpr bool kHigh = NV * kLanes8 > 256;
   const int q0 = p.width - 1 + p.right_off - x + p.min_disp;
-  uint16_t* rc = s.right_cost + q0;
-  uint16_t* rk = s.right_k + q0;
-  const cv::v_uint16 step = cv::vx_setall_u16(static_cast<uint16_t>(kLanes16));
-  cv::v_uint16 k = lanes;
-  for (int j = 0; j < 2 * NV; ++j) {
-    const cv::v_uint16 old = cv::vx_load(rc + j * kLanes16);
-    const cv::v_uint16 better = sums.v[j] < old;
-    cv::v_store(rc + j * kLanes16, cv::v_min(sums.v[j], old));
-    cv::v_store(rk + j * kLanes16, cv::v_select(better, k, cv::vx_load(rk + j * kLanes16)));
-    k = k + step;
-  }
-}
-
-template <int NV>
-SGM_INLINE int16_t subpixelDisparity(const Problem& p, const PixelSums<NV>& sums, int k) {
-  int value = (p.min_disp + k) * kDispScale;
-  if (p.subpixel && k > 0 && k < p.ndisp - 1) {
-    alignas(64) uint16_t all[2 * NV * kLanes16];
-    for (int j = 0; j < 2 * NV; ++j) cv::v_store_aligned(all + j * kLanes16, sums.v[j]);
-    const int a = all[k - 1], b = all[k], c = all[k + 1];
-    // The equiangular (V-shaped) fit: census sums grow linearly away from the match, and a
-    // parabola through them is pulled harder towards the whole pixel.
-    const int denom = a > c ? a - b : c - b;
-    if (denom > 0) {  // a float division: an integer one costs several times more here
-      const float offset = static_cast<float>((a - c) * kDispScale) / static_cast<float>(2 * denom);
-      value += static_cast<int>(offset >= 0 ? offset + 0.5f : offset - 0.5f);
+  uint8_t* rc = s.right_cost + q0;
+  uint8_t* rk = s.right_k + q0;
+  uint8_t* rh = s.right_k_high + q0;
+  for (int j = 0; j < NV; ++j) {
+    const cv::v_uint8 old = cv::vx_load(rc + j * kLanes8);
+    const cv::v_uint8 least = cv::v_min(sums[j], old);
+    const cv::v_uint8 kept = least == old;
+    cv::v_store(rc + j * kLanes8, least);
+    const cv::v_uint8 k = cv::v_add_wrap(ramp, cv::vx_setall_u8(static_cast<uint8_t>(j * kLanes8)));
+    cv::v_store(rk + j * kLanes8, cv::v_select(kept, cv::vx_load(rk + j * kLanes8), k));
+    if (kHigh) {
+      const cv::v_uint8 high = cv::vx_setall_u8(static_cast<uint8_t>((j * kLanes8) >> 8));
+      cv::v_store(rh + j * kLanes8, cv::v_select(kept, cv::vx_load(rh + j * kLanes8), high));
     }
   }
-  return static_cast<int16_t>(value);
+}
+
+int rightWinner(const Problem& p, const Scratch& s, int q) {
+  return s.right_k[q] | (p.ndisp_padded > 256 ? s.right_k_high[q] << 8 : 0);
+}
+
+// The equiangular (V-shaped) fit's operands at winner k, kept for one vectorised division per
+// row: census sums grow linearly away from the match, and a parabola through them is pulled
+// harder towards the whole pixel.
+template <int NV>
+SGM_INLINE void keepSubpixelFit(const Problem& p, const cv::v_uint8* sums, int k, int x,
+                                Scratch& s) {
+  s.offset_num[x] = 0;
+  s.offset_den[x] = 1;
+  if (!p.subpixel || k <= 0 || k >= p.ndisp - 1) return;
+  alignas(64) uint8_t all[NV * kLanes8];
+  for (int j = 0; j < NV; ++j) cv::v_store_aligned(all + j * kLanes8, sums[j]);
+  const int a = all[k - 1], b = all[k], c = all[k + 1];
+  const int denom = a > c ? a - b : c - b;
+  if (denom <= 0) return;
+  s.offset_num[x] = (a - c) * kDispScale;
+  s.offset_den[x] = 2 * denom;
+}
+
+// Adds each pixel's sub-pixel offset, num / den as a float rounded half away from zero.
+void addSubpixelOffsets(const Problem& p, Scratch& s, int16_t* out) {
+  int x = 0;
+#if CV_SIMD
+  const cv::v_float32 half = cv::vx_setall_f32(0.5f), zero = cv::vx_setzero_f32();
+  for (; x + cv::v_float32::nlanes <= p.width; x += cv::v_float32::nlanes) {
+    const cv::v_float32 q = cv::v_cvt_f32(cv::vx_load(s.offset_num + x)) /
+                            cv::v_cvt_f32(cv::vx_load(s.offset_den + x));
+    cv::v_store(s.offset_num + x, cv::v_trunc(cv::v_select(q >= zero, q + half, q - half)));
+  }
+#endif
+  for (; x < p.width; ++x) {
+    const float q = static_cast<float>(s.offset_num[x]) / static_cast<float>(s.offset_den[x]);
+    s.offset_num[x] = static_cast<int>(q >= 0 ? q + 0.5f : q - 0.5f);
+  }
+  for (x = 0; x < p.width; ++x) out[x] = static_cast<int16_t>(out[x] + s.offset_num[x]);
+}
+
+// The uniqueness test, best * (100 + ratio) < rival * 100 in integers ((100 + ratio) in
+// 1/1024ths), as the greatest rival that fails it.
+uint8_t rivalLimit(int best, int64_t uniqueness_scale) {
+  const int64_t limit = static_cast<int64_t>(best) * uniqueness_scale / (1024 * 100);
+  return static_cast<uint8_t>(limit > 255 ? 255 : limit);
 }
 
 // Clears the left winners whose right pixel's winner disagrees by more than the tolerance, and
@@ -429,7 +466,7 @@ void leftRightCheck(const Problem& p, const Scratch& s, int16_t* out, uint8_t* o
       if (occluded) occluded[x] = 255;
       continue;
     }
-    const int right_k = s.right_k[p.width - 1 + p.right_off - xr];
+    const int right_k = rightWinner(p, s, p.width - 1 + p.right_off - xr);
     if (absInt(right_k - k) <= p.left_right_tolerance) continue;
     out[x] = invalid;
     if (occluded && right_k > k) occluded[x] = 255;
@@ -453,33 +490,35 @@ void upRow(const Problem& p, Scratch& s, int y, bool output, const uint8_t* cost
   const uint8_t* row = imageRow(p, y);
   const uint8_t* below = y + 1 < p.height ? imageRow(p, y + 1) : row;
   const int16_t invalid = static_cast<int16_t>((p.min_disp - 1) * kDispScale);
-  const cv::v_uint16 lanes = laneIndices();
-  // best * (100 + ratio) < rival * 100, in integers: (100 + ratio) in 1/1024ths; 0 = no test.
+  const cv::v_uint8 ramp = laneRamp();
   const int64_t uniqueness_scale =
       p.uniqueness_ratio > 0 ? static_cast<int64_t>((100.0 + p.uniqueness_ratio) * 1024 + 0.5) : 0;
-  if (output)
-    std::memset(s.right_cost, 0xFF, static_cast<size_t>(p.right_len + D) * sizeof(uint16_t));
+  if (output) std::memset(s.right_cost, 0xFF, static_cast<size_t>(p.right_len + D));
   RowPath<NV> from_right;
-  PixelSums<NV> sums;
+  cv::v_uint8 sums[NV];
   cv::v_uint8 l[3][NV];
   for (int x = p.width - 1; x >= 0; --x) {
     const uint8_t* cost = costs + static_cast<size_t>(x) * D;
     if (kUp) verticalSteps<NV>(p, s, row, below, x, cost, l);
     if (!output) continue;
     from_right.step(cost, pen.p1, pen.at(row[x], row[x + 1 < p.width ? x + 1 : x]));
+    cv::v_uint8 lowest = cv::vx_setall_u8(255);
     for (int j = 0; j < NV; ++j) {
-      sums.set(cv::vx_load(down + static_cast<size_t>(x) * D + j * kLanes8), j);
-      sums.add(kUp ? (l[0][j] + l[1][j]) + (l[2][j] + from_right.l[j]) : from_right.l[j], j);
+      sums[j] = cv::vx_load(down + static_cast<size_t>(x) * D + j * kLanes8) +
+                (kUp ? (l[0][j] + l[1][j]) + (l[2][j] + from_right.l[j]) : from_right.l[j]);
+      lowest = cv::v_min(lowest, sums[j]);
     }
-    const Winner w = leastSum(sums, lanes);
-    const bool unique = uniqueness_scale == 0 ||
-                        static_cast<int64_t>(w.best) * uniqueness_scale <
-                            static_cast<int64_t>(rivalSum(sums, w.k, lanes)) * 1024 * 100;
-    out.disparity[x] = unique ? subpixelDisparity(p, sums, w.k) : invalid;
-    s.winner_k[x] = static_cast<uint16_t>(w.k);
-    if (p.left_right_check) foldRightWinners(p, sums, x, lanes, s);
+    const uint8_t best = minOf(lowest);
+    const int k = firstLaneOf<NV>(sums, best);
+    const bool unique =
+        uniqueness_scale == 0 || noRivalAtMost<NV>(sums, k, rivalLimit(best, uniqueness_scale));
+    out.disparity[x] = unique ? static_cast<int16_t>((p.min_disp + k) * kDispScale) : invalid;
+    keepSubpixelFit<NV>(p, sums, unique ? k : 0, x, s);
+    s.winner_k[x] = static_cast<uint16_t>(k);
+    if (p.left_right_check) foldRightWinners<NV>(p, sums, x, ramp, s);
   }
   if (!output) return;
+  if (p.subpixel) addSubpixelOffsets(p, s, out.disparity);
   if (out.occluded) std::memset(out.occluded, 0, static_cast<size_t>(p.width));
   if (p.left_right_check) leftRightCheck(p, s, out.disparity, out.occluded);
 }
