@@ -119,6 +119,7 @@ struct Scratch {
   uint16_t* winner_k;      // [x] the left pixel's winning disparity index
   int32_t* offset_num;     // [x] the sub-pixel offset's numerator, then the offset (1/16 px)
   int32_t* offset_den;     // [x] its denominator (1 where there is no offset)
+  uint8_t* p2[4];          // [x] the P2 of each path of the pass at row y (rowPenalties)
   const Penalties* penalties;
 };
 
@@ -153,6 +154,7 @@ size_t layOut(const Problem& p, int band_rows, uint8_t* base, Scratch* s) {
   s->winner_k = reinterpret_cast<uint16_t*>(take(W * 2));
   s->offset_num = reinterpret_cast<int32_t*>(take(W * 4));
   s->offset_den = reinterpret_cast<int32_t*>(take(W * 4));
+  for (auto& row : s->p2) row = take(W);
   return used + 64;
 }
 
@@ -277,20 +279,43 @@ struct Penalties {
   uint8_t at(int a, int b) const { return p2[absInt(a - b)]; }
 };
 
+// The P2 of every pixel of `row` on the four paths of one pass, to out[0..3]: the three from
+// the row `from` (straight, from the pixel before, from the pixel after, as verticalSteps
+// steps them) and the one along the row from the neighbour at `along` (-1: the left, +1: the
+// right); columns past the image's ends clamped. The intensity steps in vectors and the table
+// in a loop of its own, out of the paths' way.
+void rowPenalties(const Problem& p, const Penalties& pen, const uint8_t* row, const uint8_t* from,
+                  int along, uint8_t* const* out) {
+  const int W = p.width;
+  const int offsets[4] = {0, -1, +1, along};
+  for (int r = 0; r < 4; ++r) {
+    const uint8_t* other = r < 3 ? from : row;
+    const int o = offsets[r];
+    uint8_t* d = out[r];
+    int x = 1;
+    for (; x + kLanes8 <= W - 1; x += kLanes8)
+      cv::v_store(d + x, cv::v_absdiff(cv::vx_load(row + x), cv::vx_load(other + x + o)));
+    for (; x < W - 1; ++x) d[x] = static_cast<uint8_t>(absInt(row[x] - other[x + o]));
+    const auto clamped = [W](int v) { return v < 0 ? 0 : (v >= W ? W - 1 : v); };
+    d[0] = static_cast<uint8_t>(absInt(row[0] - other[clamped(o)]));
+    d[W - 1] = static_cast<uint8_t>(absInt(row[W - 1] - other[clamped(W - 1 + o)]));
+    for (x = 0; x < W; ++x) d[x] = pen.p2[d[x]];
+  }
+}
+
 // The three paths into row y from the previous row `from` (y - 1 going down, y + 1 going up):
 // straight, from the pixel before and from the pixel after; their costs at x to l[3].
 template <int NV>
-SGM_INLINE void verticalSteps(const Problem& p, Scratch& s, const uint8_t* row, const uint8_t* from,
-                          int x, const uint8_t* cost, cv::v_uint8 (*l)[NV]) {
+SGM_INLINE void verticalSteps(const Problem& p, Scratch& s, int x, const uint8_t* cost,
+                              cv::v_uint8 (*l)[NV]) {
   static const int kFrom[3] = {0, -1, +1};
   const Penalties& pen = *s.penalties;
   for (int r = 0; r < 3; ++r) {
     const PathRow& prev = s.vertical[r][0];
     const PathRow& cur = s.vertical[r][1];
     const int xf = x + kFrom[r];
-    const int xi = xf < 0 ? 0 : (xf >= p.width ? p.width - 1 : xf);
-    cur.min[x + 1] = pathStep<NV>(cost, block(p, prev, xf), prev.min[xf + 1], pen.p1,
-                                  pen.at(row[x], from[xi]), block(p, cur, x), l[r]);
+    cur.min[x + 1] = pathStep<NV>(cost, block(p, prev, xf), prev.min[xf + 1], pen.p1, s.p2[r][x],
+                                  block(p, cur, x), l[r]);
   }
 }
 
@@ -308,13 +333,14 @@ void downRow(const Problem& p, Scratch& s, int y, bool output, const uint8_t* co
   const Penalties& pen = *s.penalties;
   const uint8_t* row = imageRow(p, y);
   const uint8_t* above = y > 0 ? imageRow(p, y - 1) : row;
+  rowPenalties(p, pen, row, above, -1, s.p2);
   RowPath<NV> from_left;
   cv::v_uint8 l[3][NV];
   for (int x = 0; x < p.width; ++x) {
     const uint8_t* cost = costs + static_cast<size_t>(x) * D;
-    verticalSteps<NV>(p, s, row, above, x, cost, l);
+    verticalSteps<NV>(p, s, x, cost, l);
     if (!output) continue;
-    from_left.step(cost, pen.p1, pen.at(row[x], row[x > 0 ? x - 1 : 0]));
+    from_left.step(cost, pen.p1, s.p2[3][x]);
     for (int j = 0; j < NV; ++j)
       cv::v_store(down + static_cast<size_t>(x) * D + j * kLanes8,
                   (l[0][j] + l[1][j]) + (l[2][j] + from_left.l[j]));
@@ -494,14 +520,15 @@ void upRow(const Problem& p, Scratch& s, int y, bool output, const uint8_t* cost
   const int64_t uniqueness_scale =
       p.uniqueness_ratio > 0 ? static_cast<int64_t>((100.0 + p.uniqueness_ratio) * 1024 + 0.5) : 0;
   if (output) std::memset(s.right_cost, 0xFF, static_cast<size_t>(p.right_len + D));
+  rowPenalties(p, pen, row, below, +1, s.p2);
   RowPath<NV> from_right;
   cv::v_uint8 sums[NV];
   cv::v_uint8 l[3][NV];
   for (int x = p.width - 1; x >= 0; --x) {
     const uint8_t* cost = costs + static_cast<size_t>(x) * D;
-    if (kUp) verticalSteps<NV>(p, s, row, below, x, cost, l);
+    if (kUp) verticalSteps<NV>(p, s, x, cost, l);
     if (!output) continue;
-    from_right.step(cost, pen.p1, pen.at(row[x], row[x + 1 < p.width ? x + 1 : x]));
+    from_right.step(cost, pen.p1, s.p2[3][x]);
     cv::v_uint8 lowest = cv::vx_setall_u8(255);
     for (int j = 0; j < NV; ++j) {
       sums[j] = cv::vx_load(down + static_cast<size_t>(x) * D + j * kLanes8) +
