@@ -216,12 +216,13 @@ inline cv::v_uint8 jumpFloor(uint8_t prev_min, uint8_t p2) {
 }
 
 // One step of a path: L(k) = C(k) + min(P(k), P(k-1) + P1, P(k+1) + P1, minP + P2) - minP,
-// written to `out` and to `l`; returns its minimum. `prev` is the path's block at the previous
+// written to `out` and added to `sum` (or put there, when not `add`); returns its minimum. `prev` is the path's block at the previous
 // pixel, with readable pad bytes of 255 at -1 and ndisp_padded (a row written long before, so
 // the unaligned loads do not wait on a store).
 template <int NV>
 SGM_INLINE uint8_t pathStep(const uint8_t* cost, const uint8_t* prev, uint8_t prev_min,
-                        const cv::v_uint8& p1, uint8_t p2, uint8_t* out, cv::v_uint8* l) {
+                            const cv::v_uint8& p1, uint8_t p2, uint8_t* out, bool add,
+                            cv::v_uint8* sum) {
   const cv::v_uint8 floor = cv::vx_setall_u8(prev_min);
   const cv::v_uint8 jump = jumpFloor(prev_min, p2);
   cv::v_uint8 lowest = cv::vx_setall_u8(255);
@@ -229,9 +230,11 @@ SGM_INLINE uint8_t pathStep(const uint8_t* cost, const uint8_t* prev, uint8_t pr
     const uint8_t* at = prev + j * kLanes8;
     const cv::v_uint8 same = cv::vx_load(at);
     const cv::v_uint8 step = cv::v_min(cv::vx_load(at - 1), cv::vx_load(at + 1)) + p1;
-    l[j] = cv::vx_load(cost + j * kLanes8) + (cv::v_min(cv::v_min(same, step), jump) - floor);
-    cv::v_store(out + j * kLanes8, l[j]);
-    lowest = cv::v_min(lowest, l[j]);
+    const cv::v_uint8 l =
+        cv::vx_load(cost + j * kLanes8) + (cv::v_min(cv::v_min(same, step), jump) - floor);
+    cv::v_store(out + j * kLanes8, l);
+    sum[j] = add ? sum[j] + l : l;
+    lowest = cv::v_min(lowest, l);
   }
   return minOf(lowest);
 }
@@ -303,11 +306,12 @@ void rowPenalties(const Problem& p, const Penalties& pen, const uint8_t* row, co
   }
 }
 
-// The three paths into row y from the previous row `from` (y - 1 going down, y + 1 going up):
-// straight, from the pixel before and from the pixel after; their costs at x to l[3].
+// The three paths into row y from the previous row (y - 1 going down, y + 1 going up):
+// straight, from the pixel before and from the pixel after; the sum of their costs at x to
+// `sum` (bytes saturating at 255: a sum of costs in any order, as min(total, 255)).
 template <int NV>
 SGM_INLINE void verticalSteps(const Problem& p, Scratch& s, int x, const uint8_t* cost,
-                              cv::v_uint8 (*l)[NV]) {
+                              cv::v_uint8* sum) {
   static const int kFrom[3] = {0, -1, +1};
   const Penalties& pen = *s.penalties;
   for (int r = 0; r < 3; ++r) {
@@ -315,7 +319,7 @@ SGM_INLINE void verticalSteps(const Problem& p, Scratch& s, int x, const uint8_t
     const PathRow& cur = s.vertical[r][1];
     const int xf = x + kFrom[r];
     cur.min[x + 1] = pathStep<NV>(cost, block(p, prev, xf), prev.min[xf + 1], pen.p1, s.p2[r][x],
-                                  block(p, cur, x), l[r]);
+                                  block(p, cur, x), r > 0, sum);
   }
 }
 
@@ -335,15 +339,14 @@ void downRow(const Problem& p, Scratch& s, int y, bool output, const uint8_t* co
   const uint8_t* above = y > 0 ? imageRow(p, y - 1) : row;
   rowPenalties(p, pen, row, above, -1, s.p2);
   RowPath<NV> from_left;
-  cv::v_uint8 l[3][NV];
+  cv::v_uint8 vertical[NV];
   for (int x = 0; x < p.width; ++x) {
     const uint8_t* cost = costs + static_cast<size_t>(x) * D;
-    verticalSteps<NV>(p, s, x, cost, l);
+    verticalSteps<NV>(p, s, x, cost, vertical);
     if (!output) continue;
     from_left.step(cost, pen.p1, s.p2[3][x]);
     for (int j = 0; j < NV; ++j)
-      cv::v_store(down + static_cast<size_t>(x) * D + j * kLanes8,
-                  (l[0][j] + l[1][j]) + (l[2][j] + from_left.l[j]));
+      cv::v_store(down + static_cast<size_t>(x) * D + j * kLanes8, vertical[j] + from_left.l[j]);
   }
 }
 
@@ -523,16 +526,16 @@ void upRow(const Problem& p, Scratch& s, int y, bool output, const uint8_t* cost
   rowPenalties(p, pen, row, below, +1, s.p2);
   RowPath<NV> from_right;
   cv::v_uint8 sums[NV];
-  cv::v_uint8 l[3][NV];
+  cv::v_uint8 vertical[NV];
   for (int x = p.width - 1; x >= 0; --x) {
     const uint8_t* cost = costs + static_cast<size_t>(x) * D;
-    if (kUp) verticalSteps<NV>(p, s, x, cost, l);
+    if (kUp) verticalSteps<NV>(p, s, x, cost, vertical);
     if (!output) continue;
     from_right.step(cost, pen.p1, s.p2[3][x]);
     cv::v_uint8 lowest = cv::vx_setall_u8(255);
     for (int j = 0; j < NV; ++j) {
       sums[j] = cv::vx_load(down + static_cast<size_t>(x) * D + j * kLanes8) +
-                (kUp ? (l[0][j] + l[1][j]) + (l[2][j] + from_right.l[j]) : from_right.l[j]);
+                (kUp ? vertical[j] + from_right.l[j] : from_right.l[j]);
       lowest = cv::v_min(lowest, sums[j]);
     }
     const uint8_t best = minOf(lowest);
