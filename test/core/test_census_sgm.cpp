@@ -201,6 +201,37 @@ struct Case {
   bool left_right_check, subpixel;
 };
 
+// Every kernel's result and occlusions equal the reference's on a random pair (randomPair) for
+// the case `c`; returns how many kernels it compared.
+int compareKernelsWithReference(const Case& c, cv::Size size, int shift, unsigned seed) {
+  int compared = 0;
+  for (const std::string& kernel : censusSgmKernelNames()) {
+    cv::Mat left, right;
+    randomPair(size, shift, seed, &left, &right);
+    CensusSgmParams p;
+    p.kernel = kernel;
+    p.min_disparity = c.min_disparity;
+    p.num_disparities = c.num_disparities;
+    p.paths = c.paths;
+    p.census_threshold = c.census_threshold;
+    p.uniqueness_ratio = c.uniqueness;
+    p.left_right_check = c.left_right_check;
+    p.subpixel = c.subpixel;
+    const Reference ref{p, paddedCount(c.num_disparities, kernel)};
+    cv::Mat expected_occluded, got, got_occluded;
+    const cv::Mat expected = ref.compute(left, right, &expected_occluded);
+    computeCensusSgmDisparity16(left, right, p, &got, &got_occluded);
+    const std::string label = kernel + " min " + std::to_string(c.min_disparity) + " n " +
+                              std::to_string(c.num_disparities) + " paths " + std::to_string(c.paths);
+    EXPECT_EQ(cv::countNonZero(expected != got), 0) << label;
+    EXPECT_EQ(cv::countNonZero(expected_occluded != got_occluded), 0) << label << " (occlusions)";
+    const int invalid = (c.min_disparity - 1) * 16;
+    EXPECT_GT(cv::countNonZero(got != invalid), 0.5 * got.total()) << label << ": mostly invalid";
+    ++compared;
+  }
+  return compared;
+}
+
 // Every kernel equals the reference on images of one band (at most 120 rows), with sizes that
 // leave partial vectors, negative minimum disparities and padded disparity counts.
 TEST(CensusSgm, EveryKernelMatchesTheReference) {
@@ -209,32 +240,18 @@ TEST(CensusSgm, EveryKernelMatchesTheReference) {
       {0, 96, 8, 1, 0, false, false},  {4, 48, 5, 1, 0, true, false},  {0, 64, 8, 0, 15, false, true},
   };
   int compared = 0;
-  for (const std::string& kernel : censusSgmKernelNames())
-    for (const Case& c : cases) {
-      cv::Mat left, right;
-      randomPair(cv::Size(157, 61), 20, 7 + compared, &left, &right);
-      CensusSgmParams p;
-      p.kernel = kernel;
-      p.min_disparity = c.min_disparity;
-      p.num_disparities = c.num_disparities;
-      p.paths = c.paths;
-      p.census_threshold = c.census_threshold;
-      p.uniqueness_ratio = c.uniqueness;
-      p.left_right_check = c.left_right_check;
-      p.subpixel = c.subpixel;
-      const Reference ref{p, paddedCount(c.num_disparities, kernel)};
-      cv::Mat expected_occluded, got, got_occluded;
-      const cv::Mat expected = ref.compute(left, right, &expected_occluded);
-      computeCensusSgmDisparity16(left, right, p, &got, &got_occluded);
-      const std::string label = kernel + " min " + std::to_string(c.min_disparity) + " n " +
-                                std::to_string(c.num_disparities) + " paths " + std::to_string(c.paths);
-      EXPECT_EQ(cv::countNonZero(expected != got), 0) << label;
-      EXPECT_EQ(cv::countNonZero(expected_occluded != got_occluded), 0) << label << " (occlusions)";
-      const int invalid = (c.min_disparity - 1) * 16;
-      EXPECT_GT(cv::countNonZero(got != invalid), 0.5 * got.total()) << label << ": mostly invalid";
-      ++compared;
-    }
+  for (const Case& c : cases) compared += compareKernelsWithReference(c, cv::Size(157, 61), 20, 7 + compared);
   EXPECT_GE(compared, 6);
+}
+
+// More than 256 disparities: the winners' indices past 255 (a byte's range) on both sides of
+// the left-right check. The pair's disparity 20 is index 270 from a minimum of -250.
+TEST(CensusSgm, WinnersPastIndex255MatchTheReference) {
+  int compared = 0;
+  for (const int paths : {8, 5})
+    compared += compareKernelsWithReference({-250, 288, paths, 1, 10, true, true}, cv::Size(157, 24),
+                                            20, 31 + paths);
+  EXPECT_GE(compared, 2);
 }
 
 bool exists(const std::string& path) {
