@@ -271,6 +271,9 @@ TEST(DeviceImageLearner, RejectsWrongInputs) {
   DeviceLearnerOptions bad;
   bad.min_pairs = 1;
   EXPECT_NE(bad.validate(), "");
+  DeviceLearnerOptions too_coarse;
+  too_coarse.flow_finest_scale = 5;
+  EXPECT_NE(too_coarse.validate().find("flow_finest_scale"), std::string::npos);
   const cv::Mat a(48, 64, CV_8UC1, cv::Scalar(10)), b(48, 64, CV_8UC1, cv::Scalar(20));
   EXPECT_THROW(learnDeviceImage({{a, b}, {a, b}}, bad, 0), std::invalid_argument);
   EXPECT_THROW(learnDeviceImage({{a, b}}, DeviceLearnerOptions(), 0), std::invalid_argument);

@@ -27,6 +27,7 @@ std::string DeviceLearnerOptions::validate() const {
   if (first_pass_pairs < 0) problems.push_back("first_pass_pairs must be >= 0");
   if (flow_refinement_iterations < 0 || flow_refinement_iterations > 20)
     problems.push_back("flow_refinement_iterations must be in [0, 20]");
+  if (flow_finest_scale < 0 || flow_finest_scale > 4) problems.push_back("flow_finest_scale must be in [0, 4]");
   std::string joined;
   for (const std::string& p : problems) joined += (joined.empty() ? "" : "; ") + p;
   return joined;
@@ -438,6 +439,7 @@ LearnedDevice learnDeviceImage(const std::vector<LightPair>& pairs, const Device
     cv::parallel_for_(cv::Range(0, m), [&](const cv::Range& r) {
       cv::Ptr<cv::DISOpticalFlow> dis = cv::DISOpticalFlow::create(cv::DISOpticalFlow::PRESET_MEDIUM);
       dis->setVariationalRefinementIterations(options.flow_refinement_iterations);
+      dis->setFinestScale(options.flow_finest_scale);
       for (int i = r.start; i < r.end; ++i) samples[i] = samplePair(images[use[i]], device, dis.get());
     });
     if (pass > 0) {

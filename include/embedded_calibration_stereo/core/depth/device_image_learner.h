@@ -59,6 +59,9 @@ struct DeviceLearnerOptions {
   int first_pass_pairs = 0;
   // Variational refinement iterations per pyramid level of the flow (DIS; its medium preset has 5).
   int flow_refinement_iterations = 5;
+  // The flow's finest pyramid level: 0 full resolution, 1 half (DIS's medium preset), 2 a
+  // quarter, ...; DIS interpolates the flow up from there. Each level finer costs about 4 times.
+  int flow_finest_scale = 1;
   // Empty when usable; otherwise one message per problem, joined by "; ".
   std::string validate() const;
 };
