@@ -3,6 +3,7 @@
 // then averaged over each pixel's area (what a sensor integrates). Sub-pixel phases, edge angles
 // (perspective makes them non-orthogonal), blur, a brightness gradient (vignetting) and sensor
 // noise vary. cv::cornerSubPix on the same images is printed beside it for comparison.
+#include <ceres/ceres.h>
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -114,7 +115,9 @@ TEST(SaddleRefinement, FindsDrawnCornersAtAnySubPixelPhase) {
                 blur, fit.rms(), fit.max, fit.failed, subpix.rms(), subpix.max);
     EXPECT_EQ(fit.failed, 0);
     EXPECT_LT(orthogonal_max, 0.002) << "blur " << blur;
-    if (blur <= 1.2) EXPECT_LT(oblique_max, 0.03) << "blur " << blur;
+    if (blur <= 1.2) {
+      EXPECT_LT(oblique_max, 0.03) << "blur " << blur;
+    }
   }
 }
 
@@ -156,6 +159,67 @@ TEST(SaddleRefinement, RefusesWhatIsNotACorner) {
   cv::GaussianBlur(edge, edge, cv::Size(0, 0), 1.2);
   const bool found = fitSaddle(edge, cv::Point2f(20, 20), cv::Point2f(1, 0), cv::Point2f(0, 1), options, &fit);
   EXPECT_TRUE(!found || std::abs(fit.contrast) < 10) << "an edge passed as a corner, contrast " << fit.contrast;
+}
+
+// The model written again for automatic differentiation: the derivatives makeSaddleCost writes
+// out must be Ceres' own, at any parameters (corner off the window's centre, oblique edges, a
+// gradient, blur from sharp to soft).
+struct SaddleModel {
+  const std::vector<float>* values;
+  const std::vector<cv::Point2f>* offsets;
+  template <typename T>
+  bool operator()(T const* const* parameters, T* residuals) const {
+    const T* p = parameters[0];
+    using std::cos;
+    using std::erf;
+    using std::exp;
+    using std::sin;
+    const T scale = T(1.0) / (T(M_SQRT2) * exp(p[8]));
+    for (size_t i = 0; i < values->size(); ++i) {
+      const T dx = T(static_cast<double>((*offsets)[i].x)) - p[0];
+      const T dy = T(static_cast<double>((*offsets)[i].y)) - p[1];
+      const T e1 = erf((cos(p[2]) * dx + sin(p[2]) * dy) * scale);
+      const T e2 = erf((cos(p[3]) * dx + sin(p[3]) * dy) * scale);
+      residuals[i] = p[4] + p[5] * dx + p[6] * dy + p[7] * e1 * e2 - T(static_cast<double>((*values)[i]));
+    }
+    return true;
+  }
+};
+
+TEST(SaddleRefinement, DerivativesAreAutomaticDifferentiations) {
+  cv::RNG rng(5);
+  std::vector<float> values;
+  std::vector<cv::Point2f> offsets;
+  for (int y = -4; y <= 4; ++y)
+    for (int x = -4; x <= 4; ++x) {
+      offsets.emplace_back(static_cast<float>(x), static_cast<float>(y));
+      values.push_back(static_cast<float>(rng.uniform(0.0, 255.0)));
+    }
+  const std::unique_ptr<ceres::CostFunction> ours = makeSaddleCost(&values, &offsets);
+  ceres::DynamicAutoDiffCostFunction<SaddleModel, 9> automatic(new SaddleModel{&values, &offsets});
+  automatic.AddParameterBlock(9);
+  automatic.SetNumResiduals(static_cast<int>(values.size()));
+  ASSERT_EQ(ours->num_residuals(), automatic.num_residuals());
+  const int n = ours->num_residuals();
+  double worst = 0.0;
+  for (int trial = 0; trial < 20; ++trial) {
+    const double p[9] = {rng.uniform(-1.5, 1.5), rng.uniform(-1.5, 1.5), rng.uniform(-3.1, 3.1),
+                         rng.uniform(-3.1, 3.1), rng.uniform(50.0, 150.0), rng.uniform(-3.0, 3.0),
+                         rng.uniform(-3.0, 3.0), rng.uniform(-80.0, 80.0), rng.uniform(-1.5, 1.3)};
+    const double* parameters[1] = {p};
+    std::vector<double> r_ours(n), r_auto(n), j_ours(n * 9), j_auto(n * 9);
+    double* jo[1] = {j_ours.data()};
+    double* ja[1] = {j_auto.data()};
+    ASSERT_TRUE(ours->Evaluate(parameters, r_ours.data(), jo));
+    ASSERT_TRUE(automatic.Evaluate(parameters, r_auto.data(), ja));
+    for (int i = 0; i < n; ++i) EXPECT_NEAR(r_ours[i], r_auto[i], 1e-9) << "residual " << i;
+    for (int i = 0; i < n * 9; ++i) {
+      EXPECT_NEAR(j_ours[i], j_auto[i], 1e-9 * std::max(1.0, std::abs(j_auto[i])))
+          << "trial " << trial << ", residual " << i / 9 << ", parameter " << i % 9;
+      worst = std::max(worst, std::abs(j_ours[i] - j_auto[i]));
+    }
+  }
+  std::printf("[ saddle ] derivatives: largest difference from automatic ones %.2g\n", worst);
 }
 
 }  // namespace

@@ -3,6 +3,7 @@
 #include <ceres/ceres.h>
 
 #include <cmath>
+#include <memory>
 #include <vector>
 
 namespace embedded_calibration_stereo::core {
@@ -14,29 +15,49 @@ namespace {
 // head it cost more in noise than it removed in bias.)
 constexpr int kParams = 9;
 
-struct SaddleResidual {
-  const std::vector<float>* values;
-  const std::vector<cv::Point2f>* offsets;  // pixel minus window centre
-  template <typename T>
-  bool operator()(T const* const* parameters, T* residuals) const {
-    const T* p = parameters[0];
-    using std::cos;
-    using std::erf;
-    using std::exp;
-    using std::sin;
-    const T n1x = cos(p[2]), n1y = sin(p[2]);
-    const T n2x = cos(p[3]), n2y = sin(p[3]);
-    const T scale = T(1.0) / (T(M_SQRT2) * exp(p[8]));
-    for (size_t i = 0; i < values->size(); ++i) {
-      const T dx = T(static_cast<double>((*offsets)[i].x)) - p[0];
-      const T dy = T(static_cast<double>((*offsets)[i].y)) - p[1];
-      const T e1 = erf((n1x * dx + n1y * dy) * scale);
-      const T e2 = erf((n2x * dx + n2y * dy) * scale);
-      const T model = p[4] + p[5] * dx + p[6] * dy + p[7] * e1 * e2;
-      residuals[i] = model - T(static_cast<double>((*values)[i]));
+// The model's residuals and, when asked, their derivatives. With u_k = n_k . d / (sqrt(2) s) and
+// d = offset - c: dm/du_k = b e_j 2/sqrt(pi) exp(-u_k^2); du_k/dc = -n_k / (sqrt(2) s),
+// du_k/dtheta_k = n_k' . d / (sqrt(2) s) (n_k' = (-sin, cos)), du_k/dlog(s) = -u_k.
+class SaddleCost : public ceres::CostFunction {
+ public:
+  SaddleCost(const std::vector<float>* values, const std::vector<cv::Point2f>* offsets)
+      : values_(values), offsets_(offsets) {
+    set_num_residuals(static_cast<int>(values->size()));
+    mutable_parameter_block_sizes()->push_back(kParams);
+  }
+
+  bool Evaluate(double const* const* parameters, double* residuals, double** jacobians) const override {
+    const double* p = parameters[0];
+    const double n1x = std::cos(p[2]), n1y = std::sin(p[2]);
+    const double n2x = std::cos(p[3]), n2y = std::sin(p[3]);
+    const double scale = 1.0 / (M_SQRT2 * std::exp(p[8]));
+    double* J = jacobians ? jacobians[0] : nullptr;
+    constexpr double kErfSlope = 1.1283791670955126;  // 2 / sqrt(pi)
+    for (size_t i = 0; i < values_->size(); ++i) {
+      const double dx = (*offsets_)[i].x - p[0], dy = (*offsets_)[i].y - p[1];
+      const double u1 = (n1x * dx + n1y * dy) * scale, u2 = (n2x * dx + n2y * dy) * scale;
+      const double e1 = std::erf(u1), e2 = std::erf(u2);
+      residuals[i] = p[4] + p[5] * dx + p[6] * dy + p[7] * e1 * e2 - (*values_)[i];
+      if (!J) continue;
+      const double d1 = p[7] * e2 * kErfSlope * std::exp(-u1 * u1);  // dm/du1
+      const double d2 = p[7] * e1 * kErfSlope * std::exp(-u2 * u2);  // dm/du2
+      double* row = J + i * kParams;
+      row[0] = -p[5] - (d1 * n1x + d2 * n2x) * scale;
+      row[1] = -p[6] - (d1 * n1y + d2 * n2y) * scale;
+      row[2] = d1 * (n1x * dy - n1y * dx) * scale;
+      row[3] = d2 * (n2x * dy - n2y * dx) * scale;
+      row[4] = 1.0;
+      row[5] = dx;
+      row[6] = dy;
+      row[7] = e1 * e2;
+      row[8] = -(d1 * u1 + d2 * u2);
     }
     return true;
   }
+
+ private:
+  const std::vector<float>* values_;
+  const std::vector<cv::Point2f>* offsets_;
 };
 
 }  // namespace
@@ -85,15 +106,11 @@ bool fitSaddle(const cv::Mat& gray, cv::Point2f start, cv::Point2f along_col, cv
   }
   p[5] = p[6] = 0.0;
   ceres::Problem problem;
-  auto* cost = new ceres::DynamicAutoDiffCostFunction<SaddleResidual, kParams>(
-      new SaddleResidual{&values, &offsets});
-  cost->AddParameterBlock(kParams);
-  cost->SetNumResiduals(static_cast<int>(values.size()));
-  problem.AddResidualBlock(cost, nullptr, p);
+  problem.AddResidualBlock(makeSaddleCost(&values, &offsets).release(), nullptr, p);
   problem.SetParameterLowerBound(p, 8, std::log(0.2));
   problem.SetParameterUpperBound(p, 8, std::log(4.0));
   ceres::Solver::Options solver;
-  solver.linear_solver_type = ceres::DENSE_QR;
+  solver.linear_solver_type = ceres::DENSE_NORMAL_CHOLESKY;
   solver.max_num_iterations = options.max_iterations;
   solver.num_threads = 1;
   solver.logging_type = ceres::SILENT;
@@ -110,6 +127,11 @@ bool fitSaddle(const cv::Mat& gray, cv::Point2f start, cv::Point2f along_col, cv
   fit->blur_px = std::exp(p[8]);
   fit->rms_residual = std::sqrt(2.0 * summary.final_cost / values.size());
   return true;
+}
+
+std::unique_ptr<ceres::CostFunction> makeSaddleCost(const std::vector<float>* values,
+                                                    const std::vector<cv::Point2f>* offsets) {
+  return std::make_unique<SaddleCost>(values, offsets);
 }
 
 }  // namespace embedded_calibration_stereo::core

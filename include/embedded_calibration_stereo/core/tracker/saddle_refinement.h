@@ -10,10 +10,16 @@
 // with c the corner, n1, n2 the normals of its two edges, s the edge blur (lens PSF and pixel
 // area), a + g . d a smooth background (vignetting, what is left of the scene), b the contrast.
 // It is point-symmetric about c like a real corner, so its fitted c is not pulled by the pixel
-// grid. Solved by Ceres (Levenberg-Marquardt, automatic derivatives), one small problem per corner.
+// grid. Solved by Ceres (Levenberg-Marquardt, analytic derivatives), one small problem per corner.
 //
 // Threading: a pure function; safe to call concurrently.
+#include <memory>
 #include <opencv2/core.hpp>
+#include <vector>
+
+namespace ceres {
+class CostFunction;
+}
 
 namespace embedded_calibration_stereo::core {
 
@@ -40,5 +46,12 @@ struct SaddleFit {
 // converge, or it fails the checks of SaddleFitOptions.
 bool fitSaddle(const cv::Mat& gray, cv::Point2f start, cv::Point2f along_col, cv::Point2f along_row,
                const SaddleFitOptions& options, SaddleFit* fit);
+
+// fitSaddle's cost over one window: residual i = m(offsets[i]) - values[i] (offsets: pixel minus
+// the window's centre), one parameter block of 9: cx, cy (the corner, from the window's centre),
+// the two edge normals' angles, a, gx, gy, b, log(s). Its derivatives are written out (automatic
+// ones cost 3 times as much); exposed so that a test can check them. Both vectors must outlive it.
+std::unique_ptr<ceres::CostFunction> makeSaddleCost(const std::vector<float>* values,
+                                                    const std::vector<cv::Point2f>* offsets);
 
 }  // namespace embedded_calibration_stereo::core
