@@ -77,7 +77,7 @@ class SeparatorNodelet : public GuardedNodelet {
     if (learn_ && teach_from_truth_)
       throw core::ConfigError("teach_from_ground_truth", "applies to device_template teach only, not learn");
     learning_plan_.emplace(read.inRange("learn_frames_per_end", 4, 1, 30));
-    learn_options_ = core::windowLearnerOptions();
+    learn_options_ = core::separatorLearnerOptions();
     reteach_on_epoch_change_ = read.get("reteach_on_epoch_change", true);
     const int queue_size = read.atLeast("queue_size", 5, 1);
     const bool approximate = read.get("approximate_sync", false);

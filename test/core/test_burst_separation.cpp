@@ -20,6 +20,7 @@
 
 #include "embedded_calibration_stereo/core/depth/separator.h"
 #include "embedded_calibration_stereo/core/sim/sim_rig.h"
+#include "embedded_calibration_stereo/core/depth/stereo_device_template.h"
 #include "embedded_calibration_stereo/core/tracker/window_tracker.h"
 
 namespace embedded_calibration_stereo::core {
@@ -97,10 +98,10 @@ TEST_F(BurstSeparation, TheEndsOfOneBurstSeparateTheSceneWithin35Decibels) {
   LearnedDevice ends[2], early[2];
   const auto t0 = std::chrono::steady_clock::now();
   const std::clock_t c0 = std::clock();
-  for (int c = 0; c < 2; ++c) ends[c] = learnWindowDevice(windowEnds(frames(c, kLit, true), 4), windowLearnerOptions());
+  for (int c = 0; c < 2; ++c) ends[c] = learnWindowDevice(windowEnds(frames(c, kLit, true), 4), separatorLearnerOptions());
   const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   const double cpu = static_cast<double>(std::clock() - c0) / CLOCKS_PER_SEC;
-  for (int c = 0; c < 2; ++c) early[c] = learnWindowDevice(frames(c, 8, false), windowLearnerOptions());
+  for (int c = 0; c < 2; ++c) early[c] = learnWindowDevice(frames(c, 8, false), separatorLearnerOptions());
   Psnr ends_in, ends_later, early_in, early_later;
   score(ends, 1, &ends_in, &ends_later);
   score(early, 9, &early_in, &early_later);
@@ -138,10 +139,10 @@ TEST_F(BurstSeparation, TheResidualPrefersTheTemplateOfTheDeviceAsItIs) {
   for (int k = 1; k <= kLit; ++k) after_frames.light_on.push_back(after[k].left);
   after_frames.light_off_after.push_back(after[kLit + 1].left);
   const ImageSeparator before_zoom(SeparatorOptions(),
-                                   learnWindowDevice(windowEnds(frames(0, kLit, true), 4), windowLearnerOptions())
+                                   learnWindowDevice(windowEnds(frames(0, kLit, true), 4), separatorLearnerOptions())
                                        .device_template);
   const ImageSeparator after_zoom(SeparatorOptions(),
-                                  learnWindowDevice(windowEnds(after_frames, 4), windowLearnerOptions()).device_template);
+                                  learnWindowDevice(windowEnds(after_frames, 4), separatorLearnerOptions()).device_template);
   // The middle frames, which the ends were not learned from.
   std::vector<cv::Mat> middle_before, middle_after;
   for (int k = 12; k <= 18; k += 3) {

@@ -120,7 +120,7 @@ TEST(LearnStereoDevice, SaysWhichCameraCouldNotBeLearned) {
   right.light_off_before = {grey(5)};
   right.light_off_after = {grey(5)};
   const StereoLearnResult result =
-      learnStereoDevice(left, right, true, 4, windowLearnerOptions(), SeparatorOptions(), nullptr, 0);
+      learnStereoDevice(left, right, true, 4, separatorLearnerOptions(), SeparatorOptions(), nullptr, 0);
   EXPECT_EQ(result.error.rfind("left: ", 0), 0u) << result.error;
   EXPECT_FALSE(result.separator);
 }

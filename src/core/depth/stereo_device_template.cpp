@@ -90,6 +90,12 @@ std::vector<cv::Mat> middleFrames(const WindowFrames& frames, int per_end) {
   return middle;
 }
 
+DeviceLearnerOptions separatorLearnerOptions() {
+  DeviceLearnerOptions options = windowLearnerOptions();
+  options.flow_finest_scale = 2;
+  return options;
+}
+
 StereoLearnResult learnStereoDevice(const WindowFrames& left, const WindowFrames& right, bool whole, int per_end,
                                     const DeviceLearnerOptions& options, const SeparatorOptions& separator_options,
                                     const std::shared_ptr<const StereoSeparator>& in_use, uint32_t epoch) {

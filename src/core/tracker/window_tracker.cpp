@@ -81,9 +81,6 @@ DeviceLearnerOptions windowLearnerOptions() {
   DeviceLearnerOptions options;
   options.first_pass_pairs = 2;
   options.flow_refinement_iterations = 2;
-  // The flow aligns the scene, which the learner then removes; the corners come from the boards
-  // on the learned image. A quarter resolution aligns it as well, in half the learner's time.
-  options.flow_finest_scale = 2;
   return options;
 }
 

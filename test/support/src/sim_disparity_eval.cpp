@@ -14,6 +14,7 @@
 #include "embedded_calibration_stereo/core/depth/rectification.h"
 #include "embedded_calibration_stereo/core/depth/separator.h"
 #include "embedded_calibration_stereo/core/sim/sim_rig.h"
+#include "embedded_calibration_stereo/core/depth/stereo_device_template.h"
 #include "embedded_calibration_stereo/core/tracker/window_tracker.h"
 
 namespace embedded_calibration_stereo::core {
@@ -176,7 +177,7 @@ std::string learnFromBurst(const Burst& b, std::shared_ptr<const StereoSeparator
   WindowFrames frames[2];
   for (int c = 0; c < 2; ++c) {
     frames[c] = windowOf(b, c);
-    learned[c] = learnWindowDevice(windowEnds(frames[c], kLearnFramesPerEnd), windowLearnerOptions());
+    learned[c] = learnWindowDevice(windowEnds(frames[c], kLearnFramesPerEnd), separatorLearnerOptions());
   }
   auto candidate = std::make_shared<const StereoSeparators>(learned[0].device_template, learned[1].device_template);
   std::string line = "learned from frames " + std::to_string(b.on.front().index) + ".." +

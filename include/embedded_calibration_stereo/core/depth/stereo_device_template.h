@@ -90,6 +90,12 @@ struct StereoLearnResult {
   std::string error;  // non-empty: learning failed
 };
 
+// The learner's options for the Separator's templates: the window's (windowLearnerOptions),
+// with the flow ending at a quarter of the resolution instead of half. The separated frames are
+// as good and the learning takes half the CPU (docs/core.md). The window tracker keeps half:
+// there the calibrations committed after a drift were worse with a quarter.
+DeviceLearnerOptions separatorLearnerOptions();
+
 // Learns both cameras (in parallel) from a burst: its `per_end` light-on frames nearest each end
 // when `whole` (a burst that ended), all of them otherwise (a burst under way); scores the
 // result against `in_use` (when given) on the middle frames. Never throws.

@@ -44,9 +44,9 @@ DeviceLearnerOptions windowLearnerOptions();
 struct WindowTrackerOptions {
   // Its readiness fields are not used (a window is what it is). By default the first alignment
   // pass uses the two pairs closest in time only (with a light-off frame on each side: the
-  // light-on frame nearest each), whose scene moved least, the flow's variational refinement
-  // runs 2 iterations instead of DIS's medium preset's 5, and the flow ends at a quarter of the
-  // resolution instead of half: faster, and the corners are no worse (docs/figures.md).
+  // light-on frame nearest each), whose scene moved least, and the flow's variational refinement
+  // runs 2 iterations instead of DIS's medium preset's 5: faster, and the corners are no worse
+  // (docs/figures.md).
   DeviceLearnerOptions learner = windowLearnerOptions();
   SaddleFitOptions saddle;       // radius_px is set per corner from the board's square size
   // Saddle window half-size as a fraction of the local square side, clamped to [2, max] px.

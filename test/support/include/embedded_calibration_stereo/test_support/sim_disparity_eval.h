@@ -7,7 +7,7 @@
 // order, so that the auto-exposure and the light's response see the stream the head sees. The
 // Separator's device image is learned the way the Separator nodelet learns it, with no covered
 // scene and no truth: each ended burst's 4 light-on frames nearest each end, paired with the
-// settled light-off frame on their side (windowEnds + learnWindowDevice, windowLearnerOptions),
+// settled light-off frame on their side (windowEnds + learnWindowDevice, separatorLearnerOptions),
 // and a new burst's template replaces the one in use only when it leaves less of the device on
 // that burst's middle frames (separationResidual). A burst's own frames are separated with the
 // template in use before it ended, as in the nodelet, where learning finishes after the burst.
