@@ -119,7 +119,8 @@ struct Reference {
 
   static int sat(int v) { return std::min(v, 255); }
 
-  cv::Mat compute(const cv::Mat& left, const cv::Mat& right, cv::Mat* occluded) const {
+  // Census costs of every pixel and padded disparity (255 past num_disparities).
+  std::vector<int> costs(const cv::Mat& left, const cv::Mat& right) const {
     const int W = left.cols, H = left.rows, D = ndisp_padded;
     std::vector<int> cost(static_cast<size_t>(W) * H * D, 255);
     for (int y = 0; y < H; ++y)
@@ -129,6 +130,11 @@ struct Reference {
           cost[(static_cast<size_t>(y) * W + x) * D + k] =
               __builtin_popcount(census(left, y, x) ^ census(right, y, xr));
         }
+    return cost;
+  }
+
+  // All paths' sums, saturating as the definition above says.
+  std::vector<int> sums(const cv::Mat& left, const std::vector<int>& cost) const {
     const auto T = path(left, cost, 1, 0), TL = path(left, cost, 1, 1), TR = path(left, cost, 1, -1);
     const auto Lp = path(left, cost, 0, 1), R = path(left, cost, 0, -1);
     std::vector<int> B, BL, BR;
@@ -138,43 +144,57 @@ struct Reference {
       const int down = sat(sat(T[i] + TL[i]) + sat(TR[i] + Lp[i]));
       S[i] = sat(down + (p.paths == 8 ? sat(sat(B[i] + BL[i]) + sat(BR[i] + R[i])) : R[i]));
     }
+    return S;
+  }
+
+  // The right image's winners of one row of sums: least sum, the largest left x on ties.
+  std::vector<int> rightWinners(const int* row, int W) const {
+    const int D = ndisp_padded;
+    std::vector<int> right_best(W, 1 << 30), right_k(W, -1);
+    for (int x = W - 1; x >= 0; --x)
+      for (int k = 0; k < D; ++k) {
+        const int xr = x - p.min_disparity - k;
+        if (xr >= 0 && xr < W && row[x * D + k] < right_best[xr]) {
+          right_best[xr] = row[x * D + k];
+          right_k[xr] = k;
+        }
+      }
+    return right_k;
+  }
+
+  // One pixel's disparity (1/16 px) from its sums s, or `invalid` when not unique; *k its winner.
+  int pixelDisparity(const int* s, int invalid, int* winner) const {
+    const int k = static_cast<int>(std::min_element(s, s + p.num_disparities) - s);
+    *winner = k;
+    int rival = 1 << 30;
+    for (int j = 0; j < ndisp_padded; ++j)
+      if (j < k - 1 || j > k + 1) rival = std::min(rival, s[j]);
+    const int64_t scale = static_cast<int64_t>((100.0 + p.uniqueness_ratio) * 1024 + 0.5);
+    if (p.uniqueness_ratio > 0 && !(s[k] * scale < static_cast<int64_t>(rival) * 102400)) return invalid;
+    int value = (p.min_disparity + k) * 16;
+    if (p.subpixel && k > 0 && k < p.num_disparities - 1) {
+      const int a = s[k - 1], b = s[k], c = s[k + 1], denom = a > c ? a - b : c - b;
+      if (denom > 0) {
+        const float offset = static_cast<float>((a - c) * 16) / static_cast<float>(2 * denom);
+        value += static_cast<int>(offset >= 0 ? offset + 0.5f : offset - 0.5f);
+      }
+    }
+    return value;
+  }
+
+  cv::Mat compute(const cv::Mat& left, const cv::Mat& right, cv::Mat* occluded) const {
+    const int W = left.cols, H = left.rows, D = ndisp_padded;
+    const std::vector<int> S = sums(left, costs(left, right));
     cv::Mat out(left.size(), CV_16S);
     occluded->create(left.size(), CV_8U);
     *occluded = 0;
     const int invalid = (p.min_disparity - 1) * 16;
     for (int y = 0; y < H; ++y) {
       const int* row = &S[static_cast<size_t>(y) * W * D];
-      std::vector<int> right_best(W, 1 << 30), right_k(W, -1), winner(W);
-      for (int x = W - 1; x >= 0; --x)
-        for (int k = 0; k < D; ++k) {
-          const int xr = x - p.min_disparity - k;
-          if (xr >= 0 && xr < W && row[x * D + k] < right_best[xr]) {
-            right_best[xr] = row[x * D + k];
-            right_k[xr] = k;
-          }
-        }
-      for (int x = 0; x < W; ++x) {
-        const int* s = row + x * D;
-        const int k = static_cast<int>(std::min_element(s, s + p.num_disparities) - s);
-        winner[x] = k;
-        int rival = 1 << 30;
-        for (int j = 0; j < D; ++j)
-          if (j < k - 1 || j > k + 1) rival = std::min(rival, s[j]);
-        const int64_t scale = static_cast<int64_t>((100.0 + p.uniqueness_ratio) * 1024 + 0.5);
-        if (p.uniqueness_ratio > 0 && !(s[k] * scale < static_cast<int64_t>(rival) * 102400)) {
-          out.at<int16_t>(y, x) = static_cast<int16_t>(invalid);
-          continue;
-        }
-        int value = (p.min_disparity + k) * 16;
-        if (p.subpixel && k > 0 && k < p.num_disparities - 1) {
-          const int a = s[k - 1], b = s[k], c = s[k + 1], denom = a > c ? a - b : c - b;
-          if (denom > 0) {
-            const float offset = static_cast<float>((a - c) * 16) / static_cast<float>(2 * denom);
-            value += static_cast<int>(offset >= 0 ? offset + 0.5f : offset - 0.5f);
-          }
-        }
-        out.at<int16_t>(y, x) = static_cast<int16_t>(value);
-      }
+      const std::vector<int> right_k = rightWinners(row, W);
+      std::vector<int> winner(W);
+      for (int x = 0; x < W; ++x)
+        out.at<int16_t>(y, x) = static_cast<int16_t>(pixelDisparity(row + x * D, invalid, &winner[x]));
       if (!p.left_right_check) continue;
       for (int x = 0; x < W; ++x) {
         if (out.at<int16_t>(y, x) == invalid) continue;
