@@ -216,9 +216,9 @@ inline cv::v_uint8 jumpFloor(uint8_t prev_min, uint8_t p2) {
 }
 
 // One step of a path: L(k) = C(k) + min(P(k), P(k-1) + P1, P(k+1) + P1, minP + P2) - minP,
-// written to `out` and added to `sum` (or put there, when not `add`); returns its minimum. `prev` is the path's block at the previous
-// pixel, with readable pad bytes of 255 at -1 and ndisp_padded (a row written long before, so
-// the unaligned loads do not wait on a store).
+// written to `out` and added to `sum` (or put there, when not `add`); returns its minimum.
+// `prev` is the path's block at the previous pixel, with readable pad bytes of 255 at -1 and
+// ndisp_padded (a row written long before, so the unaligned loads do not wait on a store).
 template <int NV>
 SGM_INLINE uint8_t pathStep(const uint8_t* cost, const uint8_t* prev, uint8_t prev_min,
                             const cv::v_uint8& p1, uint8_t p2, uint8_t* out, bool add,
@@ -279,7 +279,6 @@ struct Penalties {
       p2[d] = static_cast<uint8_t>(v > p.P1 + 1 ? v : p.P1 + 1);
     }
   }
-  uint8_t at(int a, int b) const { return p2[absInt(a - b)]; }
 };
 
 // The P2 of every pixel of `row` on the four paths of one pass, to out[0..3]: the three from
