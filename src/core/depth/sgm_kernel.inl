@@ -281,16 +281,16 @@ struct Penalties {
   }
 };
 
-// The P2 of every pixel of `row` on the four paths of one pass, to out[0..3]: the three from
-// the row `from` (straight, from the pixel before, from the pixel after, as verticalSteps
-// steps them) and the one along the row from the neighbour at `along` (-1: the left, +1: the
-// right); columns past the image's ends clamped. The intensity steps in vectors and the table
-// in a loop of its own, out of the paths' way.
+// The P2 of every pixel of `row` on the paths of one pass that step it, to out[0..3]: when
+// `vertical`, the three from the row `from` (straight, from the pixel before, from the pixel
+// after, as verticalSteps steps them); when `horizontal`, the one along the row from the
+// neighbour at `along` (-1: the left, +1: the right). Columns past the image's ends clamped. The
+// intensity steps in vectors and the table in a loop of its own, out of the paths' way.
 void rowPenalties(const Problem& p, const Penalties& pen, const uint8_t* row, const uint8_t* from,
-                  int along, uint8_t* const* out) {
+                  int along, bool vertical, bool horizontal, uint8_t* const* out) {
   const int W = p.width;
   const int offsets[4] = {0, -1, +1, along};
-  for (int r = 0; r < 4; ++r) {
+  for (int r = vertical ? 0 : 3; r < (horizontal ? 4 : 3); ++r) {
     const uint8_t* other = r < 3 ? from : row;
     const int o = offsets[r];
     uint8_t* d = out[r];
@@ -336,7 +336,7 @@ void downRow(const Problem& p, Scratch& s, int y, bool output, const uint8_t* co
   const Penalties& pen = *s.penalties;
   const uint8_t* row = imageRow(p, y);
   const uint8_t* above = y > 0 ? imageRow(p, y - 1) : row;
-  rowPenalties(p, pen, row, above, -1, s.p2);
+  rowPenalties(p, pen, row, above, -1, true, output, s.p2);
   RowPath<NV> from_left;
   cv::v_uint8 vertical[NV];
   for (int x = 0; x < p.width; ++x) {
@@ -522,7 +522,7 @@ void upRow(const Problem& p, Scratch& s, int y, bool output, const uint8_t* cost
   const int64_t uniqueness_scale =
       p.uniqueness_ratio > 0 ? static_cast<int64_t>((100.0 + p.uniqueness_ratio) * 1024 + 0.5) : 0;
   if (output) std::memset(s.right_cost, 0xFF, static_cast<size_t>(p.right_len + D));
-  rowPenalties(p, pen, row, below, +1, s.p2);
+  rowPenalties(p, pen, row, below, +1, kUp, output, s.p2);
   RowPath<NV> from_right;
   cv::v_uint8 sums[NV];
   cv::v_uint8 vertical[NV];
