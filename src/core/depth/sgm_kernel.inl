@@ -436,15 +436,15 @@ int rightWinner(const Problem& p, const Scratch& s, int q) {
   return s.right_k[q] | (p.ndisp_padded > 256 ? s.right_k_high[q] << 8 : 0);
 }
 
-// The equiangular (V-shaped) fit's operands at winner k, kept for one vectorised division per
-// row: census sums grow linearly away from the match, and a parabola through them is pulled
-// harder towards the whole pixel.
+// The equiangular (V-shaped) fit's operands at winner k of a `unique` pixel (no offset for the
+// others), kept for one vectorised division per row: census sums grow linearly away from the
+// match, and a parabola through them is pulled harder towards the whole pixel.
 template <int NV>
-SGM_INLINE void keepSubpixelFit(const Problem& p, const cv::v_uint8* sums, int k, int x,
-                                Scratch& s) {
+SGM_INLINE void keepSubpixelFit(const Problem& p, const cv::v_uint8* sums, int k, bool unique,
+                                int x, Scratch& s) {
   s.offset_num[x] = 0;
   s.offset_den[x] = 1;
-  if (!p.subpixel || k <= 0 || k >= p.ndisp - 1) return;
+  if (!unique || !p.subpixel || k <= 0 || k >= p.ndisp - 1) return;
   alignas(64) uint8_t all[NV * kLanes8];
   for (int j = 0; j < NV; ++j) cv::v_store_aligned(all + j * kLanes8, sums[j]);
   const int a = all[k - 1], b = all[k], c = all[k + 1];
@@ -457,14 +457,12 @@ SGM_INLINE void keepSubpixelFit(const Problem& p, const cv::v_uint8* sums, int k
 // Adds each pixel's sub-pixel offset, num / den as a float rounded half away from zero.
 void addSubpixelOffsets(const Problem& p, Scratch& s, int16_t* out) {
   int x = 0;
-#if CV_SIMD
   const cv::v_float32 half = cv::vx_setall_f32(0.5f), zero = cv::vx_setzero_f32();
   for (; x + cv::v_float32::nlanes <= p.width; x += cv::v_float32::nlanes) {
     const cv::v_float32 q = cv::v_cvt_f32(cv::vx_load(s.offset_num + x)) /
                             cv::v_cvt_f32(cv::vx_load(s.offset_den + x));
     cv::v_store(s.offset_num + x, cv::v_trunc(cv::v_select(q >= zero, q + half, q - half)));
   }
-#endif
   for (; x < p.width; ++x) {
     const float q = static_cast<float>(s.offset_num[x]) / static_cast<float>(s.offset_den[x]);
     s.offset_num[x] = static_cast<int>(q >= 0 ? q + 0.5f : q - 0.5f);
@@ -542,7 +540,7 @@ void upRow(const Problem& p, Scratch& s, int y, bool output, const uint8_t* cost
     const bool unique =
         uniqueness_scale == 0 || noRivalAtMost<NV>(sums, k, rivalLimit(best, uniqueness_scale));
     out.disparity[x] = unique ? static_cast<int16_t>((p.min_disp + k) * kDispScale) : invalid;
-    keepSubpixelFit<NV>(p, sums, unique ? k : 0, x, s);
+    keepSubpixelFit<NV>(p, sums, k, unique, x, s);
     s.winner_k[x] = static_cast<uint16_t>(k);
     if (p.left_right_check) foldRightWinners<NV>(p, sums, x, ramp, s);
   }
