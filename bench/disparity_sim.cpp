@@ -13,7 +13,7 @@
 //
 // Usage: bench_disparity_sim [--config FILE] [--algorithms a,b,...] [--seed N] [--bursts N]
 //          [--lit N] [--off N] [--period S] [--burst-frames N] [--settle N] [--threads N]
-//          [--out DIR] [--frame K] [--raw]
+//          [--out DIR] [--frame K] [--raw] [--ideal | --ideal-clipped]
 //   --config  default $ECS_SOURCE_DIR/config/drive_photo.yaml, else config/drive_photo.yaml
 //   --bursts  light bursts scored (one more is rendered first, to learn the device image from)
 //   --lit, --off  frames scored per burst (settled light-on; light-off around it)
@@ -21,6 +21,9 @@
 //             light-on frames per burst (10, the driver's default) and settle frames (2)
 //   --frame   index of the lit frame written with --out (default: the middle one)
 //   --raw     the lit frames unseparated (what the Separator saves us from)
+//   --ideal   a diagnosis, not the product: the lit frames as an ideal separation would give
+//             them (the true scene plus the lit frame's own sensor noise); --ideal-clipped the
+//             same except at the pixels the raw frame clipped, which keep the Separator's output
 #include <sched.h>
 #include <sys/stat.h>
 
@@ -65,6 +68,15 @@ std::vector<std::string> splitCommas(const std::string& s) {
   return out;
 }
 
+const char* litKind(const core::SimDisparitySetOptions& set) {
+  using Ideal = core::SimDisparitySetOptions::Ideal;
+  if (set.ideal == Ideal::kIdeal) return "IDEALLY separated (the true scene plus the lit frame's sensor noise)";
+  if (set.ideal == Ideal::kIdealClipped)
+    return "IDEALLY separated except where clipped (the true scene plus the lit frame's sensor noise; the "
+           "Separator's output at the clipped pixels)";
+  return set.separate ? "separated" : "RAW (not separated)";
+}
+
 Args parseArgs(int argc, char** argv) {
   Args a;
   a.set.scored_bursts = 3;
@@ -74,8 +86,12 @@ Args parseArgs(int argc, char** argv) {
     const std::string arg = argv[i];
     const bool has_value = i + 1 < argc;
     const std::string value = has_value ? argv[i + 1] : "";
-    if (!has_value && arg != "--raw") throw std::invalid_argument("unknown option or missing value: " + arg);
-    if (arg == "--raw") { a.set.separate = false; continue; }
+    const bool flag = arg == "--raw" || arg == "--ideal" || arg == "--ideal-clipped";
+    if (!has_value && !flag) throw std::invalid_argument("unknown option or missing value: " + arg);
+    if (arg == "--raw") a.set.separate = false;
+    if (arg == "--ideal") a.set.ideal = core::SimDisparitySetOptions::Ideal::kIdeal;
+    if (arg == "--ideal-clipped") a.set.ideal = core::SimDisparitySetOptions::Ideal::kIdealClipped;
+    if (flag) continue;
     ++i;
     if (arg == "--config") a.config = value;
     else if (arg == "--algorithms") a.algorithms = splitCommas(value);
@@ -272,7 +288,7 @@ int main(int argc, char** argv) {
                 args.config.c_str(), static_cast<unsigned long long>(args.set.seed), args.set.scored_bursts,
                 args.set.off_per_burst, args.set.lit_per_burst, args.set.burst_frames, args.set.period_s,
                 args.set.settle_frames, cv::getNumThreads(),
-                args.set.separate ? "separated" : "RAW (not separated)");
+                litKind(args.set));
     const auto t0 = std::chrono::steady_clock::now();
     const core::SimDisparitySet set = core::renderSimDisparitySet(args.set);
     std::printf("rendered, learned, separated, rectified in %.1f s\n",

@@ -73,6 +73,30 @@ TEST(DisparityOnSim, SeparatedLitFramesMatchTheLightOffFramesAroundThem) {
   EXPECT_GT(off.evaluated, 6 * 300000) << "most pixels have truth (an indoor world)";
 }
 
+// The bench's diagnosis of the gap (bench_disparity_sim --ideal, --ideal-clipped): an ideal
+// separation leaves only the lit frame's sensor noise, within the 2-point goal; keeping what the
+// Separator gives at the clipped pixels puts most of the gap back. It fails if the ideal frames
+// are not aligned with the truth, carry too much noise, or are the Separator's output.
+TEST(DisparityOnSim, AnIdealSeparationLeavesOnlyTheSensorNoise) {
+  SimDisparitySetOptions o;
+  o.config_path = std::string(ECS_SOURCE_DIR) + "/config/drive_photo.yaml";
+  o.scored_bursts = 2;
+  const DisparityOptions defaults;
+  const auto gap = [&](SimDisparitySetOptions::Ideal ideal) {
+    o.ideal = ideal;
+    const SimDisparitySet set = renderSimDisparitySet(o);
+    return scoreMatcher(defaults, set.lit).badPercent() - scoreMatcher(defaults, set.light_off).badPercent();
+  };
+  const double ideal = gap(SimDisparitySetOptions::Ideal::kIdeal);
+  const double clipped = gap(SimDisparitySetOptions::Ideal::kIdealClipped);
+  const double product = gap(SimDisparitySetOptions::Ideal::kNone);
+  std::printf("  lit - light-off, bad>2px: ideal %+.2f, ideal but the clipped pixels %+.2f, the Separator %+.2f points\n",
+              ideal, clipped, product);
+  EXPECT_LT(std::abs(ideal), 2.0) << "the goal is reachable without the clipped pixels";
+  EXPECT_GT(clipped, ideal + 2.0) << "the clipped pixels are most of the gap";
+  EXPECT_GT(product, ideal + 2.0);
+}
+
 TEST(DisparityOnSim, ScoresCountInvalidAsBadAndSkipPixelsWithoutTruth) {
   cv::Mat truth(1, 4, CV_32F), d(1, 4, CV_32F);
   truth.at<float>(0) = 10.0f;  d.at<float>(0) = 10.5f;              // inlier, error 0.5

@@ -219,10 +219,28 @@ RectifiedSample rectifiedSample(const StreamFrame& f, const cv::Mat& left, const
   return s;
 }
 
+// The true scene of one camera of a lit frame plus the noise the sensor model gives that frame's
+// signal (its raw grey levels); see SimDisparitySetOptions::Ideal.
+cv::Mat idealSeparation(const StreamFrame& f, int camera, const SimSensorConfig& sensor,
+                        SimDisparitySetOptions::Ideal ideal, const cv::Mat& separated) {
+  const cv::Mat raw = grey(image(f.sim, camera));
+  const cv::Mat scene = grey(camera ? f.sim.right_scene : f.sim.left_scene);
+  cv::Mat signal, sigma, noise(raw.size(), CV_32F), out;
+  raw.convertTo(signal, CV_32F);
+  const double read_dn = sensor.read_noise_e / sensor.gain_e_per_dn;
+  cv::sqrt(signal / sensor.gain_e_per_dn + read_dn * read_dn, sigma);
+  cv::RNG rng(static_cast<uint64_t>(f.index) * 2 + camera + 1);
+  rng.fill(noise, cv::RNG::NORMAL, 0.0, 1.0);
+  scene.convertTo(signal, CV_32F);
+  cv::Mat(signal + noise.mul(sigma)).convertTo(out, CV_8U);
+  if (ideal == SimDisparitySetOptions::Ideal::kIdealClipped) grey(separated).copyTo(out, raw >= kClippedGrey);
+  return out;
+}
+
 // The burst's scored frames: light-off ones as they are, light-on ones evenly spread and
 // separated by the template in use (or raw when `separate` is false).
 void scoreBurst(const Burst& b, int burst, const SimDisparitySetOptions& o, const StereoSeparators& sep,
-                SimDisparitySet* out) {
+                const SimSensorConfig& sensor, SimDisparitySet* out) {
   for (const auto* side : {&b.before, &b.after})
     for (const StreamFrame& f : *side) out->light_off.push_back(rectifiedSample(f, f.sim.left, f.sim.right, burst, false));
   const int n = static_cast<int>(b.on.size());
@@ -233,6 +251,11 @@ void scoreBurst(const Burst& b, int burst, const SimDisparitySetOptions& o, cons
       l = cv::Mat();
       r = cv::Mat();
       separateStereo(sep.left, sep.right, f.sim.left, f.sim.right, &l, &r);
+    }
+    if (o.ideal != SimDisparitySetOptions::Ideal::kNone) {
+      if (!sensor.enabled) throw std::invalid_argument("renderSimDisparitySet: an ideal separation needs optics.sensor");
+      l = idealSeparation(f, 0, sensor, o.ideal, l);
+      r = idealSeparation(f, 1, sensor, o.ideal, r);
     }
     out->lit.push_back(rectifiedSample(f, l, r, burst, true));
   }
@@ -252,7 +275,7 @@ SimDisparitySet renderSimDisparitySet(const SimDisparitySetOptions& o) {
   SimDisparitySet out;
   for (int b = 0; b <= o.scored_bursts; ++b) {
     const Burst burst = nextBurst(&stream, before, after);
-    if (b > 0) scoreBurst(burst, b - 1, o, *in_use, &out);
+    if (b > 0) scoreBurst(burst, b - 1, o, *in_use, sim.config().optics.sensor, &out);
     // The last burst's template would separate nothing scored.
     if (b < o.scored_bursts) out.log.push_back("burst " + std::to_string(b) + ": " + learnFromBurst(burst, &in_use));
   }

@@ -68,7 +68,21 @@ struct SimDisparitySetOptions {
   int burst_frames = 10;    // settled light-on frames per burst (the driver's calibration_frames)
   int settle_frames = 2;    // unsettled frames after each switch (the driver's settle_frames)
   bool separate = true;     // false: the lit frames unseparated (shows the comparison can fail)
+  // What the lit frames would score with an ideal separation, to tell the separation's share of
+  // the lit-frame gap from what no separation can remove (a diagnosis: it reads the truth):
+  //  - kNone: the Separator's output (or the raw frames, with separate false);
+  //  - kIdeal: the true scene plus the sensor noise the lit frame has (its shot noise at the lit
+  //    frame's signal, the read noise; the config's sensor model);
+  //  - kIdealClipped: the same, except where the raw frame is clipped (kClippedGrey and above:
+  //    the full well, less the noise around it), which keep the Separator's output: the scene
+  //    there is lost.
+  enum class Ideal { kNone, kIdeal, kIdealClipped };
+  Ideal ideal = Ideal::kNone;
 };
+
+// Raw grey levels at or above this count as clipped for SimDisparitySetOptions::kIdealClipped:
+// the simulated sensor's full well is 255.3 grey levels and its noise there about 2.3.
+constexpr int kClippedGrey = 250;
 
 struct SimDisparitySet {
   std::vector<RectifiedSample> light_off, lit;
