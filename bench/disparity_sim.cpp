@@ -77,6 +77,16 @@ const char* litKind(const core::SimDisparitySetOptions& set) {
   return set.separate ? "separated" : "RAW (not separated)";
 }
 
+// The options without a value; false for any other argument.
+bool parseFlag(const std::string& arg, core::SimDisparitySetOptions* set) {
+  using Ideal = core::SimDisparitySetOptions::Ideal;
+  if (arg == "--raw") set->separate = false;
+  else if (arg == "--ideal") set->ideal = Ideal::kIdeal;
+  else if (arg == "--ideal-clipped") set->ideal = Ideal::kIdealClipped;
+  else return false;
+  return true;
+}
+
 Args parseArgs(int argc, char** argv) {
   Args a;
   a.set.scored_bursts = 3;
@@ -86,12 +96,8 @@ Args parseArgs(int argc, char** argv) {
     const std::string arg = argv[i];
     const bool has_value = i + 1 < argc;
     const std::string value = has_value ? argv[i + 1] : "";
-    const bool flag = arg == "--raw" || arg == "--ideal" || arg == "--ideal-clipped";
-    if (!has_value && !flag) throw std::invalid_argument("unknown option or missing value: " + arg);
-    if (arg == "--raw") a.set.separate = false;
-    if (arg == "--ideal") a.set.ideal = core::SimDisparitySetOptions::Ideal::kIdeal;
-    if (arg == "--ideal-clipped") a.set.ideal = core::SimDisparitySetOptions::Ideal::kIdealClipped;
-    if (flag) continue;
+    if (parseFlag(arg, &a.set)) continue;
+    if (!has_value) throw std::invalid_argument("unknown option or missing value: " + arg);
     ++i;
     if (arg == "--config") a.config = value;
     else if (arg == "--algorithms") a.algorithms = splitCommas(value);
