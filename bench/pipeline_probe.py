@@ -92,6 +92,19 @@ def process_memory_mb(pid):
     return values.get('VmRSS', float('nan')), values.get('VmHWM', float('nan'))
 
 
+def process_figures(pid, cpu_start, cpu_end, frames, seconds):
+    """CPU per disparity frame, cores used and memory of one process over the measurement."""
+    if cpu_start is None:
+        return None
+    rss, peak = process_memory_mb(pid)
+    return {
+        'cpu_ms_per_disparity_frame': 1e3 * (cpu_end - cpu_start) / max(1, frames),
+        'cores_used': (cpu_end - cpu_start) / seconds,
+        'rss_mb': rss,
+        'peak_rss_mb': peak,
+    }
+
+
 class HeadEvents:
     """Light-on frames (calibration_mode) and accepted calibrations (calibration/status)."""
     def __init__(self):
@@ -145,6 +158,7 @@ def live(args):
     start = time.time()
     load_start = open('/proc/loadavg').read().split()[0]
     cpu_start = process_cpu_s(args.manager_pid) if args.manager_pid else None
+    driver_cpu_start = process_cpu_s(args.driver_pid) if args.driver_pid else None
     drift_at = None
     if args.drift_at is not None:
         time.sleep(args.drift_at * args.duration)
@@ -152,6 +166,7 @@ def live(args):
     time.sleep(max(0.0, start + args.duration - time.time()))
     end = time.time()
     cpu_end = process_cpu_s(args.manager_pid) if args.manager_pid else None
+    driver_cpu_end = process_cpu_s(args.driver_pid) if args.driver_pid else None
     with lock:
         window = [a for a in arrivals if a[0] <= end]
     latencies = [a[0] - a[1] * 1e-9 for a in window]
@@ -174,12 +189,8 @@ def live(args):
         'driver_fps_median': statistics.median(numbers(driver, 'frame rate (fps)') or [float('nan')]),
         'input_copies': {name: (diagnostics.find('stereo/%s:' % name) or [{}])[-1].get('input copies', '?')
                          for name in ('separator', 'rectifier', 'disparity')},
-        'manager': None if cpu_start is None else {
-            'cpu_ms_per_disparity_frame': 1e3 * (cpu_end - cpu_start) / max(1, len(window)),
-            'cores_used': (cpu_end - cpu_start) / (end - start),
-            'rss_mb': process_memory_mb(args.manager_pid)[0],
-            'peak_rss_mb': process_memory_mb(args.manager_pid)[1],
-        },
+        'manager': process_figures(args.manager_pid, cpu_start, cpu_end, len(window), end - start),
+        'driver': process_figures(args.driver_pid, driver_cpu_start, driver_cpu_end, len(window), end - start),
         'loadavg_start': float(load_start),
         'loadavg_end': float(open('/proc/loadavg').read().split()[0]),
     }
@@ -200,6 +211,7 @@ def main():
     p.add_argument('--duration', type=float, default=20.0)
     p.add_argument('--warmup', type=float, default=10.0)
     p.add_argument('--manager-pid', type=int, default=0)
+    p.add_argument('--driver-pid', type=int, default=0, help="the driver's own process, when it runs apart")
     p.add_argument('--drift-at', type=float, default=None)
     args = parser.parse_args(rospy.myargv()[1:])
     live(args)

@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "kernel_choice.h"
+#include "reusable_buffers.h"
 #include "sgm_kernel.h"
 
 namespace core = embedded_calibration_stereo::core;
@@ -30,21 +31,19 @@ const sgm_kernel::Kernel& (*const kAvx2Kernel)() = sgm_kernel::avx2Kernel;
 const sgm_kernel::Kernel& (*const kAvx2Kernel)() = nullptr;
 #endif
 
-// Census planes of both images and the images' padded copies, kept per thread between calls:
-// fresh pages would cost page faults on every frame.
+// Census planes of both images and the images' padded copies (one per call under way), and the
+// bands' scratch memory (one per band under way), reused between calls.
 struct Workspace {
   cv::Mat padded_left, padded_right;
   cv::Mat census_left, census_right;  // right: mirrored, see sgm_kernel::Problem
 };
-Workspace& threadWorkspace() {
-  thread_local Workspace workspace;
-  return workspace;
+ReusableBuffers<Workspace>& workspaces() {
+  static ReusableBuffers<Workspace> pool;
+  return pool;
 }
-
-std::vector<uint8_t>& threadScratch(size_t bytes) {
-  thread_local std::vector<uint8_t> scratch;
-  if (scratch.size() < bytes) scratch.resize(bytes);
-  return scratch;
+ReusableBuffers<std::vector<uint8_t>>& bandScratch() {
+  static ReusableBuffers<std::vector<uint8_t>> pool;
+  return pool;
 }
 
 // out[q] = in[W - 1 + off - q] for q in [0, len), the ends repeated past the row's ends.
@@ -142,7 +141,8 @@ void computeCensusSgmDisparity16(const cv::Mat& left, const cv::Mat& right,
   p.left_right_check = params.left_right_check;
   p.left_right_tolerance = params.left_right_tolerance;
   p.subpixel = params.subpixel;
-  Workspace& w = threadWorkspace();
+  const ReusableBuffers<Workspace>::Lease workspace = workspaces().take();
+  Workspace& w = *workspace;
   censusBoth(left, right, kernel, params.census_threshold, &p, &w);
 
   disparity->create(left.size(), CV_16SC1);
@@ -158,7 +158,9 @@ void computeCensusSgmDisparity16(const cv::Mat& left, const cv::Mat& right,
   const size_t scratch_bytes = kernel.scratch_bytes(p, kBandRows);
   const int bands = (p.height + kBandRows - 1) / kBandRows;
   cv::parallel_for_(cv::Range(0, bands), [&](const cv::Range& range) {
-    uint8_t* scratch = threadScratch(scratch_bytes).data();
+    const ReusableBuffers<std::vector<uint8_t>>::Lease lease = bandScratch().take();
+    if (lease->size() < scratch_bytes) lease->resize(scratch_bytes);
+    uint8_t* scratch = lease->data();
     for (int b = range.start; b < range.end; ++b) {
       sgm_kernel::Band band;
       band.y0 = b * kBandRows;

@@ -132,32 +132,20 @@ void fitGains(const cv::Mat& on, const cv::Mat& a, const cv::Mat& c, const cv::M
   }
 }
 
-// A pair's images as every pass uses them, converted once.
-struct PairImages {
-  cv::Mat on, off;            // CV_32FC(channels)
-  cv::Mat on_grey, off_grey;  // CV_32FC1 (shared with on, off for mono images)
-  cv::Mat off_grey8;          // CV_8UC1: what the flow is measured against
-};
-
-PairImages prepare(const LightPair& pair) {
-  PairImages p;
-  p.on = toFloat(pair.light_on);
-  p.off = toFloat(pair.light_off);
-  p.off_grey8 = grey(pair.light_off);
-  p.on_grey = pair.light_on.channels() == 1 ? p.on : toFloat(grey(pair.light_on));
-  p.off_grey = pair.light_off.channels() == 1 ? p.off : toFloat(p.off_grey8);
-  return p;
-}
-
 // The pair's sample of I_C; `device` (float, the pair's channels) empty for the unaligned pass.
-Sample samplePair(const PairImages& pair, const cv::Mat& device, cv::DISOpticalFlow* dis) {
+// The pair's images are converted to float here, on every pass, rather than kept converted: a
+// burst's pairs in float would hold about 3 MB each for the whole learning.
+Sample samplePair(const LightPair& pair, const cv::Mat& device, cv::DISOpticalFlow* dis) {
   Sample sample;
-  const cv::Size size = pair.on.size();
+  const cv::Mat on = toFloat(pair.light_on), off = toFloat(pair.light_off);
+  const cv::Size size = on.size();
   if (device.empty()) {
-    sample.value = pair.on - pair.off;
+    sample.value = on - off;
     sample.valid = cv::Mat(size, CV_8U, cv::Scalar(255));
     return sample;
   }
+  const cv::Mat on_grey = pair.light_on.channels() == 1 ? on : toFloat(grey(pair.light_on));
+  const cv::Mat off_grey8 = grey(pair.light_off);
   const cv::Mat device_grey = channelMean(device);
   // The light-on frame without the lit pattern (as far as it is known), against which the
   // scene's motion is measured.
@@ -166,11 +154,12 @@ Sample samplePair(const PairImages& pair, const cv::Mat& device, cv::DISOpticalF
     // Its gain first: on ~ k off + s I_C without alignment is biased by the motion, but only the
     // pattern's removal needs it, and a few percent off leaves a faint pattern the flow ignores.
     double k = 1.0, s = 1.0;
-    fitGains(pair.on_grey, pair.off_grey, device_grey, cv::Mat(size, CV_8U, cv::Scalar(255)), &k, &s);
-    cv::Mat(pair.on_grey - s * device_grey).convertTo(scene_on, CV_8U);
+    const cv::Mat off_grey = pair.light_off.channels() == 1 ? off : toFloat(off_grey8);
+    fitGains(on_grey, off_grey, device_grey, cv::Mat(size, CV_8U, cv::Scalar(255)), &k, &s);
+    cv::Mat(on_grey - s * device_grey).convertTo(scene_on, CV_8U);
   }
   cv::Mat flow;
-  dis->calc(scene_on, pair.off_grey8, flow);  // scene_on(x) ~ off(x + flow(x))
+  dis->calc(scene_on, off_grey8, flow);  // scene_on(x) ~ off(x + flow(x))
   cv::Mat map(size, CV_32FC2);
   sample.valid.create(size, CV_8U);
   const float right = static_cast<float>(size.width - 1), bottom = static_cast<float>(size.height - 1);
@@ -185,12 +174,12 @@ Sample samplePair(const PairImages& pair, const cv::Mat& device, cv::DISOpticalF
     }
   }
   cv::Mat aligned;
-  cv::remap(pair.off, aligned, map, cv::noArray(), cv::INTER_LINEAR, cv::BORDER_CONSTANT, cv::Scalar::all(-1));
+  cv::remap(off, aligned, map, cv::noArray(), cv::INTER_LINEAR, cv::BORDER_CONSTANT, cv::Scalar::all(-1));
 
   double k = 1.0, s = 1.0;
-  fitGains(pair.on_grey, channelMean(aligned), device_grey, sample.valid, &k, &s);
+  fitGains(on_grey, channelMean(aligned), device_grey, sample.valid, &k, &s);
   if (!(s > 0.05)) s = 1.0;  // a degenerate fit: keep the scale of the estimate
-  sample.value = (pair.on - k * aligned) * (1.0 / s);
+  sample.value = (on - k * aligned) * (1.0 / s);
   sample.gain_on = s;
   return sample;
 }
@@ -420,10 +409,6 @@ LearnedDevice learnDeviceImage(const std::vector<LightPair>& pairs, const Device
   LearnedDevice learned;
   cv::Mat device;
   const int n = static_cast<int>(pairs.size());
-  std::vector<PairImages> images(n);
-  cv::parallel_for_(cv::Range(0, n), [&](const cv::Range& r) {
-    for (int i = r.start; i < r.end; ++i) images[i] = prepare(pairs[i]);
-  });
   // Every pair, and the first aligned pass's: the first_pass_pairs fewest frames apart.
   std::vector<int> all(n);
   std::iota(all.begin(), all.end(), 0);
@@ -440,7 +425,7 @@ LearnedDevice learnDeviceImage(const std::vector<LightPair>& pairs, const Device
       cv::Ptr<cv::DISOpticalFlow> dis = cv::DISOpticalFlow::create(cv::DISOpticalFlow::PRESET_MEDIUM);
       dis->setVariationalRefinementIterations(options.flow_refinement_iterations);
       dis->setFinestScale(options.flow_finest_scale);
-      for (int i = r.start; i < r.end; ++i) samples[i] = samplePair(images[use[i]], device, dis.get());
+      for (int i = r.start; i < r.end; ++i) samples[i] = samplePair(pairs[use[i]], device, dis.get());
     });
     if (pass > 0) {
       // Each sample is on the scale of the previous estimate; that scale is pinned to the median

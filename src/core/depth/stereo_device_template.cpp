@@ -104,14 +104,13 @@ StereoLearnResult learnStereoDevice(const WindowFrames& left, const WindowFrames
   try {
     LearnedDevice learned[2];
     std::string errors[2];
-    cv::parallel_for_(cv::Range(0, 2), [&](const cv::Range& range) {
-      for (int c = range.start; c < range.end; ++c) try {
-          learned[c] = learnWindowDevice(whole ? windowEnds(*frames[c], per_end) : *frames[c], options);
-          learned[c].device_template.calibration_epoch = epoch;
-        } catch (const std::exception& e) {
-          errors[c] = (c ? "right: " : "left: ") + std::string(e.what());
-        }
-    });
+    // One camera at a time, its pairs in parallel (learning both at once doubles the peak memory).
+    for (int c = 0; c < 2; ++c) try {
+        learned[c] = learnWindowDevice(whole ? windowEnds(*frames[c], per_end) : *frames[c], options);
+        learned[c].device_template.calibration_epoch = epoch;
+      } catch (const std::exception& e) {
+        errors[c] = (c ? "right: " : "left: ") + std::string(e.what());
+      }
     result.error = errors[0].empty() ? errors[1] : errors[0];
     if (!result.error.empty()) return result;
     result.left = std::move(learned[0]);

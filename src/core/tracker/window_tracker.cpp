@@ -115,6 +115,24 @@ WindowFrames windowEnds(const WindowFrames& frames, int per_end) {
   return ends;
 }
 
+namespace {
+
+// One camera's device image, grey; empty with *error set when learning fails. The tracker learns
+// one camera at a time, its pairs in parallel: learning holds every pair's sample until it
+// combines them, so learning both cameras at once would double the head's peak memory.
+cv::Mat learnGreyDevice(const WindowFrames& frames, const DeviceLearnerOptions& options, std::string* error) {
+  try {
+    cv::Mat device = learnWindowDevice(frames, options).device_template.device;
+    if (device.channels() == 3) cv::cvtColor(device, device, cv::COLOR_BGR2GRAY);
+    return device;
+  } catch (const std::exception& e) {
+    *error = e.what();
+    return cv::Mat();
+  }
+}
+
+}  // namespace
+
 WindowTracker::WindowTracker(const PatternPrior& prior, const TrackerOptions& tracker_options,
                              const WindowTrackerOptions& options, std::optional<StereoRig> guide)
     : tracker_(prior, tracker_options), options_(options), guide_(std::move(guide)) {
@@ -137,13 +155,12 @@ WindowTrack WindowTracker::track(const WindowFrames& left, const WindowFrames& r
   std::vector<BoardCorners> corners[2];
   int dropped[2] = {0, 0}, tracked[2] = {0, 0};
   std::string error[2];
+  for (int c = 0; c < 2; ++c) result.device[c] = learnGreyDevice(*frames[c], options_.learner, &error[c]);
   cv::parallel_for_(cv::Range(0, 2), [&](const cv::Range& range) {
     for (int c = range.start; c < range.end; ++c) {
+      if (!error[c].empty()) continue;
       try {
-        const LearnedDevice learned = learnWindowDevice(*frames[c], options_.learner);
-        cv::Mat device = learned.device_template.device;
-        if (device.channels() == 3) cv::cvtColor(device, device, cv::COLOR_BGR2GRAY);
-        result.device[c] = device;
+        const cv::Mat& device = result.device[c];
         corners[c] = tracker_.camera(c).trackSceneFree(device);
         for (const BoardCorners& b : corners[c]) tracked[c] += static_cast<int>(b.size());
         dropped[c] = refineCornersBySaddleFit(device, tracker_.camera(c).prior(), options_, &corners[c]);

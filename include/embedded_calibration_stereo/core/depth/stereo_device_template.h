@@ -96,9 +96,10 @@ struct StereoLearnResult {
 // there the calibrations committed after a drift were worse with a quarter.
 DeviceLearnerOptions separatorLearnerOptions();
 
-// Learns both cameras (in parallel) from a burst: its `per_end` light-on frames nearest each end
-// when `whole` (a burst that ended), all of them otherwise (a burst under way); scores the
-// result against `in_use` (when given) on the middle frames. Never throws.
+// Learns both cameras from a burst (one after the other, each one's pairs in parallel): its
+// `per_end` light-on frames nearest each end when `whole` (a burst that ended), all of them
+// otherwise (a burst under way); scores the result against `in_use` (when given) on the middle
+// frames. Never throws.
 StereoLearnResult learnStereoDevice(const WindowFrames& left, const WindowFrames& right, bool whole, int per_end,
                                     const DeviceLearnerOptions& options, const SeparatorOptions& separator_options,
                                     const std::shared_ptr<const StereoSeparator>& in_use, uint32_t epoch);
