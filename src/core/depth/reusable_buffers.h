@@ -6,8 +6,8 @@
 //
 // Threading: take() and the lease's return are guarded by the pool's mutex; a leased buffer
 // belongs to its lease's thread until the lease ends.
-#include <memory>
 #include <cstddef>
+#include <memory>
 #include <mutex>
 #include <thread>
 #include <utility>

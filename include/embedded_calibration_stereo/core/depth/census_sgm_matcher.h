@@ -19,7 +19,7 @@
 // every kernel (instruction set) gives the same results too.
 //
 // Threading: computeCensusSgmDisparity16 is reentrant; its only state is scratch memory kept
-// per thread between calls.
+// between calls in pools guarded by a mutex (as many buffers as were in use at once).
 #include <opencv2/core.hpp>
 #include <string>
 #include <vector>

@@ -24,8 +24,10 @@
 // (scene_matches.h): epipolar constraints at every depth for the calibrator, taken under the
 // same calibration as the boards.
 //
-// Threading: not thread-safe (one owner thread, e.g. the tracker nodelet's worker); the two
-// cameras are processed in parallel inside track().
+// Threading: not thread-safe (one owner thread, e.g. the tracker nodelet's worker). Inside
+// track(), each camera's device image is learned with its light pairs in parallel, one camera
+// after the other (the learner holds every pair's sample); the corners of both cameras are then
+// found in parallel.
 #include <opencv2/core.hpp>
 #include <optional>
 #include <string>
