@@ -253,7 +253,6 @@ void scoreBurst(const Burst& b, int burst, const SimDisparitySetOptions& o, cons
       separateStereo(sep.left, sep.right, f.sim.left, f.sim.right, &l, &r);
     }
     if (o.ideal != SimDisparitySetOptions::Ideal::kNone) {
-      if (!sensor.enabled) throw std::invalid_argument("renderSimDisparitySet: an ideal separation needs optics.sensor");
       l = idealSeparation(f, 0, sensor, o.ideal, l);
       r = idealSeparation(f, 1, sensor, o.ideal, r);
     }
@@ -269,6 +268,8 @@ SimDisparitySet renderSimDisparitySet(const SimDisparitySetOptions& o) {
     throw std::invalid_argument("renderSimDisparitySet: need >= 1 scored burst, >= 1 lit and >= 2 light-off frames "
                                 "per burst, a positive period, bursts of >= 8 lit frames and settle frames >= 0");
   const SimRig sim(loadSimRigConfig(o.config_path));
+  if (o.ideal != SimDisparitySetOptions::Ideal::kNone && !sim.config().optics.sensor.enabled)
+    throw std::invalid_argument("renderSimDisparitySet: an ideal separation needs the config's optics.sensor");
   DriverStream stream(&sim, o);
   const int before = (o.off_per_burst + 1) / 2, after = o.off_per_burst - before;
   std::shared_ptr<const StereoSeparators> in_use;
