@@ -219,6 +219,7 @@ struct Case {
   int min_disparity, num_disparities, paths, census_threshold;
   double uniqueness;
   bool left_right_check, subpixel;
+  int edge_scale = 16;  // 0: P2 constant; past 2^24 / P2 the kernel takes P2 from its table
 };
 
 // Every kernel's result and occlusions equal the reference's on a random pair (randomPair) for
@@ -237,6 +238,7 @@ int compareKernelsWithReference(const Case& c, cv::Size size, int shift, unsigne
     p.uniqueness_ratio = c.uniqueness;
     p.left_right_check = c.left_right_check;
     p.subpixel = c.subpixel;
+    p.edge_scale = c.edge_scale;
     const Reference ref{p, paddedCount(c.num_disparities, kernel)};
     cv::Mat expected_occluded, got, got_occluded;
     const cv::Mat expected = ref.compute(left, right, &expected_occluded);
@@ -253,15 +255,17 @@ int compareKernelsWithReference(const Case& c, cv::Size size, int shift, unsigne
 }
 
 // Every kernel equals the reference on images of one band (at most 120 rows), with sizes that
-// leave partial vectors, negative minimum disparities and padded disparity counts.
+// leave partial vectors, negative minimum disparities and padded disparity counts; P2 constant,
+// lowered steeply across intensity steps (edge scale 3), and past the float division's range.
 TEST(CensusSgm, EveryKernelMatchesTheReference) {
   const Case cases[] = {
       {0, 64, 8, 1, 0, true, true},    {0, 64, 5, 0, 10, true, true},  {-8, 48, 8, 3, 5, true, true},
       {0, 96, 8, 1, 0, false, false},  {4, 48, 5, 1, 0, true, false},  {0, 64, 8, 0, 15, false, true},
+      {0, 64, 8, 1, 0, true, true, 0}, {0, 64, 8, 1, 0, true, true, 3}, {0, 64, 8, 1, 0, true, true, 400000},
   };
   int compared = 0;
   for (const Case& c : cases) compared += compareKernelsWithReference(c, cv::Size(157, 61), 20, 7 + compared);
-  EXPECT_GE(compared, 6);
+  EXPECT_GE(compared, 9);
 }
 
 // More than 256 disparities: the winners' indices past 255 (a byte's range) on both sides of

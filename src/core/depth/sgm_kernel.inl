@@ -46,17 +46,21 @@ int absInt(int v) { return v < 0 ? -v : v; }
 #define SGM_INLINE inline
 #endif
 
-// Horizontal minima, the kernel's most frequent reductions: with AVX2, SSE4.1's PHMINPOSUW
-// finds the least of eight 16-bit lanes (here: bytes widened) in one instruction.
+// Horizontal minima, the kernel's most frequent reductions: with AVX2, SSE4.1's
+// PHMINPOSUW finds the least of eight 16-bit lanes (here: bytes paired, each pair's lesser in
+// its low byte and 0 in its high byte) in one instruction. minOf() gives the minimum as a
+// number; minInAll() in every lane, without the round trip through a general register, for the
+// paths along a row, whose next pixel waits on it.
 #if CV_AVX2
-inline uint8_t minOf(const cv::v_uint8& v) {
-  __m128i m = _mm_min_epu8(_mm256_castsi256_si128(v.val), _mm256_extracti128_si256(v.val, 1));
-  m = _mm_min_epu8(m, _mm_srli_epi16(m, 8));
-  m = _mm_and_si128(m, _mm_set1_epi16(0xFF));
-  return static_cast<uint8_t>(_mm_cvtsi128_si32(_mm_minpos_epu16(m)));
+inline __m128i minInLowWord(const cv::v_uint8& v) {
+  const __m128i m = _mm_min_epu8(_mm256_castsi256_si128(v.val), _mm256_extracti128_si256(v.val, 1));
+  return _mm_minpos_epu16(_mm_min_epu8(m, _mm_srli_epi16(m, 8)));
 }
+inline uint8_t minOf(const cv::v_uint8& v) { return static_cast<uint8_t>(_mm_cvtsi128_si32(minInLowWord(v))); }
+inline cv::v_uint8 minInAll(const cv::v_uint8& v) { return cv::v_uint8(_mm256_broadcastb_epi8(minInLowWord(v))); }
 #else
 inline uint8_t minOf(const cv::v_uint8& v) { return cv::v_reduce_min(v); }
+inline cv::v_uint8 minInAll(const cv::v_uint8& v) { return cv::vx_setall_u8(cv::v_reduce_min(v)); }
 #endif
 
 // ---- census ----------------------------------------------------------------------------
@@ -211,10 +215,6 @@ void costRow(const Problem& p, int y, uint8_t* costs) {
 // Templates on NV, the byte vectors of one pixel's disparities (ndisp_padded / kLanes8), so that
 // a pixel's path costs and sums stay in registers.
 
-inline cv::v_uint8 jumpFloor(uint8_t prev_min, uint8_t p2) {
-  return cv::vx_setall_u8(static_cast<uint8_t>(prev_min + p2 > 255 ? 255 : prev_min + p2));
-}
-
 // One step of a path: L(k) = C(k) + min(P(k), P(k-1) + P1, P(k+1) + P1, minP + P2) - minP,
 // written to `out` and added to `sum` (or put there, when not `add`); returns its minimum.
 // `prev` is the path's block at the previous pixel, with readable pad bytes of 255 at -1 and
@@ -224,7 +224,7 @@ SGM_INLINE uint8_t pathStep(const uint8_t* cost, const uint8_t* prev, uint8_t pr
                             const cv::v_uint8& p1, uint8_t p2, uint8_t* out, bool add,
                             cv::v_uint8* sum) {
   const cv::v_uint8 floor = cv::vx_setall_u8(prev_min);
-  const cv::v_uint8 jump = jumpFloor(prev_min, p2);
+  const cv::v_uint8 jump = floor + cv::vx_setall_u8(p2);  // saturating: min(prev_min + p2, 255)
   cv::v_uint8 lowest = cv::vx_setall_u8(255);
   for (int j = 0; j < NV; ++j) {
     const uint8_t* at = prev + j * kLanes8;
@@ -244,17 +244,17 @@ SGM_INLINE uint8_t pathStep(const uint8_t* cost, const uint8_t* prev, uint8_t pr
 // stored.
 template <int NV>
 struct RowPath {
-  cv::v_uint8 l[NV];  // the path's costs at the last pixel stepped to
-  uint8_t l_min = 255;
+  cv::v_uint8 l[NV];   // the path's costs at the last pixel stepped to
+  cv::v_uint8 l_min;   // their minimum, in every lane
 
-  RowPath() {
+  RowPath() : l_min(cv::vx_setall_u8(255)) {
     for (int j = 0; j < NV; ++j) l[j] = cv::vx_setall_u8(255);
   }
 
   void step(const uint8_t* cost, const cv::v_uint8& p1, uint8_t p2) {
     const cv::v_uint8 edge = cv::vx_setall_u8(255);
-    const cv::v_uint8 floor = cv::vx_setall_u8(l_min);
-    const cv::v_uint8 jump = jumpFloor(l_min, p2);
+    const cv::v_uint8 floor = l_min;
+    const cv::v_uint8 jump = floor + cv::vx_setall_u8(p2);  // saturating: min(floor + p2, 255)
     cv::v_uint8 lowest = edge, below = edge;  // below: l[j - 1] before this step
     for (int j = 0; j < NV; ++j) {
       const cv::v_uint8 same = l[j];
@@ -265,7 +265,7 @@ struct RowPath {
       l[j] = cv::vx_load(cost + j * kLanes8) + (cv::v_min(cv::v_min(same, step), jump) - floor);
       lowest = cv::v_min(lowest, l[j]);
     }
-    l_min = minOf(lowest);
+    l_min = minInAll(lowest);
   }
 };
 
@@ -273,11 +273,38 @@ struct RowPath {
 struct Penalties {
   cv::v_uint8 p1;
   uint8_t p2[256];
+  // The same in vectors of float: P2 * edge_scale / (edge_scale + d), truncated, is exact in
+  // float when the numerator is below 2^24 (a quotient that is not whole lies at least
+  // 1 / (edge_scale + d) from the next whole number, far more than float's rounding).
+  bool in_vectors;
+  float numerator, scale;
+  int least;
   explicit Penalties(const Problem& p) : p1(cv::vx_setall_u8(static_cast<uint8_t>(p.P1))) {
     for (int d = 0; d < 256; ++d) {
       const int v = p.edge_scale > 0 ? p.P2 * p.edge_scale / (p.edge_scale + d) : p.P2;
       p2[d] = static_cast<uint8_t>(v > p.P1 + 1 ? v : p.P1 + 1);
     }
+    in_vectors = p.edge_scale > 0 && static_cast<int64_t>(p.P2) * p.edge_scale < (int64_t{1} << 24);
+    numerator = static_cast<float>(p.P2 * (in_vectors ? p.edge_scale : 0));
+    scale = static_cast<float>(p.edge_scale);
+    least = p.P1 + 1;
+  }
+  // p2[d] for every lane of d (in_vectors only).
+  cv::v_uint8 of(const cv::v_uint8& d) const {
+    cv::v_uint16 d16[2];
+    cv::v_expand(d, d16[0], d16[1]);
+    cv::v_int16 q16[2];
+    for (int h = 0; h < 2; ++h) {
+      cv::v_uint32 d32[2];
+      cv::v_expand(d16[h], d32[0], d32[1]);
+      cv::v_int32 q[2];
+      for (int i = 0; i < 2; ++i) {
+        const cv::v_float32 f = cv::v_cvt_f32(cv::v_reinterpret_as_s32(d32[i])) + cv::vx_setall_f32(scale);
+        q[i] = cv::v_max(cv::v_trunc(cv::vx_setall_f32(numerator) / f), cv::vx_setall_s32(least));
+      }
+      q16[h] = cv::v_pack(q[0], q[1]);
+    }
+    return cv::v_pack_u(q16[0], q16[1]);
   }
 };
 
@@ -285,7 +312,7 @@ struct Penalties {
 // `vertical`, the three from the row `from` (straight, from the pixel before, from the pixel
 // after, as verticalSteps steps them); when `horizontal`, the one along the row from the
 // neighbour at `along` (-1: the left, +1: the right). Columns past the image's ends clamped. The
-// intensity steps in vectors and the table in a loop of its own, out of the paths' way.
+// intensity steps and their P2 in vectors (Penalties::of), out of the paths' way.
 void rowPenalties(const Problem& p, const Penalties& pen, const uint8_t* row, const uint8_t* from,
                   int along, bool vertical, bool horizontal, uint8_t* const* out) {
   const int W = p.width;
@@ -295,13 +322,18 @@ void rowPenalties(const Problem& p, const Penalties& pen, const uint8_t* row, co
     const int o = offsets[r];
     uint8_t* d = out[r];
     int x = 1;
-    for (; x + kLanes8 <= W - 1; x += kLanes8)
-      cv::v_store(d + x, cv::v_absdiff(cv::vx_load(row + x), cv::vx_load(other + x + o)));
-    for (; x < W - 1; ++x) d[x] = static_cast<uint8_t>(absInt(row[x] - other[x + o]));
+    if (pen.in_vectors) {
+      for (; x + kLanes8 <= W - 1; x += kLanes8)
+        cv::v_store(d + x, pen.of(cv::v_absdiff(cv::vx_load(row + x), cv::vx_load(other + x + o))));
+    } else {
+      for (; x + kLanes8 <= W - 1; x += kLanes8)
+        cv::v_store(d + x, cv::v_absdiff(cv::vx_load(row + x), cv::vx_load(other + x + o)));
+      for (int i = 1; i < x; ++i) d[i] = pen.p2[d[i]];
+    }
+    for (; x < W - 1; ++x) d[x] = pen.p2[absInt(row[x] - other[x + o])];
     const auto clamped = [W](int v) { return v < 0 ? 0 : (v >= W ? W - 1 : v); };
-    d[0] = static_cast<uint8_t>(absInt(row[0] - other[clamped(o)]));
-    d[W - 1] = static_cast<uint8_t>(absInt(row[W - 1] - other[clamped(W - 1 + o)]));
-    for (x = 0; x < W; ++x) d[x] = pen.p2[d[x]];
+    d[0] = pen.p2[absInt(row[0] - other[clamped(o)])];
+    d[W - 1] = pen.p2[absInt(row[W - 1] - other[clamped(W - 1 + o)])];
   }
 }
 
@@ -374,10 +406,9 @@ SGM_INLINE uint64_t laneMask(const cv::v_uint8* s, int g, const Test& test) {
 template <int NV>
 constexpr int groups() { return (NV + kVectorsPerGroup - 1) / kVectorsPerGroup; }
 
-// The index of the first lane holding `best`, the least sum (so there is one).
+// The index of the first lane holding the least sum `b` (in every lane of b; so there is one).
 template <int NV>
-SGM_INLINE int firstLaneOf(const cv::v_uint8* s, uint8_t best) {
-  const cv::v_uint8 b = cv::vx_setall_u8(best);
+SGM_INLINE int firstLaneOf(const cv::v_uint8* s, const cv::v_uint8& b) {
   const auto is_best = [&b](const cv::v_uint8& v) { return v == b; };
   for (int g = 0; g + 1 < groups<NV>(); ++g) {
     const uint64_t m = laneMask<NV>(s, g, is_best);
@@ -536,7 +567,7 @@ void upRow(const Problem& p, Scratch& s, int y, bool output, const uint8_t* cost
       lowest = cv::v_min(lowest, sums[j]);
     }
     const uint8_t best = minOf(lowest);
-    const int k = firstLaneOf<NV>(sums, best);
+    const int k = firstLaneOf<NV>(sums, minInAll(lowest));
     const bool unique =
         uniqueness_scale == 0 || noRivalAtMost<NV>(sums, k, rivalLimit(best, uniqueness_scale));
     out.disparity[x] = unique ? static_cast<int16_t>((p.min_disp + k) * kDispScale) : invalid;
