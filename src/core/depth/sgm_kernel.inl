@@ -117,8 +117,7 @@ struct Scratch {
   uint8_t* band_costs;     // [row][x][k] eight paths: the costs of the band's rows y0..
   PathRow vertical[3][2];  // the three paths from the previous row: previous and current row
   uint8_t* down;           // [row][x][k] the down pass's sums, rows y0.. of the band
-  uint8_t* right_cost;     // [q] right image's best sum so far, entries as Problem::census_right
-  uint8_t* right_k;        // [q] its disparity index, low byte
+  uint8_t* right_k;        // [q] the right image's winner, low byte, entries as Problem::census_right
   uint8_t* right_k_high;   // [q] its high byte (more than 256 disparities only)
   uint16_t* winner_k;      // [x] the left pixel's winning disparity index
   int32_t* offset_num;     // [x] the sub-pixel offset's numerator, then the offset (1/16 px)
@@ -152,7 +151,6 @@ size_t layOut(const Problem& p, int band_rows, uint8_t* base, Scratch* s) {
   const size_t band = rowElements(p) * static_cast<size_t>(p.paths == 5 ? 1 : band_rows);
   s->down = take(band);
   s->band_costs = p.paths == 5 ? s->costs : take(band);
-  s->right_cost = take(right);
   s->right_k = take(right);
   s->right_k_high = take(right);
   s->winner_k = reinterpret_cast<uint16_t*>(take(W * 2));
@@ -269,10 +267,15 @@ struct RowPath {
   }
 };
 
-// P1, and P2 lowered across intensity edges (where depth edges are likely): P2 / (1 + |dI| / T).
+// What a band's pixels look up rather than compute: P1; P2 lowered across intensity edges (where
+// depth edges are likely), P2 / (1 + |dI| / T); the uniqueness test's limit for each best sum.
 struct Penalties {
   cv::v_uint8 p1;
   uint8_t p2[256];
+  // The uniqueness test, best * (100 + ratio) < rival * 100 in integers ((100 + ratio) in
+  // 1/1024ths), as the greatest rival that fails it, for each best sum.
+  bool uniqueness;
+  uint8_t rival_limit[256];
   // The same in vectors of float: P2 * edge_scale / (edge_scale + d), truncated, is exact in
   // float when the numerator is below 2^24 (a quotient that is not whole lies at least
   // 1 / (edge_scale + d) from the next whole number, far more than float's rounding).
@@ -288,6 +291,12 @@ struct Penalties {
     numerator = static_cast<float>(p.P2 * (in_vectors ? p.edge_scale : 0));
     scale = static_cast<float>(p.edge_scale);
     least = p.P1 + 1;
+    uniqueness = p.uniqueness_ratio > 0;
+    const int64_t scale = uniqueness ? static_cast<int64_t>((100.0 + p.uniqueness_ratio) * 1024 + 0.5) : 0;
+    for (int best = 0; best < 256; ++best) {
+      const int64_t limit = best * scale / (1024 * 100);
+      rival_limit[best] = static_cast<uint8_t>(limit > 255 ? 255 : limit);
+    }
   }
   // p2[d] for every lane of d (in_vectors only).
   cv::v_uint8 of(const cv::v_uint8& d) const {
@@ -423,6 +432,10 @@ template <int NV>
 SGM_INLINE bool noRivalAtMost(const cv::v_uint8* s, int k, uint8_t limit) {
   const cv::v_uint8 t = cv::vx_setall_u8(limit);
   const auto at_most = [&t](const cv::v_uint8& v) { return cv::v_min(v, t) == v; };
+  if (groups<NV>() == 1) {  // 64 disparities or fewer: the winner's lanes by one shift
+    const uint64_t around = k > 0 ? uint64_t{7} << (k - 1) : uint64_t{3};
+    return (laneMask<NV>(s, 0, at_most) & ~around) == 0;
+  }
   for (int g = 0; g < groups<NV>(); ++g) {
     uint64_t m = laneMask<NV>(s, g, at_most);
     for (int i = k - 1 - g * kGroupLanes; i <= k + 1 - g * kGroupLanes; ++i)
@@ -432,36 +445,59 @@ SGM_INLINE bool noRivalAtMost(const cv::v_uint8* s, int k, uint8_t limit) {
   return true;
 }
 
-cv::v_uint8 laneRamp() {
-  alignas(64) uint8_t ramp[kLanes8];
-  for (int i = 0; i < kLanes8; ++i) ramp[i] = static_cast<uint8_t>(i);
-  return cv::vx_load_aligned(ramp);
-}
-
-// Folds the sums of left pixel x into the right image's winners: entry q of right_cost/right_k
-// is right column width - 1 + right_off - q, which disparity index k of x meets at q0 + k. On
-// ties the entry keeps the pixel folded first (the larger x).
+// The right image's winners, from the left pixels' sums folded right to left (x from width - 1
+// down to 0): entry q of right_k / right_k_high is right column width - 1 + right_off - q, which
+// disparity index k of left pixel x meets at q0(x) + k, and q0 grows by one from one pixel to
+// the next. So the entries a pixel meets are held in registers, a window that moves on by one
+// entry per pixel; the entry it leaves behind is final and is stored. (In memory, each pixel's
+// loads would overlap the previous pixel's stores one byte off, which stalls the loads until
+// the stores are written.) On ties an entry keeps the pixel folded first (the larger x).
 template <int NV>
-SGM_INLINE void foldRightWinners(const Problem& p, const cv::v_uint8* sums, int x,
-                                 const cv::v_uint8& ramp, Scratch& s) {
-  constexpr bool kHigh = NV * kLanes8 > 256;
-  const int q0 = p.width - 1 + p.right_off - x + p.min_disp;
-  uint8_t* rc = s.right_cost + q0;
-  uint8_t* rk = s.right_k + q0;
-  uint8_t* rh = s.right_k_high + q0;
-  for (int j = 0; j < NV; ++j) {
-    const cv::v_uint8 old = cv::vx_load(rc + j * kLanes8);
-    const cv::v_uint8 least = cv::v_min(sums[j], old);
-    const cv::v_uint8 kept = least == old;
-    cv::v_store(rc + j * kLanes8, least);
-    const cv::v_uint8 k = cv::v_add_wrap(ramp, cv::vx_setall_u8(static_cast<uint8_t>(j * kLanes8)));
-    cv::v_store(rk + j * kLanes8, cv::v_select(kept, cv::vx_load(rk + j * kLanes8), k));
-    if (kHigh) {
-      const cv::v_uint8 high = cv::vx_setall_u8(static_cast<uint8_t>((j * kLanes8) >> 8));
-      cv::v_store(rh + j * kLanes8, cv::v_select(kept, cv::vx_load(rh + j * kLanes8), high));
+struct RightWinners {
+  static constexpr bool kHigh = NV * kLanes8 > 256;
+  cv::v_uint8 cost[NV];   // the best sum so far of entries q0 ..
+  cv::v_uint8 k[NV];      // its disparity index, low byte
+  cv::v_uint8 high[NV];   // and high byte (more than 256 disparities only)
+  cv::v_uint8 index[NV];  // lane i of vector j: j * kLanes8 + i, low byte
+
+  RightWinners() {
+    alignas(64) uint8_t ramp[kLanes8];
+    for (int i = 0; i < kLanes8; ++i) ramp[i] = static_cast<uint8_t>(i);
+    for (int j = 0; j < NV; ++j) {
+      cost[j] = cv::vx_setall_u8(255);
+      k[j] = high[j] = cv::vx_setzero_u8();
+      index[j] = cv::v_add_wrap(cv::vx_load_aligned(ramp), cv::vx_setall_u8(static_cast<uint8_t>(j * kLanes8)));
     }
   }
-}
+
+  // Folds the sums of the next pixel in, stores its entry q0 to k_out[0] (high_out[0]), and
+  // moves on to the next pixel's entries.
+  SGM_INLINE void fold(const cv::v_uint8* sums, uint8_t* k_out, uint8_t* high_out) {
+    for (int j = 0; j < NV; ++j) {
+      const cv::v_uint8 least = cv::v_min(sums[j], cost[j]);
+      const cv::v_uint8 kept = least == cost[j];
+      cost[j] = least;
+      k[j] = cv::v_select(kept, k[j], index[j]);
+      if (kHigh) high[j] = cv::v_select(kept, high[j], cv::vx_setall_u8(static_cast<uint8_t>((j * kLanes8) >> 8)));
+    }
+    *k_out = cv::v_extract_n<0>(k[0]);
+    if (kHigh) *high_out = cv::v_extract_n<0>(high[0]);
+    const cv::v_uint8 none = cv::vx_setall_u8(255), zero = cv::vx_setzero_u8();
+    for (int j = 0; j < NV; ++j) {
+      cost[j] = cv::v_rotate_right<1>(cost[j], j + 1 < NV ? cost[j + 1] : none);
+      k[j] = cv::v_rotate_right<1>(k[j], j + 1 < NV ? k[j + 1] : zero);
+      if (kHigh) high[j] = cv::v_rotate_right<1>(high[j], j + 1 < NV ? high[j + 1] : zero);
+    }
+  }
+
+  // After the row's last pixel: the entries still in the window, from k_out[0] (high_out[0]).
+  void flush(uint8_t* k_out, uint8_t* high_out) const {
+    for (int j = 0; j < NV; ++j) {
+      cv::v_store(k_out + j * kLanes8, k[j]);
+      if (kHigh) cv::v_store(high_out + j * kLanes8, high[j]);
+    }
+  }
+};
 
 int rightWinner(const Problem& p, const Scratch& s, int q) {
   return s.right_k[q] | (p.ndisp_padded > 256 ? s.right_k_high[q] << 8 : 0);
@@ -499,13 +535,6 @@ void addSubpixelOffsets(const Problem& p, Scratch& s, int16_t* out) {
     s.offset_num[x] = static_cast<int>(q >= 0 ? q + 0.5f : q - 0.5f);
   }
   for (x = 0; x < p.width; ++x) out[x] = static_cast<int16_t>(out[x] + s.offset_num[x]);
-}
-
-// The uniqueness test, best * (100 + ratio) < rival * 100 in integers ((100 + ratio) in
-// 1/1024ths), as the greatest rival that fails it.
-uint8_t rivalLimit(int best, int64_t uniqueness_scale) {
-  const int64_t limit = static_cast<int64_t>(best) * uniqueness_scale / (1024 * 100);
-  return static_cast<uint8_t>(limit > 255 ? 255 : limit);
 }
 
 // Clears the left winners whose right pixel's winner disagrees by more than the tolerance, and
@@ -547,12 +576,10 @@ void upRow(const Problem& p, Scratch& s, int y, bool output, const uint8_t* cost
   const uint8_t* row = imageRow(p, y);
   const uint8_t* below = y + 1 < p.height ? imageRow(p, y + 1) : row;
   const int16_t invalid = static_cast<int16_t>((p.min_disp - 1) * kDispScale);
-  const cv::v_uint8 ramp = laneRamp();
-  const int64_t uniqueness_scale =
-      p.uniqueness_ratio > 0 ? static_cast<int64_t>((100.0 + p.uniqueness_ratio) * 1024 + 0.5) : 0;
-  if (output) std::memset(s.right_cost, 0xFF, static_cast<size_t>(p.right_len + D));
   rowPenalties(p, pen, row, below, +1, kUp, output, s.p2);
   RowPath<NV> from_right;
+  RightWinners<NV> right;
+  const int q_start = p.width - 1 + p.right_off + p.min_disp;  // q0(x) = q_start - x
   cv::v_uint8 sums[NV];
   cv::v_uint8 vertical[NV];
   for (int x = p.width - 1; x >= 0; --x) {
@@ -568,14 +595,14 @@ void upRow(const Problem& p, Scratch& s, int y, bool output, const uint8_t* cost
     }
     const uint8_t best = minOf(lowest);
     const int k = firstLaneOf<NV>(sums, minInAll(lowest));
-    const bool unique =
-        uniqueness_scale == 0 || noRivalAtMost<NV>(sums, k, rivalLimit(best, uniqueness_scale));
+    const bool unique = !pen.uniqueness || noRivalAtMost<NV>(sums, k, pen.rival_limit[best]);
     out.disparity[x] = unique ? static_cast<int16_t>((p.min_disp + k) * kDispScale) : invalid;
     keepSubpixelFit<NV>(p, sums, k, unique, x, s);
     s.winner_k[x] = static_cast<uint16_t>(k);
-    if (p.left_right_check) foldRightWinners<NV>(p, sums, x, ramp, s);
+    if (p.left_right_check) right.fold(sums, s.right_k + (q_start - x), s.right_k_high + (q_start - x));
   }
   if (!output) return;
+  if (p.left_right_check) right.flush(s.right_k + q_start + 1, s.right_k_high + q_start + 1);
   if (p.subpixel) addSubpixelOffsets(p, s, out.disparity);
   if (out.occluded) std::memset(out.occluded, 0, static_cast<size_t>(p.width));
   if (p.left_right_check) leftRightCheck(p, s, out.disparity, out.occluded);
