@@ -182,30 +182,30 @@ void swapVerticalRows(Scratch& s) {
   }
 }
 
-uint8_t* block(const Problem& p, const PathRow& row, int x) {
-  return row.cost + (x + 1) * blockStride(p) + 1;
-}
-
 // ---- costs -------------------------------------------------------------------------------
 
 // Census costs of row y: costs[x * D + k] = Hamming distance between left pixel x and right
 // pixel x - min_disp - k; 255 in the padded lanes k >= ndisp.
+template <int NV>
 void costRow(const Problem& p, int y, uint8_t* costs) {
-  const int D = p.ndisp_padded;
+  constexpr int D = NV * kLanes8;
+  // Locals, not p's members, in the loop: its stores might alias them (VerticalPaths says more).
+  const int width = p.width, ndisp = p.ndisp;
+  const size_t right_len = static_cast<size_t>(p.right_len);
   const uint8_t* left = p.census_left + static_cast<size_t>(y) * p.left_step;
-  const uint8_t* right = p.census_right + static_cast<size_t>(y) * p.right_step;
-  for (int x = 0; x < p.width; ++x) {
-    const int q0 = p.width - 1 + p.right_off - x + p.min_disp;
+  const uint8_t* right = p.census_right + static_cast<size_t>(y) * p.right_step +
+                         (p.width - 1 + p.right_off + p.min_disp);  // q0(x) = -x
+  for (int x = 0; x < width; ++x) {
     cv::v_uint8 l[kPlanes];
-    for (int k = 0; k < kPlanes; ++k) l[k] = cv::vx_setall_u8(left[k * p.width + x]);
+    for (int k = 0; k < kPlanes; ++k) l[k] = cv::vx_setall_u8(left[k * width + x]);
     uint8_t* out = costs + static_cast<size_t>(x) * D;
+    const uint8_t* r = right - x;
     for (int j = 0; j < D; j += kLanes8) {
-      cv::v_uint8 sum = cv::v_popcount(cv::vx_load(right + q0 + j) ^ l[0]);
-      for (int k = 1; k < kPlanes; ++k)
-        sum = sum + cv::v_popcount(cv::vx_load(right + k * p.right_len + q0 + j) ^ l[k]);
+      cv::v_uint8 sum = cv::v_popcount(cv::vx_load(r + j) ^ l[0]);
+      for (int k = 1; k < kPlanes; ++k) sum = sum + cv::v_popcount(cv::vx_load(r + k * right_len + j) ^ l[k]);
       cv::v_store(out + j, sum);
     }
-    for (int k = p.ndisp; k < D; ++k) out[k] = 255;
+    for (int k = ndisp; k < D; ++k) out[k] = 255;
   }
 }
 
@@ -319,7 +319,7 @@ struct Penalties {
 
 // The P2 of every pixel of `row` on the paths of one pass that step it, to out[0..3]: when
 // `vertical`, the three from the row `from` (straight, from the pixel before, from the pixel
-// after, as verticalSteps steps them); when `horizontal`, the one along the row from the
+// after, as VerticalPaths steps them); when `horizontal`, the one along the row from the
 // neighbour at `along` (-1: the left, +1: the right). Columns past the image's ends clamped. The
 // intensity steps and their P2 in vectors (Penalties::of), out of the paths' way.
 void rowPenalties(const Problem& p, const Penalties& pen, const uint8_t* row, const uint8_t* from,
@@ -347,21 +347,40 @@ void rowPenalties(const Problem& p, const Penalties& pen, const uint8_t* row, co
 }
 
 // The three paths into row y from the previous row (y - 1 going down, y + 1 going up):
-// straight, from the pixel before and from the pixel after; the sum of their costs at x to
-// `sum` (bytes saturating at 255: a sum of costs in any order, as min(total, 255)).
+// straight, from the pixel before and from the pixel after. What the pixel loop reads is held
+// in this object's members, a local of the row's function: were it read through Scratch, every
+// byte the loop stores might alias it, and the compiler would reload it after each one.
 template <int NV>
-SGM_INLINE void verticalSteps(const Problem& p, Scratch& s, int x, const uint8_t* cost,
-                              cv::v_uint8* sum) {
-  static const int kFrom[3] = {0, -1, +1};
-  const Penalties& pen = *s.penalties;
-  for (int r = 0; r < 3; ++r) {
-    const PathRow& prev = s.vertical[r][0];
-    const PathRow& cur = s.vertical[r][1];
-    const int xf = x + kFrom[r];
-    cur.min[x + 1] = pathStep<NV>(cost, block(p, prev, xf), prev.min[xf + 1], pen.p1, s.p2[r][x],
-                                  block(p, cur, x), r > 0, sum);
+struct VerticalPaths {
+  static constexpr int kStride = NV * kLanes8 + 2;  // blockStride() of this NV
+  const uint8_t* prev_cost[3];  // the block of column 0 of the path's previous row
+  const uint8_t* prev_min[3];   // its minima, column x at [x + 1]
+  uint8_t* cur_cost[3];
+  uint8_t* cur_min[3];
+  const uint8_t* p2[3];         // the row's P2 per pixel (rowPenalties)
+  cv::v_uint8 p1;
+
+  explicit VerticalPaths(const Scratch& s) : p1(s.penalties->p1) {
+    for (int r = 0; r < 3; ++r) {
+      prev_cost[r] = s.vertical[r][0].cost + kStride + 1;
+      prev_min[r] = s.vertical[r][0].min;
+      cur_cost[r] = s.vertical[r][1].cost + kStride + 1;
+      cur_min[r] = s.vertical[r][1].min;
+      p2[r] = s.p2[r];
+    }
   }
-}
+
+  // Steps the three paths to pixel x; the sum of their costs there to `sum` (bytes saturating
+  // at 255: a sum of costs in any order, as min(total, 255)).
+  SGM_INLINE void step(int x, const uint8_t* cost, cv::v_uint8* sum) const {
+    constexpr int kFrom[3] = {0, -1, +1};
+    for (int r = 0; r < 3; ++r) {
+      const int xf = x + kFrom[r];
+      cur_min[r][x + 1] = pathStep<NV>(cost, prev_cost[r] + xf * kStride, prev_min[r][xf + 1], p1, p2[r][x],
+                                       cur_cost[r] + x * kStride, r > 0, sum);
+    }
+  }
+};
 
 const uint8_t* imageRow(const Problem& p, int y) {
   const int yc = y < 0 ? 0 : (y >= p.height ? p.height - 1 : y);
@@ -378,13 +397,16 @@ void downRow(const Problem& p, Scratch& s, int y, bool output, const uint8_t* co
   const uint8_t* row = imageRow(p, y);
   const uint8_t* above = y > 0 ? imageRow(p, y - 1) : row;
   rowPenalties(p, pen, row, above, -1, true, output, s.p2);
+  const VerticalPaths<NV> paths(s);
+  const uint8_t* const p2_along = s.p2[3];
+  const int width = p.width;
   RowPath<NV> from_left;
   cv::v_uint8 vertical[NV];
-  for (int x = 0; x < p.width; ++x) {
+  for (int x = 0; x < width; ++x) {
     const uint8_t* cost = costs + static_cast<size_t>(x) * D;
-    verticalSteps<NV>(p, s, x, cost, vertical);
+    paths.step(x, cost, vertical);
     if (!output) continue;
-    from_left.step(cost, pen.p1, s.p2[3][x]);
+    from_left.step(cost, paths.p1, p2_along[x]);
     for (int j = 0; j < NV; ++j)
       cv::v_store(down + static_cast<size_t>(x) * D + j * kLanes8, vertical[j] + from_left.l[j]);
   }
@@ -499,26 +521,22 @@ struct RightWinners {
   }
 };
 
-int rightWinner(const Problem& p, const Scratch& s, int q) {
-  return s.right_k[q] | (p.ndisp_padded > 256 ? s.right_k_high[q] << 8 : 0);
-}
-
 // The equiangular (V-shaped) fit's operands at winner k of a `unique` pixel (no offset for the
 // others), kept for one vectorised division per row: census sums grow linearly away from the
 // match, and a parabola through them is pulled harder towards the whole pixel.
+// `fit`: the pixel is unique and k has neighbours on both sides; the operands to *num, *den.
 template <int NV>
-SGM_INLINE void keepSubpixelFit(const Problem& p, const cv::v_uint8* sums, int k, bool unique,
-                                int x, Scratch& s) {
-  s.offset_num[x] = 0;
-  s.offset_den[x] = 1;
-  if (!unique || !p.subpixel || k <= 0 || k >= p.ndisp - 1) return;
+SGM_INLINE void keepSubpixelFit(const cv::v_uint8* sums, int k, bool fit, int32_t* num, int32_t* den) {
+  *num = 0;
+  *den = 1;
+  if (!fit) return;
   alignas(64) uint8_t all[NV * kLanes8];
   for (int j = 0; j < NV; ++j) cv::v_store_aligned(all + j * kLanes8, sums[j]);
   const int a = all[k - 1], b = all[k], c = all[k + 1];
   const int denom = a > c ? a - b : c - b;
   if (denom <= 0) return;
-  s.offset_num[x] = (a - c) * kDispScale;
-  s.offset_den[x] = 2 * denom;
+  *num = (a - c) * kDispScale;
+  *den = 2 * denom;
 }
 
 // Adds each pixel's sub-pixel offset, num / den as a float rounded half away from zero.
@@ -543,19 +561,25 @@ void addSubpixelOffsets(const Problem& p, Scratch& s, int16_t* out) {
 // hidden from the right camera rather than mismatched.
 void leftRightCheck(const Problem& p, const Scratch& s, int16_t* out, uint8_t* occluded) {
   const int16_t invalid = static_cast<int16_t>((p.min_disp - 1) * kDispScale);
-  for (int x = 0; x < p.width; ++x) {
+  // Locals, not p's and s's members, in the loop: its stores might alias them.
+  const int width = p.width, min_disp = p.min_disp, tolerance = p.left_right_tolerance;
+  const bool high = p.ndisp_padded > 256;
+  const uint16_t* const winner_k = s.winner_k;
+  const uint8_t* const right_k = s.right_k + (p.width - 1 + p.right_off);  // entry of column xr at -xr
+  const uint8_t* const right_k_high = s.right_k_high + (p.width - 1 + p.right_off);
+  for (int x = 0; x < width; ++x) {
     if (out[x] == invalid) continue;
-    const int k = s.winner_k[x];
-    const int xr = x - p.min_disp - k;
-    if (xr < kCensusRadiusX || xr >= p.width - kCensusRadiusX) {
+    const int k = winner_k[x];
+    const int xr = x - min_disp - k;
+    if (xr < kCensusRadiusX || xr >= width - kCensusRadiusX) {
       out[x] = invalid;
       if (occluded) occluded[x] = 255;
       continue;
     }
-    const int right_k = rightWinner(p, s, p.width - 1 + p.right_off - xr);
-    if (absInt(right_k - k) <= p.left_right_tolerance) continue;
+    const int rk = right_k[-xr] | (high ? right_k_high[-xr] << 8 : 0);
+    if (absInt(rk - k) <= tolerance) continue;
     out[x] = invalid;
-    if (occluded && right_k > k) occluded[x] = 255;
+    if (occluded && rk > k) occluded[x] = 255;
   }
 }
 
@@ -577,16 +601,28 @@ void upRow(const Problem& p, Scratch& s, int y, bool output, const uint8_t* cost
   const uint8_t* below = y + 1 < p.height ? imageRow(p, y + 1) : row;
   const int16_t invalid = static_cast<int16_t>((p.min_disp - 1) * kDispScale);
   rowPenalties(p, pen, row, below, +1, kUp, output, s.p2);
+  // The pixel loop reads locals only (VerticalPaths says why).
+  const VerticalPaths<NV> paths(s);
+  const uint8_t* const p2_along = s.p2[3];
+  const bool uniqueness = pen.uniqueness, subpixel = p.subpixel, left_right = p.left_right_check;
+  const uint8_t* const rival_limit = pen.rival_limit;
+  const int ndisp = p.ndisp, min_disp = p.min_disp;
+  int16_t* const disparity = out.disparity;
+  uint16_t* const winner_k = s.winner_k;
+  int32_t* const offset_num = s.offset_num;
+  int32_t* const offset_den = s.offset_den;
   RowPath<NV> from_right;
   RightWinners<NV> right;
   const int q_start = p.width - 1 + p.right_off + p.min_disp;  // q0(x) = q_start - x
+  uint8_t* const right_k = s.right_k + q_start;
+  uint8_t* const right_k_high = s.right_k_high + q_start;
   cv::v_uint8 sums[NV];
   cv::v_uint8 vertical[NV];
   for (int x = p.width - 1; x >= 0; --x) {
     const uint8_t* cost = costs + static_cast<size_t>(x) * D;
-    if (kUp) verticalSteps<NV>(p, s, x, cost, vertical);
+    if (kUp) paths.step(x, cost, vertical);
     if (!output) continue;
-    from_right.step(cost, pen.p1, s.p2[3][x]);
+    from_right.step(cost, paths.p1, p2_along[x]);
     cv::v_uint8 lowest = cv::vx_setall_u8(255);
     for (int j = 0; j < NV; ++j) {
       sums[j] = cv::vx_load(down + static_cast<size_t>(x) * D + j * kLanes8) +
@@ -595,11 +631,11 @@ void upRow(const Problem& p, Scratch& s, int y, bool output, const uint8_t* cost
     }
     const uint8_t best = minOf(lowest);
     const int k = firstLaneOf<NV>(sums, minInAll(lowest));
-    const bool unique = !pen.uniqueness || noRivalAtMost<NV>(sums, k, pen.rival_limit[best]);
-    out.disparity[x] = unique ? static_cast<int16_t>((p.min_disp + k) * kDispScale) : invalid;
-    keepSubpixelFit<NV>(p, sums, k, unique, x, s);
-    s.winner_k[x] = static_cast<uint16_t>(k);
-    if (p.left_right_check) right.fold(sums, s.right_k + (q_start - x), s.right_k_high + (q_start - x));
+    const bool unique = !uniqueness || noRivalAtMost<NV>(sums, k, rival_limit[best]);
+    disparity[x] = unique ? static_cast<int16_t>((min_disp + k) * kDispScale) : invalid;
+    keepSubpixelFit<NV>(sums, k, unique && subpixel && k > 0 && k < ndisp - 1, offset_num + x, offset_den + x);
+    winner_k[x] = static_cast<uint16_t>(k);
+    if (left_right) right.fold(sums, right_k - x, right_k_high - x);
   }
   if (!output) return;
   if (p.left_right_check) right.flush(s.right_k + q_start + 1, s.right_k_high + q_start + 1);
@@ -619,7 +655,7 @@ template <int NV>
 void matchFivePaths(const Problem& p, const Band& band, Scratch& s) {
   for (int y = band.y_start; y < band.y1; ++y) {
     const bool output = y >= band.y0;
-    costRow(p, y, s.costs);
+    costRow<NV>(p, y, s.costs);
     downRow<NV>(p, s, y, output, s.costs, s.down);
     if (output) upRow<NV, false>(p, s, y, true, s.costs, s.down, rowOut(p, band, y));
     swapVerticalRows(s);
@@ -635,7 +671,7 @@ void matchEightPaths(const Problem& p, const Band& band, Scratch& s) {
     const bool output = y >= band.y0;
     const size_t at = output ? static_cast<size_t>(y - band.y0) * row_elements : 0;
     uint8_t* costs = output ? s.band_costs + at : s.costs;
-    costRow(p, y, costs);
+    costRow<NV>(p, y, costs);
     downRow<NV>(p, s, y, output, costs, s.down + at);
     swapVerticalRows(s);
   }
@@ -643,7 +679,7 @@ void matchEightPaths(const Problem& p, const Band& band, Scratch& s) {
   for (int y = band.y_end - 1; y >= band.y0; --y) {
     const bool output = y < band.y1;
     const size_t at = output ? static_cast<size_t>(y - band.y0) * row_elements : 0;
-    if (!output) costRow(p, y, s.costs);
+    if (!output) costRow<NV>(p, y, s.costs);
     upRow<NV, true>(p, s, y, output, output ? s.band_costs + at : s.costs, s.down + at,
                     rowOut(p, band, y));
     swapVerticalRows(s);
