@@ -272,16 +272,16 @@ struct RowPath {
 struct Penalties {
   cv::v_uint8 p1;
   uint8_t p2[256];
-  // The uniqueness test, best * (100 + ratio) < rival * 100 in integers ((100 + ratio) in
-  // 1/1024ths), as the greatest rival that fails it, for each best sum.
-  bool uniqueness;
-  uint8_t rival_limit[256];
   // The same in vectors of float: P2 * edge_scale / (edge_scale + d), truncated, is exact in
   // float when the numerator is below 2^24 (a quotient that is not whole lies at least
   // 1 / (edge_scale + d) from the next whole number, far more than float's rounding).
   bool in_vectors;
   float numerator, scale;
   int least;
+  // The uniqueness test, best * (100 + ratio) < rival * 100 in integers ((100 + ratio) in
+  // 1/1024ths), as the greatest rival that fails it, for each best sum.
+  bool uniqueness;
+  uint8_t rival_limit[256];
   explicit Penalties(const Problem& p) : p1(cv::vx_setall_u8(static_cast<uint8_t>(p.P1))) {
     for (int d = 0; d < 256; ++d) {
       const int v = p.edge_scale > 0 ? p.P2 * p.edge_scale / (p.edge_scale + d) : p.P2;
@@ -292,9 +292,9 @@ struct Penalties {
     scale = static_cast<float>(p.edge_scale);
     least = p.P1 + 1;
     uniqueness = p.uniqueness_ratio > 0;
-    const int64_t scale = uniqueness ? static_cast<int64_t>((100.0 + p.uniqueness_ratio) * 1024 + 0.5) : 0;
+    const int64_t ratio = uniqueness ? static_cast<int64_t>((100.0 + p.uniqueness_ratio) * 1024 + 0.5) : 0;
     for (int best = 0; best < 256; ++best) {
-      const int64_t limit = best * scale / (1024 * 100);
+      const int64_t limit = best * ratio / (1024 * 100);
       rival_limit[best] = static_cast<uint8_t>(limit > 255 ? 255 : limit);
     }
   }
@@ -521,10 +521,10 @@ struct RightWinners {
   }
 };
 
-// The equiangular (V-shaped) fit's operands at winner k of a `unique` pixel (no offset for the
-// others), kept for one vectorised division per row: census sums grow linearly away from the
-// match, and a parabola through them is pulled harder towards the whole pixel.
-// `fit`: the pixel is unique and k has neighbours on both sides; the operands to *num, *den.
+// The equiangular (V-shaped) fit's operands at winner k, to *num and *den, where `fit` (the
+// pixel is unique and k has neighbours on both sides; no offset elsewhere), kept for one
+// vectorised division per row: census sums grow linearly away from the match, and a parabola
+// through them is pulled harder towards the whole pixel.
 template <int NV>
 SGM_INLINE void keepSubpixelFit(const cv::v_uint8* sums, int k, bool fit, int32_t* num, int32_t* den) {
   *num = 0;
