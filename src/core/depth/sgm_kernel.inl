@@ -638,7 +638,7 @@ void upRow(const Problem& p, Scratch& s, int y, bool output, const uint8_t* cost
     if (left_right) right.fold(sums, right_k - x, right_k_high - x);
   }
   if (!output) return;
-  if (p.left_right_check) right.flush(s.right_k + q_start + 1, s.right_k_high + q_start + 1);
+  if (left_right) right.flush(right_k + 1, right_k_high + 1);
   if (p.subpixel) addSubpixelOffsets(p, s, out.disparity);
   if (out.occluded) std::memset(out.occluded, 0, static_cast<size_t>(p.width));
   if (p.left_right_check) leftRightCheck(p, s, out.disparity, out.occluded);
