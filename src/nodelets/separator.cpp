@@ -20,6 +20,7 @@
 #include "embedded_calibration_stereo/core/depth/stereo_device_template.h"
 #include "embedded_calibration_stereo/core/io/config_error.h"
 #include "embedded_calibration_stereo/core/tracker/window_tracker.h"
+#include "embedded_calibration_stereo/ros/freed_memory.h"
 #include "embedded_calibration_stereo/ros/guarded_nodelet.h"
 #include "embedded_calibration_stereo/ros/lazy_synced_input.h"
 #include "embedded_calibration_stereo/ros/light_burst.h"
@@ -305,6 +306,7 @@ class SeparatorNodelet : public GuardedNodelet {
       } catch (const std::exception& e) {  // an image cv_bridge cannot read
         run.result.error = e.what();
       }
+      releaseFreedMemory();  // learning freed tens of MB
       return run;
     });
   }

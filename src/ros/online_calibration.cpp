@@ -6,6 +6,7 @@
 #include <cstdio>
 
 #include "embedded_calibration_stereo/ros/conversions.h"
+#include "embedded_calibration_stereo/ros/freed_memory.h"
 #include "embedded_calibration_stereo/ros/stamp_guard.h"
 
 namespace embedded_calibration_stereo {
@@ -259,6 +260,7 @@ void OnlineCalibration::workerLoop() {
     request.frames = std::move(job.frames);
     request.dry_run = job.dry_run;
     SolveResult solved = session_->solve(request);
+    releaseFreedMemory();  // a solve frees what its problem took
     CalibrationStatus& status = solved.status;
     if (solved.committed) readCommittedEpoch(*solved.committed, request.epoch, &status);
     if (!job.dry_run) {

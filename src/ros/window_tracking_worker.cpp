@@ -5,6 +5,7 @@
 
 #include "embedded_calibration_stereo/StereoPatternObservation.h"
 #include "embedded_calibration_stereo/ros/conversions.h"
+#include "embedded_calibration_stereo/ros/freed_memory.h"
 
 namespace embedded_calibration_stereo {
 
@@ -60,6 +61,7 @@ void WindowTrackingWorker::track(const Job& job) {
   } catch (const std::exception& e) {
     error = e.what();
   }
+  releaseFreedMemory();  // the burst's learning freed tens of MB
   const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
   const size_t frames = job.burst.light_on.size();
   char text[600];
