@@ -95,12 +95,27 @@ struct Sample {
   double gain_on = 1.0;  // s of on = k * off_aligned + s * I_C
 };
 
-// `value` (float, grey levels) in fixed point, kNoSample where `valid` (CV_8U) is 0.
-cv::Mat toSample(const cv::Mat& value, const cv::Mat& valid) {
+// The unaligned pass's sample: on - off (8 bits each), exact in fixed point.
+cv::Mat unalignedSample(const LightPair& pair) {
   cv::Mat out;
-  // Saturated one step short of kNoSample, so that no value reads as missing.
-  cv::Mat(cv::max(value * kSampleSteps, -32767.0)).convertTo(out, CV_MAKETYPE(CV_16S, value.channels()));
-  if (!valid.empty()) out.setTo(cv::Scalar::all(kNoSample), valid == 0);
+  cv::subtract(pair.light_on, pair.light_off, out, cv::noArray(), CV_MAKETYPE(CV_16S, pair.light_on.channels()));
+  out.convertTo(out, -1, kSampleSteps);
+  return out;
+}
+
+// The sample (on - k * aligned) / s (float images) in fixed point, kNoSample where `valid`
+// (CV_8U) is 0, in one pass: no float image of it is made.
+cv::Mat alignedSample(const cv::Mat& on, const cv::Mat& aligned, double k, double s, const cv::Mat& valid) {
+  const int channels = on.channels(), width = on.cols * channels;
+  cv::Mat out(on.size(), CV_MAKETYPE(CV_16S, channels));
+  const float gain = static_cast<float>(k), steps = static_cast<float>(kSampleSteps / s);
+  for (int y = 0; y < on.rows; ++y) {
+    const float *o = on.ptr<float>(y), *a = aligned.ptr<float>(y);
+    const uchar* v = valid.ptr<uchar>(y);
+    int16_t* d = out.ptr<int16_t>(y);
+    for (int i = 0; i < width; ++i)  // saturated one step short of kNoSample: no value reads as missing
+      d[i] = v[i / channels] ? cv::saturate_cast<int16_t>(std::max((o[i] - gain * a[i]) * steps, -32767.f)) : kNoSample;
+  }
   return out;
 }
 
@@ -150,12 +165,12 @@ void fitGains(const cv::Mat& on, const cv::Mat& a, const cv::Mat& c, const cv::M
 // burst's pairs in float would hold about 3 MB each for the whole learning.
 Sample samplePair(const LightPair& pair, const cv::Mat& device, cv::DISOpticalFlow* dis) {
   Sample sample;
-  const cv::Mat on = toFloat(pair.light_on), off = toFloat(pair.light_off);
-  const cv::Size size = on.size();
   if (device.empty()) {
-    sample.value = toSample(on - off, cv::Mat());
+    sample.value = unalignedSample(pair);
     return sample;
   }
+  const cv::Mat on = toFloat(pair.light_on), off = toFloat(pair.light_off);
+  const cv::Size size = on.size();
   const cv::Mat on_grey = pair.light_on.channels() == 1 ? on : toFloat(grey(pair.light_on));
   const cv::Mat off_grey8 = grey(pair.light_off);
   const cv::Mat device_grey = channelMean(device);
@@ -172,7 +187,8 @@ Sample samplePair(const LightPair& pair, const cv::Mat& device, cv::DISOpticalFl
   }
   cv::Mat flow;
   dis->calc(scene_on, off_grey8, flow);  // scene_on(x) ~ off(x + flow(x))
-  cv::Mat map(size, CV_32FC2), valid_map(size, CV_8U);
+  cv::Mat& map = flow;  // the flow becomes the map, in place
+  cv::Mat valid_map(size, CV_8U);
   const float right = static_cast<float>(size.width - 1), bottom = static_cast<float>(size.height - 1);
   for (int y = 0; y < size.height; ++y) {
     const cv::Point2f* f = flow.ptr<cv::Point2f>(y);
@@ -190,7 +206,7 @@ Sample samplePair(const LightPair& pair, const cv::Mat& device, cv::DISOpticalFl
   double k = 1.0, s = 1.0;
   fitGains(on_grey, channelMean(aligned), device_grey, valid_map, &k, &s);
   if (!(s > 0.05)) s = 1.0;  // a degenerate fit: keep the scale of the estimate
-  sample.value = toSample((on - k * aligned) * (1.0 / s), valid_map);
+  sample.value = alignedSample(on, aligned, k, s, valid_map);
   sample.gain_on = s;
   return sample;
 }
