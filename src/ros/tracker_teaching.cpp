@@ -9,6 +9,7 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "embedded_calibration_stereo/core/io/atomic_file.h"
+#include "embedded_calibration_stereo/ros/freed_memory.h"
 
 namespace embedded_calibration_stereo {
 
@@ -126,13 +127,17 @@ void TeachingRun::start(const core::TeachFrame& left, const core::TeachFrame& ri
     return out;
   };
   result_ = std::async(std::launch::async, [left = copy(left), right = copy(right), order, device, path] {
-    return teachStereoPrior(left, right, order, device, path);
+    TeachOutcome outcome = teachStereoPrior(left, right, order, device, path);
+    releaseFreedMemory();  // teaching freed tens of MB
+    return outcome;
   });
 }
 
 void TeachingRun::start(LightBurst burst, const core::SimRigConfig& device, const std::string& path) {
   result_ = std::async(std::launch::async, [burst = std::move(burst), device, path] {
-    return teachStereoPriorFromBurst(burst, device, path);
+    TeachOutcome outcome = teachStereoPriorFromBurst(burst, device, path);
+    releaseFreedMemory();  // teaching freed tens of MB
+    return outcome;
   });
 }
 

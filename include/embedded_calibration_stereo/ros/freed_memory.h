@@ -1,8 +1,9 @@
 #pragma once
 // Hands the memory freed by a burst's work back to the system.
 //
-// The head's heavy work comes in bursts: a light burst tracked as a whole, a device image
-// learned, a calibration solved; each allocates tens of MB for a second or two and frees them.
+// The head's heavy work comes in bursts: a light burst tracked as a whole, the tracker taught, a
+// device image learned, a calibration solved; each allocates tens of MB for a second or two and
+// frees them.
 // glibc's allocator keeps what a thread frees in that thread's arena for later use, and it
 // returns only the end of an arena to the system: the head's manager, whose workers and
 // callback threads each have one, stays at the sum of every arena's high-water mark
