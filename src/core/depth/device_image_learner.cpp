@@ -257,8 +257,7 @@ inline Robust robustMean(const float* values, const float* sorted, int m, double
 // Mono pixels whose samples are all valid (nearly all of them) are sorted kLanes at a time by a
 // sorting network, branch-free (SIMD min and max); the others one by one.
 constexpr int kLanes = 8;
-static_assert(kLanes == sizeof(uint64_t) && kLanes % cv::v_float32x4::nlanes == 0,
-              "kLanes: the valid flags of a block are read as one uint64");
+static_assert(kLanes % cv::v_float32x4::nlanes == 0, "kLanes: whole SIMD vectors");
 
 // One image row as combine() reads and writes it: the samples' rows and the outputs' rows.
 struct CombineRow {
