@@ -16,16 +16,17 @@
 #include <cstdlib>
 #include <cstring>
 #include <ctime>
-#include <fstream>
 #include <string>
 #include <vector>
 
 #include "embedded_calibration_stereo/core/sim/sim_rig.h"
 #include "embedded_calibration_stereo/core/tracker/window_tracker.h"
 #include "embedded_calibration_stereo/test_support/corner_score.h"
+#include "embedded_calibration_stereo/test_support/process_memory.h"
 #include "embedded_calibration_stereo/test_support/sim_prior.h"
 
 using namespace embedded_calibration_stereo::core;
+namespace test_support = embedded_calibration_stereo::test_support;
 
 namespace {
 
@@ -35,21 +36,8 @@ double cpuMs() {
   return 1e3 * ts.tv_sec + 1e-6 * ts.tv_nsec;
 }
 
-// The process's resident memory now, or its peak since resetPeakMemory() (VmRSS, VmHWM), MB.
-double residentMb(const char* key) {
-  std::ifstream status("/proc/self/status");
-  std::string word;
-  while (status >> word)
-    if (word == key) {
-      double kb = 0.0;
-      status >> kb;
-      return kb / 1024.0;
-    }
-  return 0.0;
-}
-
-// Resets the peak resident memory to the current one (Linux: clear_refs 5).
-void resetPeakMemory() { std::ofstream("/proc/self/clear_refs") << "5"; }
+// The process's resident memory now ("VmRSS") or its peak since resetPeakMemory() ("VmHWM"), MB.
+double residentMb(const char* key) { return test_support::processStatusKb(0, key) / 1024.0; }
 
 double median(std::vector<double> v) {
   std::sort(v.begin(), v.end());
@@ -71,7 +59,8 @@ int main(int argc, char** argv) {
     else if (!std::strcmp(argv[i], "--scene")) scene = std::atoi(value());
     else if (!std::strcmp(argv[i], "--frames")) lit_frames = std::atoi(value());
     else if (!std::strcmp(argv[i], "--flow-scale")) options.learner.flow_finest_scale = std::atoi(value());
-    else if (!std::strcmp(argv[i], "--flow-iterations")) options.learner.flow_refinement_iterations = std::atoi(value());
+    else if (!std::strcmp(argv[i], "--flow-iterations"))
+      options.learner.flow_refinement_iterations = std::atoi(value());
     else {
       std::fprintf(stderr, "bench_window_tracker: unknown argument %s\n", argv[i]);
       return 2;
@@ -108,17 +97,18 @@ int main(int argc, char** argv) {
     double memory = 0.0;
     CornerScore score;
     for (int r = 0; r < repeats; ++r) {
-      resetPeakMemory();
-      const double before_mb = residentMb("VmRSS:");
+      test_support::resetPeakMemory();
+      const double before_mb = residentMb("VmRSS");
       const auto t0 = std::chrono::steady_clock::now();
       const double c0 = cpuMs();
       const WindowTrack track = tracker.track(left, right, (j + lit_frames) / kFps);
       cpu.push_back(cpuMs() - c0);
       wall.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
-      memory = std::max(memory, residentMb("VmHWM:") - before_mb);
+      memory = std::max(memory, residentMb("VmHWM") - before_mb);
       if (r == 0) score.add(track.observation, lit.observations);
     }
-    std::printf("window %d (t %.1f s, %d light-on frames): %.0f ms wall, %.0f ms CPU (median of %d), peak memory +%.0f MB; %s\n",
+    std::printf("window %d (t %.1f s, %d light-on frames): %.0f ms wall, %.0f ms CPU (median of %d), "
+                "peak memory +%.0f MB; %s\n",
                 w, j / kFps, lit_frames, median(wall), median(cpu), repeats, memory, score.str().c_str());
     wall_all.push_back(median(wall));
     cpu_all.push_back(median(cpu));

@@ -5,26 +5,15 @@
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
-#include <fstream>
-#include <string>
 #include <thread>
 #include <vector>
 
 #include "embedded_calibration_stereo/ros/freed_memory.h"
+#include "embedded_calibration_stereo/test_support/process_memory.h"
 
 namespace {
 
-double residentMb() {
-  std::ifstream status("/proc/self/status");
-  std::string word;
-  while (status >> word)
-    if (word == "VmRSS:") {
-      double kb = 0.0;
-      status >> kb;
-      return kb / 1024.0;
-    }
-  return -1.0;
-}
+double residentMb() { return embedded_calibration_stereo::test_support::processStatusKb(0, "VmRSS") / 1024.0; }
 
 constexpr size_t kBlock = 64 * 1024;  // below glibc's mmap threshold: from the thread's arena
 constexpr int kBlocks = 800;          // 50 MB

@@ -19,6 +19,8 @@
 #include <utility>
 #include <vector>
 
+#include "embedded_calibration_stereo/test_support/process_memory.h"
+
 namespace embedded_calibration_stereo::test_support {
 
 // The pid of node `name` (absolute), or -1.
@@ -48,12 +50,7 @@ inline int nodePid(const std::string& name) {
 inline bool processRuns(int pid) { return pid > 0 && ::kill(pid, 0) == 0; }
 
 // VmRSS of `pid` in kB (-1 when unknown).
-inline long rssKb(int pid) {
-  std::ifstream in("/proc/" + std::to_string(pid) + "/status");
-  for (std::string line; std::getline(in, line);)
-    if (line.rfind("VmRSS:", 0) == 0) return std::stol(line.substr(6));
-  return -1;
-}
+inline long rssKb(int pid) { return processStatusKb(pid, "VmRSS"); }
 
 // A command run as a child process of the test, on the test's master: the environment is
 // inherited but for ROS_NAMESPACE (rostest sets it for the test node, and launch files put their
