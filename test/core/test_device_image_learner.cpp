@@ -274,6 +274,11 @@ TEST(DeviceImageLearner, RejectsWrongInputs) {
   DeviceLearnerOptions too_coarse;
   too_coarse.flow_finest_scale = 5;
   EXPECT_NE(too_coarse.validate().find("flow_finest_scale"), std::string::npos);
+  DeviceLearnerOptions no_overlap;  // DIS needs its patches (8 wide) to overlap
+  no_overlap.flow_patch_stride = 8;
+  EXPECT_NE(no_overlap.validate().find("flow_patch_stride"), std::string::npos);
+  no_overlap.flow_patch_stride = 7;
+  EXPECT_EQ(no_overlap.validate(), "");
   const cv::Mat a(48, 64, CV_8UC1, cv::Scalar(10)), b(48, 64, CV_8UC1, cv::Scalar(20));
   EXPECT_THROW(learnDeviceImage({{a, b}, {a, b}}, bad, 0), std::invalid_argument);
   EXPECT_THROW(learnDeviceImage({{a, b}}, DeviceLearnerOptions(), 0), std::invalid_argument);

@@ -81,6 +81,7 @@ DeviceLearnerOptions windowLearnerOptions() {
   DeviceLearnerOptions options;
   options.first_pass_pairs = 2;
   options.flow_refinement_iterations = 2;
+  options.flow_patch_stride = 4;
   return options;
 }
 

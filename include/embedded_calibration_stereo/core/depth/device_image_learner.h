@@ -62,6 +62,9 @@ struct DeviceLearnerOptions {
   // The flow's finest pyramid level: 0 full resolution, 1 half (DIS's medium preset), 2 a
   // quarter, ...; DIS interpolates the flow up from there. Each level finer costs about 4 times.
   int flow_finest_scale = 1;
+  // Pixels between the flow's patches, < 8 (DIS's medium preset: 3, with patches 8 wide). A
+  // sparser lattice has fewer patches to search and fewer overlaps to blend.
+  int flow_patch_stride = 3;
   // Empty when usable; otherwise one message per problem, joined by "; ".
   std::string validate() const;
 };
