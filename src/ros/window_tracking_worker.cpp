@@ -72,6 +72,7 @@ void WindowTrackingWorker::track(const Job& job) {
                   "burst of %zu light-on frames ending at %.3f s: %d corners (%d dropped by the saddle fit), "
                   "%zu scene correspondences, in %.0f ms",
                   frames, header.stamp.toSec(), corners, saddle_failures, msg.scene.size(), ms);
+    ROS_INFO_NAMED(logger_, "PatternTracker: %s", text);
     if (!scene_problem.empty())
       ROS_WARN_THROTTLE_NAMED(30.0, logger_, "PatternTracker: %s (device_config %s)", scene_problem.c_str(),
                               device_config_.c_str());
