@@ -120,6 +120,35 @@ TEST_F(BurstSeparation, TheEndsOfOneBurstSeparateTheSceneWithin35Decibels) {
   EXPECT_LT(early_in.mean(), ends_in.mean()) << "one-sided pairs are expected to be worse";
 }
 
+// The whole burst as the window tracker learns it: the flow computed for every other light-on
+// frame of each side and interpolated in time for the others separates the burst as well as every
+// frame's own flow does, for about half the flows.
+TEST_F(BurstSeparation, InterpolatedFlowsSeparateAsWellAsEveryPairsOwn) {
+  DeviceLearnerOptions every = windowLearnerOptions();
+  every.flow_pair_step = 1;
+  ASSERT_GT(windowLearnerOptions().flow_pair_step, 1);
+  LearnedDevice interpolated[2], computed[2];
+  double cpu[2];
+  for (int variant = 0; variant < 2; ++variant) {
+    const std::clock_t c0 = std::clock();
+    for (int c = 0; c < 2; ++c)
+      (variant ? computed : interpolated)[c] =
+          learnWindowDevice(frames(c, kLit, true), variant ? every : windowLearnerOptions());
+    cpu[variant] = static_cast<double>(std::clock() - c0) / CLOCKS_PER_SEC;
+  }
+  Psnr interpolated_in, interpolated_later, computed_in, computed_later;
+  score(interpolated, 1, &interpolated_in, &interpolated_later);
+  score(computed, 1, &computed_in, &computed_later);
+  std::printf("  whole burst, interpolated flows (%.2f s of CPU): min %.2f mean %.2f dB, later frames min %.2f dB\n",
+              cpu[0], interpolated_in.min, interpolated_in.mean(), interpolated_later.min);
+  std::printf("  whole burst, every pair's flow (%.2f s of CPU): min %.2f mean %.2f dB, later frames min %.2f dB\n",
+              cpu[1], computed_in.min, computed_in.mean(), computed_later.min);
+  EXPECT_EQ(interpolated[0].pairs, kLit);
+  EXPECT_GE(interpolated_in.mean(), computed_in.mean() - 0.2);
+  EXPECT_GE(interpolated_in.min, computed_in.min - 0.5);
+  EXPECT_GE(interpolated_later.min, computed_later.min - 0.5);
+}
+
 // After a 5 % zoom, the template of a burst taken after it separates that burst's middle frames
 // with less of the device left (separationResidual) than the template taken before it, and the
 // other way round on frames before the zoom: the Separator keeps a new burst's template by this

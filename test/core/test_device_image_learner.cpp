@@ -279,6 +279,9 @@ TEST(DeviceImageLearner, RejectsWrongInputs) {
   EXPECT_NE(no_overlap.validate().find("flow_patch_stride"), std::string::npos);
   no_overlap.flow_patch_stride = 7;
   EXPECT_EQ(no_overlap.validate(), "");
+  DeviceLearnerOptions sparse;
+  sparse.flow_pair_step = 5;
+  EXPECT_NE(sparse.validate().find("flow_pair_step"), std::string::npos);
   const cv::Mat a(48, 64, CV_8UC1, cv::Scalar(10)), b(48, 64, CV_8UC1, cv::Scalar(20));
   EXPECT_THROW(learnDeviceImage({{a, b}, {a, b}}, bad, 0), std::invalid_argument);
   EXPECT_THROW(learnDeviceImage({{a, b}}, DeviceLearnerOptions(), 0), std::invalid_argument);

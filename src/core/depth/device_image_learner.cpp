@@ -6,6 +6,7 @@
 #include <cstdio>
 #include <cstring>
 #include <limits>
+#include <map>
 #include <numeric>
 #include <opencv2/core/hal/intrin.hpp>
 #include <opencv2/imgproc.hpp>
@@ -29,6 +30,7 @@ std::string DeviceLearnerOptions::validate() const {
     problems.push_back("flow_refinement_iterations must be in [0, 20]");
   if (flow_finest_scale < 0 || flow_finest_scale > 4) problems.push_back("flow_finest_scale must be in [0, 4]");
   if (flow_patch_stride < 1 || flow_patch_stride > 7) problems.push_back("flow_patch_stride must be in [1, 7]");
+  if (flow_pair_step < 1 || flow_pair_step > 4) problems.push_back("flow_pair_step must be in [1, 4]");
   std::string joined;
   for (const std::string& p : problems) joined += (joined.empty() ? "" : "; ") + p;
   return joined;
@@ -176,42 +178,40 @@ void fitGains(const cv::Mat& on, const cv::Mat& a, const cv::Mat& c, const cv::M
   }
 }
 
-// The pair's sample of I_C; `device` (float, the pair's channels) empty for the unaligned pass.
-// The pair's images are converted to float here, on every pass, rather than kept converted: a
-// burst's pairs in float would hold about 3 MB each for the whole learning.
-Sample samplePair(const LightPair& pair, const cv::Mat& device, cv::DISOpticalFlow* dis) {
-  Sample sample;
-  if (device.empty()) {
-    sample.value = unalignedSample(pair);
-    return sample;
-  }
-  const cv::Mat on = toFloat(pair.light_on), off = toFloat(pair.light_off);
-  const cv::Size size = on.size();
-  const cv::Mat on_grey = pair.light_on.channels() == 1 ? on : toFloat(grey(pair.light_on));
+// The flow of an aligned pass from the pair's light-on frame without the lit pattern (as far as
+// `device`, float, knows it) to its light-off frame: scene_on(x) ~ off(x + flow(x)), CV_32FC2.
+cv::Mat pairFlow(const LightPair& pair, const cv::Mat& device, cv::DISOpticalFlow* dis) {
+  const cv::Mat on_grey = toFloat(grey(pair.light_on));
   const cv::Mat off_grey8 = grey(pair.light_off);
   const cv::Mat device_grey = channelMean(device);
-  // The light-on frame without the lit pattern (as far as it is known), against which the
-  // scene's motion is measured.
   cv::Mat scene_on;
   {
     // Its gain first: on ~ k off + s I_C without alignment is biased by the motion, but only the
     // pattern's removal needs it, and a few percent off leaves a faint pattern the flow ignores.
     double k = 1.0, s = 1.0;
-    const cv::Mat off_grey = pair.light_off.channels() == 1 ? off : toFloat(off_grey8);
-    fitGains(on_grey, off_grey, device_grey, cv::Mat(size, CV_8U, cv::Scalar(255)), &k, &s);
+    fitGains(on_grey, toFloat(off_grey8), device_grey, cv::Mat(on_grey.size(), CV_8U, cv::Scalar(255)), &k, &s);
     cv::Mat(on_grey - s * device_grey).convertTo(scene_on, CV_8U);
   }
   cv::Mat flow;
-  dis->calc(scene_on, off_grey8, flow);  // scene_on(x) ~ off(x + flow(x))
-  cv::Mat& map = flow;  // the flow becomes the map, in place
+  dis->calc(scene_on, off_grey8, flow);
+  return flow;
+}
+
+// The pair's sample of I_C through its flow (pairFlow's), which becomes the remap's map in place.
+// The pair's images are converted to float here, on every pass, rather than kept converted: a
+// burst's pairs in float would hold about 3 MB each for the whole learning.
+Sample alignedPairSample(const LightPair& pair, const cv::Mat& device, cv::Mat flow) {
+  const cv::Mat on = toFloat(pair.light_on), off = toFloat(pair.light_off);
+  const cv::Size size = on.size();
+  const cv::Mat on_grey = pair.light_on.channels() == 1 ? on : toFloat(grey(pair.light_on));
+  cv::Mat& map = flow;
   cv::Mat valid_map(size, CV_8U);
   const float right = static_cast<float>(size.width - 1), bottom = static_cast<float>(size.height - 1);
   for (int y = 0; y < size.height; ++y) {
-    const cv::Point2f* f = flow.ptr<cv::Point2f>(y);
     cv::Point2f* m = map.ptr<cv::Point2f>(y);
     uchar* valid = valid_map.ptr<uchar>(y);
     for (int x = 0; x < size.width; ++x) {
-      m[x] = cv::Point2f(x + f[x].x, y + f[x].y);
+      m[x] = cv::Point2f(x + m[x].x, y + m[x].y);
       // Where the flow points outside the light-off frame there is nothing to subtract.
       valid[x] = m[x].x >= 0.f && m[x].y >= 0.f && m[x].x <= right && m[x].y <= bottom ? 255 : 0;
     }
@@ -219,12 +219,81 @@ Sample samplePair(const LightPair& pair, const cv::Mat& device, cv::DISOpticalFl
   cv::Mat aligned;
   cv::remap(off, aligned, map, cv::noArray(), cv::INTER_LINEAR, cv::BORDER_CONSTANT, cv::Scalar::all(-1));
 
+  Sample sample;
   double k = 1.0, s = 1.0;
-  fitGains(on_grey, channelMean(aligned), device_grey, valid_map, &k, &s);
+  fitGains(on_grey, channelMean(aligned), channelMean(device), valid_map, &k, &s);
   if (!(s > 0.05)) s = 1.0;  // a degenerate fit: keep the scale of the estimate
   sample.value = alignedSample(on, aligned, k, s, valid_map);
   sample.gain_on = s;
   return sample;
+}
+
+// The pair's sample of I_C; `device` (float, the pair's channels) empty for the unaligned pass.
+Sample samplePair(const LightPair& pair, const cv::Mat& device, cv::DISOpticalFlow* dis) {
+  if (!device.empty()) return alignedPairSample(pair, device, pairFlow(pair, device, dis));
+  Sample sample;
+  sample.value = unalignedSample(pair);
+  return sample;
+}
+
+// Pairs of one light-off frame, as positions in the pass's list, by frames apart; the flow is
+// computed for the first, every step-th after it and the last, the others interpolate it. A part
+// that does not sample its last pair leaves it to the next part, which starts there.
+struct FlowRun {
+  std::vector<int> positions;
+  bool sample_last = true;
+};
+
+// The runs of an aligned pass: the pairs grouped by their light-off frame, each group with frames
+// apart strictly increasing cut in two at a computed pair (the halves run in parallel: one extra
+// flow), any other pair a run of its own.
+std::vector<FlowRun> flowRuns(const std::vector<LightPair>& pairs, const std::vector<int>& use, int step) {
+  std::map<const uchar*, std::vector<int>> groups;
+  for (int i = 0; i < static_cast<int>(use.size()); ++i) groups[pairs[use[i]].light_off.data].push_back(i);
+  const auto apart = [&](int position) { return pairs[use[position]].frames_apart; };
+  std::vector<FlowRun> runs;
+  for (auto& group : groups) {
+    std::vector<int>& p = group.second;
+    std::stable_sort(p.begin(), p.end(), [&](int a, int b) { return apart(a) < apart(b); });
+    bool increasing = apart(p[0]) > 0;
+    for (size_t i = 1; i < p.size(); ++i) increasing &= apart(p[i]) > apart(p[i - 1]);
+    const int m = static_cast<int>(p.size()), computed = (m - 2 + step) / step + 1;  // 0, step, ..., m - 1
+    if (!increasing) {
+      for (int position : p) runs.push_back({{position}, true});
+    } else if (computed < 3) {
+      runs.push_back({p, true});
+    } else {
+      const int split = (computed / 2) * step;
+      runs.push_back({std::vector<int>(p.begin(), p.begin() + split + 1), false});
+      runs.push_back({std::vector<int>(p.begin() + split, p.end()), true});
+    }
+  }
+  return runs;
+}
+
+// Samples one run in order, holding two computed flows at a time. Over a frame period or two the
+// scene's motion is smooth, so the flow between is interpolated linearly in frames apart; where
+// it is not (an edge that appears or hides), the combination's inlier test takes the sample out.
+void sampleRun(const std::vector<LightPair>& pairs, const std::vector<int>& use, const FlowRun& run, int step,
+               const cv::Mat& device, cv::DISOpticalFlow* dis, std::vector<Sample>* samples) {
+  const std::vector<int>& p = run.positions;
+  const int m = static_cast<int>(p.size());
+  const auto pair = [&](int i) -> const LightPair& { return pairs[use[p[i]]]; };
+  cv::Mat flow_a = pairFlow(pair(0), device, dis), flow;  // flow: the interpolated, reused
+  for (int a = 0; a + 1 < m;) {
+    const int b = std::min(a + step, m - 1);
+    const cv::Mat flow_b = pairFlow(pair(b), device, dis);
+    for (int i = a + 1; i < b; ++i) {
+      const double w = static_cast<double>(pair(i).frames_apart - pair(a).frames_apart) /
+                       (pair(b).frames_apart - pair(a).frames_apart);
+      cv::addWeighted(flow_a, 1.0 - w, flow_b, w, 0.0, flow);
+      (*samples)[p[i]] = alignedPairSample(pair(i), device, flow);
+    }
+    (*samples)[p[a]] = alignedPairSample(pair(a), device, flow_a);
+    flow_a = flow_b;
+    a = b;
+  }
+  if (run.sample_last) (*samples)[p[m - 1]] = alignedPairSample(pair(m - 1), device, flow_a);
 }
 
 // The comparators of a sorting network for n values: Batcher's odd-even merge sort for the next
@@ -439,6 +508,34 @@ void combine(const std::vector<Sample>& samples, float scale, double threshold, 
   });
 }
 
+cv::Ptr<cv::DISOpticalFlow> learnerFlow(const DeviceLearnerOptions& options) {
+  cv::Ptr<cv::DISOpticalFlow> dis = cv::DISOpticalFlow::create(cv::DISOpticalFlow::PRESET_MEDIUM);
+  dis->setVariationalRefinementIterations(options.flow_refinement_iterations);
+  dis->setFinestScale(options.flow_finest_scale);
+  dis->setPatchStride(options.flow_patch_stride);
+  return dis;
+}
+
+// The samples of the pairs `use`, in that order; `device` empty for the unaligned pass. Flow is
+// per pair (or per run of pairs) and independent: they run in parallel, one DIS instance each.
+std::vector<Sample> samplePass(const std::vector<LightPair>& pairs, const std::vector<int>& use, const cv::Mat& device,
+                               const DeviceLearnerOptions& options) {
+  std::vector<Sample> samples(use.size());
+  const bool interpolate = !device.empty() && options.flow_pair_step > 1;
+  const std::vector<FlowRun> runs = interpolate ? flowRuns(pairs, use, options.flow_pair_step) : std::vector<FlowRun>();
+  const int tasks = static_cast<int>(interpolate ? runs.size() : use.size());
+  cv::parallel_for_(cv::Range(0, tasks), [&](const cv::Range& r) {
+    const cv::Ptr<cv::DISOpticalFlow> dis = learnerFlow(options);
+    for (int i = r.start; i < r.end; ++i) {
+      if (interpolate)
+        sampleRun(pairs, use, runs[i], options.flow_pair_step, device, dis.get(), &samples);
+      else
+        samples[i] = samplePair(pairs[use[i]], device, dis.get());
+    }
+  });
+  return samples;
+}
+
 }  // namespace
 
 LearnedDevice learnDeviceImage(const std::vector<LightPair>& pairs, const DeviceLearnerOptions& options,
@@ -467,15 +564,7 @@ LearnedDevice learnDeviceImage(const std::vector<LightPair>& pairs, const Device
     const std::vector<int>& use = pass == 1 ? closest : all;
     const int m = static_cast<int>(use.size());
     double scale = 1.0;  // of the samples' grey levels
-    std::vector<Sample> samples(m);
-    // Flow is per pair and independent: pairs run in parallel, one DIS instance each.
-    cv::parallel_for_(cv::Range(0, m), [&](const cv::Range& r) {
-      cv::Ptr<cv::DISOpticalFlow> dis = cv::DISOpticalFlow::create(cv::DISOpticalFlow::PRESET_MEDIUM);
-      dis->setVariationalRefinementIterations(options.flow_refinement_iterations);
-      dis->setFinestScale(options.flow_finest_scale);
-      dis->setPatchStride(options.flow_patch_stride);
-      for (int i = r.start; i < r.end; ++i) samples[i] = samplePair(pairs[use[i]], device, dis.get());
-    });
+    const std::vector<Sample> samples = samplePass(pairs, use, device, options);
     if (pass > 0) {
       // Each sample is on the scale of the previous estimate; that scale is pinned to the median
       // pair's light-on gain, so that it cannot drift from pass to pass.

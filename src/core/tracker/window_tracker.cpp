@@ -82,6 +82,7 @@ DeviceLearnerOptions windowLearnerOptions() {
   options.first_pass_pairs = 2;
   options.flow_refinement_iterations = 2;
   options.flow_patch_stride = 4;
+  options.flow_pair_step = 2;
   return options;
 }
 

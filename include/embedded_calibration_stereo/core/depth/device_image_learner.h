@@ -65,6 +65,10 @@ struct DeviceLearnerOptions {
   // Pixels between the flow's patches, < 8 (DIS's medium preset: 3, with patches 8 wide). A
   // sparser lattice has fewer patches to search and fewer overlaps to blend.
   int flow_patch_stride = 3;
+  // Of the pairs that share a light-off frame (a burst's), the aligned passes compute the flow of
+  // every flow_pair_step-th by frames apart (and of the last) and interpolate it in time for the
+  // pairs between; 1: every pair's own. Needs the pairs' frames_apart.
+  int flow_pair_step = 1;
   // Empty when usable; otherwise one message per problem, joined by "; ".
   std::string validate() const;
 };
