@@ -197,24 +197,29 @@ cv::Mat pairFlow(const LightPair& pair, const cv::Mat& device, cv::DISOpticalFlo
   return flow;
 }
 
-// The pair's sample of I_C through its flow (pairFlow's), which becomes the remap's map in place.
-// The pair's images are converted to float here, on every pass, rather than kept converted: a
-// burst's pairs in float would hold about 3 MB each for the whole learning.
-Sample alignedPairSample(const LightPair& pair, const cv::Mat& device, cv::Mat flow) {
+// A flow turned into the remap's map in place: x + flow(x).
+void flowToMap(cv::Mat* flow) {
+  for (int y = 0; y < flow->rows; ++y) {
+    cv::Point2f* m = flow->ptr<cv::Point2f>(y);
+    for (int x = 0; x < flow->cols; ++x) m[x] += cv::Point2f(static_cast<float>(x), static_cast<float>(y));
+  }
+}
+
+// The pair's sample of I_C through `map` (a flow of pairFlow's made a map by flowToMap; only
+// read). The pair's images are converted to float here, on every pass, rather than kept
+// converted: a burst's pairs in float would hold about 3 MB each for the whole learning.
+Sample alignedPairSample(const LightPair& pair, const cv::Mat& device, const cv::Mat& map) {
   const cv::Mat on = toFloat(pair.light_on), off = toFloat(pair.light_off);
   const cv::Size size = on.size();
   const cv::Mat on_grey = pair.light_on.channels() == 1 ? on : toFloat(grey(pair.light_on));
-  cv::Mat& map = flow;
   cv::Mat valid_map(size, CV_8U);
   const float right = static_cast<float>(size.width - 1), bottom = static_cast<float>(size.height - 1);
   for (int y = 0; y < size.height; ++y) {
-    cv::Point2f* m = map.ptr<cv::Point2f>(y);
+    const cv::Point2f* m = map.ptr<cv::Point2f>(y);
     uchar* valid = valid_map.ptr<uchar>(y);
-    for (int x = 0; x < size.width; ++x) {
-      m[x] = cv::Point2f(x + m[x].x, y + m[x].y);
-      // Where the flow points outside the light-off frame there is nothing to subtract.
+    // Where the flow points outside the light-off frame there is nothing to subtract.
+    for (int x = 0; x < size.width; ++x)
       valid[x] = m[x].x >= 0.f && m[x].y >= 0.f && m[x].x <= right && m[x].y <= bottom ? 255 : 0;
-    }
   }
   cv::Mat aligned;
   cv::remap(off, aligned, map, cv::noArray(), cv::INTER_LINEAR, cv::BORDER_CONSTANT, cv::Scalar::all(-1));
@@ -230,7 +235,11 @@ Sample alignedPairSample(const LightPair& pair, const cv::Mat& device, cv::Mat f
 
 // The pair's sample of I_C; `device` (float, the pair's channels) empty for the unaligned pass.
 Sample samplePair(const LightPair& pair, const cv::Mat& device, cv::DISOpticalFlow* dis) {
-  if (!device.empty()) return alignedPairSample(pair, device, pairFlow(pair, device, dis));
+  if (!device.empty()) {
+    cv::Mat map = pairFlow(pair, device, dis);
+    flowToMap(&map);
+    return alignedPairSample(pair, device, map);
+  }
   Sample sample;
   sample.value = unalignedSample(pair);
   return sample;
@@ -271,29 +280,37 @@ std::vector<FlowRun> flowRuns(const std::vector<LightPair>& pairs, const std::ve
   return runs;
 }
 
-// Samples one run in order, holding two computed flows at a time. Over a frame period or two the
-// scene's motion is smooth, so the flow between is interpolated linearly in frames apart; where
-// it is not (an edge that appears or hides), the combination's inlier test takes the sample out.
+// Samples one run in order, holding two computed flows at a time (as maps). Over a frame period
+// or two the scene's motion is smooth, so the map between is interpolated linearly in frames
+// apart; where it is not (an edge that appears or hides), the combination's inlier test takes the
+// sample out. The last map between two computed ones is written over the first of them, which
+// is no longer needed then: with every other flow computed, no third map is held.
 void sampleRun(const std::vector<LightPair>& pairs, const std::vector<int>& use, const FlowRun& run, int step,
                const cv::Mat& device, cv::DISOpticalFlow* dis, std::vector<Sample>* samples) {
   const std::vector<int>& p = run.positions;
   const int m = static_cast<int>(p.size());
   const auto pair = [&](int i) -> const LightPair& { return pairs[use[p[i]]]; };
-  cv::Mat flow_a = pairFlow(pair(0), device, dis), flow;  // flow: the interpolated, reused
+  const auto map = [&](int i) {
+    cv::Mat flow = pairFlow(pair(i), device, dis);
+    flowToMap(&flow);
+    return flow;
+  };
+  cv::Mat map_a = map(0), between;
   for (int a = 0; a + 1 < m;) {
     const int b = std::min(a + step, m - 1);
-    const cv::Mat flow_b = pairFlow(pair(b), device, dis);
+    const cv::Mat map_b = map(b);
+    (*samples)[p[a]] = alignedPairSample(pair(a), device, map_a);
     for (int i = a + 1; i < b; ++i) {
       const double w = static_cast<double>(pair(i).frames_apart - pair(a).frames_apart) /
                        (pair(b).frames_apart - pair(a).frames_apart);
-      cv::addWeighted(flow_a, 1.0 - w, flow_b, w, 0.0, flow);
-      (*samples)[p[i]] = alignedPairSample(pair(i), device, flow);
+      cv::Mat& out = i + 1 == b ? map_a : between;
+      cv::addWeighted(map_a, 1.0 - w, map_b, w, 0.0, out);
+      (*samples)[p[i]] = alignedPairSample(pair(i), device, out);
     }
-    (*samples)[p[a]] = alignedPairSample(pair(a), device, flow_a);
-    flow_a = flow_b;
+    map_a = map_b;
     a = b;
   }
-  if (run.sample_last) (*samples)[p[m - 1]] = alignedPairSample(pair(m - 1), device, flow_a);
+  if (run.sample_last) (*samples)[p[m - 1]] = alignedPairSample(pair(m - 1), device, map_a);
 }
 
 // The comparators of a sorting network for n values: Batcher's odd-even merge sort for the next
