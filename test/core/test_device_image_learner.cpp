@@ -20,6 +20,8 @@
 #include <string>
 #include <vector>
 
+#include <opencv2/imgproc.hpp>
+
 #include "embedded_calibration_stereo/core/light/light_schedule.h"
 #include "embedded_calibration_stereo/core/depth/device_image_learner.h"
 #include "embedded_calibration_stereo/core/depth/disparity.h"
@@ -265,6 +267,38 @@ TEST(DeviceImageLearner, LearnsOnDrivePhotoWithoutTruthAndFollowsAZoom) {
   EXPECT_GE(fresh.min_psnr, 35.0);
   EXPECT_LE(fresh.worst_gap, 2.0);
   std::printf("  test time %.1f s\n", secondsSince(t0));
+}
+
+// Pairs one after the other (the window tracker's choice, for memory) learn the very same image
+// as pairs in parallel, with and without interpolated flows: the result depends on no thread.
+TEST(DeviceImageLearner, PairsInSeriesLearnWhatPairsInParallelLearn) {
+  cv::RNG rng(7);
+  cv::Mat scene(120, 160, CV_8UC1);
+  rng.fill(scene, cv::RNG::UNIFORM, 20, 200);
+  cv::GaussianBlur(scene, scene, cv::Size(5, 5), 1.5);
+  cv::Mat pattern = cv::Mat::zeros(scene.size(), CV_8UC1);
+  cv::rectangle(pattern, cv::Rect(40, 30, 80, 60), cv::Scalar(40), cv::FILLED);
+  const cv::Mat off = scene.clone();
+  std::vector<LightPair> pairs;
+  for (int k = 1; k <= 6; ++k) {
+    cv::Mat moved;
+    const cv::Matx23d shift(1, 0, 0.7 * k, 0, 1, -0.4 * k);
+    cv::warpAffine(scene, moved, shift, scene.size(), cv::INTER_LINEAR, cv::BORDER_REFLECT);
+    pairs.push_back({off, moved + pattern, k});
+  }
+  for (int step : {1, 2}) {
+    DeviceLearnerOptions parallel;
+    parallel.min_pairs = 2;
+    parallel.flow_pair_step = step;
+    DeviceLearnerOptions series = parallel;
+    series.parallel_pairs = false;
+    const cv::Mat a = learnDeviceImage(pairs, parallel, 0).device_template.device;
+    const cv::Mat b = learnDeviceImage(pairs, series, 0).device_template.device;
+    ASSERT_EQ(a.size(), b.size());
+    EXPECT_EQ(cv::norm(a, b, cv::NORM_INF), 0.0) << "flow_pair_step " << step;
+    // And it learned the pattern: the lit rectangle stands out of the rest.
+    EXPECT_GT(cv::mean(a(cv::Rect(50, 40, 60, 40)))[0], cv::mean(a(cv::Rect(0, 0, 30, 120)))[0] + 20.0);
+  }
 }
 
 TEST(DeviceImageLearner, RejectsWrongInputs) {

@@ -534,14 +534,15 @@ cv::Ptr<cv::DISOpticalFlow> learnerFlow(const DeviceLearnerOptions& options) {
 }
 
 // The samples of the pairs `use`, in that order; `device` empty for the unaligned pass. Flow is
-// per pair (or per run of pairs) and independent: they run in parallel, one DIS instance each.
+// per pair (or per run of pairs) and independent: in parallel, one DIS instance each, or one
+// after the other (options.parallel_pairs).
 std::vector<Sample> samplePass(const std::vector<LightPair>& pairs, const std::vector<int>& use, const cv::Mat& device,
                                const DeviceLearnerOptions& options) {
   std::vector<Sample> samples(use.size());
   const bool interpolate = !device.empty() && options.flow_pair_step > 1;
   const std::vector<FlowRun> runs = interpolate ? flowRuns(pairs, use, options.flow_pair_step) : std::vector<FlowRun>();
   const int tasks = static_cast<int>(interpolate ? runs.size() : use.size());
-  cv::parallel_for_(cv::Range(0, tasks), [&](const cv::Range& r) {
+  const auto body = [&](const cv::Range& r) {
     const cv::Ptr<cv::DISOpticalFlow> dis = learnerFlow(options);
     for (int i = r.start; i < r.end; ++i) {
       if (interpolate)
@@ -549,7 +550,11 @@ std::vector<Sample> samplePass(const std::vector<LightPair>& pairs, const std::v
       else
         samples[i] = samplePair(pairs[use[i]], device, dis.get());
     }
-  });
+  };
+  if (options.parallel_pairs)
+    cv::parallel_for_(cv::Range(0, tasks), body);
+  else
+    body(cv::Range(0, tasks));
   return samples;
 }
 

@@ -83,6 +83,7 @@ DeviceLearnerOptions windowLearnerOptions() {
   options.flow_refinement_iterations = 2;
   options.flow_patch_stride = 4;
   options.flow_pair_step = 2;
+  options.parallel_pairs = false;  // the head's memory: a burst's learning runs beside depth
   return options;
 }
 

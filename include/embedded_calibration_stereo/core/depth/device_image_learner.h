@@ -69,6 +69,12 @@ struct DeviceLearnerOptions {
   // every flow_pair_step-th by frames apart (and of the last) and interpolate it in time for the
   // pairs between; 1: every pair's own. Needs the pairs' frames_apart.
   int flow_pair_step = 1;
+  // Pairs in parallel (a DIS instance and a pair's working images per thread), or one after the
+  // other with each flow, remap and combination parallel inside: a third less memory at the peak,
+  // and OpenCV's parallel region (one at a time per process: another thread's parallel loop
+  // started meanwhile runs serially) held a few milliseconds at a time rather than for a whole
+  // pass, at the cost of more CPU.
+  bool parallel_pairs = true;
   // Empty when usable; otherwise one message per problem, joined by "; ".
   std::string validate() const;
 };
