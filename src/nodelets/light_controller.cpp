@@ -244,10 +244,11 @@ class LightControllerNodelet : public GuardedNodelet {
   void checkCalibration(const CameraInfo& info, const std::string& topic, int side) {
     if (calibration_.update(side, info))
       NODELET_INFO("LightController: new calibration on %s, calibration epoch %u", topic.c_str(), calibration_.epoch());
-    if (calibration_.uncalibrated(side))
-      NODELET_WARN_THROTTLE(10.0, "LightController: %s is uncalibrated (K or P all zero): the calibrator starts from "
-                                  "scratch and depth waits for a committed calibration",
-                            topic.c_str());
+    // Throttled per topic: the other camera's warning must not hide this one's.
+    if (calibration_.uncalibrated(side) && uncalibrated_warnings_.shouldReport(topic))
+      NODELET_WARN("LightController: %s is uncalibrated (K or P all zero): the calibrator starts from scratch and "
+                   "depth waits for a committed calibration",
+                   topic.c_str());
   }
 
   void publish(const PendingFrame& frame, const core::ConfirmedLight& light) {
@@ -350,6 +351,7 @@ class LightControllerNodelet : public GuardedNodelet {
   // How long a calibration of one camera waits for the other camera's (as the CameraDriver's default).
   static constexpr double kPairTimeoutS = 10.0;
   DriverCalibrationWatch calibration_;  // the driver's camera_info: epoch, uncalibrated
+  ErrorThrottle uncalibrated_warnings_{10.0};  // per camera_info topic
 
   std::unique_ptr<image_transport::ImageTransport> it_;
   std::unique_ptr<ExternalStereoInput> input_;  // the driver's four topics, paired by stamp

@@ -250,7 +250,9 @@ TEST(LightControllerInputs, DelayedLightAndBadInputs) {
   from = diagnostics.snapshot().size();
   EXPECT_TRUE(waitForDiagnostic(diagnostics, from, DiagnosticStatus::WARN, "uncalibrated", 8.0, &seen))
       << "last light_controller status: " << seen;
+  // One warning per topic: the other camera's must not hide it.
   EXPECT_TRUE(test_support::waitForLog(log, {"/stereo/left_driver/camera_info is uncalibrated"}, 5.0));
+  EXPECT_TRUE(test_support::waitForLog(log, {"/stereo/right_driver/camera_info is uncalibrated"}, 5.0));
   size_t count = modes.snapshot().size();
   EXPECT_TRUE(modes.waitForCount(count + 10, 5.0)) << "frames stopped with an uncalibrated camera_info";
 
