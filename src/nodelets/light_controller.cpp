@@ -172,9 +172,10 @@ class LightControllerNodelet : public GuardedNodelet {
   void warnIfRegionsDoNotFit(int camera, const cv::Mat& image, const std::string& topic) {
     if (confirmer_->fits(camera, image.size())) return;
     const cv::Mat& mask = regions_file_->mask(camera);
-    NODELET_WARN_THROTTLE(10.0, "LightController: %s is %dx%d but the prior file '%s' was taught on %dx%d images; "
-                                "confirming the light over the whole image",
-                          topic.c_str(), image.cols, image.rows, params_.prior_file.c_str(), mask.cols, mask.rows);
+    if (!input_warnings_.shouldReport(topic + " size")) return;  // per topic: both cameras are named
+    NODELET_WARN("LightController: %s is %dx%d but the prior file '%s' was taught on %dx%d images; confirming the "
+                 "light over the whole image",
+                 topic.c_str(), image.cols, image.rows, params_.prior_file.c_str(), mask.cols, mask.rows);
   }
 
   bool readImage(const ImageConstPtr& msg, const std::string& topic, cv_bridge::CvImageConstPtr* out) {
@@ -245,7 +246,7 @@ class LightControllerNodelet : public GuardedNodelet {
     if (calibration_.update(side, info))
       NODELET_INFO("LightController: new calibration on %s, calibration epoch %u", topic.c_str(), calibration_.epoch());
     // Throttled per topic: the other camera's warning must not hide this one's.
-    if (calibration_.uncalibrated(side) && uncalibrated_warnings_.shouldReport(topic))
+    if (calibration_.uncalibrated(side) && input_warnings_.shouldReport(topic + " uncalibrated"))
       NODELET_WARN("LightController: %s is uncalibrated (K or P all zero): the calibrator starts from scratch and "
                    "depth waits for a committed calibration",
                    topic.c_str());
@@ -351,7 +352,7 @@ class LightControllerNodelet : public GuardedNodelet {
   // How long a calibration of one camera waits for the other camera's (as the CameraDriver's default).
   static constexpr double kPairTimeoutS = 10.0;
   DriverCalibrationWatch calibration_;  // the driver's camera_info: epoch, uncalibrated
-  ErrorThrottle uncalibrated_warnings_{10.0};  // per camera_info topic
+  ErrorThrottle input_warnings_{10.0};  // per topic and problem (an image size, an uncalibrated camera_info)
 
   std::unique_ptr<image_transport::ImageTransport> it_;
   std::unique_ptr<ExternalStereoInput> input_;  // the driver's four topics, paired by stamp
