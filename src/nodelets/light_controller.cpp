@@ -178,20 +178,25 @@ class LightControllerNodelet : public GuardedNodelet {
                  topic.c_str(), image.cols, image.rows, params_.prior_file.c_str(), mask.cols, mask.rows);
   }
 
+  // Throttled per message, as the other nodelets' (ErrorThrottle): one camera's bad image must not
+  // hide the other's.
+  void reportDropped(const std::string& message) {
+    if (errors_.shouldReport(message)) NODELET_ERROR("LightController: %s; frame dropped", message.c_str());
+  }
+
   bool readImage(const ImageConstPtr& msg, const std::string& topic, cv_bridge::CvImageConstPtr* out) {
     if (msg->encoding != "mono8" && msg->encoding != "bgr8" && msg->encoding != "rgb8") {
-      NODELET_ERROR_THROTTLE(5.0, "LightController: %s has encoding '%s' (expected mono8, bgr8 or rgb8); frame dropped",
-                             topic.c_str(), msg->encoding.c_str());
+      reportDropped(topic + " has encoding '" + msg->encoding + "' (expected mono8, bgr8 or rgb8)");
       return false;
     }
     try {
       *out = cv_bridge::toCvShare(msg);
     } catch (const cv_bridge::Exception& e) {
-      NODELET_ERROR_THROTTLE(5.0, "LightController: cannot read %s: %s; frame dropped", topic.c_str(), e.what());
+      reportDropped("cannot read " + topic + ": " + e.what());
       return false;
     }
     if ((*out)->image.empty()) {
-      NODELET_ERROR_THROTTLE(5.0, "LightController: %s delivered an empty image; frame dropped", topic.c_str());
+      reportDropped(topic + " delivered an empty image");
       return false;
     }
     return true;
@@ -353,6 +358,7 @@ class LightControllerNodelet : public GuardedNodelet {
   static constexpr double kPairTimeoutS = 10.0;
   DriverCalibrationWatch calibration_;  // the driver's camera_info: epoch, uncalibrated
   ErrorThrottle input_warnings_{10.0};  // per topic and problem (an image size, an uncalibrated camera_info)
+  ErrorThrottle errors_{5.0};           // dropped frames, per message
 
   std::unique_ptr<image_transport::ImageTransport> it_;
   std::unique_ptr<ExternalStereoInput> input_;  // the driver's four topics, paired by stamp
