@@ -13,8 +13,9 @@
 //    stamp tolerance), stamped with the clock or with the stamp of the driver's latest frame,
 //    light and settled flags at random: they once filled the synchronisers' queues with sets no
 //    image would complete, or replaced the driver's messages (depth at 0-4 Hz). Now:
-//    disparity keeps at least 90 % of its rate of the 4 s before, and a warning names the topic
-//    and the publisher.
+//    disparity keeps at least half of its rate of the 4 s before (the failure took it to a
+//    quarter or less; a tighter bound measures the load of the machine), and a warning names the
+//    topic and the publisher.
 #include <gtest/gtest.h>
 #include <sensor_msgs/CameraInfo.h>
 #include <stereo_msgs/DisparityImage.h>
@@ -149,7 +150,7 @@ void expectRateKept(double rate_hz, const std::function<ros::Time()>& stamp, con
   std::printf("%s at %.0f Hz: disparity %.1f Hz during the flood, %.1f Hz in the 4 s before\n", what, rate_hz,
               with, without);
   EXPECT_GT(without, 10.0) << "control: disparity of the 15 fps driver";
-  EXPECT_GE(with, 0.9 * without);
+  EXPECT_GE(with, 0.5 * without);
 }
 
 ros::Time latestFrame() {
