@@ -87,7 +87,11 @@ class LightControllerNodelet : public GuardedNodelet {
     input_ = std::make_unique<ExternalStereoInput>(
         nh, pnh, *it_, ExternalStereoInput::Options{params_.approximate_sync, params_.max_interval_s, params_.queue_size},
         [this](const auto& l, const auto& li, const auto& r, const auto& ri) { frameCb(l, li, r, ri); },
-        [this](const std::string& text) { NODELET_WARN("%s", text.c_str()); });
+        [this](const std::string& text) { NODELET_WARN("%s", text.c_str()); },
+        [this](const std::string& problem) {
+          ++dropped_;
+          reportDropped(problem);
+        });
     startDiagnostics(nh, pnh);
     NODELET_INFO("LightController: light %s, %s sync of %s and %s, light confirmed in %s, calibrations stored by %s",
                  params_.light.backend.c_str(), params_.approximate_sync ? "approximate" : "exact",
@@ -205,7 +209,10 @@ class LightControllerNodelet : public GuardedNodelet {
   void frameCb(const ImageConstPtr& left, const CameraInfoConstPtr& left_info, const ImageConstPtr& right,
                const CameraInfoConstPtr& right_info) {
     cv_bridge::CvImageConstPtr left_cv, right_cv;
-    if (!readImage(left, input_->topic(0), &left_cv) || !readImage(right, input_->topic(2), &right_cv)) {
+    // Both read, so that a bad left image does not hide a bad right one.
+    const bool left_read = readImage(left, input_->topic(0), &left_cv);
+    const bool right_read = readImage(right, input_->topic(2), &right_cv);
+    if (!left_read || !right_read) {
       ++dropped_;
       return;
     }

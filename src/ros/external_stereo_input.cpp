@@ -6,8 +6,8 @@ namespace embedded_calibration_stereo {
 
 ExternalStereoInput::ExternalStereoInput(ros::NodeHandle& nh, ros::NodeHandle& pnh,
                                          image_transport::ImageTransport& it, const Options& options, Frame frame,
-                                         std::function<void(const std::string&)> warn)
-    : frame_(std::move(frame)) {
+                                         Report warn, Report unreadable)
+    : frame_(std::move(frame)), unreadable_(std::move(unreadable)) {
   const image_transport::TransportHints hints("raw", ros::TransportHints(), pnh);
   left_sub_.subscribe(it, "driver/left/image_raw", options.queue_size, hints);
   right_sub_.subscribe(it, "driver/right/image_raw", options.queue_size, hints);
@@ -35,13 +35,19 @@ std::string ExternalStereoInput::topic(int index) const {
   }
 }
 
-void ExternalStereoInput::admit(ros::NodeHandle& pnh, std::function<void(const std::string&)> warn) {
+bool ExternalStereoInput::readable(int index, const Image& image) const {
+  const std::string problem = malformedImage(image);
+  if (!problem.empty()) unreadable_("cannot read the image on " + topic(index) + ": " + problem);
+  return problem.empty();
+}
+
+void ExternalStereoInput::admit(ros::NodeHandle& pnh, Report warn) {
   guard_ = std::make_unique<StampGuard>(std::vector<std::string>{topic(0), topic(1), topic(2), topic(3)},
                                         readStampTolerance(pnh), "LightController", std::move(warn));
   const auto admit_image = [this](size_t index) {
     return [this, index](const ros::MessageEvent<Image const>& event) {
       const Image& image = *event.getMessage();
-      return malformedImage(image).empty() && guard_->admit(index, image.header.stamp);
+      return readable(static_cast<int>(index), image) && guard_->admit(index, image.header.stamp);
     };
   };
   const auto admit_info = [this](size_t index) {

@@ -26,6 +26,7 @@ struct Side {
   int width = 160, height = 120;
   bool calibrated = true;
   std::string frame_id = "cam";
+  bool truncated = false;  // data shorter than height x step
 };
 
 Image::Ptr makeImage(const Side& s, const ros::Time& stamp) {
@@ -41,6 +42,7 @@ Image::Ptr makeImage(const Side& s, const ros::Time& stamp) {
   cv::Mat bytes(1, static_cast<int>(msg->data.size()), CV_8U, msg->data.data());
   cv::RNG rng(7);  // the same texture on both sides: disparity 0 everywhere
   rng.fill(bytes, cv::RNG::UNIFORM, 0, 256);
+  if (s.truncated) msg->data.resize(msg->data.size() / 2);
   return msg;
 }
 
@@ -147,6 +149,11 @@ Side withWidth(int w) {
   s.width = w;
   return s;
 }
+Side truncated() {
+  Side s;
+  s.truncated = true;
+  return s;
+}
 Side uncalibrated() {
   Side s;
   s.calibrated = false;
@@ -166,6 +173,14 @@ TEST(RectifierBadInput, EncodingMismatch) {
 TEST(RectifierBadInput, UncalibratedCameraInfo) {
   expectRejected<Image>("image_scene", "left/image_rect", uncalibrated(), Side(),
                         {"left/camera_info", "uncalibrated"});
+}
+// Both images unreadable in every frame: each camera's topic is named (the left camera's error,
+// which comes first, must not hide the right camera's).
+TEST(RectifierBadInput, MalformedImagesOfBothCamerasAreBothNamed) {
+  expectRejected<Image>("image_scene", "left/image_rect", truncated(), truncated(),
+                        {"image dropped on", "left/image_scene", "fewer than height x step"});
+  expectRejected<Image>("image_scene", "left/image_rect", truncated(), truncated(),
+                        {"image dropped on", "right/image_scene", "fewer than height x step"});
 }
 TEST(RectifierBadInput, UnsupportedEncoding) {
   expectRejected<Image>("image_scene", "left/image_rect", withEncoding("32FC1"), withEncoding("32FC1"),

@@ -11,10 +11,18 @@
 //     boards seen"; with the light off again the report clears;
 //  C. uncalibrated camera_info: a warning naming the topic, frames keep flowing;
 //  D. no right camera_info: frames are held back with an error naming the topic, and flow again
-//     once it is back.
+//     once it is back;
+//  E. on demand: a burst while calibration/health wants one, none while it does not;
+//  F. unreadable images: a malformed left image (its data shorter than its size says), then an
+//     empty left image and a right image of an encoding the light cannot be confirmed on, at
+//     once: each is dropped with an error naming its topic (both cameras', not the first one's
+//     alone), and frames flow again once the images are good;
+//  G. images of another size than the board regions were taught on: a warning naming each
+//     camera's topic and both sizes; frames keep flowing.
 #include <cv_bridge/cv_bridge.h>
 #include <diagnostic_msgs/DiagnosticArray.h>
 #include <gtest/gtest.h>
+#include <opencv2/imgproc.hpp>
 #include <rosgraph_msgs/Log.h>
 #include <sensor_msgs/CameraInfo.h>
 #include <sensor_msgs/Image.h>
@@ -53,6 +61,7 @@ constexpr int kDelayFrames = 2;
 class FakeDriver {
  public:
   enum class Info { kCalibrated, kUncalibrated, kRightMissing };
+  enum class Images { kGood, kLeftMalformed, kLeftEmptyRightWrongEncoding, kHalfSize };
 
   explicit FakeDriver(ros::NodeHandle& nh) {
     core::SimRigConfig config = core::loadSimRigConfig(std::string(ECS_SOURCE_DIR) + "/config/sim_rig.yaml");
@@ -85,6 +94,7 @@ class FakeDriver {
 
   std::atomic<bool> device_visible{true};
   std::atomic<Info> info{Info::kCalibrated};
+  std::atomic<Images> images{Images::kGood};
 
   // Fraction of the exposure with the light on, for the frame of this (left) stamp; -1 unknown.
   double truthAt(const ros::Time& stamp) {
@@ -126,7 +136,7 @@ class FakeDriver {
     std_msgs::Header header;
     header.stamp = stamp;
     header.frame_id = "stereo_left_optical_frame";
-    (c == 0 ? left_pub_ : right_pub_).publish(cv_bridge::CvImage(header, "mono8", image).toImageMsg());
+    (c == 0 ? left_pub_ : right_pub_).publish(imageMessage(c, header, image));
     const Info mode = info.load();
     if (mode == Info::kRightMissing && c == 1) return;
     sensor_msgs::CameraInfo camera = c == 0 ? left_info_ : right_info_;
@@ -138,6 +148,27 @@ class FakeDriver {
     }
     camera.header = header;
     (c == 0 ? left_info_pub_ : right_info_pub_).publish(camera);
+  }
+
+  // Camera c's image as the fault of the moment makes it.
+  sensor_msgs::ImagePtr imageMessage(int c, const std_msgs::Header& header, const cv::Mat& image) const {
+    const Images fault = images.load();
+    if (fault == Images::kHalfSize) {
+      cv::Mat half;
+      cv::resize(image, half, cv::Size(), 0.5, 0.5, cv::INTER_AREA);
+      return cv_bridge::CvImage(header, "mono8", half).toImageMsg();
+    }
+    sensor_msgs::ImagePtr msg = cv_bridge::CvImage(header, "mono8", image).toImageMsg();
+    if (fault == Images::kLeftMalformed && c == 0) msg->data.resize(msg->data.size() / 2);
+    if (fault == Images::kLeftEmptyRightWrongEncoding && c == 0) {
+      msg->width = msg->height = msg->step = 0;
+      msg->data.clear();
+    }
+    if (fault == Images::kLeftEmptyRightWrongEncoding && c == 1) {
+      msg->encoding = "16UC1";  // as if a depth camera's stream were remapped here
+      msg->width /= 2;          // readable: step is width x 2 bytes
+    }
+    return msg;
   }
 
   cv::Mat off_[2], on_[2];
@@ -309,6 +340,35 @@ TEST(LightControllerInputs, DelayedLightAndBadInputs) {
   for (size_t i = before; i < quiet.size(); ++i) lit += quiet[i]->light_on ? 1 : 0;
   EXPECT_EQ(lit, 0) << "the light went on while calibration/health wanted no calibration";
   health_timer.stop();
+
+  // F. Unreadable images: dropped, each with an error naming its topic; frames resume after.
+  //    A malformed left image is dropped before pairing; an empty left image and a right image
+  //    of another encoding, in the same frame, are both named.
+  driver.images = FakeDriver::Images::kLeftMalformed;
+  EXPECT_TRUE(test_support::waitForLog(
+      log, {"cannot read the image on /stereo/left_driver/image_raw", "fewer than height x step", "frame dropped"}, 5.0))
+      << "a malformed image was dropped without a word";
+  count = modes.snapshot().size();
+  ros::WallDuration(1.0).sleep();  // a quiet second (the control below shows the pipe works)
+  EXPECT_LE(modes.snapshot().size(), count + 1) << "frames went out with a malformed image";
+  driver.images = FakeDriver::Images::kLeftEmptyRightWrongEncoding;
+  EXPECT_TRUE(test_support::waitForLog(log, {"/stereo/left_driver/image_raw delivered an empty image"}, 5.0));
+  EXPECT_TRUE(test_support::waitForLog(log, {"/stereo/right_driver/image_raw has encoding '16UC1'", "frame dropped"},
+                                       5.0))
+      << "the left camera's error hid the right camera's";
+  driver.images = FakeDriver::Images::kGood;
+  count = modes.snapshot().size();
+  EXPECT_TRUE(modes.waitForCount(count + 10, 5.0)) << "frames did not resume with good images";
+
+  // G. Images of another size than the board regions were taught on: a warning per camera.
+  ASSERT_TRUE(test_support::waitForLog(log, {"LightController: taught board regions read from"}, 1.0))
+      << "the board regions were never taught in this test: nothing to check their size against";
+  driver.images = FakeDriver::Images::kHalfSize;
+  EXPECT_TRUE(test_support::waitForLog(log, {"/stereo/left_driver/image_raw is 376x240", "taught on 752x480"}, 5.0));
+  EXPECT_TRUE(test_support::waitForLog(log, {"/stereo/right_driver/image_raw is 376x240", "taught on 752x480"}, 5.0));
+  count = modes.snapshot().size();
+  EXPECT_TRUE(modes.waitForCount(count + 10, 5.0)) << "frames stopped with images of another size";
+  driver.images = FakeDriver::Images::kGood;
 }
 
 int main(int argc, char** argv) {

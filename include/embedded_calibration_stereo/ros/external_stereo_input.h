@@ -38,10 +38,14 @@ class ExternalStereoInput {
     int queue_size = 5;
   };
 
+  using Report = std::function<void(const std::string&)>;
   /// Subscribes in `nh` (images raw, hints from `pnh`; stamp_tolerance_s from `pnh`); `frame`
-  /// gets each paired stereo frame, `warn` the StampGuard's warnings.
+  /// gets each paired stereo frame, `warn` the StampGuard's warnings, `unreadable` each image
+  /// dropped before pairing because its data cannot be read ("cannot read the image on TOPIC:
+  /// why";
+  /// unthrottled: the caller throttles).
   ExternalStereoInput(ros::NodeHandle& nh, ros::NodeHandle& pnh, image_transport::ImageTransport& it,
-                      const Options& options, Frame frame, std::function<void(const std::string&)> warn);
+                      const Options& options, Frame frame, Report warn, Report unreadable);
 
   /// The resolved topics: 0 left image, 1 left camera_info, 2 right image, 3 right camera_info.
   std::string topic(int index) const;
@@ -54,12 +58,14 @@ class ExternalStereoInput {
   using ExactPolicy = message_filters::sync_policies::ExactTime<Image, CameraInfo, Image, CameraInfo>;
   using ApproximatePolicy = message_filters::sync_policies::ApproximateTime<Image, CameraInfo, Image, CameraInfo>;
 
-  void admit(ros::NodeHandle& pnh, std::function<void(const std::string&)> warn);
+  void admit(ros::NodeHandle& pnh, Report warn);
+  bool readable(int index, const Image& image) const;
   void synchronise(const Options& options);
   void onFrame(const sensor_msgs::ImageConstPtr& left, const sensor_msgs::CameraInfoConstPtr& left_info,
                const sensor_msgs::ImageConstPtr& right, const sensor_msgs::CameraInfoConstPtr& right_info);
 
   Frame frame_;
+  Report unreadable_;
   image_transport::SubscriberFilter left_sub_, right_sub_;
   message_filters::Subscriber<CameraInfo> left_info_sub_, right_info_sub_;
   std::unique_ptr<core::InputArrivalWatch> arrivals_;
