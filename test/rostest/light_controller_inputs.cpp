@@ -204,27 +204,19 @@ bool callService(const std::string& name, Srv* srv) {
   return ros::service::waitForService(name, ros::Duration(20.0)) && ros::service::call(name, *srv);
 }
 
-}  // namespace
+// What the sections share: the stand-in driver, the head's log, diagnostics and calibration_mode.
+struct Rig {
+  ros::NodeHandle& nh;
+  FakeDriver& driver;
+  Collector<rosgraph_msgs::Log>& log;
+  Collector<diagnostic_msgs::DiagnosticArray>& diagnostics;
+  Collector<CalibrationMode>& modes;
+  test_support::ChildLaunch& head;
+};
 
-TEST(LightControllerInputs, DelayedLightAndBadInputs) {
-  using diagnostic_msgs::DiagnosticStatus;
-  ros::NodeHandle nh;
-  test_support::TempDir dir("ecs_light_inputs");
-  ASSERT_FALSE(dir.path.empty());
-  Collector<rosgraph_msgs::Log> log(nh, "/rosout", 5000);
-  Collector<diagnostic_msgs::DiagnosticArray> diagnostics(nh, "/diagnostics", 2000);
-  Collector<CalibrationMode> modes(nh, "calibration_mode", 5000);
-  // On demand with no calibration/health publisher but the test's (section E): the light
-  // follows set_light only until then, as with the periodic trigger and no period.
-  test_support::ChildLaunch head({"embedded_calibration_stereo", "external_driver.launch", "light_backend:=sim",
-                              "calibration_period_s:=0", "calibration_trigger:=on_demand", "health:=false",
-                              "prior_file:=" + dir.path + "/prior.yaml"},
-                             dir.path + "/head.log");
-  ASSERT_TRUE(head.started());
-  ASSERT_TRUE(ros::service::waitForService("/stereo/set_light", ros::Duration(30.0))) << head.logTail();
-  FakeDriver driver(nh);
-  ASSERT_TRUE(modes.waitForCount(10, 20.0)) << "no calibration_mode from the LightController\n" << head.logTail();
-
+void recalibrateWithTheLightLate(Rig& rig) {
+  FakeDriver& driver = rig.driver;
+  auto& modes = rig.modes;
   // A. A recalibration with the light two frames late; set_camera_info absent.
   Recalibrate recalibrate;
   recalibrate.request.frames = 5;
@@ -253,7 +245,13 @@ TEST(LightControllerInputs, DelayedLightAndBadInputs) {
               settled_off, half_lit);
   EXPECT_GE(settled_on, 5);
   EXPECT_GE(half_lit, 2) << "the switches must have produced half-lit frames";
+}
 
+void noDeviceInView(Rig& rig) {
+  using diagnostic_msgs::DiagnosticStatus;
+  FakeDriver& driver = rig.driver;
+  auto& log = rig.log;
+  auto& diagnostics = rig.diagnostics;
   // B. No device in view with the light on.
   driver.device_visible = false;
   size_t from = diagnostics.snapshot().size();
@@ -275,10 +273,18 @@ TEST(LightControllerInputs, DelayedLightAndBadInputs) {
   EXPECT_TRUE(waitForDiagnostic(diagnostics, from, DiagnosticStatus::OK, "confirming the light", 8.0, &seen))
       << "last light_controller status: " << seen;
   driver.device_visible = true;
+}
 
+void uncalibratedCameraInfo(Rig& rig) {
+  using diagnostic_msgs::DiagnosticStatus;
+  FakeDriver& driver = rig.driver;
+  auto& log = rig.log;
+  auto& diagnostics = rig.diagnostics;
+  auto& modes = rig.modes;
+  std::string seen;
   // C. Uncalibrated camera_info: a warning, frames keep flowing.
   driver.info = FakeDriver::Info::kUncalibrated;
-  from = diagnostics.snapshot().size();
+  size_t from = diagnostics.snapshot().size();
   EXPECT_TRUE(waitForDiagnostic(diagnostics, from, DiagnosticStatus::WARN, "uncalibrated", 8.0, &seen))
       << "last light_controller status: " << seen;
   // One warning per topic: the other camera's must not hide it.
@@ -286,20 +292,33 @@ TEST(LightControllerInputs, DelayedLightAndBadInputs) {
   EXPECT_TRUE(test_support::waitForLog(log, {"/stereo/right_driver/camera_info is uncalibrated"}, 5.0));
   size_t count = modes.snapshot().size();
   EXPECT_TRUE(modes.waitForCount(count + 10, 5.0)) << "frames stopped with an uncalibrated camera_info";
+}
 
+void rightCameraInfoMissing(Rig& rig) {
+  using diagnostic_msgs::DiagnosticStatus;
+  FakeDriver& driver = rig.driver;
+  auto& log = rig.log;
+  auto& diagnostics = rig.diagnostics;
+  auto& modes = rig.modes;
+  std::string seen;
   // D. No right camera_info: frames held back, with the topic named; back when it is back.
   driver.info = FakeDriver::Info::kRightMissing;
-  from = diagnostics.snapshot().size();
+  size_t from = diagnostics.snapshot().size();
   EXPECT_TRUE(waitForDiagnostic(diagnostics, from, DiagnosticStatus::ERROR,
                                 "no camera_info on /stereo/right_driver/camera_info", 8.0, &seen))
       << "last light_controller status: " << seen;
   EXPECT_TRUE(test_support::waitForLog(log, {"frames held back", "/stereo/right_driver/camera_info"}, 5.0));
-  count = modes.snapshot().size();
+  size_t count = modes.snapshot().size();
   ros::WallDuration(1.0).sleep();  // a quiet second (the control below shows the pipe works)
   EXPECT_LE(modes.snapshot().size(), count + 1) << "frames went out without the right camera_info";
   driver.info = FakeDriver::Info::kCalibrated;
   EXPECT_TRUE(modes.waitForCount(count + 10, 5.0)) << "frames did not resume with the camera_info back";
+}
 
+void onDemand(Rig& rig) {
+  ros::NodeHandle& nh = rig.nh;
+  auto& modes = rig.modes;
+  auto& head = rig.head;
   // E. On demand: a calibration burst (settled light-on frames confirmed from the images; a
   //    verification flash would give one, and there are none here) while calibration/health
   //    wants one; none while it does not, frames flowing all the while.
@@ -340,7 +359,12 @@ TEST(LightControllerInputs, DelayedLightAndBadInputs) {
   for (size_t i = before; i < quiet.size(); ++i) lit += quiet[i]->light_on ? 1 : 0;
   EXPECT_EQ(lit, 0) << "the light went on while calibration/health wanted no calibration";
   health_timer.stop();
+}
 
+void unreadableImages(Rig& rig) {
+  FakeDriver& driver = rig.driver;
+  auto& log = rig.log;
+  auto& modes = rig.modes;
   // F. Unreadable images: dropped, each with an error naming its topic; frames resume after.
   //    A malformed left image is dropped before pairing; an empty left image and a right image
   //    of another encoding, in the same frame, are both named.
@@ -348,7 +372,7 @@ TEST(LightControllerInputs, DelayedLightAndBadInputs) {
   EXPECT_TRUE(test_support::waitForLog(
       log, {"cannot read the image on /stereo/left_driver/image_raw", "fewer than height x step", "frame dropped"}, 5.0))
       << "a malformed image was dropped without a word";
-  count = modes.snapshot().size();
+  size_t count = modes.snapshot().size();
   ros::WallDuration(1.0).sleep();  // a quiet second (the control below shows the pipe works)
   EXPECT_LE(modes.snapshot().size(), count + 1) << "frames went out with a malformed image";
   driver.images = FakeDriver::Images::kLeftEmptyRightWrongEncoding;
@@ -359,16 +383,57 @@ TEST(LightControllerInputs, DelayedLightAndBadInputs) {
   driver.images = FakeDriver::Images::kGood;
   count = modes.snapshot().size();
   EXPECT_TRUE(modes.waitForCount(count + 10, 5.0)) << "frames did not resume with good images";
+}
 
+void imagesOfAnotherSize(Rig& rig) {
+  FakeDriver& driver = rig.driver;
+  auto& log = rig.log;
+  auto& modes = rig.modes;
   // G. Images of another size than the board regions were taught on: a warning per camera.
   ASSERT_TRUE(test_support::waitForLog(log, {"LightController: taught board regions read from"}, 1.0))
       << "the board regions were never taught in this test: nothing to check their size against";
   driver.images = FakeDriver::Images::kHalfSize;
   EXPECT_TRUE(test_support::waitForLog(log, {"/stereo/left_driver/image_raw is 376x240", "taught on 752x480"}, 5.0));
   EXPECT_TRUE(test_support::waitForLog(log, {"/stereo/right_driver/image_raw is 376x240", "taught on 752x480"}, 5.0));
-  count = modes.snapshot().size();
+  size_t count = modes.snapshot().size();
   EXPECT_TRUE(modes.waitForCount(count + 10, 5.0)) << "frames stopped with images of another size";
   driver.images = FakeDriver::Images::kGood;
+}
+
+}  // namespace
+
+TEST(LightControllerInputs, DelayedLightAndBadInputs) {
+  ros::NodeHandle nh;
+  test_support::TempDir dir("ecs_light_inputs");
+  ASSERT_FALSE(dir.path.empty());
+  Collector<rosgraph_msgs::Log> log(nh, "/rosout", 5000);
+  Collector<diagnostic_msgs::DiagnosticArray> diagnostics(nh, "/diagnostics", 2000);
+  Collector<CalibrationMode> modes(nh, "calibration_mode", 5000);
+  // On demand with no calibration/health publisher but the test's (section E): the light
+  // follows set_light only until then, as with the periodic trigger and no period.
+  test_support::ChildLaunch head({"embedded_calibration_stereo", "external_driver.launch", "light_backend:=sim",
+                              "calibration_period_s:=0", "calibration_trigger:=on_demand", "health:=false",
+                              "prior_file:=" + dir.path + "/prior.yaml"},
+                             dir.path + "/head.log");
+  ASSERT_TRUE(head.started());
+  ASSERT_TRUE(ros::service::waitForService("/stereo/set_light", ros::Duration(30.0))) << head.logTail();
+  FakeDriver driver(nh);
+  ASSERT_TRUE(modes.waitForCount(10, 20.0)) << "no calibration_mode from the LightController\n" << head.logTail();
+
+  Rig rig{nh, driver, log, diagnostics, modes, head};
+  recalibrateWithTheLightLate(rig);
+  if (::testing::Test::HasFatalFailure()) return;
+  noDeviceInView(rig);
+  if (::testing::Test::HasFatalFailure()) return;
+  uncalibratedCameraInfo(rig);
+  if (::testing::Test::HasFatalFailure()) return;
+  rightCameraInfoMissing(rig);
+  if (::testing::Test::HasFatalFailure()) return;
+  onDemand(rig);
+  if (::testing::Test::HasFatalFailure()) return;
+  unreadableImages(rig);
+  if (::testing::Test::HasFatalFailure()) return;
+  imagesOfAnotherSize(rig);
 }
 
 int main(int argc, char** argv) {
