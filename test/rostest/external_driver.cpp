@@ -182,60 +182,35 @@ bool callService(const std::string& name, Srv* srv, double wait_s = 10.0) {
   return ros::service::waitForService(name, ros::Duration(wait_s)) && ros::service::call(name, *srv);
 }
 
-}  // namespace
-
-TEST(ExternalDriver, ImagePublisherRunsTheHead) {
-  ros::NodeHandle nh;
-  test_support::TempDir dir("ecs_external_driver");
-  ASSERT_FALSE(dir.path.empty());
-
-  // 1. The videos and their truth.
+// 1. The videos and their truth, rendered into `dir`.
+void renderVideos(const std::string& dir, Truth* truth, cv::Mat* scene) {
   char command[2048];
   std::snprintf(command, sizeof(command),
                 "'%s' --config '%s/config/sim_rig.yaml' --out '%s' --seconds %g --fps %g --light %s --cover %s "
                 "--zoom %g:%g",
-                ECS_RENDER_SIM_VIDEO, ECS_SOURCE_DIR, dir.path.c_str(), kSeconds, kFps, kLight, kCover, kZoomAt, kZoom);
+                ECS_RENDER_SIM_VIDEO, ECS_SOURCE_DIR, dir.c_str(), kSeconds, kFps, kLight, kCover, kZoomAt, kZoom);
   const auto render_start = ros::WallTime::now();
   ASSERT_EQ(std::system(command), 0) << command;
   std::printf("videos rendered in %.1f s\n", (ros::WallTime::now() - render_start).toSec());
-  const Truth truth = readFrames(dir.path + "/frames.csv");
-  ASSERT_EQ(truth.frames.size(), static_cast<size_t>(std::lround(kSeconds * kFps)));
-  const cv::Mat scene = cv::imread(dir.path + "/left_scene.png", cv::IMREAD_GRAYSCALE);
-  ASSERT_FALSE(scene.empty());
+  *truth = readFrames(dir + "/frames.csv");
+  ASSERT_EQ(truth->frames.size(), static_cast<size_t>(std::lround(kSeconds * kFps)));
+  *scene = cv::imread(dir + "/left_scene.png", cv::IMREAD_GRAYSCALE);
+  ASSERT_FALSE(scene->empty());
   int partly_lit = 0;
-  for (const FrameTruth& f : truth.frames) partly_lit += f.light > 0 && f.light < 1;
+  for (const FrameTruth& f : truth->frames) partly_lit += f.light > 0 && f.light < 1;
   ASSERT_GE(partly_lit, 5) << "the timeline should switch the light during exposures";
+}
 
-  // 2. The head's graph without our driver.
-  const std::string left_url = "file://" + dir.path + "/left.yaml", right_url = "file://" + dir.path + "/right.yaml";
-  test_support::ChildLaunch head({"embedded_calibration_stereo", "external_driver.launch", "light_backend:=none",
-                              "calibration_period_s:=0", "driver_left_image:=left_camera/image_raw",
-                              "driver_left_info:=left_camera/camera_info", "driver_right_image:=right_camera/image_raw",
-                              "driver_right_info:=right_camera/camera_info", "calibration_store:=file",
-                              "left_camera_info_url:=" + left_url, "right_camera_info_url:=" + right_url,
-                              "left_reload_service:=/stereo/left_camera/set_parameters",
-                              "right_reload_service:=/stereo/right_camera/set_parameters",
-                              "prior_file:=" + dir.path + "/prior.yaml",
-                              // The first window already commits (epoch 2) before the judged window,
-                              // which comes before the zoom: the taught device image still holds.
-                              "device_template:=teach", "reteach_on_epoch_change:=false"},
-                             dir.path + "/head.log");
-  ASSERT_TRUE(head.started());
-
-  Collector<CalibrationMode> modes(nh, "calibration_mode", 1000);
-  Collector<StereoPatternObservation> observations(nh, "calibration/observations", 1000);
-  Collector<CalibrationStatus> statuses(nh, "calibration/status", 50);
-  Collector<sensor_msgs::CameraInfo> left_infos(nh, "left/camera_info", 1000);
-  Recorder recorder(nh, truth, scene);
-
-  // 3. The driver we did not write: two image_publisher nodelets in the head's manager, loaded
-  //    back to back so that their frames start together.
+// 3. The driver we did not write: two image_publisher nodelets in the head's manager, loaded
+//    back to back so that their frames start together.
+void loadImagePublishers(const std::string& dir, const std::string& left_url, const std::string& right_url,
+                         test_support::ChildLaunch& head) {
   const std::string load = "/stereo/stereo_manager/load_nodelet";
   ASSERT_TRUE(ros::service::waitForService(load, ros::Duration(30.0))) << head.logTail();
   ASSERT_TRUE(ros::service::waitForService("/stereo/set_light", ros::Duration(30.0))) << head.logTail();
   for (const std::string side : {"left", "right"}) {
     const std::string name = "/stereo/" + side + "_camera";
-    ros::param::set(name + "/filename", dir.path + "/" + side + ".avi");
+    ros::param::set(name + "/filename", dir + "/" + side + ".avi");
     ros::param::set(name + "/publish_rate", kFps);
     ros::param::set(name + "/camera_info_url", side == "left" ? left_url : right_url);
     ros::param::set(name + "/frame_id", std::string("stereo_left_optical_frame"));
@@ -246,23 +221,13 @@ TEST(ExternalDriver, ImagePublisherRunsTheHead) {
     srv.request.type = "image_publisher/image_publisher";
     ASSERT_TRUE(ros::service::call(load, srv) && srv.response.success) << side << "\n" << head.logTail();
   }
+}
 
-  // 4. Teach the Separator on the covered scene with the light on.
-  ASSERT_TRUE(modes.waitFor(
-      [&](const std::vector<CalibrationMode::ConstPtr>& m) {
-        for (const auto& mode : m) {
-          if (!mode->settled || !mode->light_on) continue;
-          const auto [l, r] = recorder.frames(mode->header.stamp);
-          if (l >= 0 && truth.frames[l].covered) return true;
-        }
-        return false;
-      },
-      30.0))
-      << "no settled light-on frame of the covered scene\n" << head.logTail();
-  std_srvs::Trigger teach;
-  ASSERT_TRUE(callService("/stereo/separator/teach", &teach) && teach.response.success) << teach.response.message;
-
-  // 5. After the zoom a calibration is committed and image_publisher publishes it.
+// 5. After the zoom a calibration is committed and image_publisher publishes it; calibration_mode's
+//    epoch follows the commits.
+void expectCommitPublished(const std::string& dir, Collector<CalibrationStatus>& statuses,
+                           Collector<sensor_msgs::CameraInfo>& left_infos, Collector<CalibrationMode>& modes,
+                           test_support::ChildLaunch& head) {
   ASSERT_TRUE(statuses.waitFor(
       [](const std::vector<CalibrationStatus::ConstPtr>& s) {
         for (const auto& status : s)
@@ -273,7 +238,7 @@ TEST(ExternalDriver, ImagePublisherRunsTheHead) {
       << head.logTail(60);
   sensor_msgs::CameraInfo truth_left;
   std::string name, error;
-  ASSERT_TRUE(embedded_calibration_stereo::readCalibrationFile(dir.path + "/truth_left.yaml", &name, &truth_left, &error))
+  ASSERT_TRUE(embedded_calibration_stereo::readCalibrationFile(dir + "/truth_left.yaml", &name, &truth_left, &error))
       << error;
   ASSERT_TRUE(left_infos.waitFor(
       [&](const std::vector<sensor_msgs::CameraInfo::ConstPtr>& infos) {
@@ -298,8 +263,76 @@ TEST(ExternalDriver, ImagePublisherRunsTheHead) {
       [&](const auto& m) { return !m.empty() && m.back()->calibration_epoch == 2u * accepted(); }, 5.0))
       << "calibration_mode's epoch " << modes.snapshot().back()->calibration_epoch << " after " << accepted()
       << " commits\n" << head.logTail(60);
+}
 
-  // 6. Nothing drifted since: the next window confirms the calibration in force.
+// 8. Every settled frame was fully lit or fully dark, as calibration_mode said.
+void expectSettledFramesTrue(const std::vector<CalibrationMode::ConstPtr>& modes, Recorder& recorder,
+                             const Truth& truth) {
+  int settled = 0, settled_on = 0, unsettled_partial = 0, unknown = 0;
+  for (const auto& mode : modes) {
+    const auto [l, r] = recorder.frames(mode->header.stamp);
+    if (l == -1 || r == -1) continue;  // images not received by this test (its queues are finite)
+    if (l == -2 || r == -2) {
+      ++unknown;
+      continue;
+    }
+    const FrameTruth &fl = truth.frames[l], &fr = truth.frames[r];
+    const bool partial = (fl.light > 0 && fl.light < 1) || (fr.light > 0 && fr.light < 1);
+    if (!mode->settled) {
+      unsettled_partial += partial;
+      continue;
+    }
+    ++settled;
+    settled_on += mode->light_on;
+    EXPECT_FALSE(partial) << "frames " << l << "/" << r << " were exposed while the light switched, but settled";
+    EXPECT_EQ(fl.light, fr.light) << "frames " << l << "/" << r;
+    EXPECT_EQ(mode->light_on, fl.light == 1.0) << "frames " << l << "/" << r;
+  }
+  std::printf("calibration_mode: %d settled frames checked (%d light-on), %d partly lit frames marked unsettled\n",
+              settled, settled_on, unsettled_partial);
+  EXPECT_EQ(unknown, 0) << "images not in the videos";
+  // The test's own subscriptions may drop images under load: a good share of the run, both states.
+  EXPECT_GE(settled, 80);
+  EXPECT_GE(settled_on, 20);
+  EXPECT_GE(settled - settled_on, 40);
+  EXPECT_GE(unsettled_partial, 3) << "the partly lit frames must reach the LightController";
+}
+
+// 9. Observations only from fully lit frames.
+void expectObservationsLit(const std::vector<StereoPatternObservation::ConstPtr>& observations, Recorder& recorder,
+                           const Truth& truth) {
+  int observed = 0;
+  for (const auto& o : observations) {
+    const auto [l, r] = recorder.frames(o->header.stamp);
+    if (l < 0 || r < 0) continue;
+    ++observed;
+    EXPECT_EQ(truth.frames[l].light, 1.0) << "observation from frame " << l;
+    EXPECT_EQ(truth.frames[r].light, 1.0) << "observation from frame " << r;
+  }
+  EXPECT_GE(observed, 20);
+}
+
+// 10. Separation of the second light window against the true scene.
+void expectSeparated(const std::vector<CalibrationMode::ConstPtr>& modes, Recorder& recorder, const Truth& truth) {
+  const auto raw = recorder.rawErrors();
+  const auto separated = recorder.sceneErrors();
+  int judged = 0;
+  for (const auto& mode : modes) {
+    const auto [l, r] = recorder.frames(mode->header.stamp);
+    if (!mode->settled || !mode->light_on || l < 0) continue;
+    const double t = truth.frames[l].time_s;
+    if (t < kSecondWindow[0] || t > kSecondWindow[1]) continue;
+    const auto s = separated.find(mode->header.stamp), e = raw.find(mode->header.stamp);
+    if (s == separated.end() || e == raw.end()) continue;
+    if (judged++ == 0) std::printf("separated scene: mean |error| %.2f grey levels (raw frame %.2f)\n", s->second, e->second);
+    EXPECT_LT(s->second, 0.2 * e->second) << "frame " << l;
+  }
+  EXPECT_GE(judged, 5);
+}
+
+// 6. Nothing drifted since: the next window confirms the calibration in force. 7. A real failure:
+//    no boards while the videos' light is off.
+void expectConfirmedThenNoBoards(Collector<CalibrationMode>& modes, Recorder& recorder, const Truth& truth) {
   Recalibrate recalibrate;
   recalibrate.request.frames = 5;
   recalibrate.request.timeout_s = 8.0;
@@ -327,65 +360,71 @@ TEST(ExternalDriver, ImagePublisherRunsTheHead) {
   ASSERT_TRUE(callService("/stereo/calibration/recalibrate", &no_boards));
   EXPECT_FALSE(no_boards.response.success);
   EXPECT_NE(no_boards.response.message.find("no boards seen"), std::string::npos) << no_boards.response.message;
+}
 
+}  // namespace
+
+TEST(ExternalDriver, ImagePublisherRunsTheHead) {
+  ros::NodeHandle nh;
+  test_support::TempDir dir("ecs_external_driver");
+  ASSERT_FALSE(dir.path.empty());
+
+  // 1. The videos and their truth.
+  Truth truth;
+  cv::Mat scene;
+  renderVideos(dir.path, &truth, &scene);
+  if (HasFatalFailure()) return;
+
+  // 2. The head's graph without our driver.
+  const std::string left_url = "file://" + dir.path + "/left.yaml", right_url = "file://" + dir.path + "/right.yaml";
+  test_support::ChildLaunch head({"embedded_calibration_stereo", "external_driver.launch", "light_backend:=none",
+                              "calibration_period_s:=0", "driver_left_image:=left_camera/image_raw",
+                              "driver_left_info:=left_camera/camera_info", "driver_right_image:=right_camera/image_raw",
+                              "driver_right_info:=right_camera/camera_info", "calibration_store:=file",
+                              "left_camera_info_url:=" + left_url, "right_camera_info_url:=" + right_url,
+                              "left_reload_service:=/stereo/left_camera/set_parameters",
+                              "right_reload_service:=/stereo/right_camera/set_parameters",
+                              "prior_file:=" + dir.path + "/prior.yaml",
+                              // The first window already commits (epoch 2) before the judged window,
+                              // which comes before the zoom: the taught device image still holds.
+                              "device_template:=teach", "reteach_on_epoch_change:=false"},
+                             dir.path + "/head.log");
+  ASSERT_TRUE(head.started());
+
+  Collector<CalibrationMode> modes(nh, "calibration_mode", 1000);
+  Collector<StereoPatternObservation> observations(nh, "calibration/observations", 1000);
+  Collector<CalibrationStatus> statuses(nh, "calibration/status", 50);
+  Collector<sensor_msgs::CameraInfo> left_infos(nh, "left/camera_info", 1000);
+  Recorder recorder(nh, truth, scene);
+
+  loadImagePublishers(dir.path, left_url, right_url, head);
+  if (HasFatalFailure()) return;
+
+  // 4. Teach the Separator on the covered scene with the light on.
+  ASSERT_TRUE(modes.waitFor(
+      [&](const std::vector<CalibrationMode::ConstPtr>& m) {
+        for (const auto& mode : m) {
+          if (!mode->settled || !mode->light_on) continue;
+          const auto [l, r] = recorder.frames(mode->header.stamp);
+          if (l >= 0 && truth.frames[l].covered) return true;
+        }
+        return false;
+      },
+      30.0))
+      << "no settled light-on frame of the covered scene\n" << head.logTail();
+  std_srvs::Trigger teach;
+  ASSERT_TRUE(callService("/stereo/separator/teach", &teach) && teach.response.success) << teach.response.message;
+
+  expectCommitPublished(dir.path, statuses, left_infos, modes, head);
+  if (HasFatalFailure()) return;
+
+  expectConfirmedThenNoBoards(modes, recorder, truth);
+  if (HasFatalFailure()) return;
   head.stop(20.0);
 
-  // 8. Every settled frame was fully lit or fully dark, as calibration_mode said.
-  int settled = 0, settled_on = 0, unsettled_partial = 0, unknown = 0;
-  for (const auto& mode : modes.snapshot()) {
-    const auto [l, r] = recorder.frames(mode->header.stamp);
-    if (l == -1 || r == -1) continue;  // images not received by this test (its queues are finite)
-    if (l == -2 || r == -2) {
-      ++unknown;
-      continue;
-    }
-    const FrameTruth &fl = truth.frames[l], &fr = truth.frames[r];
-    const bool partial = (fl.light > 0 && fl.light < 1) || (fr.light > 0 && fr.light < 1);
-    if (!mode->settled) {
-      unsettled_partial += partial;
-      continue;
-    }
-    ++settled;
-    settled_on += mode->light_on;
-    EXPECT_FALSE(partial) << "frames " << l << "/" << r << " were exposed while the light switched, but settled";
-    EXPECT_EQ(fl.light, fr.light) << "frames " << l << "/" << r;
-    EXPECT_EQ(mode->light_on, fl.light == 1.0) << "frames " << l << "/" << r;
-  }
-  std::printf("calibration_mode: %d settled frames checked (%d light-on), %d partly lit frames marked unsettled\n",
-              settled, settled_on, unsettled_partial);
-  EXPECT_EQ(unknown, 0) << "images not in the videos";
-  // The test's own subscriptions may drop images under load: a good share of the run, both states.
-  EXPECT_GE(settled, 80);
-  EXPECT_GE(settled_on, 20);
-  EXPECT_GE(settled - settled_on, 40);
-  EXPECT_GE(unsettled_partial, 3) << "the partly lit frames must reach the LightController";
-
-  // 9. Observations only from fully lit frames.
-  int observed = 0;
-  for (const auto& o : observations.snapshot()) {
-    const auto [l, r] = recorder.frames(o->header.stamp);
-    if (l < 0 || r < 0) continue;
-    ++observed;
-    EXPECT_EQ(truth.frames[l].light, 1.0) << "observation from frame " << l;
-    EXPECT_EQ(truth.frames[r].light, 1.0) << "observation from frame " << r;
-  }
-  EXPECT_GE(observed, 20);
-
-  // 10. Separation of the second light window against the true scene.
-  const auto raw = recorder.rawErrors();
-  const auto separated = recorder.sceneErrors();
-  int judged = 0;
-  for (const auto& mode : modes.snapshot()) {
-    const auto [l, r] = recorder.frames(mode->header.stamp);
-    if (!mode->settled || !mode->light_on || l < 0) continue;
-    const double t = truth.frames[l].time_s;
-    if (t < kSecondWindow[0] || t > kSecondWindow[1]) continue;
-    const auto s = separated.find(mode->header.stamp), e = raw.find(mode->header.stamp);
-    if (s == separated.end() || e == raw.end()) continue;
-    if (judged++ == 0) std::printf("separated scene: mean |error| %.2f grey levels (raw frame %.2f)\n", s->second, e->second);
-    EXPECT_LT(s->second, 0.2 * e->second) << "frame " << l;
-  }
-  EXPECT_GE(judged, 5);
+  expectSettledFramesTrue(modes.snapshot(), recorder, truth);
+  expectObservationsLit(observations.snapshot(), recorder, truth);
+  expectSeparated(modes.snapshot(), recorder, truth);
 
   // 11. Depth kept coming.
   const std::vector<double> valid = recorder.disparityValid();
