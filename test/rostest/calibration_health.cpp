@@ -40,30 +40,40 @@ bool setCameraInfo(const std::string& service, const CameraInfo& info, std::stri
   return srv.response.success;
 }
 
-}  // namespace
+// GOOD, with both signals measured.
+bool goodWithBoth(const Healths& m) {
+  return !m.empty() && m.back()->state == CalibrationHealth::GOOD && m.back()->verification_age_s >= 0.0 &&
+         m.back()->misalignment_age_s >= 0.0;
+}
 
-TEST(CalibrationHealth, GoodWrongCalibrationRolledBackKnockCalibratesOnDemand) {
-  ros::NodeHandle nh;
-  Collector<CalibrationHealth> health(nh, "calibration/health", 1000);
-  Collector<CalibrationStatus> status(nh, "calibration/status");
-  Collector<CalibrationMode> modes(nh, "calibration_mode", 2000);
-  Collector<CameraInfo> left(nh, "left/camera_info", 50), right(nh, "right/camera_info", 50);
-  ASSERT_TRUE(ros::service::waitForService("left/set_camera_info", 20000));
+// What the test watches.
+struct Topics {
+  Collector<CalibrationHealth>& health;
+  Collector<CalibrationStatus>& status;
+  Collector<CalibrationMode>& modes;
+  Collector<CameraInfo>& left;
+  Collector<CameraInfo>& right;
+};
 
+void expectGoodUndisturbed(Topics& t, CalibrationHealth* good_out) {
+  auto& health = t.health;
   // 1. Undisturbed: GOOD once both signals were measured.
-  const auto good_with_both = [](const Healths& m) {
-    return !m.empty() && m.back()->state == CalibrationHealth::GOOD && m.back()->verification_age_s >= 0.0 &&
-           m.back()->misalignment_age_s >= 0.0;
-  };
-  ASSERT_TRUE(health.waitFor(good_with_both, 20.0)) << lastHealth(health);
-  const CalibrationHealth good = *health.snapshot().back();
+  ASSERT_TRUE(health.waitFor(goodWithBoth, 20.0)) << lastHealth(health);
+  const CalibrationHealth& good = *good_out = *health.snapshot().back();
   std::printf("undisturbed: epoch %u GOOD, misalignment %.3f +- %.3f px, board rms %.3f / %.3f px, consistency "
               "%.3f px\n",
               good.epoch, good.misalignment_px, good.misalignment_sd_px, good.board_rms_left_px,
               good.board_rms_right_px, good.stereo_consistency_px);
   EXPECT_TRUE(std::isfinite(good.misalignment_px));
   EXPECT_TRUE(std::isfinite(good.board_rms_left_px));
+}
 
+void expectWrongCalibrationRolledBack(Topics& t, const CalibrationHealth& good, uint32_t* restored_out) {
+  auto& health = t.health;
+  auto& status = t.status;
+  auto& modes = t.modes;
+  auto& left = t.left;
+  auto& right = t.right;
   // 2. A wrong calibration through set_camera_info: the right camera tilted by 0.5 degrees.
   CameraInfo original_left, original_right;
   ASSERT_TRUE(latestPair(left, right, &original_left, &original_right));
@@ -96,7 +106,7 @@ TEST(CalibrationHealth, GoodWrongCalibrationRolledBackKnockCalibratesOnDemand) {
       << lastHealth(health);
   std::printf("rollback status: %s\n", status.snapshot().back()->reason.c_str());
   // The driver publishes the previous calibration again, under a new epoch, which verifies GOOD.
-  uint32_t restored_epoch = 0;
+  uint32_t& restored_epoch = *restored_out;
   ASSERT_TRUE(modes.waitFor(
       [&](const std::vector<CalibrationMode::ConstPtr>& m) {
         if (m.empty() || m.back()->calibration_epoch == wrong_epoch || m.back()->calibration_epoch == good.epoch)
@@ -112,7 +122,7 @@ TEST(CalibrationHealth, GoodWrongCalibrationRolledBackKnockCalibratesOnDemand) {
       << "the calibration in force is not the one before the wrong one";
   ASSERT_TRUE(health.waitFor(
       [&](const Healths& m) {
-        return !m.empty() && m.back()->epoch == restored_epoch && good_with_both(m);
+        return !m.empty() && m.back()->epoch == restored_epoch && goodWithBoth(m);
       },
       8.0))
       << lastHealth(health);
@@ -122,7 +132,11 @@ TEST(CalibrationHealth, GoodWrongCalibrationRolledBackKnockCalibratesOnDemand) {
     said_why = said_why || (h->epoch == restored_epoch && h->reason.find("restoring the previous one; restored") !=
                                                               std::string::npos);
   EXPECT_TRUE(said_why) << "no health message of the restored epoch says why it was restored";
+}
 
+void expectKnockCalibratesOnDemand(Topics& t, uint32_t restored_epoch) {
+  auto& health = t.health;
+  auto& modes = t.modes;
   // 3. A knock of the right camera (tilt, 0.2 degrees): health leaves GOOD, the calibration in
   //    force stays (nothing was committed), and the driver starts a calibration burst on demand.
   //    First the light off and settled (a burst of the wrong calibration may still be running).
@@ -157,6 +171,26 @@ TEST(CalibrationHealth, GoodWrongCalibrationRolledBackKnockCalibratesOnDemand) {
       },
       5.0))
       << "no calibration burst after the health left GOOD";
+}
+
+}  // namespace
+
+TEST(CalibrationHealth, GoodWrongCalibrationRolledBackKnockCalibratesOnDemand) {
+  ros::NodeHandle nh;
+  Collector<CalibrationHealth> health(nh, "calibration/health", 1000);
+  Collector<CalibrationStatus> status(nh, "calibration/status");
+  Collector<CalibrationMode> modes(nh, "calibration_mode", 2000);
+  Collector<CameraInfo> left(nh, "left/camera_info", 50), right(nh, "right/camera_info", 50);
+  ASSERT_TRUE(ros::service::waitForService("left/set_camera_info", 20000));
+
+  Topics topics{health, status, modes, left, right};
+  CalibrationHealth good;
+  expectGoodUndisturbed(topics, &good);
+  if (HasFatalFailure()) return;
+  uint32_t restored_epoch = 0;
+  expectWrongCalibrationRolledBack(topics, good, &restored_epoch);
+  if (HasFatalFailure()) return;
+  expectKnockCalibratesOnDemand(topics, restored_epoch);
 }
 
 int main(int argc, char** argv) {
