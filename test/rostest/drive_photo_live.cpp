@@ -171,6 +171,116 @@ bool setDrift(const SetRigDrift::Request& request) {
   return srv.response.success;
 }
 
+// The stamp of the frame whose calibration is judged: the first of `epoch` (when `confirmed`, the
+// newest of it: the epoch has been in force since an earlier commit).
+ros::Time committedStamp(const std::vector<CalibrationMode::ConstPtr>& seen, uint32_t epoch, bool confirmed) {
+  if (confirmed) {
+    for (auto it = seen.rbegin() + 3; it < seen.rend(); ++it)  // the newest frames' camera_info may be on the way
+      if ((*it)->calibration_epoch == epoch) return (*it)->header.stamp;
+    return ros::Time();
+  }
+  for (const auto& m : seen)
+    if (m->calibration_epoch == epoch) return m->header.stamp;
+  return ros::Time();
+}
+
+// Where the error of `committed` sits: principal points, the stereo rotation, the translation's
+// direction.
+void printErrorParts(const Frame& committed) {
+  const Eigen::AngleAxisd turn(committed.published.right_from_left.linear() *
+                               committed.truth.right_from_left.linear().transpose());
+  const Eigen::Vector3d turn_deg = turn.angle() * turn.axis() * 180.0 / M_PI;
+  const Eigen::Vector3d t_est = committed.published.right_from_left.translation().normalized(),
+                        t_true = committed.truth.right_from_left.translation().normalized();
+  std::printf("cx %+.3f / %+.3f px, cy %+.3f / %+.3f px, rotation error (%+.4f, %+.4f, %+.4f) deg, translation "
+              "direction %.4f deg\n",
+              committed.published.left.cx - committed.truth.left.cx,
+              committed.published.right.cx - committed.truth.right.cx,
+              committed.published.left.cy - committed.truth.left.cy,
+              committed.published.right.cy - committed.truth.right.cy, turn_deg.x(), turn_deg.y(), turn_deg.z(),
+              std::acos(std::min(1.0, t_est.dot(t_true))) * 180.0 / M_PI);
+}
+
+// The calibration in force after the drift against the truth of its frame.
+void expectCommittedAccurate(const Frame& committed) {
+  Fixture& f = *fixture;
+  // The drift really happened: the calibration before it is far off.
+  EXPECT_NEAR(committed.truth.left.fx / f.truth_left.snapshot().front()->K[0], 1.05, 0.01);
+  const core::StereoAccuracy a = accuracy(committed.published, committed.truth);
+  print("after zoom, thermal rotation and knock", a);
+  const double fx_left = std::abs(committed.published.left.fx / committed.truth.left.fx - 1);
+  const double fx_right = std::abs(committed.published.right.fx / committed.truth.right.fx - 1);
+  const double baseline = std::abs(committed.published.baseline() / committed.truth.baseline() - 1);
+  std::printf("fx %.4f / %.4f %%, baseline %.4f %%\n", 100 * fx_left, 100 * fx_right, 100 * baseline);
+  printErrorParts(committed);
+  const bool targets_met = a.misalignment_px.rms <= kTargetMisalignmentPx && a.disparity_bias_px.rms <= kTargetBiasPx &&
+                           a.at_depth[3].depth_error_pct.rms <= kTargetDepthError10mPct &&
+                           std::max(fx_left, fx_right) <= kTargetFocalRel && baseline <= kTargetBaselineRel;
+  std::printf("accuracy targets for depth (misalignment and bias %.2f px, depth error at 10 m %.1f %%, fx %.2f %%, "
+              "baseline %.1f %%): %s\n",
+              kTargetBiasPx, kTargetDepthError10mPct, 100 * kTargetFocalRel, 100 * kTargetBaselineRel,
+              targets_met ? "met" : "NOT met");
+  EXPECT_LE(a.misalignment_px.rms, kMisalignmentPx);
+  EXPECT_LE(a.disparity_bias_px.rms, kBiasPx);
+  EXPECT_LE(a.at_depth[3].depth_error_pct.rms, kDepthError10mPct);
+  EXPECT_LE(fx_left, kFocalRel);
+  EXPECT_LE(fx_right, kFocalRel);
+  EXPECT_LE(baseline, kBaselineRel);
+}
+
+// Every commit against the calibration it replaced, on the truth of the first frame of the new
+// epoch (the replaced one is the camera_info of the frame before it).
+void expectNoCommitWorse(const std::vector<CalibrationMode::ConstPtr>& modes) {
+  int commits = 0;
+  for (size_t i = 1; i < modes.size(); ++i) {
+    if (modes[i]->calibration_epoch == modes[i - 1]->calibration_epoch) continue;
+    const Frame now = frameAt(modes[i]->header.stamp), before = frameAt(modes[i - 1]->header.stamp);
+    if (!now.ok || !before.ok) continue;  // the last frames' camera_info may still be on the way
+    ++commits;
+    const core::StereoAccuracy new_a = accuracy(now.published, now.truth);
+    const core::StereoAccuracy old_a = accuracy(before.published, now.truth);
+    std::printf("commit at %.3f (epoch %u -> %u):\n", modes[i]->header.stamp.toSec(), modes[i - 1]->calibration_epoch,
+                modes[i]->calibration_epoch);
+    print("  replaced", old_a);
+    print("  new     ", new_a);
+    EXPECT_LE(combined(new_a), combined(old_a) + kWorsePx) << "commit at " << modes[i]->header.stamp;
+  }
+  EXPECT_GE(commits, 2) << "the zoom and the knock should each have been committed";
+}
+
+// How many bursts the window tracker kept up with (the others were dropped, its worker busy), and
+// its windows against the truth.
+void printTracking(const std::vector<CalibrationMode::ConstPtr>& modes) {
+  Fixture& f = *fixture;
+  int bursts = 0, lit = 0;
+  for (const auto& m : modes) {
+    if (m->light_on && m->settled) ++lit;
+    if (!m->light_on && m->settled) {
+      bursts += lit >= 3;
+      lit = 0;
+    }
+  }
+  const auto windows = f.windows.snapshot();
+  std::printf("window observations: %zu for %d bursts of >= 3 settled light-on frames\n", windows.size(), bursts);
+  const auto truths = f.truth_corners.snapshot();
+  for (const auto& w : windows)
+    for (const auto& t : truths)
+      if (t->header.stamp == w->header.stamp) {
+        const core::StereoObservation tracked = embedded_calibration_stereo::fromMsg(*w),
+                                     truth = embedded_calibration_stereo::fromMsg(*t);
+        core::CornerScore left, right;
+        left.add(tracked.left, truth.left);
+        right.add(tracked.right, truth.right);
+        std::printf("  window at %.3f s against the truth: left %s, right %s; %zu scene correspondences\n",
+                    w->header.stamp.toSec(), left.str().c_str(), right.str().c_str(), w->scene.size());
+      }
+  std::set<std::string> lines;  // the tracker's word on each burst (diagnostics, once a second)
+  for (const auto& array : f.diagnostics.snapshot())
+    for (const auto& status : array->status)
+      for (const auto& kv : status.values)
+        if (kv.key == "window tracking" && lines.insert(kv.value).second) std::printf("  %s\n", kv.value.c_str());
+}
+
 }  // namespace
 
 TEST(DrivePhotoLive, ZoomThermalAndKnockAreRecalibratedAndNoCommitIsWorse) {
@@ -225,106 +335,13 @@ TEST(DrivePhotoLive, ZoomThermalAndKnockAreRecalibratedAndNoCommitIsWorse) {
   ASSERT_TRUE(f.modes.waitFor(
       [&](const auto& m) { return !m.empty() && m.back()->calibration_epoch >= after->epoch; }, 5.0));
   ASSERT_TRUE(f.modes.waitForCount(f.modes.snapshot().size() + 3, 5.0));  // its camera_info arrived
-  ros::Time committed_stamp;
-  const auto seen = f.modes.snapshot();
-  if (confirmed) {
-    for (auto it = seen.rbegin() + 3; it < seen.rend(); ++it)  // the newest frames' camera_info may be on the way
-      if ((*it)->calibration_epoch == after->epoch) {
-        committed_stamp = (*it)->header.stamp;
-        break;
-      }
-  } else {
-    for (const auto& m : seen)
-      if (m->calibration_epoch == after->epoch) {
-        committed_stamp = m->header.stamp;
-        break;
-      }
-  }
+  const ros::Time committed_stamp = committedStamp(f.modes.snapshot(), after->epoch, confirmed);
   const Frame committed = frameAt(committed_stamp);
   ASSERT_TRUE(committed.ok) << "no camera_info of frame " << committed_stamp;
-  // The drift really happened: the calibration before it is far off.
-  EXPECT_NEAR(committed.truth.left.fx / f.truth_left.snapshot().front()->K[0], 1.05, 0.01);
-  const core::StereoAccuracy a = accuracy(committed.published, committed.truth);
-  print("after zoom, thermal rotation and knock", a);
-  const double fx_left = std::abs(committed.published.left.fx / committed.truth.left.fx - 1);
-  const double fx_right = std::abs(committed.published.right.fx / committed.truth.right.fx - 1);
-  const double baseline = std::abs(committed.published.baseline() / committed.truth.baseline() - 1);
-  std::printf("fx %.4f / %.4f %%, baseline %.4f %%\n", 100 * fx_left, 100 * fx_right, 100 * baseline);
-  {  // where the error sits: principal points, the stereo rotation, the translation's direction
-    const Eigen::AngleAxisd turn(committed.published.right_from_left.linear() *
-                                 committed.truth.right_from_left.linear().transpose());
-    const Eigen::Vector3d turn_deg = turn.angle() * turn.axis() * 180.0 / M_PI;
-    const Eigen::Vector3d t_est = committed.published.right_from_left.translation().normalized(),
-                          t_true = committed.truth.right_from_left.translation().normalized();
-    std::printf("cx %+.3f / %+.3f px, cy %+.3f / %+.3f px, rotation error (%+.4f, %+.4f, %+.4f) deg, translation "
-                "direction %.4f deg\n",
-                committed.published.left.cx - committed.truth.left.cx,
-                committed.published.right.cx - committed.truth.right.cx,
-                committed.published.left.cy - committed.truth.left.cy,
-                committed.published.right.cy - committed.truth.right.cy, turn_deg.x(), turn_deg.y(), turn_deg.z(),
-                std::acos(std::min(1.0, t_est.dot(t_true))) * 180.0 / M_PI);
-  }
-  const bool targets_met = a.misalignment_px.rms <= kTargetMisalignmentPx && a.disparity_bias_px.rms <= kTargetBiasPx &&
-                           a.at_depth[3].depth_error_pct.rms <= kTargetDepthError10mPct &&
-                           std::max(fx_left, fx_right) <= kTargetFocalRel && baseline <= kTargetBaselineRel;
-  std::printf("accuracy targets for depth (misalignment and bias %.2f px, depth error at 10 m %.1f %%, fx %.2f %%, "
-              "baseline %.1f %%): %s\n",
-              kTargetBiasPx, kTargetDepthError10mPct, 100 * kTargetFocalRel, 100 * kTargetBaselineRel,
-              targets_met ? "met" : "NOT met");
-  EXPECT_LE(a.misalignment_px.rms, kMisalignmentPx);
-  EXPECT_LE(a.disparity_bias_px.rms, kBiasPx);
-  EXPECT_LE(a.at_depth[3].depth_error_pct.rms, kDepthError10mPct);
-  EXPECT_LE(fx_left, kFocalRel);
-  EXPECT_LE(fx_right, kFocalRel);
-  EXPECT_LE(baseline, kBaselineRel);
-
-  // Every commit against the calibration it replaced, on the truth of the first frame of the new
-  // epoch (the replaced one is the camera_info of the frame before it).
+  expectCommittedAccurate(committed);
   const auto modes = f.modes.snapshot();
-  int commits = 0;
-  for (size_t i = 1; i < modes.size(); ++i) {
-    if (modes[i]->calibration_epoch == modes[i - 1]->calibration_epoch) continue;
-    const Frame now = frameAt(modes[i]->header.stamp), before = frameAt(modes[i - 1]->header.stamp);
-    if (!now.ok || !before.ok) continue;  // the last frames' camera_info may still be on the way
-    ++commits;
-    const core::StereoAccuracy new_a = accuracy(now.published, now.truth);
-    const core::StereoAccuracy old_a = accuracy(before.published, now.truth);
-    std::printf("commit at %.3f (epoch %u -> %u):\n", modes[i]->header.stamp.toSec(), modes[i - 1]->calibration_epoch,
-                modes[i]->calibration_epoch);
-    print("  replaced", old_a);
-    print("  new     ", new_a);
-    EXPECT_LE(combined(new_a), combined(old_a) + kWorsePx) << "commit at " << modes[i]->header.stamp;
-  }
-  EXPECT_GE(commits, 2) << "the zoom and the knock should each have been committed";
-
-  // How many bursts the window tracker kept up with (the others were dropped, its worker busy).
-  int bursts = 0, lit = 0;
-  for (const auto& m : modes) {
-    if (m->light_on && m->settled) ++lit;
-    if (!m->light_on && m->settled) {
-      bursts += lit >= 3;
-      lit = 0;
-    }
-  }
-  const auto windows = f.windows.snapshot();
-  std::printf("window observations: %zu for %d bursts of >= 3 settled light-on frames\n", windows.size(), bursts);
-  const auto truths = f.truth_corners.snapshot();
-  for (const auto& w : windows)
-    for (const auto& t : truths)
-      if (t->header.stamp == w->header.stamp) {
-        const core::StereoObservation tracked = embedded_calibration_stereo::fromMsg(*w),
-                                     truth = embedded_calibration_stereo::fromMsg(*t);
-        core::CornerScore left, right;
-        left.add(tracked.left, truth.left);
-        right.add(tracked.right, truth.right);
-        std::printf("  window at %.3f s against the truth: left %s, right %s; %zu scene correspondences\n",
-                    w->header.stamp.toSec(), left.str().c_str(), right.str().c_str(), w->scene.size());
-      }
-  std::set<std::string> lines;  // the tracker's word on each burst (diagnostics, once a second)
-  for (const auto& array : f.diagnostics.snapshot())
-    for (const auto& status : array->status)
-      for (const auto& kv : status.values)
-        if (kv.key == "window tracking" && lines.insert(kv.value).second) std::printf("  %s\n", kv.value.c_str());
+  expectNoCommitWorse(modes);
+  printTracking(modes);
 }
 
 int main(int argc, char** argv) {
