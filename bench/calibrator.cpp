@@ -149,51 +149,71 @@ void run(const char* label, BoardPoseMode mode, bool from_in_force, int frames,
       a.compared ? static_cast<double>(a.covered) / a.compared : 0.0, a.failures, a.not_converged);
 }
 
-}  // namespace
-
-int main(int argc, char** argv) {
+// The command line's options.
+struct Options {
   Setup setup;
   std::string rig_path;
   std::vector<int> frame_counts{1, 10, 30};
   bool per_frame = true, zero_tangential = false;
-  for (int i = 1; i + 1 < argc; i += 2) {
-    const std::string key = argv[i];
-    if (key == "--trials")
-      setup.trials = std::max(1, std::atoi(argv[i + 1]));
-    else if (key == "--threads")
-      setup.threads = std::max(1, std::atoi(argv[i + 1]));
-    else if (key == "--noise")
-      setup.noise = std::atof(argv[i + 1]);
-    else if (key == "--tangential")
-      setup.tangential = std::atoi(argv[i + 1]) != 0;
-    else if (key == "--rig")
-      rig_path = argv[i + 1];
-    else if (key == "--zero-tangential")
-      zero_tangential = std::atoi(argv[i + 1]) != 0;
-    else if (key == "--prior-deg")
-      setup.prior_deg = std::atof(argv[i + 1]);
-    else if (key == "--prior-m")
-      setup.prior_m = std::atof(argv[i + 1]);
-    else if (key == "--device-error-mm")
-      setup.device_error_m = 1e-3 * std::atof(argv[i + 1]);
-    else if (key == "--device-error-deg")
-      setup.device_error_deg = std::atof(argv[i + 1]);
-    else if (key == "--per-frame")
-      per_frame = std::atoi(argv[i + 1]) != 0;
-    else if (key == "--frames") {
-      frame_counts.clear();
-      for (const char* p = argv[i + 1]; *p;) {
-        char* end = nullptr;
-        const long n = std::strtol(p, &end, 10);
-        if (end == p) break;
-        if (n > 0) frame_counts.push_back(static_cast<int>(n));
-        p = *end == ',' ? end + 1 : end;
-      }
-    } else {
+};
+
+// "1,10,30" as numbers (the positive ones).
+std::vector<int> frameCounts(const char* text) {
+  std::vector<int> counts;
+  for (const char* p = text; *p;) {
+    char* end = nullptr;
+    const long n = std::strtol(p, &end, 10);
+    if (end == p) break;
+    if (n > 0) counts.push_back(static_cast<int>(n));
+    p = *end == ',' ? end + 1 : end;
+  }
+  return counts;
+}
+
+// Sets the option `key` to `value`; false for an unknown key.
+bool setOption(const std::string& key, const char* value, Options* o) {
+  Setup& setup = o->setup;
+  if (key == "--trials")
+    setup.trials = std::max(1, std::atoi(value));
+  else if (key == "--threads")
+    setup.threads = std::max(1, std::atoi(value));
+  else if (key == "--noise")
+    setup.noise = std::atof(value);
+  else if (key == "--tangential")
+    setup.tangential = std::atoi(value) != 0;
+  else if (key == "--rig")
+    o->rig_path = value;
+  else if (key == "--zero-tangential")
+    o->zero_tangential = std::atoi(value) != 0;
+  else if (key == "--prior-deg")
+    setup.prior_deg = std::atof(value);
+  else if (key == "--prior-m")
+    setup.prior_m = std::atof(value);
+  else if (key == "--device-error-mm")
+    setup.device_error_m = 1e-3 * std::atof(value);
+  else if (key == "--device-error-deg")
+    setup.device_error_deg = std::atof(value);
+  else if (key == "--per-frame")
+    o->per_frame = std::atoi(value) != 0;
+  else if (key == "--frames")
+    o->frame_counts = frameCounts(value);
+  else
+    return false;
+  return true;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  Options options;
+  for (int i = 1; i + 1 < argc; i += 2)
+    if (!setOption(argv[i], argv[i + 1], &options)) {
       std::fprintf(stderr, "unknown option %s\n", argv[i]);
       return 2;
     }
-  }
+  Setup& setup = options.setup;
+  const std::string& rig_path = options.rig_path;
+  const bool zero_tangential = options.zero_tangential;
   if (rig_path.empty()) {
     setup.truth = makeSimLikeStereoRig();
     setup.boards = makeSpreadVirtualBoards(setup.truth.left, {});
@@ -220,7 +240,7 @@ int main(int argc, char** argv) {
       setup.threads, setup.noise, setup.tangential ? "estimated" : "held",
       zero_tangential ? " (zero in the truth)" : "", 1e3 * setup.device_error_m,
       setup.device_error_deg, setup.prior_deg, 1e3 * setup.prior_m);
-  for (int frames : frame_counts) {
+  for (int frames : options.frame_counts) {
     if (setup.device) {
       run("device model, init in-force(5%,0.3d)", BoardPoseMode::kDeviceModel, true, frames, setup);
       run("device model, init Zhang", BoardPoseMode::kDeviceModel, false, frames, setup);
@@ -228,7 +248,7 @@ int main(int argc, char** argv) {
     run("shared poses, init in-force(5%,0.3d)", BoardPoseMode::kSharedAcrossFrames, true, frames,
         setup);
     run("shared poses, init Zhang", BoardPoseMode::kSharedAcrossFrames, false, frames, setup);
-    if (!per_frame) continue;
+    if (!options.per_frame) continue;
     run("per-frame poses, init in-force", BoardPoseMode::kPerFrame, true, frames, setup);
     run("per-frame poses, init Zhang", BoardPoseMode::kPerFrame, false, frames, setup);
   }
