@@ -126,6 +126,123 @@ bool lastRightRotation(const std::vector<tf2_msgs::TFMessage::ConstPtr>& message
   return found;
 }
 
+// Phase 1: the live head, recorded into `bag_path`: the statuses published while recording to
+// *live_recorded, the stamp of the last status before it to *record_start_stamp.
+void recordLiveHead(const std::string& dir, const std::string& bag_path, const std::string& prior_file,
+                    std::vector<CalibrationStatus::ConstPtr>* live_recorded, ros::Time* record_start_stamp) {
+  ros::NodeHandle nh;
+  Collector<CalibrationMode> modes(nh, "calibration_mode", 2000);
+  Collector<CalibrationStatus> live(nh, "calibration/status");
+  ChildLaunch head({launchFile("driver.launch"), launchFile("tracker.launch"), launchFile("calibrator.launch"),
+                    "calibration_period_s:=" + std::to_string(kPeriodS), "calibration_frames:=10",
+                    "left_camera_info_url:=file://" + dir + "/left.yaml",
+                    "right_camera_info_url:=file://" + dir + "/right.yaml", "prior_file:=" + prior_file,
+                    kEachWindowAlone},
+                   dir + "/head.log");
+  ASSERT_TRUE(head.started());
+  // Windows at 0 s (no light-off frame yet to teach with), 4 s (teaching), 8 s: first solve.
+  ASSERT_TRUE(live.waitForCount(1, 3 * kPeriodS + 25.0)) << "no calibration/status\n" << head.logTail();
+  ASSERT_TRUE(std::filesystem::exists(prior_file)) << "the tracker did not write its prior\n" << head.logTail();
+  *record_start_stamp = live.snapshot().back()->header.stamp;
+  // The status comes after the window's light-off: start recording in the dark gap, so that
+  // the bag holds whole windows only.
+  ASSERT_TRUE(modes.waitFor([](const auto& m) { return !m.empty() && !m.back()->light_on; }, 2.0));
+  const size_t light_on_before = lightOnFrames(modes.snapshot());
+
+  ChildLaunch recorder({launchFile("record.launch"), "bag:=" + bag_path}, dir + "/record.log");
+  ASSERT_TRUE(recorder.started());
+  ASSERT_TRUE(waitUntil(
+      [] {
+        return subscribedBy("/record", {"/stereo/left/image_raw", "/stereo/right/image_raw",
+                                        "/stereo/left/camera_info", "/stereo/right/camera_info",
+                                        "/stereo/calibration_mode", "/stereo/calibration/status", "/tf_static"});
+      },
+      15.0))
+      << recorder.logTail();
+  ASSERT_EQ(lightOnFrames(modes.snapshot()), light_on_before)
+      << "the recorder subscribed only after the next light window had started";
+
+  // Drift the rig so that the recorded epochs change the calibration.
+  embedded_calibration_stereo::SetRigDrift drift;
+  drift.request.focal_scale = 1.05;
+  drift.request.right_rotation_deg = {0.0, 0.3, 0.0};
+  ASSERT_TRUE(ros::service::call("sim/set_drift", drift));
+  ASSERT_TRUE(drift.response.success) << drift.response.message;
+
+  ASSERT_TRUE(live.waitForCount(1 + kRecordedWindows, kRecordedWindows * kPeriodS + 15.0)) << head.logTail();
+  // A third of a second more of frames: the recorder has received the last status by then.
+  const size_t frames_now = modes.snapshot().size();
+  ASSERT_TRUE(modes.waitForCount(frames_now + 10, 5.0));
+  EXPECT_TRUE(recorder.stop(20.0)) << "record.launch did not stop in time\n" << recorder.logTail();
+  EXPECT_TRUE(head.stop(20.0)) << "the head did not stop in time";
+  const auto all_live = live.snapshot();
+  live_recorded->assign(all_live.begin() + 1, all_live.end());
+}
+
+// What the recorded bag holds: the statuses of its windows (not the one latched before the
+// recording), /tf_static, and how many images and calibration_mode messages.
+struct BagContents {
+  std::vector<CalibrationStatus::ConstPtr> statuses;
+  std::vector<tf2_msgs::TFMessage::ConstPtr> tf;
+  size_t left_images = 0, modes = 0;
+  ros::Time end;
+};
+
+BagContents readBag(const std::string& bag_path, const ros::Time& record_start_stamp) {
+  BagContents contents;
+  BagContents* out = &contents;
+  rosbag::Bag bag(bag_path, rosbag::bagmode::Read);
+  rosbag::View view(bag);
+  out->end = view.getEndTime();
+  out->left_images = rosbag::View(bag, rosbag::TopicQuery("/stereo/left/image_raw")).size();
+  out->modes = rosbag::View(bag, rosbag::TopicQuery("/stereo/calibration_mode")).size();
+  for (const rosbag::MessageInstance& m :
+       rosbag::View(bag, rosbag::TopicQuery(std::vector<std::string>{"/stereo/calibration/status", "/tf_static"}))) {
+    if (m.getTopic() == "/stereo/calibration/status") {
+      // The status latched before the recorder started is in the bag too; its window is not.
+      const auto status = m.instantiate<CalibrationStatus>();
+      if (status && status->header.stamp > record_start_stamp) out->statuses.push_back(status);
+    } else if (auto tf = m.instantiate<tf2_msgs::TFMessage>()) {
+      out->tf.push_back(tf);
+    }
+  }
+  std::printf("bag: %.1f s, %zu left images, %zu calibration_mode, %zu statuses of its windows, %.0f MB\n",
+              (view.getEndTime() - view.getBeginTime()).toSec(), out->left_images, out->modes, out->statuses.size(),
+              std::filesystem::file_size(bag_path) / 1e6);
+  return contents;
+}
+
+// Each replayed epoch against the recorded one: the gate's decision, the epoch, the frames and
+// the parameters within their standard deviations.
+void expectEpochsReproduced(const std::vector<CalibrationStatus::ConstPtr>& recorded,
+                            const std::vector<CalibrationStatus::ConstPtr>& replay_statuses) {
+  Worst worst;
+  for (size_t i = 0; i < recorded.size(); ++i) {
+    const CalibrationStatus& rec = *recorded[i];
+    const CalibrationStatus& rep = *replay_statuses[i];
+    std::printf("epoch %zu: recorded %s (%s, epoch %u, %u frames, rms %.4f/%.4f px, fx %.3f +- %.3f), replay %s "
+                "(%s, epoch %u, %u frames, rms %.4f/%.4f px, fx %.3f)\n",
+                i, rec.accepted ? "accepted" : "rejected", rec.reason.c_str(), rec.epoch, rec.frames_used,
+                rec.rms_left_px, rec.rms_right_px, rec.left_intrinsics.empty() ? 0.0 : rec.left_intrinsics[0],
+                rec.left_intrinsics_stddev.empty() ? 0.0 : rec.left_intrinsics_stddev[0],
+                rep.accepted ? "accepted" : "rejected", rep.reason.c_str(), rep.epoch, rep.frames_used,
+                rep.rms_left_px, rep.rms_right_px, rep.left_intrinsics.empty() ? 0.0 : rep.left_intrinsics[0]);
+    ASSERT_EQ(rep.accepted, rec.accepted) << "epoch " << i << ": the gate decided otherwise (" << rep.reason << ")";
+    if (rec.accepted) {
+      // Accepted, committed nowhere: the epoch in force stays the one the driver had (2 below
+      // the recorded one, which counts the driver's two set_camera_info).
+      EXPECT_EQ(rep.reason, embedded_calibration_stereo::kAcceptedNotCommittedReason);
+      EXPECT_EQ(rep.epoch + 2, rec.epoch);
+    } else {
+      EXPECT_EQ(rep.epoch, rec.epoch);
+    }
+    // A frame lost by a starved queue in either run is tolerated (see the file comment).
+    EXPECT_LE(std::abs(static_cast<int>(rep.frames_used) - static_cast<int>(rec.frames_used)), 1) << "epoch " << i;
+    expectSameParameters(i, rec, rep, &worst);
+  }
+  std::printf("largest replay - recorded difference: %.3g sd (%s)\n", worst.sd_units, worst.what.c_str());
+}
+
 }  // namespace
 
 TEST(Replay, ReproducesTheRecordedCalibrationEpochs) {
@@ -138,81 +255,15 @@ TEST(Replay, ReproducesTheRecordedCalibrationEpochs) {
   // ---- Phase 1: the live head, recorded --------------------------------------------------
   std::vector<CalibrationStatus::ConstPtr> live_recorded;  // statuses published while recording
   ros::Time record_start_stamp;                            // stamp of the last status before it
-  {
-    Collector<CalibrationMode> modes(nh, "calibration_mode", 2000);
-    Collector<CalibrationStatus> live(nh, "calibration/status");
-    ChildLaunch head({launchFile("driver.launch"), launchFile("tracker.launch"), launchFile("calibrator.launch"),
-                      "calibration_period_s:=" + std::to_string(kPeriodS), "calibration_frames:=10",
-                      "left_camera_info_url:=file://" + dir.path + "/left.yaml",
-                      "right_camera_info_url:=file://" + dir.path + "/right.yaml", "prior_file:=" + prior_file,
-                      kEachWindowAlone},
-                     dir.path + "/head.log");
-    ASSERT_TRUE(head.started());
-    // Windows at 0 s (no light-off frame yet to teach with), 4 s (teaching), 8 s: first solve.
-    ASSERT_TRUE(live.waitForCount(1, 3 * kPeriodS + 25.0)) << "no calibration/status\n" << head.logTail();
-    ASSERT_TRUE(std::filesystem::exists(prior_file)) << "the tracker did not write its prior\n" << head.logTail();
-    record_start_stamp = live.snapshot().back()->header.stamp;
-    // The status comes after the window's light-off: start recording in the dark gap, so that
-    // the bag holds whole windows only.
-    ASSERT_TRUE(modes.waitFor([](const auto& m) { return !m.empty() && !m.back()->light_on; }, 2.0));
-    const size_t light_on_before = lightOnFrames(modes.snapshot());
-
-    ChildLaunch recorder({launchFile("record.launch"), "bag:=" + bag_path}, dir.path + "/record.log");
-    ASSERT_TRUE(recorder.started());
-    ASSERT_TRUE(waitUntil(
-        [] {
-          return subscribedBy("/record", {"/stereo/left/image_raw", "/stereo/right/image_raw",
-                                          "/stereo/left/camera_info", "/stereo/right/camera_info",
-                                          "/stereo/calibration_mode", "/stereo/calibration/status", "/tf_static"});
-        },
-        15.0))
-        << recorder.logTail();
-    ASSERT_EQ(lightOnFrames(modes.snapshot()), light_on_before)
-        << "the recorder subscribed only after the next light window had started";
-
-    // Drift the rig so that the recorded epochs change the calibration.
-    embedded_calibration_stereo::SetRigDrift drift;
-    drift.request.focal_scale = 1.05;
-    drift.request.right_rotation_deg = {0.0, 0.3, 0.0};
-    ASSERT_TRUE(ros::service::call("sim/set_drift", drift));
-    ASSERT_TRUE(drift.response.success) << drift.response.message;
-
-    ASSERT_TRUE(live.waitForCount(1 + kRecordedWindows, kRecordedWindows * kPeriodS + 15.0)) << head.logTail();
-    // A third of a second more of frames: the recorder has received the last status by then.
-    const size_t frames_now = modes.snapshot().size();
-    ASSERT_TRUE(modes.waitForCount(frames_now + 10, 5.0));
-    EXPECT_TRUE(recorder.stop(20.0)) << "record.launch did not stop in time\n" << recorder.logTail();
-    EXPECT_TRUE(head.stop(20.0)) << "the head did not stop in time";
-    const auto all_live = live.snapshot();
-    live_recorded.assign(all_live.begin() + 1, all_live.end());
-  }
+  recordLiveHead(dir.path, bag_path, prior_file, &live_recorded, &record_start_stamp);
+  if (HasFatalFailure()) return;
 
   // ---- The bag: the statuses published while recording, whole windows --------------------
   ASSERT_TRUE(std::filesystem::exists(bag_path)) << "no bag (still .active?)";
-  std::vector<CalibrationStatus::ConstPtr> recorded;
-  std::vector<tf2_msgs::TFMessage::ConstPtr> recorded_tf;
-  size_t left_images = 0, modes_in_bag = 0;
-  ros::Time bag_end;
-  {
-    rosbag::Bag bag(bag_path, rosbag::bagmode::Read);
-    rosbag::View view(bag);
-    bag_end = view.getEndTime();
-    left_images = rosbag::View(bag, rosbag::TopicQuery("/stereo/left/image_raw")).size();
-    modes_in_bag = rosbag::View(bag, rosbag::TopicQuery("/stereo/calibration_mode")).size();
-    for (const rosbag::MessageInstance& m :
-         rosbag::View(bag, rosbag::TopicQuery(std::vector<std::string>{"/stereo/calibration/status", "/tf_static"}))) {
-      if (m.getTopic() == "/stereo/calibration/status") {
-        // The status latched before the recorder started is in the bag too; its window is not.
-        const auto status = m.instantiate<CalibrationStatus>();
-        if (status && status->header.stamp > record_start_stamp) recorded.push_back(status);
-      } else if (auto tf = m.instantiate<tf2_msgs::TFMessage>()) {
-        recorded_tf.push_back(tf);
-      }
-    }
-    std::printf("bag: %.1f s, %zu left images, %zu calibration_mode, %zu statuses of its windows, %.0f MB\n",
-                (view.getEndTime() - view.getBeginTime()).toSec(), left_images, modes_in_bag, recorded.size(),
-                std::filesystem::file_size(bag_path) / 1e6);
-  }
+  const BagContents contents = readBag(bag_path, record_start_stamp);
+  const std::vector<CalibrationStatus::ConstPtr>& recorded = contents.statuses;
+  const size_t left_images = contents.left_images, modes_in_bag = contents.modes;
+  const ros::Time bag_end = contents.end;
   ASSERT_EQ(recorded.size(), live_recorded.size()) << "the bag lost or gained statuses";
   for (size_t i = 0; i < recorded.size(); ++i) {
     EXPECT_EQ(recorded[i]->accepted, live_recorded[i]->accepted);
@@ -249,36 +300,13 @@ TEST(Replay, ReproducesTheRecordedCalibrationEpochs) {
   const auto replay_tf_messages = replay_tf.snapshot();
   EXPECT_TRUE(replay.stop(20.0)) << "replay.launch did not stop in time";
 
-  Worst worst;
-  for (size_t i = 0; i < recorded.size(); ++i) {
-    const CalibrationStatus& rec = *recorded[i];
-    const CalibrationStatus& rep = *replay_statuses[i];
-    std::printf("epoch %zu: recorded %s (%s, epoch %u, %u frames, rms %.4f/%.4f px, fx %.3f +- %.3f), replay %s "
-                "(%s, epoch %u, %u frames, rms %.4f/%.4f px, fx %.3f)\n",
-                i, rec.accepted ? "accepted" : "rejected", rec.reason.c_str(), rec.epoch, rec.frames_used,
-                rec.rms_left_px, rec.rms_right_px, rec.left_intrinsics.empty() ? 0.0 : rec.left_intrinsics[0],
-                rec.left_intrinsics_stddev.empty() ? 0.0 : rec.left_intrinsics_stddev[0],
-                rep.accepted ? "accepted" : "rejected", rep.reason.c_str(), rep.epoch, rep.frames_used,
-                rep.rms_left_px, rep.rms_right_px, rep.left_intrinsics.empty() ? 0.0 : rep.left_intrinsics[0]);
-    ASSERT_EQ(rep.accepted, rec.accepted) << "epoch " << i << ": the gate decided otherwise (" << rep.reason << ")";
-    if (rec.accepted) {
-      // Accepted, committed nowhere: the epoch in force stays the one the driver had (2 below
-      // the recorded one, which counts the driver's two set_camera_info).
-      EXPECT_EQ(rep.reason, embedded_calibration_stereo::kAcceptedNotCommittedReason);
-      EXPECT_EQ(rep.epoch + 2, rec.epoch);
-    } else {
-      EXPECT_EQ(rep.epoch, rec.epoch);
-    }
-    // A frame lost by a starved queue in either run is tolerated (see the file comment).
-    EXPECT_LE(std::abs(static_cast<int>(rep.frames_used) - static_cast<int>(rec.frames_used)), 1) << "epoch " << i;
-    expectSameParameters(i, rec, rep, &worst);
-  }
+  expectEpochsReproduced(recorded, replay_statuses);
+  if (HasFatalFailure()) return;
   std::printf("replay: %zu disparity images for %zu left images\n", disparity_images, left_images);
-  std::printf("largest replay - recorded difference: %.3g sd (%s)\n", worst.sd_units, worst.what.c_str());
 
   // The replay's last accepted geometry on /tf_static is the recorded one.
   tf2::Quaternion recorded_q, replay_q;
-  ASSERT_TRUE(lastRightRotation(recorded_tf, &recorded_q)) << "no recorded /tf_static";
+  ASSERT_TRUE(lastRightRotation(contents.tf, &recorded_q)) << "no recorded /tf_static";
   ASSERT_TRUE(lastRightRotation(replay_tf_messages, &replay_q)) << "no /tf_static from the replay";
   const auto last_accepted =
       *std::find_if(recorded.rbegin(), recorded.rend(), [](const auto& s) { return s->accepted; });
