@@ -204,6 +204,8 @@ bool callService(const std::string& name, Srv* srv) {
   return ros::service::waitForService(name, ros::Duration(20.0)) && ros::service::call(name, *srv);
 }
 
+using diagnostic_msgs::DiagnosticStatus;
+
 // What the sections share: the stand-in driver, the head's log, diagnostics and calibration_mode.
 struct Rig {
   ros::NodeHandle& nh;
@@ -212,11 +214,18 @@ struct Rig {
   Collector<diagnostic_msgs::DiagnosticArray>& diagnostics;
   Collector<CalibrationMode>& modes;
   test_support::ChildLaunch& head;
+
+  // The sections, in order (the file comment says what each checks).
+  void recalibrateWithTheLightLate();
+  void noDeviceInView();
+  void uncalibratedCameraInfo();
+  void rightCameraInfoMissing();
+  void onDemand();
+  void unreadableImages();
+  void imagesOfAnotherSize();
 };
 
-void recalibrateWithTheLightLate(Rig& rig) {
-  FakeDriver& driver = rig.driver;
-  auto& modes = rig.modes;
+void Rig::recalibrateWithTheLightLate() {
   // A. A recalibration with the light two frames late; set_camera_info absent.
   Recalibrate recalibrate;
   recalibrate.request.frames = 5;
@@ -247,11 +256,7 @@ void recalibrateWithTheLightLate(Rig& rig) {
   EXPECT_GE(half_lit, 2) << "the switches must have produced half-lit frames";
 }
 
-void noDeviceInView(Rig& rig) {
-  using diagnostic_msgs::DiagnosticStatus;
-  FakeDriver& driver = rig.driver;
-  auto& log = rig.log;
-  auto& diagnostics = rig.diagnostics;
+void Rig::noDeviceInView() {
   // B. No device in view with the light on.
   driver.device_visible = false;
   size_t from = diagnostics.snapshot().size();
@@ -275,12 +280,7 @@ void noDeviceInView(Rig& rig) {
   driver.device_visible = true;
 }
 
-void uncalibratedCameraInfo(Rig& rig) {
-  using diagnostic_msgs::DiagnosticStatus;
-  FakeDriver& driver = rig.driver;
-  auto& log = rig.log;
-  auto& diagnostics = rig.diagnostics;
-  auto& modes = rig.modes;
+void Rig::uncalibratedCameraInfo() {
   std::string seen;
   // C. Uncalibrated camera_info: a warning, frames keep flowing.
   driver.info = FakeDriver::Info::kUncalibrated;
@@ -294,12 +294,7 @@ void uncalibratedCameraInfo(Rig& rig) {
   EXPECT_TRUE(modes.waitForCount(count + 10, 5.0)) << "frames stopped with an uncalibrated camera_info";
 }
 
-void rightCameraInfoMissing(Rig& rig) {
-  using diagnostic_msgs::DiagnosticStatus;
-  FakeDriver& driver = rig.driver;
-  auto& log = rig.log;
-  auto& diagnostics = rig.diagnostics;
-  auto& modes = rig.modes;
+void Rig::rightCameraInfoMissing() {
   std::string seen;
   // D. No right camera_info: frames held back, with the topic named; back when it is back.
   driver.info = FakeDriver::Info::kRightMissing;
@@ -315,10 +310,7 @@ void rightCameraInfoMissing(Rig& rig) {
   EXPECT_TRUE(modes.waitForCount(count + 10, 5.0)) << "frames did not resume with the camera_info back";
 }
 
-void onDemand(Rig& rig) {
-  ros::NodeHandle& nh = rig.nh;
-  auto& modes = rig.modes;
-  auto& head = rig.head;
+void Rig::onDemand() {
   // E. On demand: a calibration burst (settled light-on frames confirmed from the images; a
   //    verification flash would give one, and there are none here) while calibration/health
   //    wants one; none while it does not, frames flowing all the while.
@@ -361,10 +353,7 @@ void onDemand(Rig& rig) {
   health_timer.stop();
 }
 
-void unreadableImages(Rig& rig) {
-  FakeDriver& driver = rig.driver;
-  auto& log = rig.log;
-  auto& modes = rig.modes;
+void Rig::unreadableImages() {
   // F. Unreadable images: dropped, each with an error naming its topic; frames resume after.
   //    A malformed left image is dropped before pairing; an empty left image and a right image
   //    of another encoding, in the same frame, are both named.
@@ -385,10 +374,7 @@ void unreadableImages(Rig& rig) {
   EXPECT_TRUE(modes.waitForCount(count + 10, 5.0)) << "frames did not resume with good images";
 }
 
-void imagesOfAnotherSize(Rig& rig) {
-  FakeDriver& driver = rig.driver;
-  auto& log = rig.log;
-  auto& modes = rig.modes;
+void Rig::imagesOfAnotherSize() {
   // G. Images of another size than the board regions were taught on: a warning per camera.
   ASSERT_TRUE(test_support::waitForLog(log, {"LightController: taught board regions read from"}, 1.0))
       << "the board regions were never taught in this test: nothing to check their size against";
@@ -421,19 +407,19 @@ TEST(LightControllerInputs, DelayedLightAndBadInputs) {
   ASSERT_TRUE(modes.waitForCount(10, 20.0)) << "no calibration_mode from the LightController\n" << head.logTail();
 
   Rig rig{nh, driver, log, diagnostics, modes, head};
-  recalibrateWithTheLightLate(rig);
+  rig.recalibrateWithTheLightLate();
   if (::testing::Test::HasFatalFailure()) return;
-  noDeviceInView(rig);
+  rig.noDeviceInView();
   if (::testing::Test::HasFatalFailure()) return;
-  uncalibratedCameraInfo(rig);
+  rig.uncalibratedCameraInfo();
   if (::testing::Test::HasFatalFailure()) return;
-  rightCameraInfoMissing(rig);
+  rig.rightCameraInfoMissing();
   if (::testing::Test::HasFatalFailure()) return;
-  onDemand(rig);
+  rig.onDemand();
   if (::testing::Test::HasFatalFailure()) return;
-  unreadableImages(rig);
+  rig.unreadableImages();
   if (::testing::Test::HasFatalFailure()) return;
-  imagesOfAnotherSize(rig);
+  rig.imagesOfAnotherSize();
 }
 
 int main(int argc, char** argv) {
