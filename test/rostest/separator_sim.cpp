@@ -312,6 +312,120 @@ TEST(SeparatorTeachService, TeachesFromCoveredSceneFrames) {
   loader->unload("/hw/separator");
 }
 
+namespace {
+
+// The Separator of SeparatorLearn fed crafted frames in /learn: a static device pattern (a
+// checkerboard) over a lens-blurred random texture that slides 2 px right and 1 px down per
+// frame, 30 fps stamps, light bursts as a driver sends them.
+class LearnRig {
+ public:
+  struct Out {
+    double psnr = 0;   // image_scene against the true scene
+    bool raw = false;  // image_scene is the raw frame, byte for byte
+  };
+
+  explicit LearnRig(ros::NodeHandle& nh)
+      : scene(nh, "left/image_scene", 50),
+        log(nh, "/rosout", 1000),
+        left_pub_(nh.advertise<Image>("left/image_raw", 5)),
+        right_pub_(nh.advertise<Image>("right/image_raw", 5)),
+        mode_pub_(nh.advertise<CalibrationMode>("calibration_mode", 5)),
+        device(size, CV_8UC1),
+        canvas_(size.height + 200, size.width + 400, CV_8UC1) {
+    for (int v = 0; v < device.rows; ++v)
+      for (int u = 0; u < device.cols; ++u) device.at<uint8_t>(v, u) = ((u / 8 + v / 8) % 2) * 90;
+    cv::RNG rng(5);
+    rng.fill(canvas_, cv::RNG::UNIFORM, 20, 151);
+    // A lens-blurred texture the flow can follow, stretched back to full contrast (grey 20..150).
+    cv::GaussianBlur(canvas_, canvas_, cv::Size(0, 0), 2.5);
+    cv::normalize(canvas_, canvas_, 20, 150, cv::NORM_MINMAX);
+  }
+
+  bool subscribed() const {
+    return left_pub_.getNumSubscribers() && right_pub_.getNumSubscribers() && mode_pub_.getNumSubscribers();
+  }
+
+  cv::Mat sceneAt(int f) const {
+    return canvas_(cv::Rect((2 * f) % 400, f % 200, size.width, size.height)).clone();
+  }
+
+  // Publishes the next frame (the device at `light` level), waits for its image_scene.
+  Out publish(bool on, bool settled, double light) {
+    const cv::Mat scene_image = sceneAt(frame);
+    cv::Mat image;
+    cv::addWeighted(scene_image, 1.0, device, light, 0.0, image);
+    const ros::Time stamp = stampOf(frame);
+    ++frame;
+    auto mode = boost::make_shared<CalibrationMode>();
+    mode->header.stamp = stamp;
+    mode->light_on = on;
+    mode->settled = settled;
+    mode->calibration_epoch = epoch;
+    publishMonoFrame(left_pub_, right_pub_, mode_pub_, image, mode);
+    Image::ConstPtr out;
+    EXPECT_TRUE(scene.waitFor(
+        [&](const std::vector<Image::ConstPtr>& m) { return (out = test_support::findByStamp(m, stamp)) != nullptr; },
+        10.0))
+        << "frame " << frame - 1 << " not republished";
+    if (!out) return Out{};
+    return Out{psnr(view(*out), scene_image), cv::norm(view(*out), image, cv::NORM_INF) == 0.0};
+  }
+
+  static ros::Time stampOf(int f) { return ros::Time(300, 0) + ros::Duration(f / 30.0); }
+
+  // Settled light-off frames, then the two unsettled frames of the switch on.
+  void lightOn() {
+    for (int i = 0; i < 3; ++i) publish(false, true, 0.0);
+    publish(true, false, 0.33);
+    publish(true, false, 0.67);
+  }
+  // The two unsettled frames of the switch off, then a settled light-off frame.
+  void lightOff() {
+    publish(false, false, 0.67);
+    publish(false, false, 0.33);
+    publish(false, true, 0.0);
+  }
+
+  // Light-off frames until the log has `needle` (a learning run is taken at a frame's arrival).
+  bool waitLearned(const std::string& needle, std::string* found) {
+    for (int i = 0; i < 100; ++i) {
+      if (test_support::waitForLog(log, {"Separator", needle}, 0.05, found)) return true;
+      publish(false, true, 0.0);
+    }
+    return false;
+  }
+
+  // Scores a burst's light-on frames (8 settled); returns the worst PSNR, counting raw frames.
+  double burst(int* raw_count) {
+    lightOn();
+    double worst = 1e9;
+    for (int i = 0; i < 8; ++i) {
+      const Out out = publish(true, true, 1.0);
+      worst = std::min(worst, out.psnr);
+      *raw_count += out.raw;
+    }
+    lightOff();
+    return worst;
+  }
+
+  const cv::Size size{256, 192};
+  Collector<Image> scene;
+  Collector<rosgraph_msgs::Log> log;
+
+ private:
+  ros::Publisher left_pub_, right_pub_, mode_pub_;
+
+ public:
+  cv::Mat device;  // the device pattern as the next frames show it
+  int frame = 0;
+  uint32_t epoch = 0;
+
+ private:
+  cv::Mat canvas_;
+};
+
+}  // namespace
+
 // device_template learn on crafted frames: a static device pattern (a checkerboard) over a scene
 // that slides 2 px right and 1 px down per frame (a moving head), light bursts as the driver
 // sends them (settled light-off frames, two unsettled, settled light-on ones, two unsettled, light
@@ -325,93 +439,30 @@ TEST(SeparatorTeachService, TeachesFromCoveredSceneFrames) {
 //    are learned, after which they are separated with the moved device again.
 TEST(SeparatorLearn, LearnsTheDeviceImageFromTheFirstBurstOnWithAMovingScene) {
   ros::NodeHandle nh("/learn");
-  Collector<Image> scene(nh, "left/image_scene", 50);
-  Collector<rosgraph_msgs::Log> log(nh, "/rosout", 1000);
-  ros::Publisher left_pub = nh.advertise<Image>("left/image_raw", 5);
-  ros::Publisher right_pub = nh.advertise<Image>("right/image_raw", 5);
-  ros::Publisher mode_pub = nh.advertise<CalibrationMode>("calibration_mode", 5);
+  LearnRig rig(nh);
   // learn is the default device_template: no parameter set
   ASSERT_TRUE(loader->load("/learn/separator", "embedded_calibration_stereo/Separator", ros::M_string(), {}));
-  ASSERT_TRUE(waitUntil(
-      [&] { return left_pub.getNumSubscribers() && right_pub.getNumSubscribers() && mode_pub.getNumSubscribers(); },
-      10.0));
+  ASSERT_TRUE(waitUntil([&] { return rig.subscribed(); }, 10.0));
   std_srvs::Trigger teach;
   ASSERT_TRUE(ros::service::call("/learn/separator/teach", teach));
   EXPECT_FALSE(teach.response.success) << "learn mode has no teach: " << teach.response.message;
-
-  const cv::Size size(256, 192);
-  cv::Mat device(size, CV_8UC1), canvas(size.height + 200, size.width + 400, CV_8UC1);
-  for (int v = 0; v < device.rows; ++v)
-    for (int u = 0; u < device.cols; ++u) device.at<uint8_t>(v, u) = ((u / 8 + v / 8) % 2) * 90;
-  cv::RNG rng(5);
-  rng.fill(canvas, cv::RNG::UNIFORM, 20, 151);
-  // A lens-blurred texture the flow can follow, stretched back to full contrast (grey 20..150).
-  cv::GaussianBlur(canvas, canvas, cv::Size(0, 0), 2.5);
-  cv::normalize(canvas, canvas, 20, 150, cv::NORM_MINMAX);
-  int frame = 0;
-  uint32_t epoch = 0;
-  const auto sceneAt = [&](int f) { return canvas(cv::Rect((2 * f) % 400, f % 200, size.width, size.height)).clone(); };
-  // Publishes frame `frame` (the device at `light` level), waits for its image_scene and returns
-  // its PSNR against the true scene and whether it is the raw frame, byte for byte.
-  struct Out {
-    double psnr = 0;
-    bool raw = false;
-  };
-  const auto publish = [&](bool on, bool settled, double light) {
-    const cv::Mat scene_image = sceneAt(frame);
-    cv::Mat image;
-    cv::addWeighted(scene_image, 1.0, device, light, 0.0, image);
-    const ros::Time stamp = ros::Time(300, 0) + ros::Duration(frame / 30.0);
-    ++frame;
-    auto mode = boost::make_shared<CalibrationMode>();
-    mode->header.stamp = stamp;
-    mode->light_on = on;
-    mode->settled = settled;
-    mode->calibration_epoch = epoch;
-    publishMonoFrame(left_pub, right_pub, mode_pub, image, mode);
-    Image::ConstPtr out;
-    EXPECT_TRUE(scene.waitFor(
-        [&](const std::vector<Image::ConstPtr>& m) { return (out = test_support::findByStamp(m, stamp)) != nullptr; },
-        10.0))
-        << "frame " << frame - 1 << " not republished";
-    if (!out) return Out{};
-    return Out{psnr(view(*out), scene_image), cv::norm(view(*out), image, cv::NORM_INF) == 0.0};
-  };
-  const auto lightOn = [&] {
-    for (int i = 0; i < 3; ++i) publish(false, true, 0.0);
-    publish(true, false, 0.33);
-    publish(true, false, 0.67);
-  };
-  const auto lightOff = [&] {
-    publish(false, false, 0.67);
-    publish(false, false, 0.33);
-    publish(false, true, 0.0);
-  };
-  // Light-off frames until the log has `needle` (a learning run is taken at a frame's arrival).
-  const auto waitLearned = [&](const std::string& needle, std::string* found) {
-    for (int i = 0; i < 100; ++i) {
-      if (test_support::waitForLog(log, {"Separator", needle}, 0.05, found)) return true;
-      publish(false, true, 0.0);
-    }
-    return false;
-  };
   {
     cv::Scalar mean, sd;
-    cv::meanStdDev(sceneAt(0), mean, sd);
+    cv::meanStdDev(rig.sceneAt(0), mean, sd);
     std::printf("learn: scene texture sd %.1f grey levels, moving 2 px right and 1 px up per frame; raw light-on "
-                "frames %.1f dB\n", sd[0], psnr(device, cv::Mat::zeros(size, CV_8UC1)));
+                "frames %.1f dB\n", sd[0], psnr(rig.device, cv::Mat::zeros(rig.size, CV_8UC1)));
   }
 
   // The first burst: learned from its first 8 light-on frames while it goes on.
-  lightOn();
-  for (int i = 0; i < 8; ++i) EXPECT_TRUE(publish(true, true, 1.0).raw) << "no template yet: the raw frame";
+  rig.lightOn();
+  for (int i = 0; i < 8; ++i) EXPECT_TRUE(rig.publish(true, true, 1.0).raw) << "no template yet: the raw frame";
   std::string found;
   bool early = false;
   double worst_early = 1e9;
   int separated_in_first = 0;
   for (int i = 8; i < 12; ++i) {
-    early = early || test_support::waitForLog(log, {"Separator", "from the first 8 light-on frames"}, 2.0, &found);
-    const Out out = publish(true, true, 1.0);
+    early = early || test_support::waitForLog(rig.log, {"Separator", "from the first 8 light-on frames"}, 2.0, &found);
+    const LearnRig::Out out = rig.publish(true, true, 1.0);
     if (!out.raw) {
       ++separated_in_first;
       worst_early = std::min(worst_early, out.psnr);
@@ -422,40 +473,28 @@ TEST(SeparatorLearn, LearnsTheDeviceImageFromTheFirstBurstOnWithAMovingScene) {
               found.c_str(), separated_in_first, worst_early);
   EXPECT_GE(separated_in_first, 3);
   EXPECT_GE(worst_early, 20.0) << "one-sided pairs on a faint texture: well above the raw frames, short of later bursts";
-  lightOff();
-  EXPECT_TRUE(waitLearned("from the 12 light-on frames", &found)) << "the first burst's ends not learned";
+  rig.lightOff();
+  EXPECT_TRUE(rig.waitLearned("from the 12 light-on frames", &found)) << "the first burst's ends not learned";
 
-  // Scores the next burst's light-on frames (8 settled); returns the worst PSNR, counting raw frames.
-  const auto burst = [&](int* raw_count) {
-    lightOn();
-    double worst = 1e9;
-    for (int i = 0; i < 8; ++i) {
-      const Out out = publish(true, true, 1.0);
-      worst = std::min(worst, out.psnr);
-      *raw_count += out.raw;
-    }
-    lightOff();
-    return worst;
-  };
   int raw = 0;
-  const double after_first = burst(&raw);
+  const double after_first = rig.burst(&raw);
   std::printf("learn, after the first burst: '%s'; next burst separated, worst %.1f dB\n", found.c_str(), after_first);
   EXPECT_GE(after_first, 35.0);
   EXPECT_EQ(raw, 0);
 
   // A new calibration epoch with the device image moved: separated with the template in use
   // (worse: the device moved), never raw; that burst's ends are learned; then separated again.
-  ++epoch;
+  ++rig.epoch;
   cv::Mat moved;
-  cv::warpAffine(device, moved, cv::Matx23f(1.03f, 0, -2, 0, 1.03f, -1), size, cv::INTER_NEAREST);
-  device = moved;
-  const double moved_old = burst(&raw);
+  cv::warpAffine(rig.device, moved, cv::Matx23f(1.03f, 0, -2, 0, 1.03f, -1), rig.size, cv::INTER_NEAREST);
+  rig.device = moved;
+  const double moved_old = rig.burst(&raw);
   EXPECT_EQ(raw, 0) << "a new epoch: the template in use, never raw frames";
   char stamp_needle[80];  // the burst's last light-on frame: the three light-off frames came after it
   std::snprintf(stamp_needle, sizeof(stamp_needle), "light-on frames of the burst ending at %.3f s",
-                (ros::Time(300, 0) + ros::Duration((frame - 4) / 30.0)).toSec());
-  EXPECT_TRUE(waitLearned(stamp_needle, &found)) << "the moved device's burst not learned (" << stamp_needle << ")";
-  const double moved_new = burst(&raw);
+                LearnRig::stampOf(rig.frame - 4).toSec());
+  EXPECT_TRUE(rig.waitLearned(stamp_needle, &found)) << "the moved device's burst not learned (" << stamp_needle << ")";
+  const double moved_new = rig.burst(&raw);
   std::printf("learn, device moved: the previous template %.1f dB; after its burst '%s': %.1f dB\n", moved_old,
               found.c_str(), moved_new);
   EXPECT_GE(moved_new, 35.0);
