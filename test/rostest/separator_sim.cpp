@@ -79,6 +79,68 @@ void publishMonoFrame(ros::Publisher& left_pub, ros::Publisher& right_pub, ros::
   mode_pub.publish(mode);
 }
 
+using Pairs = std::vector<std::pair<Image::ConstPtr, Image::ConstPtr>>;  // (raw, scene)
+
+// The separated frames among `scenes`: image_scene of a light-on settled stamp that is not the raw
+// object, with a truth image.
+Pairs separatedFrames(const std::vector<Image::ConstPtr>& scenes, const std::vector<Image::ConstPtr>& raws,
+                      const std::vector<Image::ConstPtr>& truths, const std::vector<CalibrationMode::ConstPtr>& modes) {
+  Pairs out;
+  for (const auto& s : scenes) {
+    const auto source = test_support::findByStamp(raws, s->header.stamp);
+    const auto mode = test_support::findByStamp(modes, s->header.stamp);
+    if (source && mode && mode->light_on && mode->settled && source.get() != s.get() &&
+        test_support::findByStamp(truths, s->header.stamp))
+      out.emplace_back(source, s);
+  }
+  return out;
+}
+
+// What a camera's image_scene messages were, for a failure message.
+std::string sceneCensus(const std::vector<Image::ConstPtr>& scenes, const std::vector<Image::ConstPtr>& raws,
+                        const std::vector<Image::ConstPtr>& truths, const std::vector<CalibrationMode::ConstPtr>& modes) {
+  int total = 0, lit = 0, raw_object = 0, no_raw = 0, no_truth = 0;
+  for (const auto& s : scenes) {
+    ++total;
+    const auto mode = test_support::findByStamp(modes, s->header.stamp);
+    if (!mode || !mode->light_on || !mode->settled) continue;
+    ++lit;
+    const auto source = test_support::findByStamp(raws, s->header.stamp);
+    no_raw += !source;
+    raw_object += source && source.get() == s.get();
+    no_truth += !test_support::findByStamp(truths, s->header.stamp);
+  }
+  return std::to_string(total) + " messages, " + std::to_string(lit) + " of settled light-on stamps: " +
+         std::to_string(raw_object) + " the raw image itself, " + std::to_string(no_raw) + " without a raw image, " +
+         std::to_string(no_truth) + " without a truth image";
+}
+
+// The separated frames of one camera against the truth: headers and sizes kept, PSNR >= 35 dB,
+// closer to the truth than any raw light-on frame.
+void expectSeparatedScene(const char* side, const Pairs& frames, const std::vector<Image::ConstPtr>& truths) {
+  double worst = 1e9, sum = 0, worst_raw = 0;
+  for (const auto& f : frames) {
+    const Image& r = *f.first;
+    const Image& s = *f.second;
+    EXPECT_EQ(s.header.stamp, r.header.stamp);
+    EXPECT_EQ(s.header.frame_id, r.header.frame_id);
+    EXPECT_EQ(s.header.seq, r.header.seq);
+    EXPECT_EQ(s.encoding, r.encoding);
+    ASSERT_EQ(s.width, r.width);
+    ASSERT_EQ(s.height, r.height);
+    const auto t = test_support::findByStamp(truths, s.header.stamp);
+    const double p = psnr(view(s), view(*t));
+    worst = std::min(worst, p);
+    sum += p;
+    worst_raw = std::max(worst_raw, psnr(view(r), view(*t)));
+  }
+  std::printf("%s image_scene vs ground truth over %zu separated frames: PSNR mean %.1f dB, worst %.1f dB "
+              "(raw light-on frames: at best %.1f dB)\n",
+              side, frames.size(), sum / frames.size(), worst, worst_raw);
+  EXPECT_GE(worst, 35.0) << side;
+  EXPECT_LT(worst_raw, worst) << "the raw frames are as close to the scene: nothing was separated";
+}
+
 }  // namespace
 
 // Light off: image_scene is the very message published on image_raw (same object address).
@@ -132,38 +194,8 @@ TEST(SeparatorSim, CalibrationModePublishesTheSeparatedScene) {
   ASSERT_TRUE(ros::service::call("/sim/set_light", light));
   ASSERT_TRUE(light.response.success) << light.response.message;
 
-  // Separated frames: image_scene of a light-on settled stamp that is not the raw object.
   const auto separated = [&](Collector<Image>& raws, Collector<Image>& truths, const std::vector<Image::ConstPtr>& m) {
-    std::vector<std::pair<Image::ConstPtr, Image::ConstPtr>> out;  // (raw, scene)
-    const auto r = raws.snapshot(), t = truths.snapshot();
-    const auto md = modes.snapshot();
-    for (const auto& s : m) {
-      const auto source = test_support::findByStamp(r, s->header.stamp);
-      const auto mode = test_support::findByStamp(md, s->header.stamp);
-      if (source && mode && mode->light_on && mode->settled && source.get() != s.get() &&
-          test_support::findByStamp(t, s->header.stamp))
-        out.emplace_back(source, s);
-    }
-    return out;
-  };
-  // What the right camera's image_scene messages were, for a failure message.
-  const auto rightCensus = [&]() {
-    int total = 0, lit = 0, raw_object = 0, no_raw = 0, no_truth = 0;
-    const auto r = right_raw.snapshot(), t = right_truth.snapshot();
-    const auto md = modes.snapshot();
-    for (const auto& s : right_scene.snapshot()) {
-      ++total;
-      const auto mode = test_support::findByStamp(md, s->header.stamp);
-      if (!mode || !mode->light_on || !mode->settled) continue;
-      ++lit;
-      const auto source = test_support::findByStamp(r, s->header.stamp);
-      no_raw += !source;
-      raw_object += source && source.get() == s.get();
-      no_truth += !test_support::findByStamp(t, s->header.stamp);
-    }
-    return std::to_string(total) + " messages, " + std::to_string(lit) + " of settled light-on stamps: " +
-           std::to_string(raw_object) + " the raw image itself, " + std::to_string(no_raw) + " without a raw image, " +
-           std::to_string(no_truth) + " without a truth image";
+    return separatedFrames(m, raws.snapshot(), truths.snapshot(), modes.snapshot());
   };
   ASSERT_TRUE(scene.waitFor([&](const std::vector<Image::ConstPtr>& m) { return separated(raw, truth, m).size() >= 5; },
                             40.0))
@@ -172,7 +204,8 @@ TEST(SeparatorSim, CalibrationModePublishesTheSeparatedScene) {
   // several seconds (a wait, not a sleep: a passing run does not take longer).
   ASSERT_TRUE(right_scene.waitFor(
       [&](const std::vector<Image::ConstPtr>& m) { return separated(right_raw, right_truth, m).size() >= 3; }, 30.0))
-      << "fewer than 3 separated right light-on frames within 30 s of the left's 5: " << rightCensus();
+      << "fewer than 3 separated right light-on frames within 30 s of the left's 5: "
+      << sceneCensus(right_scene.snapshot(), right_raw.snapshot(), right_truth.snapshot(), modes.snapshot());
   light.request.data = false;
   EXPECT_TRUE(ros::service::call("/sim/set_light", light));
 
@@ -185,32 +218,8 @@ TEST(SeparatorSim, CalibrationModePublishesTheSeparatedScene) {
   }
   EXPECT_GE(raw_light_on, kTeachFrames) << "light-on frames during the teach were not republished raw";
 
-  for (auto* side : {"left", "right"}) {
-    const bool left = std::string(side) == "left";
-    const auto frames = left ? separated(raw, truth, scene.snapshot()) : separated(right_raw, right_truth, right_scene.snapshot());
-    const auto truths = (left ? truth : right_truth).snapshot();
-    double worst = 1e9, sum = 0, worst_raw = 0;
-    for (const auto& f : frames) {
-      const Image& r = *f.first;
-      const Image& s = *f.second;
-      EXPECT_EQ(s.header.stamp, r.header.stamp);
-      EXPECT_EQ(s.header.frame_id, r.header.frame_id);
-      EXPECT_EQ(s.header.seq, r.header.seq);
-      EXPECT_EQ(s.encoding, r.encoding);
-      ASSERT_EQ(s.width, r.width);
-      ASSERT_EQ(s.height, r.height);
-      const auto t = test_support::findByStamp(truths, s.header.stamp);
-      const double p = psnr(view(s), view(*t));
-      worst = std::min(worst, p);
-      sum += p;
-      worst_raw = std::max(worst_raw, psnr(view(r), view(*t)));
-    }
-    std::printf("%s image_scene vs ground truth over %zu separated frames: PSNR mean %.1f dB, worst %.1f dB "
-                "(raw light-on frames: at best %.1f dB)\n",
-                side, frames.size(), sum / frames.size(), worst, worst_raw);
-    EXPECT_GE(worst, 35.0) << side;
-    EXPECT_LT(worst_raw, worst) << "the raw frames are as close to the scene: nothing was separated";
-  }
+  expectSeparatedScene("left", separated(raw, truth, scene.snapshot()), truth.snapshot());
+  expectSeparatedScene("right", separated(right_raw, right_truth, right_scene.snapshot()), right_truth.snapshot());
 }
 
 // After a calibration change (left/set_camera_info: epoch + 1) the template of the old epoch is
