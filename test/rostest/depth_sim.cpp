@@ -50,87 +50,60 @@ TEST(DepthSim, ImageRectHasTheRawHeaderAndEncoding) {
   EXPECT_EQ(right.snapshot().back()->header.frame_id, source->header.frame_id);
 }
 
-// Rectified-pixel disparity against the simulator's depth: each sampled rectified left pixel
-// with a valid disparity is mapped to its raw pixel (R^T, then K and D of the left CameraInfo);
-// the ground-truth depth there gives the true 3D point, hence the true disparity f*T/Z_rect.
-// `prefix`: namespace of the pipeline; `info`: the CameraInfo its Disparity reads.
-void expectDisparityMatchesGroundTruth(const std::string& prefix, const std::string& info) {
-  ros::NodeHandle nh;
-  Collector<DisparityImage> disparity(nh, prefix + "disparity", 20);
-  Collector<sensor_msgs::PointCloud2> points(nh, prefix + "points2", 20);
-  Collector<embedded_calibration_stereo::DisparityCoverage> coverages(nh, prefix + "disparity_coverage", 20);
-  Collector<Image> masks(nh, prefix + "disparity_mask", 20);
-  Collector<Image> depth(nh, "ground_truth/left/depth", 50);
-  Collector<CameraInfo> left_info(nh, prefix + "left/" + info, 50), right_info(nh, prefix + "right/" + info, 50);
-  // A disparity frame for which the depth and both CameraInfos of the same stamp arrived.
-  DisparityImage::ConstPtr disp;
-  Image::ConstPtr truth;
-  CameraInfo::ConstPtr li, ri;
-  sensor_msgs::PointCloud2::ConstPtr cloud;
-  embedded_calibration_stereo::DisparityCoverage::ConstPtr coverage;
-  ASSERT_TRUE(disparity.waitFor(
-      [&](const std::vector<DisparityImage::ConstPtr>& m) {
-        for (const auto& d : m) {
-          truth = test_support::findByStamp(depth.snapshot(), d->header.stamp);
-          li = test_support::findByStamp(left_info.snapshot(), d->header.stamp);
-          ri = test_support::findByStamp(right_info.snapshot(), d->header.stamp);
-          cloud = test_support::findByStamp(points.snapshot(), d->header.stamp);
-          coverage = test_support::findByStamp(coverages.snapshot(), d->header.stamp);
-          if (truth && li && ri && cloud && coverage) {
-            disp = d;
-            return true;
-          }
-        }
-        return false;
+// disparity_coverage: the fraction of the image's pixels with a disparity, counted here.
+void expectCoverageCounted(const DisparityImage& disp, const embedded_calibration_stereo::DisparityCoverage& coverage) {
+  const float* d = reinterpret_cast<const float*>(disp.image.data.data());
+  const size_t n = disp.image.width * disp.image.height;
+  const size_t valid = std::count_if(d, d + n, [&](float v) { return v >= disp.min_disparity; });
+  EXPECT_NEAR(coverage.valid_fraction, double(valid) / n, 1e-6);
+  EXPECT_GT(coverage.valid_fraction, 0.5);
+}
+
+// disparity_mask: mono8 of the disparity's stamp and size; mostly matched, and the left border
+// (where the right camera cannot see) marked hidden (census_sgm, the default).
+void expectMaskOfDisparity(Collector<Image>& masks, const DisparityImage& disp) {
+  Image::ConstPtr mask;
+  ASSERT_TRUE(masks.waitFor(
+      [&](const std::vector<Image::ConstPtr>& m) {
+        mask = test_support::findByStamp(m, disp.header.stamp);
+        return bool(mask);
       },
-      20.0))
-      << "no disparity frame with matching ground truth, camera_info, points2 and disparity_coverage";
-  // disparity_coverage: the fraction of the image's pixels with a disparity, counted here.
-  {
-    const float* d = reinterpret_cast<const float*>(disp->image.data.data());
-    const size_t n = disp->image.width * disp->image.height;
-    const size_t valid = std::count_if(d, d + n, [&](float v) { return v >= disp->min_disparity; });
-    EXPECT_NEAR(coverage->valid_fraction, double(valid) / n, 1e-6);
-    EXPECT_GT(coverage->valid_fraction, 0.5);
-  }
-  // disparity_mask: mono8 of the disparity's stamp and size; mostly matched, and the left border
-  // (where the right camera cannot see) marked hidden (census_sgm, the default).
-  {
-    Image::ConstPtr mask;
-    ASSERT_TRUE(masks.waitFor(
-        [&](const std::vector<Image::ConstPtr>& m) {
-          mask = test_support::findByStamp(m, disp->header.stamp);
-          return bool(mask);
-        },
-        5.0))
-        << "no disparity_mask with the disparity's stamp";
-    EXPECT_EQ(mask->encoding, "mono8");
-    EXPECT_EQ(mask->width, disp->image.width);
-    EXPECT_EQ(mask->height, disp->image.height);
-    const auto count = [&](uint8_t v) { return std::count(mask->data.begin(), mask->data.end(), v); };
-    EXPECT_GT(double(count(255)) / mask->data.size(), 0.5);
-    EXPECT_GT(count(128), 0) << "nothing marked hidden from the right camera";
-    EXPECT_EQ(count(255) + count(128) + count(0), static_cast<long>(mask->data.size()));
-  }
+      5.0))
+      << "no disparity_mask with the disparity's stamp";
+  EXPECT_EQ(mask->encoding, "mono8");
+  EXPECT_EQ(mask->width, disp.image.width);
+  EXPECT_EQ(mask->height, disp.image.height);
+  const auto count = [&](uint8_t v) { return std::count(mask->data.begin(), mask->data.end(), v); };
+  EXPECT_GT(double(count(255)) / mask->data.size(), 0.5);
+  EXPECT_GT(count(128), 0) << "nothing marked hidden from the right camera";
+  EXPECT_EQ(count(255) + count(128) + count(0), static_cast<long>(mask->data.size()));
+}
 
-  image_geometry::StereoCameraModel model;
-  ASSERT_TRUE(model.fromCameraInfo(li, ri));
-  // DisparityImage fields.
-  EXPECT_FLOAT_EQ(disp->f, model.right().fx());
-  EXPECT_NEAR(disp->T, model.baseline(), 1e-6);
-  EXPECT_GT(disp->T, 0.05);
-  EXPECT_EQ(disp->min_disparity, 0.0f);
-  EXPECT_EQ(disp->max_disparity, 63.0f);
-  EXPECT_GT(disp->delta_d, 0.0f);
-  EXPECT_EQ(disp->image.encoding, "32FC1");
-  EXPECT_EQ(disp->image.width, li->width);
-  const auto& w = disp->valid_window;
-  EXPECT_GT(w.width, li->width / 2);
-  EXPECT_GT(w.height, li->height / 2);
-  EXPECT_LE(w.x_offset + w.width, li->width);
-  EXPECT_LE(w.y_offset + w.height, li->height);
+// The DisparityImage's fields against the stereo model of its camera_infos.
+void expectDisparityFields(const DisparityImage& disp, const image_geometry::StereoCameraModel& model,
+                           const CameraInfo& left) {
+  EXPECT_FLOAT_EQ(disp.f, model.right().fx());
+  EXPECT_NEAR(disp.T, model.baseline(), 1e-6);
+  EXPECT_GT(disp.T, 0.05);
+  EXPECT_EQ(disp.min_disparity, 0.0f);
+  EXPECT_EQ(disp.max_disparity, 63.0f);
+  EXPECT_GT(disp.delta_d, 0.0f);
+  EXPECT_EQ(disp.image.encoding, "32FC1");
+  EXPECT_EQ(disp.image.width, left.width);
+  const auto& w = disp.valid_window;
+  EXPECT_GT(w.width, left.width / 2);
+  EXPECT_GT(w.height, left.height / 2);
+  EXPECT_LE(w.x_offset + w.width, left.width);
+  EXPECT_LE(w.y_offset + w.height, left.height);
   EXPECT_GE(w.x_offset, 63u) << "the leftmost max_disparity columns cannot be matched";
+}
 
+// Sampled rectified pixels with a valid disparity against the depth truth: their disparity, and
+// points2's depth.
+void expectAgainstTruth(const std::string& name, const DisparityImage::ConstPtr& disp, const Image::ConstPtr& truth,
+                        const CameraInfo::ConstPtr& li, const image_geometry::StereoCameraModel& model,
+                        const sensor_msgs::PointCloud2::ConstPtr& cloud) {
+  const auto& w = disp->valid_window;
   const cv::Matx33d K(li->K.data()), R(li->R.data());
   const cv::Mat D(li->D);
   const cv::Matx44d Q = model.reprojectionMatrix();
@@ -166,10 +139,54 @@ void expectDisparityMatchesGroundTruth(const std::string& prefix, const std::str
   const double median_depth_error = test_support::median(depth_errors);
   std::printf("%s: disparity vs ground truth over %zu pixels: median |error| %.3f px, %.1f %% within 1 px; "
               "points2 median relative depth error %.4f\n",
-              (prefix + "disparity").c_str(), errors.size(), median_error, 100 * within_1px, median_depth_error);
+              name.c_str(), errors.size(), median_error, 100 * within_1px, median_depth_error);
   EXPECT_LT(median_error, 0.3);
   EXPECT_GT(within_1px, 0.8);
   EXPECT_LT(median_depth_error, 0.02);
+}
+
+// Rectified-pixel disparity against the simulator's depth: each sampled rectified left pixel
+// with a valid disparity is mapped to its raw pixel (R^T, then K and D of the left CameraInfo);
+// the ground-truth depth there gives the true 3D point, hence the true disparity f*T/Z_rect.
+// `prefix`: namespace of the pipeline; `info`: the CameraInfo its Disparity reads.
+void expectDisparityMatchesGroundTruth(const std::string& prefix, const std::string& info) {
+  ros::NodeHandle nh;
+  Collector<DisparityImage> disparity(nh, prefix + "disparity", 20);
+  Collector<sensor_msgs::PointCloud2> points(nh, prefix + "points2", 20);
+  Collector<embedded_calibration_stereo::DisparityCoverage> coverages(nh, prefix + "disparity_coverage", 20);
+  Collector<Image> masks(nh, prefix + "disparity_mask", 20);
+  Collector<Image> depth(nh, "ground_truth/left/depth", 50);
+  Collector<CameraInfo> left_info(nh, prefix + "left/" + info, 50), right_info(nh, prefix + "right/" + info, 50);
+  // A disparity frame for which the depth and both CameraInfos of the same stamp arrived.
+  DisparityImage::ConstPtr disp;
+  Image::ConstPtr truth;
+  CameraInfo::ConstPtr li, ri;
+  sensor_msgs::PointCloud2::ConstPtr cloud;
+  embedded_calibration_stereo::DisparityCoverage::ConstPtr coverage;
+  ASSERT_TRUE(disparity.waitFor(
+      [&](const std::vector<DisparityImage::ConstPtr>& m) {
+        for (const auto& d : m) {
+          truth = test_support::findByStamp(depth.snapshot(), d->header.stamp);
+          li = test_support::findByStamp(left_info.snapshot(), d->header.stamp);
+          ri = test_support::findByStamp(right_info.snapshot(), d->header.stamp);
+          cloud = test_support::findByStamp(points.snapshot(), d->header.stamp);
+          coverage = test_support::findByStamp(coverages.snapshot(), d->header.stamp);
+          if (truth && li && ri && cloud && coverage) {
+            disp = d;
+            return true;
+          }
+        }
+        return false;
+      },
+      20.0))
+      << "no disparity frame with matching ground truth, camera_info, points2 and disparity_coverage";
+  expectCoverageCounted(*disp, *coverage);
+  expectMaskOfDisparity(masks, *disp);
+  if (::testing::Test::HasFatalFailure()) return;
+  image_geometry::StereoCameraModel model;
+  ASSERT_TRUE(model.fromCameraInfo(li, ri));
+  expectDisparityFields(*disp, model, *li);
+  expectAgainstTruth(prefix + "disparity", disp, truth, li, model, cloud);
 }
 
 TEST(DepthSim, BouguetDisparityMatchesGroundTruthDepth) { expectDisparityMatchesGroundTruth("", "camera_info"); }
