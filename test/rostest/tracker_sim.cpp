@@ -88,77 +88,42 @@ struct CornerAgreement {
   double fraction() const { return truth ? static_cast<double>(matched) / truth : 0.0; }
 };
 
-TEST(TrackerSim, TeachesOnStartThenTracksEverySettledLightOnFrame) {
-  std::string prior_file;
-  ASSERT_TRUE(ros::param::get("~prior_file", prior_file));
-  // The launch file's anonymous directory, created by the tracker: removed at the end.
-  struct RemoveDir {
-    std::filesystem::path path;
-    ~RemoveDir() {
-      if (path.string().rfind("/tmp/ecs_tracker_sim_test", 0) == 0) std::filesystem::remove_all(path);
-    }
-  } cleanup{std::filesystem::path(prior_file).parent_path()};
-  // First window: teaching; the next one is tracked.
-  ASSERT_TRUE(fixture->observations.waitForCount(1, 20.0)) << "no observation within 20 s";
-  const ros::Time first = fixture->observations.snapshot().front()->header.stamp;
-  core::PatternPrior prior;
-  ASSERT_NO_THROW(prior = core::readPatternPrior(prior_file)) << prior_file;
-  ASSERT_EQ(prior.cameras.size(), 2u);
-  // Written through a temporary file next to it (writeFileAtomically: "<file>.tmp.XXXXXX"),
-  // renamed over the target: none may be left in the folder once the prior is there.
+// The prior is written through a temporary file next to it (writeFileAtomically:
+// "<file>.tmp.XXXXXX"), renamed over the target: none may be left in `folder` once it is there.
+void expectNoTemporaryFilesIn(const std::filesystem::path& folder) {
   std::vector<std::string> leftovers;
-  for (const auto& entry : std::filesystem::directory_iterator(cleanup.path))
+  for (const auto& entry : std::filesystem::directory_iterator(folder))
     if (entry.path().filename().string().find(".tmp.") != std::string::npos)
       leftovers.push_back(entry.path().filename().string());
   EXPECT_TRUE(leftovers.empty()) << "temporary files left next to the prior: "
                                  << ::testing::PrintToString(leftovers);
+}
 
-  // Two more complete windows after the first observation.
-  ASSERT_TRUE(waitForWindow(first, 6.0));
-  const ros::Time second_window_end = fixture->modes.snapshot().back()->header.stamp;
-  ASSERT_TRUE(waitForWindow(second_window_end, 6.0));
-  const ros::Time end = fixture->modes.snapshot().back()->header.stamp;
-  std::vector<ros::Time> expected;
-  for (const ros::Time& t : lightOnStamps(fixture->modes.snapshot(), first))
-    if (t < end) expected.push_back(t);
-  ASSERT_GE(expected.size(), 8u);
-  // Every settled light-on frame gets its observation (the last ones may still be in flight).
-  const bool all = fixture->observations.waitFor(
-      [&](const std::vector<StereoPatternObservation::ConstPtr>& obs) {
-        std::set<ros::Time> seen;
-        for (const auto& o : obs) seen.insert(o->header.stamp);
-        for (const ros::Time& t : expected)
-          if (!seen.count(t)) return false;
-        return true;
-      },
-      3.0);
-  EXPECT_TRUE(all) << "an observation is missing for a settled light-on frame";
-
-  // Nothing for light-off or unsettled frames; corners against ground truth of the same stamp.
+// The observations of frames before `end` against ground truth of the same stamp: none for
+// light-off or unsettled frames; their corners' agreement to *agreement, frames compared returned.
+size_t compareWithTruth(const ros::Time& end, CornerAgreement* agreement) {
   std::map<ros::Time, CalibrationMode::ConstPtr> mode_of;
   for (const auto& m : fixture->modes.snapshot()) mode_of[m->header.stamp] = m;
   std::map<ros::Time, StereoPatternObservation::ConstPtr> truth_of;
   for (const auto& t : fixture->truth.snapshot()) truth_of[t->header.stamp] = t;
-  CornerAgreement agreement;
   size_t compared = 0;
   for (const auto& o : fixture->observations.snapshot()) {
     if (o->header.stamp >= end) break;
     const auto mode = mode_of.find(o->header.stamp);
-    ASSERT_NE(mode, mode_of.end()) << "observation stamp " << o->header.stamp << " is no frame's";
+    EXPECT_NE(mode, mode_of.end()) << "observation stamp " << o->header.stamp << " is no frame's";
+    if (mode == mode_of.end()) continue;
     EXPECT_TRUE(calibrating(*mode->second)) << "observation of a light-off or unsettled frame";
     const auto truth = truth_of.find(o->header.stamp);
     if (truth == truth_of.end()) continue;
-    agreement.add(o->left, truth->second->left);
-    agreement.add(o->right, truth->second->right);
+    agreement->add(o->left, truth->second->left);
+    agreement->add(o->right, truth->second->right);
     ++compared;
   }
-  std::printf("tracker_sim: %zu frames compared with ground truth: %zu of %zu visible corners found (%.1f %%), "
-              "RMS %.4f px, %zu corners not in the ground truth\n",
-              compared, agreement.matched, agreement.truth, 100.0 * agreement.fraction(), agreement.rms(),
-              agreement.extra);
-  ASSERT_GE(compared, expected.size() / 2);
+  return compared;
+}
 
-  // Diagnostics report what the last frame found and the time per frame.
+// Diagnostics report what the last frame found and the time per frame.
+void expectDiagnosticsOfCorners() {
   std::map<std::string, std::string> values;
   const bool reported = fixture->diagnostics.waitFor(
       [&](const std::vector<diagnostic_msgs::DiagnosticArray::ConstPtr>& arrays) {
@@ -185,6 +150,56 @@ TEST(TrackerSim, TeachesOnStartThenTracksEverySettledLightOnFrame) {
               values["left boards found"].c_str(), values["left corners found"].c_str(),
               values["right boards found"].c_str(), values["right corners found"].c_str(),
               values["last frame (ms)"].c_str(), values["mean frame (ms)"].c_str());
+}
+
+TEST(TrackerSim, TeachesOnStartThenTracksEverySettledLightOnFrame) {
+  std::string prior_file;
+  ASSERT_TRUE(ros::param::get("~prior_file", prior_file));
+  // The launch file's anonymous directory, created by the tracker: removed at the end.
+  struct RemoveDir {
+    std::filesystem::path path;
+    ~RemoveDir() {
+      if (path.string().rfind("/tmp/ecs_tracker_sim_test", 0) == 0) std::filesystem::remove_all(path);
+    }
+  } cleanup{std::filesystem::path(prior_file).parent_path()};
+  // First window: teaching; the next one is tracked.
+  ASSERT_TRUE(fixture->observations.waitForCount(1, 20.0)) << "no observation within 20 s";
+  const ros::Time first = fixture->observations.snapshot().front()->header.stamp;
+  core::PatternPrior prior;
+  ASSERT_NO_THROW(prior = core::readPatternPrior(prior_file)) << prior_file;
+  ASSERT_EQ(prior.cameras.size(), 2u);
+  expectNoTemporaryFilesIn(cleanup.path);
+
+  // Two more complete windows after the first observation.
+  ASSERT_TRUE(waitForWindow(first, 6.0));
+  const ros::Time second_window_end = fixture->modes.snapshot().back()->header.stamp;
+  ASSERT_TRUE(waitForWindow(second_window_end, 6.0));
+  const ros::Time end = fixture->modes.snapshot().back()->header.stamp;
+  std::vector<ros::Time> expected;
+  for (const ros::Time& t : lightOnStamps(fixture->modes.snapshot(), first))
+    if (t < end) expected.push_back(t);
+  ASSERT_GE(expected.size(), 8u);
+  // Every settled light-on frame gets its observation (the last ones may still be in flight).
+  const bool all = fixture->observations.waitFor(
+      [&](const std::vector<StereoPatternObservation::ConstPtr>& obs) {
+        std::set<ros::Time> seen;
+        for (const auto& o : obs) seen.insert(o->header.stamp);
+        for (const ros::Time& t : expected)
+          if (!seen.count(t)) return false;
+        return true;
+      },
+      3.0);
+  EXPECT_TRUE(all) << "an observation is missing for a settled light-on frame";
+
+  CornerAgreement agreement;
+  const size_t compared = compareWithTruth(end, &agreement);
+  std::printf("tracker_sim: %zu frames compared with ground truth: %zu of %zu visible corners found (%.1f %%), "
+              "RMS %.4f px, %zu corners not in the ground truth\n",
+              compared, agreement.matched, agreement.truth, 100.0 * agreement.fraction(), agreement.rms(),
+              agreement.extra);
+  ASSERT_GE(compared, expected.size() / 2);
+
+  expectDiagnosticsOfCorners();
   EXPECT_LE(agreement.rms(), 0.1);
   EXPECT_GE(agreement.fraction(), 0.95);
   EXPECT_LE(agreement.extra, agreement.matched / 100);
