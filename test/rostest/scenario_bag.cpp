@@ -59,17 +59,8 @@ struct Window {
   ros::Time first, last;
 };
 
-}  // namespace
-
-TEST(ScenarioBag, ReplaysThroughTheGraphWithoutErrors) {
-  ros::NodeHandle nh;
-  std::string scenario;
-  ASSERT_TRUE(ros::param::get("~scenario", scenario));
-  test_support::TempDir dir("ecs_scenario_bag_test");
-  ASSERT_FALSE(dir.path.empty());
-  const std::string bag_path = dir.path + "/scenario.bag";
-
-  // ---- The bag --------------------------------------------------------------------------
+// Renders the scenario's bag to `bag_path`.
+void renderBag(const std::string& scenario, const std::string& bag_path) {
   const auto render_start = std::chrono::steady_clock::now();
   std::string output;
   const int status = run(std::string(ECS_RENDER_SCENARIO_BAG) + " --config " + scenario + " --out " + bag_path +
@@ -81,23 +72,93 @@ TEST(ScenarioBag, ReplaysThroughTheGraphWithoutErrors) {
   std::printf("%s", output.c_str());
   std::printf("rendered %.0f s of %s in %.1f s wall\n", kSeconds, std::filesystem::path(scenario).filename().c_str(),
               render_s);
+}
 
+// The bag's light windows, left images and last calibration_mode stamp.
+struct BagWindows {
   std::vector<Window> windows;
   size_t left_images = 0;
-  ros::Time bag_end;
-  {
-    rosbag::Bag bag(bag_path, rosbag::bagmode::Read);
-    left_images = rosbag::View(bag, rosbag::TopicQuery("/stereo/left/image_raw")).size();
-    bool on = false;
-    for (const rosbag::MessageInstance& m : rosbag::View(bag, rosbag::TopicQuery("/stereo/calibration_mode"))) {
-      const auto mode = m.instantiate<CalibrationMode>();
-      ASSERT_TRUE(mode);
-      if (mode->light_on && !on) windows.push_back({mode->header.stamp, mode->header.stamp});
-      if (mode->light_on) windows.back().last = mode->header.stamp;
-      on = mode->light_on;
-      bag_end = mode->header.stamp;
-    }
+  ros::Time end;
+};
+
+BagWindows readWindows(const std::string& bag_path) {
+  BagWindows out;
+  rosbag::Bag bag(bag_path, rosbag::bagmode::Read);
+  out.left_images = rosbag::View(bag, rosbag::TopicQuery("/stereo/left/image_raw")).size();
+  bool on = false;
+  for (const rosbag::MessageInstance& m : rosbag::View(bag, rosbag::TopicQuery("/stereo/calibration_mode"))) {
+    const auto mode = m.instantiate<CalibrationMode>();
+    EXPECT_TRUE(mode);
+    if (!mode) continue;
+    if (mode->light_on && !on) out.windows.push_back({mode->header.stamp, mode->header.stamp});
+    if (mode->light_on) out.windows.back().last = mode->header.stamp;
+    on = mode->light_on;
+    out.end = mode->header.stamp;
   }
+  return out;
+}
+
+// One calibration/status per window the tracker followed (at least 5 observations), the last
+// window among them, each status a solve.
+void expectEveryTrackedWindowSolved(const std::vector<Window>& windows,
+                                    const std::vector<StereoPatternObservation::ConstPtr>& observed,
+                                    const std::vector<CalibrationStatus::ConstPtr>& solved) {
+  // Observations per window (by stamp).
+  std::vector<size_t> per_window(windows.size(), 0);
+  for (const auto& o : observed)
+    for (size_t w = 0; w < windows.size(); ++w)
+      if (o->header.stamp >= windows[w].first && o->header.stamp <= windows[w].last) ++per_window[w];
+  for (size_t w = 0; w < windows.size(); ++w)
+    std::printf("window %zu at %.2f s: %zu tracker observations\n", w, (windows[w].first.toSec() - kStart),
+                per_window[w]);
+  for (const auto& s : solved)
+    std::printf("calibration/status: %s, %u frames, rms %.3f/%.3f px: %s\n", s->accepted ? "accepted" : "rejected",
+                s->frames_used, s->rms_left_px, s->rms_right_px, s->reason.c_str());
+
+  std::string table;
+  size_t tracked = 0;
+  for (size_t w = 0; w < windows.size(); ++w) {
+    table += "window " + std::to_string(w) + ": " + std::to_string(per_window[w]) + " observations\n";
+    tracked += per_window[w] >= 5u;
+  }
+  for (const auto& s : solved) table += "status: " + std::to_string(s->frames_used) + " frames, " + s->reason + "\n";
+  EXPECT_GE(per_window.back(), 5u) << "the last window is not tracked\n" << table;
+  EXPECT_EQ(solved.size(), tracked) << "not one calibration/status per tracked window\n" << table;
+  for (const auto& s : solved) EXPECT_GE(s->frames_used, 5u) << "a status without a solve: " << s->reason;
+}
+
+// No error on /rosout from the manager or the player, and INFO from the manager (else the check
+// would be vacuous).
+void expectNoErrorsLogged(const std::vector<rosgraph_msgs::Log::ConstPtr>& messages) {
+  // ---- /rosout --------------------------------------------------------------------------
+  size_t manager_info = 0;
+  for (const auto& m : messages) {
+    const bool ours = m->name == kManager;
+    const bool player = m->name.rfind("/play", 0) == 0;
+    if (ours && m->level == rosgraph_msgs::Log::INFO) ++manager_info;
+    if ((ours || player) && m->level >= rosgraph_msgs::Log::ERROR)
+      ADD_FAILURE() << m->name << " logged an error: " << m->msg;
+  }
+  EXPECT_GE(manager_info, 1u) << "no INFO from " << kManager << " on /rosout: the error check would be vacuous";
+}
+
+}  // namespace
+
+TEST(ScenarioBag, ReplaysThroughTheGraphWithoutErrors) {
+  ros::NodeHandle nh;
+  std::string scenario;
+  ASSERT_TRUE(ros::param::get("~scenario", scenario));
+  test_support::TempDir dir("ecs_scenario_bag_test");
+  ASSERT_FALSE(dir.path.empty());
+  const std::string bag_path = dir.path + "/scenario.bag";
+
+  // ---- The bag --------------------------------------------------------------------------
+  renderBag(scenario, bag_path);
+  if (HasFatalFailure()) return;
+  const BagWindows bag = readWindows(bag_path);
+  const std::vector<Window>& windows = bag.windows;
+  const size_t left_images = bag.left_images;
+  const ros::Time bag_end = bag.end;
   ASSERT_EQ(windows.size(), static_cast<size_t>(kSeconds / kPeriodS)) << "light windows in the bag";
   ASSERT_EQ(left_images, static_cast<size_t>(kSeconds * kFps));
 
@@ -121,41 +182,10 @@ TEST(ScenarioBag, ReplaysThroughTheGraphWithoutErrors) {
   const size_t disparity_frames = disparity.snapshot().size();
   EXPECT_TRUE(replay.stop(20.0)) << "replay.launch did not stop in time";
 
-  // Observations per window (by stamp).
-  std::vector<size_t> per_window(windows.size(), 0);
-  for (const auto& o : observed)
-    for (size_t w = 0; w < windows.size(); ++w)
-      if (o->header.stamp >= windows[w].first && o->header.stamp <= windows[w].last) ++per_window[w];
-  for (size_t w = 0; w < windows.size(); ++w)
-    std::printf("window %zu at %.2f s: %zu tracker observations\n", w, (windows[w].first.toSec() - kStart),
-                per_window[w]);
-  for (const auto& s : solved)
-    std::printf("calibration/status: %s, %u frames, rms %.3f/%.3f px: %s\n", s->accepted ? "accepted" : "rejected",
-                s->frames_used, s->rms_left_px, s->rms_right_px, s->reason.c_str());
+  expectEveryTrackedWindowSolved(windows, observed, solved);
   std::printf("disparity: %zu frames for %zu left images\n", disparity_frames, left_images);
-
-  std::string table;
-  size_t tracked = 0;
-  for (size_t w = 0; w < windows.size(); ++w) {
-    table += "window " + std::to_string(w) + ": " + std::to_string(per_window[w]) + " observations\n";
-    tracked += per_window[w] >= 5u;
-  }
-  for (const auto& s : solved) table += "status: " + std::to_string(s->frames_used) + " frames, " + s->reason + "\n";
-  EXPECT_GE(per_window.back(), 5u) << "the last window is not tracked\n" << table;
-  EXPECT_EQ(solved.size(), tracked) << "not one calibration/status per tracked window\n" << table;
-  for (const auto& s : solved) EXPECT_GE(s->frames_used, 5u) << "a status without a solve: " << s->reason;
   EXPECT_GE(disparity_frames, left_images / 2) << "disparity did not keep up with the replay";
-
-  // ---- /rosout --------------------------------------------------------------------------
-  size_t manager_info = 0;
-  for (const auto& m : log.snapshot()) {
-    const bool ours = m->name == kManager;
-    const bool player = m->name.rfind("/play", 0) == 0;
-    if (ours && m->level == rosgraph_msgs::Log::INFO) ++manager_info;
-    if ((ours || player) && m->level >= rosgraph_msgs::Log::ERROR)
-      ADD_FAILURE() << m->name << " logged an error: " << m->msg;
-  }
-  EXPECT_GE(manager_info, 1u) << "no INFO from " << kManager << " on /rosout: the error check would be vacuous";
+  expectNoErrorsLogged(log.snapshot());
 }
 
 int main(int argc, char** argv) {
