@@ -47,6 +47,57 @@ std::vector<ros::Time> burstAfter(const std::vector<CalibrationMode::ConstPtr>& 
   return {};
 }
 
+// The ground-truth observation of the frame of `stamp` (null if none within 2 s).
+StereoPatternObservation::ConstPtr observationAt(Collector<StereoPatternObservation>& truth, const ros::Time& stamp) {
+  StereoPatternObservation::ConstPtr found;
+  truth.waitFor(
+      [&](const auto& m) {
+        for (const auto& o : m)
+          if (o->header.stamp == stamp) found = o;
+        return found != nullptr;
+      },
+      2.0);
+  return found;
+}
+
+// After `window` was solved (`solved`): the same window again, as it was and stamped as a newer
+// one, and an older one, are dropped with a warning; a later one is solved.
+void expectCopiesAndOlderDropped(ros::Publisher& window_pub, const StereoPatternObservation& window,
+                                 const CalibrationStatus& solved, Collector<CalibrationMode>& modes,
+                                 Collector<rosgraph_msgs::Log>& log, Collector<CalibrationStatus>& status) {
+  // The same window again, as it was and stamped as a newer one: a copy, dropped with a warning.
+  window_pub.publish(window);
+  StereoPatternObservation copy = window;
+  copy.header.stamp = modes.snapshot().back()->header.stamp;
+  window_pub.publish(copy);
+  EXPECT_TRUE(test_support::waitForLog(log, {"window observation dropped", "a copy of one seen before"}, 5.0));
+  // Another window (two boards fewer per camera) stamped before the solved one: dropped too.
+  StereoPatternObservation older = window;
+  ASSERT_GE(older.left.size(), 5u);
+  ASSERT_GE(older.right.size(), 5u);
+  older.header.stamp = window.header.stamp - ros::Duration(0.5);
+  for (int i = 0; i < 2; ++i) {
+    older.left.pop_back();
+    older.right.pop_back();
+  }
+  window_pub.publish(older);
+  EXPECT_TRUE(test_support::waitForLog(log, {"window observation dropped", "not after the previous one"}, 5.0));
+  // The control: a later window (a newer stamp, one board fewer per camera, so that its status
+  // tells itself from the duplicate's by its corner count) is solved, and its status is the second
+  // one (the duplicate made none: the calibrator solves in arrival order).
+  StereoPatternObservation next = window;
+  next.header.stamp = modes.snapshot().back()->header.stamp;
+  ASSERT_GE(next.left.size(), 5u);
+  ASSERT_GE(next.right.size(), 5u);
+  next.left.pop_back();
+  next.right.pop_back();
+  window_pub.publish(next);
+  ASSERT_TRUE(status.waitFor(
+      [&](const auto& m) { return !m.empty() && m.back()->corners_used < solved.corners_used; }, 10.0))
+      << "the later window observation was not solved";
+  EXPECT_EQ(status.snapshot().size(), 2u) << "a copy or an older window was solved";
+}
+
 }  // namespace
 
 TEST(CalibratorWindowObservations, SolvesEachWindowObservationAndNotThePerFrameWindows) {
@@ -81,18 +132,7 @@ TEST(CalibratorWindowObservations, SolvesEachWindowObservationAndNotThePerFrameW
   // A window observation: the ground truth of the burst's last frame, sent once frames more
   // than the stamp tolerance (2 s) newer exist (the stamp guard would drop it; a window
   // observation passes it).
-  const auto truthAt = [&](const ros::Time& stamp) {
-    StereoPatternObservation::ConstPtr found;
-    truth.waitFor(
-        [&](const auto& m) {
-          for (const auto& o : m)
-            if (o->header.stamp == stamp) found = o;
-          return found != nullptr;
-        },
-        2.0);
-    return found;
-  };
-  const StereoPatternObservation::ConstPtr window = truthAt(burst.back());
+  const StereoPatternObservation::ConstPtr window = observationAt(truth, burst.back());
   ASSERT_TRUE(window) << "no ground-truth observation of frame " << burst.back();
   ASSERT_TRUE(modes.waitFor(
       [&](const auto& m) { return !m.empty() && (m.back()->header.stamp - window->header.stamp).toSec() > 2.5; },
@@ -108,37 +148,7 @@ TEST(CalibratorWindowObservations, SolvesEachWindowObservationAndNotThePerFrameW
   ASSERT_TRUE(left.waitFor([&](const auto& m) { return std::abs(m.back()->K[0] / fx_before - 1.05) < 1e-3; }, 5.0))
       << "the zoom was not committed: fx " << left.snapshot().back()->K[0] << " was " << fx_before;
 
-  // The same window again, as it was and stamped as a newer one: a copy, dropped with a warning.
-  window_pub.publish(*window);
-  StereoPatternObservation copy = *window;
-  copy.header.stamp = modes.snapshot().back()->header.stamp;
-  window_pub.publish(copy);
-  EXPECT_TRUE(test_support::waitForLog(log, {"window observation dropped", "a copy of one seen before"}, 5.0));
-  // Another window (two boards fewer per camera) stamped before the solved one: dropped too.
-  StereoPatternObservation older = *window;
-  ASSERT_GE(older.left.size(), 5u);
-  ASSERT_GE(older.right.size(), 5u);
-  older.header.stamp = window->header.stamp - ros::Duration(0.5);
-  for (int i = 0; i < 2; ++i) {
-    older.left.pop_back();
-    older.right.pop_back();
-  }
-  window_pub.publish(older);
-  EXPECT_TRUE(test_support::waitForLog(log, {"window observation dropped", "not after the previous one"}, 5.0));
-  // The control: a later window (a newer stamp, one board fewer per camera, so that its status
-  // tells itself from the duplicate's by its corner count) is solved, and its status is the second
-  // one (the duplicate made none: the calibrator solves in arrival order).
-  StereoPatternObservation next = *window;
-  next.header.stamp = modes.snapshot().back()->header.stamp;
-  ASSERT_GE(next.left.size(), 5u);
-  ASSERT_GE(next.right.size(), 5u);
-  next.left.pop_back();
-  next.right.pop_back();
-  window_pub.publish(next);
-  ASSERT_TRUE(status.waitFor(
-      [&](const auto& m) { return !m.empty() && m.back()->corners_used < solved.corners_used; }, 10.0))
-      << "the later window observation was not solved";
-  EXPECT_EQ(status.snapshot().size(), 2u) << "a copy or an older window was solved";
+  expectCopiesAndOlderDropped(window_pub, *window, solved, modes, log, status);
 }
 
 int main(int argc, char** argv) {
