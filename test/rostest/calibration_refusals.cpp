@@ -15,40 +15,11 @@ using test_support::Collector;
 using embedded_calibration_stereo::CalibrationMode;
 using sensor_msgs::CameraInfo;
 
-TEST(CalibrationRefusals, BadFieldsAreRefusedAndNothingIsPersisted) {
-  ros::NodeHandle nh("/stereo");
-  const test_support::TempDir temp("ecs_calibration_refusals");
-  ASSERT_FALSE(temp.path.empty());
-  const std::string left_path = temp.path + "/left.yaml", right_path = temp.path + "/right.yaml";
-  test_support::InProcessManager manager;
-  ASSERT_TRUE(manager.load("/stereo/camera_driver", {{"backend", "sim"},
-                                                     {"fps", 10.0},
-                                                     {"left_camera_info_url", "file://" + left_path},
-                                                     {"right_camera_info_url", "file://" + right_path}}));
-  Collector<CalibrationMode> modes(nh, "calibration_mode");
-  Collector<CameraInfo> left(nh, "left/camera_info"), right(nh, "right/camera_info");
-  ASSERT_TRUE(modes.waitForCount(2, 20.0));
-  ASSERT_TRUE(left.waitForCount(1, 5.0));
-  ASSERT_TRUE(right.waitForCount(1, 5.0));
+namespace {
 
-  // Control: a valid change (k1 of each camera, P unchanged) is accepted and stored.
-  double k1[2];
-  for (const int i : {0, 1}) {
-    sensor_msgs::SetCameraInfo srv;
-    srv.request.camera_info = *(i == 0 ? left : right).snapshot().back();
-    srv.request.camera_info.D[0] -= 0.01;
-    k1[i] = srv.request.camera_info.D[0];
-    ASSERT_TRUE(ros::service::call(std::string("/stereo/") + (i == 0 ? "left" : "right") + "/set_camera_info", srv));
-    ASSERT_TRUE(srv.response.success) << i << ": " << srv.response.status_message;
-  }
-  ASSERT_TRUE(modes.waitFor([](const auto& m) { return m.back()->calibration_epoch == 2u; }, 5.0));
-  ASSERT_TRUE(left.waitFor([&](const auto& m) { return m.back()->D[0] == k1[0]; }, 5.0));
-  ASSERT_TRUE(right.waitFor([&](const auto& m) { return m.back()->D[0] == k1[1]; }, 5.0));
-  const CameraInfo left_in_force = *left.snapshot().back(), right_in_force = *right.snapshot().back();
-  const std::string left_bytes = test_support::fileBytes(left_path), right_bytes = test_support::fileBytes(right_path);
-  ASSERT_FALSE(left_bytes.empty());
-  ASSERT_FALSE(right_bytes.empty());
-
+// Each field no consumer could use, in either camera's calibration (`in_force`: left, right),
+// is refused by set_camera_info with a message naming the field and the service.
+void expectBadFieldsRefused(const CameraInfo& left_in_force, const CameraInfo& right_in_force) {
   const double nan = std::numeric_limits<double>::quiet_NaN();
   const struct {
     const char* name;
@@ -87,6 +58,45 @@ TEST(CalibrationRefusals, BadFieldsAreRefusedAndNothingIsPersisted) {
       if (side == "left") std::printf("  %-18s -> %s\n", c.name, srv.response.status_message.c_str());
     }
   }
+}
+
+}  // namespace
+
+TEST(CalibrationRefusals, BadFieldsAreRefusedAndNothingIsPersisted) {
+  ros::NodeHandle nh("/stereo");
+  const test_support::TempDir temp("ecs_calibration_refusals");
+  ASSERT_FALSE(temp.path.empty());
+  const std::string left_path = temp.path + "/left.yaml", right_path = temp.path + "/right.yaml";
+  test_support::InProcessManager manager;
+  ASSERT_TRUE(manager.load("/stereo/camera_driver", {{"backend", "sim"},
+                                                     {"fps", 10.0},
+                                                     {"left_camera_info_url", "file://" + left_path},
+                                                     {"right_camera_info_url", "file://" + right_path}}));
+  Collector<CalibrationMode> modes(nh, "calibration_mode");
+  Collector<CameraInfo> left(nh, "left/camera_info"), right(nh, "right/camera_info");
+  ASSERT_TRUE(modes.waitForCount(2, 20.0));
+  ASSERT_TRUE(left.waitForCount(1, 5.0));
+  ASSERT_TRUE(right.waitForCount(1, 5.0));
+
+  // Control: a valid change (k1 of each camera, P unchanged) is accepted and stored.
+  double k1[2];
+  for (const int i : {0, 1}) {
+    sensor_msgs::SetCameraInfo srv;
+    srv.request.camera_info = *(i == 0 ? left : right).snapshot().back();
+    srv.request.camera_info.D[0] -= 0.01;
+    k1[i] = srv.request.camera_info.D[0];
+    ASSERT_TRUE(ros::service::call(std::string("/stereo/") + (i == 0 ? "left" : "right") + "/set_camera_info", srv));
+    ASSERT_TRUE(srv.response.success) << i << ": " << srv.response.status_message;
+  }
+  ASSERT_TRUE(modes.waitFor([](const auto& m) { return m.back()->calibration_epoch == 2u; }, 5.0));
+  ASSERT_TRUE(left.waitFor([&](const auto& m) { return m.back()->D[0] == k1[0]; }, 5.0));
+  ASSERT_TRUE(right.waitFor([&](const auto& m) { return m.back()->D[0] == k1[1]; }, 5.0));
+  const CameraInfo left_in_force = *left.snapshot().back(), right_in_force = *right.snapshot().back();
+  const std::string left_bytes = test_support::fileBytes(left_path), right_bytes = test_support::fileBytes(right_path);
+  ASSERT_FALSE(left_bytes.empty());
+  ASSERT_FALSE(right_bytes.empty());
+
+  expectBadFieldsRefused(left_in_force, right_in_force);
   // Nothing persisted, nothing put in force.
   EXPECT_EQ(test_support::fileBytes(left_path), left_bytes);
   EXPECT_EQ(test_support::fileBytes(right_path), right_bytes);
