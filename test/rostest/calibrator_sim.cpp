@@ -176,6 +176,46 @@ TEST(CalibratorSim, RejectedSolveChangesNothing) {
   EXPECT_EQ(fixture->tf_static.snapshot().size(), tf_before);
 }
 
+// The published rig against the truth. The corners are the sim's noise-free ground truth and
+// device_config is the sim's own device, so the solve should return the truth up to the solver's
+// tolerances (printed). The bounds leave a wide margin on that and are still several times
+// tighter than what 10 frames reach at 0.2 px noise (docs/figures.md): fx, fy 0.01 %, cx, cy
+// 0.05 px, baseline 0.01 %, rotation 0.005 deg.
+void expectRigIsTheTruth(const core::StereoRig& published, const core::StereoRig& truth) {
+  const auto relative = [](double a, double b) { return std::abs(a - b) / std::abs(b); };
+  for (const auto& [est, ref, name] : {std::make_tuple(published.left, truth.left, "left"),
+                                       std::make_tuple(published.right, truth.right, "right")}) {
+    std::printf("%s fx %.6f %% fy %.6f %% cx %.4f px cy %.4f px\n", name, 100 * relative(est.fx, ref.fx),
+                100 * relative(est.fy, ref.fy), est.cx - ref.cx, est.cy - ref.cy);
+    EXPECT_LT(relative(est.fx, ref.fx), 1e-4) << name;
+    EXPECT_LT(relative(est.fy, ref.fy), 1e-4) << name;
+    EXPECT_LT(std::abs(est.cx - ref.cx), 0.05) << name;
+    EXPECT_LT(std::abs(est.cy - ref.cy), 0.05) << name;
+  }
+  const double rotation_deg = core::rotationAngleDeg(published.right_from_left.linear(), truth.right_from_left.linear());
+  std::printf("baseline %.6f %%, rotation %.5f deg\n", 100 * relative(published.baseline(), truth.baseline()),
+              rotation_deg);
+  EXPECT_LT(relative(published.baseline(), truth.baseline()), 1e-4);
+  EXPECT_LT(rotation_deg, 0.005);
+  // The right P carries Tx = -fx' * baseline.
+  const CameraInfo& right = *fixture->right.snapshot().back();
+  EXPECT_NEAR(right.P[3], -right.P[0] * published.baseline(), 1e-6 * right.P[0]);
+}
+
+// The commit on /tf_static: one transform, left to right, the truth's.
+void expectTfStaticIsTheTruth(size_t tf_before, const core::StereoRig& truth) {
+  ASSERT_TRUE(fixture->tf_static.waitForCount(tf_before + 1, 2.0)) << "no /tf_static update";
+  const auto& transforms = fixture->tf_static.snapshot().back()->transforms;
+  ASSERT_EQ(transforms.size(), 1u);
+  EXPECT_EQ(transforms[0].header.frame_id, "stereo_left_optical_frame");
+  EXPECT_EQ(transforms[0].child_frame_id, "stereo_right_optical_frame");
+  const Eigen::Isometry3d left_from_right = tf2::transformToEigen(transforms[0]);
+  const Eigen::Isometry3d truth_left_from_right = truth.leftFromRight();
+  EXPECT_LT((left_from_right.translation() - truth_left_from_right.translation()).norm(), 1e-4 * truth.baseline());
+  EXPECT_LT(core::rotationAngleDeg(left_from_right.linear(), truth_left_from_right.linear()), 0.005);
+  ASSERT_TRUE(fixture->status.waitFor([](const auto& m) { return !m.empty() && m.back()->accepted; }, 2.0));
+}
+
 TEST(CalibratorSim, RecoversADriftedRigAndCommitsIt) {
   embedded_calibration_stereo::SetRigDrift drift;
   drift.request.focal_scale = 1.05;
@@ -222,40 +262,8 @@ TEST(CalibratorSim, RecoversADriftedRigAndCommitsIt) {
   ASSERT_TRUE(embedded_calibration_stereo::fromStereoCameraInfo(*fixture->left.snapshot().back(),
                                                                 *fixture->right.snapshot().back(), &published, &error))
       << error;
-  // Bounds: the corners are the sim's noise-free ground truth and device_config is the sim's
-  // own device, so the solve should return the truth up to the solver's tolerances (printed
-  // below). The bounds leave a wide margin on that and are still several times tighter than
-  // what 10 frames reach at 0.2 px noise (docs/figures.md): fx, fy 0.01 %, cx, cy 0.05 px,
-  // baseline 0.01 %, rotation 0.005 deg.
-  const auto relative = [](double a, double b) { return std::abs(a - b) / std::abs(b); };
-  for (const auto& [est, ref, name] : {std::make_tuple(published.left, truth.left, "left"),
-                                       std::make_tuple(published.right, truth.right, "right")}) {
-    std::printf("%s fx %.6f %% fy %.6f %% cx %.4f px cy %.4f px\n", name, 100 * relative(est.fx, ref.fx),
-                100 * relative(est.fy, ref.fy), est.cx - ref.cx, est.cy - ref.cy);
-    EXPECT_LT(relative(est.fx, ref.fx), 1e-4) << name;
-    EXPECT_LT(relative(est.fy, ref.fy), 1e-4) << name;
-    EXPECT_LT(std::abs(est.cx - ref.cx), 0.05) << name;
-    EXPECT_LT(std::abs(est.cy - ref.cy), 0.05) << name;
-  }
-  const double rotation_deg = core::rotationAngleDeg(published.right_from_left.linear(), truth.right_from_left.linear());
-  std::printf("baseline %.6f %%, rotation %.5f deg\n", 100 * relative(published.baseline(), truth.baseline()),
-              rotation_deg);
-  EXPECT_LT(relative(published.baseline(), truth.baseline()), 1e-4);
-  EXPECT_LT(rotation_deg, 0.005);
-  // The right P carries Tx = -fx' * baseline.
-  const CameraInfo& right = *fixture->right.snapshot().back();
-  EXPECT_NEAR(right.P[3], -right.P[0] * published.baseline(), 1e-6 * right.P[0]);
-
-  ASSERT_TRUE(fixture->tf_static.waitForCount(tf_before + 1, 2.0)) << "no /tf_static update";
-  const auto& transforms = fixture->tf_static.snapshot().back()->transforms;
-  ASSERT_EQ(transforms.size(), 1u);
-  EXPECT_EQ(transforms[0].header.frame_id, "stereo_left_optical_frame");
-  EXPECT_EQ(transforms[0].child_frame_id, "stereo_right_optical_frame");
-  const Eigen::Isometry3d left_from_right = tf2::transformToEigen(transforms[0]);
-  const Eigen::Isometry3d truth_left_from_right = truth.leftFromRight();
-  EXPECT_LT((left_from_right.translation() - truth_left_from_right.translation()).norm(), 1e-4 * truth.baseline());
-  EXPECT_LT(core::rotationAngleDeg(left_from_right.linear(), truth_left_from_right.linear()), 0.005);
-  ASSERT_TRUE(fixture->status.waitFor([](const auto& m) { return !m.empty() && m.back()->accepted; }, 2.0));
+  expectRigIsTheTruth(published, truth);
+  expectTfStaticIsTheTruth(tf_before, truth);
 }
 
 // A pair set from outside the calibrator (the health monitor's rollback, a rosservice call)
