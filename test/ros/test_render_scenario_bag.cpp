@@ -53,6 +53,68 @@ struct TempDir {
 
 void writeFile(const std::string& path, const std::string& text) { std::ofstream(path) << text; }
 
+// The topics of launch/record.launch ground_truth:=true that the driver publishes, with their types.
+const std::map<std::string, std::string>& driverTopics() {
+  static const std::map<std::string, std::string> topics = {
+      {"/stereo/left/image_raw", "sensor_msgs/Image"},
+      {"/stereo/right/image_raw", "sensor_msgs/Image"},
+      {"/stereo/left/camera_info", "sensor_msgs/CameraInfo"},
+      {"/stereo/right/camera_info", "sensor_msgs/CameraInfo"},
+      {"/stereo/calibration_mode", "embedded_calibration_stereo/CalibrationMode"},
+      {"/stereo/ground_truth/left/image_scene", "sensor_msgs/Image"},
+      {"/stereo/ground_truth/right/image_scene", "sensor_msgs/Image"},
+      {"/stereo/ground_truth/left/camera_info", "sensor_msgs/CameraInfo"},
+      {"/stereo/ground_truth/right/camera_info", "sensor_msgs/CameraInfo"},
+      {"/stereo/ground_truth/observations", "embedded_calibration_stereo/StereoPatternObservation"},
+      {"/stereo/ground_truth/head_pose", "nav_msgs/Odometry"},
+      {"/tf", "tf2_msgs/TFMessage"}};
+  return topics;
+}
+
+// What a 10 fps bag from stamp 1000 s holds per frame; each message's stamp, frame and fields
+// are checked as it is read.
+struct BagSeries {
+  std::vector<bool> light, settled;  // calibration_mode
+  std::vector<double> truth_fx;      // ground_truth/left/camera_info
+  std::map<std::string, size_t> counts;
+};
+
+BagSeries readSeries(rosbag::View& view, const core::SimRigConfig& config) {
+  BagSeries out;
+  for (const rosbag::MessageInstance& m : view) {
+    ++out.counts[m.getTopic()];
+    const size_t k = out.counts[m.getTopic()] - 1;  // frame index of this topic's message
+    const ros::Time expected_stamp = ros::Time(1000.0) + ros::Duration(k / 10.0);
+    EXPECT_EQ(m.getTime(), expected_stamp) << m.getTopic() << " #" << k;
+    if (auto image = m.instantiate<sensor_msgs::Image>()) {
+      EXPECT_EQ(image->header.stamp, expected_stamp);
+      EXPECT_EQ(image->header.frame_id, "stereo_left_optical_frame") << m.getTopic();
+      EXPECT_EQ(image->encoding, "mono8");
+      EXPECT_EQ(static_cast<int>(image->width), config.rig.left.width);
+    } else if (auto mode = m.instantiate<embedded_calibration_stereo::CalibrationMode>()) {
+      EXPECT_EQ(mode->header.stamp, expected_stamp);
+      out.light.push_back(mode->light_on);
+      out.settled.push_back(mode->settled);
+    } else if (auto info = m.instantiate<sensor_msgs::CameraInfo>()) {
+      EXPECT_EQ(info->header.stamp, expected_stamp);
+      if (m.getTopic() == "/stereo/ground_truth/left/camera_info") out.truth_fx.push_back(info->K[0]);
+      if (m.getTopic() == "/stereo/left/camera_info") {
+        EXPECT_EQ(info->K[0], config.rig.left.fx);  // nominal
+      }
+    } else if (auto odom = m.instantiate<nav_msgs::Odometry>()) {
+      EXPECT_EQ(odom->header.frame_id, "ground_truth/world");
+      EXPECT_EQ(odom->child_frame_id, "ground_truth/stereo_left_optical_frame");
+      EXPECT_EQ(odom->header.stamp, expected_stamp);
+    } else if (auto tf = m.instantiate<tf2_msgs::TFMessage>()) {
+      EXPECT_EQ(tf->transforms.size(), 1u);
+      if (!tf->transforms.empty()) {
+        EXPECT_EQ(tf->transforms[0].child_frame_id, "ground_truth/stereo_left_optical_frame");
+      }
+    }
+  }
+  return out;
+}
+
 }  // namespace
 
 TEST(RenderScenarioBag, WritesTheDriversTopicsWithTheScheduleAndTheDrift) {
@@ -74,56 +136,15 @@ TEST(RenderScenarioBag, WritesTheDriversTopicsWithTheScheduleAndTheDrift) {
   rosbag::Bag bag(bag_path, rosbag::bagmode::Read);
   rosbag::View view(bag);
   std::map<std::string, std::string> types;
-  std::map<std::string, size_t> counts;
   for (const rosbag::ConnectionInfo* c : view.getConnections()) types[c->topic] = c->datatype;
-  // The topics of launch/record.launch ground_truth:=true that the driver publishes.
-  const std::map<std::string, std::string> expected = {
-      {"/stereo/left/image_raw", "sensor_msgs/Image"},
-      {"/stereo/right/image_raw", "sensor_msgs/Image"},
-      {"/stereo/left/camera_info", "sensor_msgs/CameraInfo"},
-      {"/stereo/right/camera_info", "sensor_msgs/CameraInfo"},
-      {"/stereo/calibration_mode", "embedded_calibration_stereo/CalibrationMode"},
-      {"/stereo/ground_truth/left/image_scene", "sensor_msgs/Image"},
-      {"/stereo/ground_truth/right/image_scene", "sensor_msgs/Image"},
-      {"/stereo/ground_truth/left/camera_info", "sensor_msgs/CameraInfo"},
-      {"/stereo/ground_truth/right/camera_info", "sensor_msgs/CameraInfo"},
-      {"/stereo/ground_truth/observations", "embedded_calibration_stereo/StereoPatternObservation"},
-      {"/stereo/ground_truth/head_pose", "nav_msgs/Odometry"},
-      {"/tf", "tf2_msgs/TFMessage"}};
+  const std::map<std::string, std::string>& expected = driverTopics();
   EXPECT_EQ(types, expected);
 
-  std::vector<bool> light;
-  std::vector<bool> settled;
-  std::vector<double> truth_fx;
-  for (const rosbag::MessageInstance& m : view) {
-    ++counts[m.getTopic()];
-    const size_t k = counts[m.getTopic()] - 1;  // frame index of this topic's message
-    const ros::Time expected_stamp = ros::Time(1000.0) + ros::Duration(k / 10.0);
-    EXPECT_EQ(m.getTime(), expected_stamp) << m.getTopic() << " #" << k;
-    if (auto image = m.instantiate<sensor_msgs::Image>()) {
-      EXPECT_EQ(image->header.stamp, expected_stamp);
-      EXPECT_EQ(image->header.frame_id, "stereo_left_optical_frame") << m.getTopic();
-      EXPECT_EQ(image->encoding, "mono8");
-      EXPECT_EQ(static_cast<int>(image->width), config.rig.left.width);
-    } else if (auto mode = m.instantiate<embedded_calibration_stereo::CalibrationMode>()) {
-      EXPECT_EQ(mode->header.stamp, expected_stamp);
-      light.push_back(mode->light_on);
-      settled.push_back(mode->settled);
-    } else if (auto info = m.instantiate<sensor_msgs::CameraInfo>()) {
-      EXPECT_EQ(info->header.stamp, expected_stamp);
-      if (m.getTopic() == "/stereo/ground_truth/left/camera_info") truth_fx.push_back(info->K[0]);
-      if (m.getTopic() == "/stereo/left/camera_info") {
-        EXPECT_EQ(info->K[0], config.rig.left.fx);  // nominal
-      }
-    } else if (auto odom = m.instantiate<nav_msgs::Odometry>()) {
-      EXPECT_EQ(odom->header.frame_id, "ground_truth/world");
-      EXPECT_EQ(odom->child_frame_id, "ground_truth/stereo_left_optical_frame");
-      EXPECT_EQ(odom->header.stamp, expected_stamp);
-    } else if (auto tf = m.instantiate<tf2_msgs::TFMessage>()) {
-      ASSERT_EQ(tf->transforms.size(), 1u);
-      EXPECT_EQ(tf->transforms[0].child_frame_id, "ground_truth/stereo_left_optical_frame");
-    }
-  }
+  const BagSeries series = readSeries(view, config);
+  const std::vector<bool>& light = series.light;
+  const std::vector<bool>& settled = series.settled;
+  const std::vector<double>& truth_fx = series.truth_fx;
+  std::map<std::string, size_t> counts = series.counts;
   for (const auto& [topic, type] : expected) EXPECT_EQ(counts[topic], 20u) << topic;
   // Windows at frames 0 and 10 (every 1 s from the first frame): 1 settling + 3 settled frames on.
   std::vector<bool> expected_light(20, false), expected_settled(20, true);
