@@ -56,6 +56,34 @@ struct Setup {
   double device_error_m = 0.001, device_error_deg = 0.5;
 };
 
+// Adds one successful solve's errors against the truth and its reported deviations.
+void accumulate(const BundleAdjustmentSummary& s, const StereoRig& truth, Accumulated* acc) {
+  Accumulated& a = *acc;
+  const RigErrors e = compareRigs(s.rig, truth);
+  a.fx = std::max({a.fx, e.fx_rel[0], e.fx_rel[1]});
+  a.fy = std::max({a.fy, e.fy_rel[0], e.fy_rel[1]});
+  a.cx = std::max({a.cx, e.cx_px[0], e.cx_px[1]});
+  a.cy = std::max({a.cy, e.cy_px[0], e.cy_px[1]});
+  a.k1 = std::max({a.k1, e.k1[0], e.k1[1]});
+  a.baseline = std::max(a.baseline, e.baseline_rel);
+  a.rotation = std::max(a.rotation, e.rotation_deg);
+  a.fx_sum += 0.5 * (e.fx_rel[0] + e.fx_rel[1]);
+  a.baseline_sum += e.baseline_rel;
+  a.rotation_sum += e.rotation_deg;
+  a.fx_sd += 0.5 * (s.left_stddev.fx / s.rig.left.fx + s.right_stddev.fx / s.rig.right.fx);
+  a.baseline_sd += s.baseline_stddev_m / s.rig.baseline();
+  a.rotation_sd += s.rotation_stddev_deg;
+  a.c_sum += 0.25 * (e.cx_px[0] + e.cx_px[1] + e.cy_px[0] + e.cy_px[1]);
+  a.c_sd += 0.25 * (s.left_stddev.cx + s.right_stddev.cx + s.left_stddev.cy + s.right_stddev.cy);
+  a.k1_sum += 0.5 * (e.k1[0] + e.k1[1]);
+  a.k1_sd += 0.5 * (s.left_stddev.dist[0] + s.right_stddev.dist[0]);
+  if (s.covariance_ok)
+    for (double z : errorsInReportedStddevs(s, truth)) {
+      ++a.compared;
+      if (z <= 3.0) ++a.covered;
+    }
+}
+
 void run(const char* label, BoardPoseMode mode, bool from_in_force, int frames,
          const Setup& setup) {
   const StereoRig& truth = setup.truth;
@@ -104,29 +132,7 @@ void run(const char* label, BoardPoseMode mode, bool from_in_force, int frames,
     a.ceres_ms += s.ceres_ms;
     a.covariance_ms += s.covariance_ms;
     a.iterations += s.iterations;
-    const RigErrors e = compareRigs(s.rig, truth);
-    a.fx = std::max({a.fx, e.fx_rel[0], e.fx_rel[1]});
-    a.fy = std::max({a.fy, e.fy_rel[0], e.fy_rel[1]});
-    a.cx = std::max({a.cx, e.cx_px[0], e.cx_px[1]});
-    a.cy = std::max({a.cy, e.cy_px[0], e.cy_px[1]});
-    a.k1 = std::max({a.k1, e.k1[0], e.k1[1]});
-    a.baseline = std::max(a.baseline, e.baseline_rel);
-    a.rotation = std::max(a.rotation, e.rotation_deg);
-    a.fx_sum += 0.5 * (e.fx_rel[0] + e.fx_rel[1]);
-    a.baseline_sum += e.baseline_rel;
-    a.rotation_sum += e.rotation_deg;
-    a.fx_sd += 0.5 * (s.left_stddev.fx / s.rig.left.fx + s.right_stddev.fx / s.rig.right.fx);
-    a.baseline_sd += s.baseline_stddev_m / s.rig.baseline();
-    a.rotation_sd += s.rotation_stddev_deg;
-    a.c_sum += 0.25 * (e.cx_px[0] + e.cx_px[1] + e.cy_px[0] + e.cy_px[1]);
-    a.c_sd += 0.25 * (s.left_stddev.cx + s.right_stddev.cx + s.left_stddev.cy + s.right_stddev.cy);
-    a.k1_sum += 0.5 * (e.k1[0] + e.k1[1]);
-    a.k1_sd += 0.5 * (s.left_stddev.dist[0] + s.right_stddev.dist[0]);
-    if (s.covariance_ok)
-      for (double z : errorsInReportedStddevs(s, truth)) {
-        ++a.compared;
-        if (z <= 3.0) ++a.covered;
-      }
+    accumulate(s, truth, &a);
   }
   const int ok = static_cast<int>(a.ms.size());
   if (ok == 0) {
