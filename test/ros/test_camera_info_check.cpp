@@ -110,7 +110,9 @@ struct Case {
 
 const double kNaN = std::numeric_limits<double>::quiet_NaN();
 
-std::vector<Case> refusedCases() {
+// The cameras disagreeing (one recalibrated alone, binning, frame ids aside) and principal points
+// off the image.
+std::vector<Case> disagreeingOrOffImageCases() {
   return {
       {"right fx' differs (one camera recalibrated)", [](CameraInfo&, CameraInfo& r) { r.P[0] += 0.5; },
        "right/camera_info: P: fx'", Outcome::kAborted},
@@ -137,6 +139,13 @@ std::vector<Case> refusedCases() {
          r.P[2] += 5000;
        },
        "left/camera_info: P: cx' (P[2])", Outcome::kFinite},
+  };
+}
+
+// Fields no consumer can use: P, R or D that do not make an image, NaN and infinities, zeros,
+// sizes, ROI, Tx, models, frame ids.
+std::vector<Case> unusableFieldCases() {
+  return {
       // P that does not fit K and R, and distortion that folds over: harmless to image_geometry,
       // but the rectified images would be out of view or mirrored.
       {"P of another camera (fx', fy' 3 times K's)",
@@ -205,6 +214,12 @@ std::vector<Case> refusedCases() {
       {"frame ids differ", [](CameraInfo&, CameraInfo& r) { r.header.frame_id = "other"; },
        "right/camera_info: frame id", Outcome::kAborted},
   };
+}
+
+std::vector<Case> refusedCases() {
+  std::vector<Case> cases = disagreeingOrOffImageCases();
+  for (Case& c : unusableFieldCases()) cases.push_back(std::move(c));
+  return cases;
 }
 
 }  // namespace
