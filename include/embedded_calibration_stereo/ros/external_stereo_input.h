@@ -42,8 +42,7 @@ class ExternalStereoInput {
   /// Subscribes in `nh` (images raw, hints from `pnh`; stamp_tolerance_s from `pnh`); `frame`
   /// gets each paired stereo frame, `warn` the StampGuard's warnings, `unreadable` each image
   /// dropped before pairing because its data cannot be read ("cannot read the image on TOPIC:
-  /// why";
-  /// unthrottled: the caller throttles).
+  /// why"; every one: the caller throttles).
   ExternalStereoInput(ros::NodeHandle& nh, ros::NodeHandle& pnh, image_transport::ImageTransport& it,
                       const Options& options, Frame frame, Report warn, Report unreadable);
 
