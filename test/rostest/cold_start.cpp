@@ -94,7 +94,11 @@ TEST(ColdStart, FromANominalDescriptionTheHeadCalibratesItselfWithinTheTargets) 
                                                                               << head.logTail();
   const ros::WallTime start = ros::WallTime::now();
   Scores first;
-  ASSERT_TRUE(right.waitForCount(1, 5.0) && score(left, right, truth_left, truth_right, &first));
+  // The four camera_info topics connect one by one: until a left/right pair of one stamp (of
+  // both the head and the truth) has arrived there is nothing to score.
+  const auto scored_now = [&](Scores* out) { return score(left, right, truth_left, truth_right, out); };
+  ASSERT_TRUE(test_support::waitUntil([&] { return scored_now(&first); }, 5.0))
+      << "no left/right camera_info pair of one stamp, of the head and of the truth";
   std::printf("start (the nominal description): %s\n", first.text().c_str());
   ASSERT_FALSE(first.within()) << "the nominal description is already within the targets: no cold start";
 
@@ -115,7 +119,7 @@ TEST(ColdStart, FromANominalDescriptionTheHeadCalibratesItselfWithinTheTargets) 
     // The commit reaches the cameras' camera_info within a frame or two.
     const ros::Time committed = statuses.snapshot().back()->header.stamp;
     left.waitFor([&](const auto& m) { return m.back()->header.stamp > committed + ros::Duration(0.2); }, 3.0);
-    ASSERT_TRUE(score(left, right, truth_left, truth_right, &now));
+    ASSERT_TRUE(test_support::waitUntil([&] { return scored_now(&now); }, 5.0));
     within = now.within();
     std::printf("%.1f s: calibration %zu accepted: %s%s\n", (ros::WallTime::now() - start).toSec(), scored,
                 now.text().c_str(), within ? " (within the targets)" : "");
