@@ -336,10 +336,10 @@ class LearnRig {
   explicit LearnRig(ros::NodeHandle& nh)
       : scene(nh, "left/image_scene", 50),
         log(nh, "/rosout", 1000),
+        device(size, CV_8UC1),
         left_pub_(nh.advertise<Image>("left/image_raw", 5)),
         right_pub_(nh.advertise<Image>("right/image_raw", 5)),
         mode_pub_(nh.advertise<CalibrationMode>("calibration_mode", 5)),
-        device(size, CV_8UC1),
         canvas_(size.height + 200, size.width + 400, CV_8UC1) {
     for (int v = 0; v < device.rows; ++v)
       for (int u = 0; u < device.cols; ++u) device.at<uint8_t>(v, u) = ((u / 8 + v / 8) % 2) * 90;
@@ -420,17 +420,14 @@ class LearnRig {
   const cv::Size size{256, 192};
   Collector<Image> scene;
   Collector<rosgraph_msgs::Log> log;
-
- private:
-  ros::Publisher left_pub_, right_pub_, mode_pub_;
-
- public:
-  cv::Mat device;  // the device pattern as the next frames show it
-  int frame = 0;
+  // What the next frames are made of (the test moves the device and the epoch).
+  cv::Mat device;  // the device pattern
+  int frame = 0;   // the next frame's index
   uint32_t epoch = 0;
 
  private:
-  cv::Mat canvas_;
+  ros::Publisher left_pub_, right_pub_, mode_pub_;
+  cv::Mat canvas_;  // the scene's texture; frame f shows the window sceneAt(f)
 };
 
 }  // namespace
