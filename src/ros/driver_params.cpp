@@ -13,6 +13,14 @@ void readHealthSchedule(const ParameterReader& read, core::LightScheduleConfig* 
   schedule->first_burst_delay_s = read.atLeast("first_burst_delay_s", 0.5, 0.0);
 }
 
+void readBurstSchedule(const ParameterReader& read, core::LightScheduleConfig* schedule) {
+  schedule->period_s = read.get("calibration_period_s", 0.0);
+  // A burst's length is a time by default, so that it lasts as long at any frame rate; a count
+  // of frames (calibration_frames > 0) is for tests and replays that need exact frames.
+  schedule->calibration_frames = read.get("calibration_frames", 0);
+  schedule->calibration_duration_s = read.get("calibration_duration_s", 0.33);
+}
+
 DriverParams loadDriverParams(const ros::NodeHandle& private_nh, const std::string& default_sim_config) {
   const ParameterReader read(private_nh);
   DriverParams p;
@@ -36,8 +44,7 @@ DriverParams loadDriverParams(const ros::NodeHandle& private_nh, const std::stri
   if (!(p.pair_timeout_s > 0.0) || p.pair_timeout_s > 3600.0)
     throw core::ConfigError("pair_timeout_s", "must be in (0, 3600] seconds");
 
-  p.schedule.period_s = read.get("calibration_period_s", 0.0);
-  p.schedule.calibration_frames = read.get("calibration_frames", p.schedule.calibration_frames);
+  readBurstSchedule(read, &p.schedule);
   p.schedule.settle_frames = read.get("settle_frames", p.schedule.settle_frames);
   readHealthSchedule(read, &p.schedule);
   core::throwIfProblem(p.schedule.problem());

@@ -9,9 +9,8 @@ namespace embedded_calibration_stereo {
 LightControllerParams loadLightControllerParams(const ParameterReader& read, const std::string& default_prior_file) {
   LightControllerParams p;
   p.light = readLightBackendParams(read, "none");
-  p.schedule.period_s = read.get("calibration_period_s", 0.0);
-  p.schedule.calibration_frames = read.get("calibration_frames", p.schedule.calibration_frames);
-  // Frames the light is held on beyond calibration_frames: the driver's delay and the unsettled
+  readBurstSchedule(read, &p.schedule);
+  // Frames the light is held on beyond the settled ones: the driver's delay and the unsettled
   // frames on both sides of each switch.
   p.schedule.settle_frames = read.get("settle_frames", 5);
   readHealthSchedule(read, &p.schedule);

@@ -1,6 +1,7 @@
 // Light schedule: periodic bursts, requests through set_light and the settled flag.
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <vector>
 
 #include "embedded_calibration_stereo/core/light/light_schedule.h"
@@ -29,7 +30,14 @@ std::vector<core::LightState> run(core::LightSchedule* schedule, double t0, doub
 TEST(LightSchedule, ValidateNamesTheBadField) {
   EXPECT_EQ(config(0, 10, 2).validate(), "");
   EXPECT_NE(config(-1, 10, 2).validate().find("calibration_period_s"), std::string::npos);
-  EXPECT_NE(config(0, 0, 2).validate().find("calibration_frames"), std::string::npos);
+  EXPECT_NE(config(0, -1, 2).validate().find("calibration_frames"), std::string::npos);
+  // calibration_frames 0 counts the burst in time, which then needs a duration.
+  EXPECT_NE(config(0, 0, 2).validate().find("calibration_duration_s"), std::string::npos);
+  auto timed = config(0, 0, 2);
+  timed.calibration_duration_s = 1.0;
+  EXPECT_EQ(timed.validate(), "");
+  timed.calibration_duration_s = -1.0;
+  EXPECT_NE(timed.validate().find("calibration_duration_s"), std::string::npos);
   EXPECT_NE(config(0, 10, -1).validate().find("settle_frames"), std::string::npos);
 }
 
@@ -95,6 +103,52 @@ TEST(LightSchedule, PeriodicBurstsYieldCalibrationFramesSettledFrames) {
     }
   }
   EXPECT_EQ(bursts, 3);
+}
+
+// Settled light-on frames of each burst, stepping the schedule at the given frame times.
+std::vector<int> settledFramesPerBurst(core::LightSchedule* schedule, const std::vector<double>& times) {
+  std::vector<int> bursts;
+  bool on = false;
+  for (double t : times) {
+    const core::LightState s = schedule->step(t);
+    if (s.light_on && !on) bursts.push_back(0);
+    if (s.light_on && s.settled) ++bursts.back();
+    on = s.light_on;
+  }
+  return bursts;
+}
+
+TEST(LightSchedule, TimedBurstsLastTheSameTimeAtAnyFrameRate) {
+  for (const double duration : {1.0, 0.33, 0.4}) {
+    for (const double fps : {10.0, 15.0, 25.0, 29.97, 30.0, 60.0}) {
+      auto c = config(4.0, 0, 2);
+      c.calibration_duration_s = duration;
+      core::LightSchedule schedule(c);
+      // Frame times with up to 3 ms of jitter, as a driver's stamps have.
+      std::vector<double> times;
+      for (int i = 0; i < static_cast<int>(10.0 * fps); ++i) times.push_back(50.0 + i / fps + 0.003 * ((i * 7) % 3 - 1));
+      const std::vector<int> bursts = settledFramesPerBurst(&schedule, times);
+      ASSERT_EQ(bursts.size(), 3u) << fps;
+      for (int n : bursts) EXPECT_EQ(n, std::lround(duration * fps)) << duration << " s at " << fps << " fps";
+    }
+  }
+}
+
+TEST(LightSchedule, ATimedBurstEndsOnTimeWhenFramesAreLost) {
+  auto c = config(10.0, 0, 1);
+  c.calibration_duration_s = 1.0;
+  core::LightSchedule schedule(c);
+  double first_settled = -1.0, last_settled = -1.0;
+  for (int i = 0; i < 90; ++i) {
+    if (i >= 10 && i % 2 == 1) continue;  // from frame 10 on, every other frame of 30 fps is lost
+    const double t = i / 30.0;
+    const core::LightState s = schedule.step(t);
+    if (!s.light_on || !s.settled) continue;
+    if (first_settled < 0.0) first_settled = t;
+    last_settled = t;
+  }
+  // The settled frames cover 1 s at the rate they came (15 fps at the end), give or take a frame.
+  EXPECT_NEAR(last_settled - first_settled + 1.0 / 15.0, 1.0, 1.0 / 15.0);
 }
 
 TEST(LightSchedule, ReleasingTheRequestEndsABurst) {
@@ -293,7 +347,7 @@ TEST(LightSchedule, TheFirstBurstComesAfterTheDelayWithSettledLightOffFramesBefo
   // The parameter travels apart from the sentence: a refusal names it without parsing text.
   EXPECT_EQ(bad.problem().parameter, "first_burst_delay_s");
   EXPECT_EQ(bad.problem().problem, "must be >= 0");
-  core::LightScheduleConfig frames = config(1.0, 0, 2);
+  core::LightScheduleConfig frames = config(1.0, -1, 2);
   EXPECT_EQ(frames.problem().parameter, "calibration_frames");
   EXPECT_TRUE(config(1.0, 10, 2).problem().ok());
   EXPECT_THROW(core::throwIfProblem(frames.problem()), core::ConfigError);

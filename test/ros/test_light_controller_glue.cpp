@@ -93,6 +93,13 @@ TEST(LightControllerParams, DefaultsAndTheFileStoresRequiredUrls) {
   const LightControllerParams d = loadLightControllerParams(p.reader(), "/tmp/prior.yaml");
   EXPECT_EQ(d.light.backend, "none");
   EXPECT_EQ(d.schedule.settle_frames, 5) << "the external driver's delay: more than the CameraDriver's 2";
+  EXPECT_EQ(d.schedule.calibration_frames, 0) << "a burst's length is a time by default";
+  EXPECT_GT(d.schedule.calibration_duration_s, 0.0);
+  Params untimed;
+  untimed.set("calibration_duration_s", 0.0);
+  EXPECT_EQ(refused([&] { loadLightControllerParams(untimed.reader(), ""); }), "calibration_duration_s");
+  untimed.set("calibration_frames", 12);
+  EXPECT_EQ(loadLightControllerParams(untimed.reader(), "").schedule.calibration_frames, 12);
   EXPECT_EQ(d.prior_file, "/tmp/prior.yaml");
   EXPECT_EQ(d.calibration_store, "driver");
   p.set("calibration_store", std::string("file"));

@@ -399,6 +399,8 @@ TEST(LightControllerInputs, DelayedLightAndBadInputs) {
   // follows set_light only until then, as with the periodic trigger and no period.
   test_support::ChildLaunch head({"embedded_calibration_stereo", "external_driver.launch", "light_backend:=sim",
                               "calibration_period_s:=0", "calibration_trigger:=on_demand", "health:=false",
+                              // bursts of a fixed 10 frames, as the sections' counts assume
+                              "calibration_frames:=10",
                               "prior_file:=" + dir.path + "/prior.yaml"},
                              dir.path + "/head.log");
   ASSERT_TRUE(head.started());

@@ -32,16 +32,19 @@ struct DriverParams {
   // The device description (its `rig`: the nominal cameras); every calibration's focal lengths
   // must lie near its (kNominalFocalFactor). Empty: sim_config with the sim backend, else none.
   std::string device_config;
-  core::LightScheduleConfig schedule;    // calibration_period_s, calibration_frames, settle_frames, trigger, ...
+  core::LightScheduleConfig schedule;    // calibration_period_s, calibration_frames or _duration_s, settle_frames, trigger, ...
   FilesSourceParams files;
   V4l2SourceParams v4l2;
   LightBackendParams light;  // light_backend (default: sim for the sim backend, else none), serial_*, gpio_*
 };
 
+class ParameterReader;
+// calibration_period_s and a burst's length (calibration_frames, calibration_duration_s), read
+// alike by the CameraDriver and the LightController.
+void readBurstSchedule(const ParameterReader& read, core::LightScheduleConfig* schedule);
 // The schedule's health parameters, shared by the CameraDriver and the LightController:
 // calibration_trigger (periodic | on_demand), min_calibration_interval_s, verification_period_s,
 // first_burst_delay_s.
-class ParameterReader;
 void readHealthSchedule(const ParameterReader& read, core::LightScheduleConfig* schedule);
 
 // Reads and validates the parameters. `default_sim_config` is used when sim_config is not set.

@@ -14,7 +14,7 @@ class ParameterReader;
 
 struct LightControllerParams {
   LightBackendParams light;           // light_backend (default none), serial_*, gpio_*
-  core::LightScheduleConfig schedule;  // calibration_period_s, calibration_frames, settle_frames, trigger, ...
+  core::LightScheduleConfig schedule;  // calibration_period_s, calibration_frames or _duration_s, settle_frames, trigger, ...
   bool approximate_sync = true;
   double max_interval_s = 0.0;  // ApproximateTime's limit on a set's stamp spread; 0 = none
   int queue_size = 5;

@@ -3,8 +3,10 @@
 //
 // The schedule is stepped once per stereo frame. The light is on
 //  - while a request (set_light true) holds it on, until set_light false, or
-//  - during a calibration burst, for `settle_frames + calibration_frames` frames, so that each
-//    burst yields `calibration_frames` settled frames. Bursts start
+//  - during a calibration burst, for `settle_frames` frames and then its settled frames: either
+//    `calibration_frames` of them, or, when calibration_frames is 0, as many as span
+//    `calibration_duration_s` at the rate the frames come (round(duration x rate): 30 at 30 fps
+//    and 15 at 15 fps for 1 s), so that a burst lasts as long at any frame rate. Bursts start
 //      - trigger kPeriodic: every `period_s` seconds (0 = never; only on request), starting
 //        `first_burst_delay_s` after the first frame;
 //      - trigger kOnDemand: while demand(true) holds (the calibration is not healthy), at the
@@ -32,7 +34,9 @@ enum class CalibrationTrigger { kPeriodic, kOnDemand };
 
 struct LightScheduleConfig {
   double period_s = 0.0;       // time between calibration bursts (kOnDemand: the longest); 0 = only on request
-  int calibration_frames = 10; // settled frames with the light on per burst (>= 1)
+  int calibration_frames = 10; // settled frames with the light on per burst; 0: by duration
+  // With calibration_frames 0: the time a burst's settled light-on frames cover (> 0).
+  double calibration_duration_s = 0.0;
   int settle_frames = 2;       // frames reported unsettled after each switch (>= 0)
   CalibrationTrigger trigger = CalibrationTrigger::kPeriodic;
   // kOnDemand: shortest time from a burst's last lit frame to the next burst: the window's time
@@ -90,6 +94,9 @@ class LightSchedule {
   // step()'s decisions: a periodic or demanded burst; a verification flash.
   void startBurstIfDue(double time_s);
   void startFlashIfDue(double time_s);
+  // Counts a burst frame at time_s down; a timed burst (calibration_frames 0) ends on the frame
+  // whose settled frames cover calibration_duration_s.
+  void countBurstFrame(double time_s);
 
   LightScheduleConfig config_;
   bool hold_on_ = false;
@@ -101,6 +108,10 @@ class LightSchedule {
   double last_burst_end_s_ = 0.0;  // the latest burst's last lit frame (after started_)
   double next_flash_s_ = 0.0;    // the next verification flash
   int64_t burst_frames_left_ = 0;
+  int64_t burst_frame_index_ = 0;  // frames of the burst so far, this one excluded
+  double burst_start_s_ = 0.0;     // the burst's first frame
+  double burst_settled_s_ = 0.0;   // its first settled frame (a timed burst)
+  double previous_step_s_ = 0.0;   // the previous step()'s frame (after started_)
   int64_t flash_frames_left_ = 0;
   bool previous_on_ = false;
   int64_t frames_since_switch_ = 1 << 30;  // "long ago": the initial off state is settled
