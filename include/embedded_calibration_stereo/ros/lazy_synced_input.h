@@ -47,6 +47,7 @@
 #include "embedded_calibration_stereo/CalibrationMode.h"
 #include "embedded_calibration_stereo/ros/frame_stamp_gate.h"
 #include "embedded_calibration_stereo/ros/stamp_guard.h"
+#include "embedded_calibration_stereo/ros/stereo_input_check.h"  // ErrorThrottle
 
 namespace embedded_calibration_stereo {
 
@@ -132,7 +133,6 @@ class LazySyncedInput : public LazySubscription {
         queue_size_(queue_size),
         callback_(std::move(callback)) {
     for (size_t i = 0; i < kTopics; ++i) resolved_[i] = nh_.resolveName(topics_[i]);
-    for (auto& last : last_malformed_report_s_) last = -1e9;
     guard_ = std::make_unique<StampGuard>(std::vector<std::string>(resolved_.begin(), resolved_.end()),
                                           readStampTolerance(private_nh_), private_nh_.getNamespace());
     gate_ = std::make_unique<FrameStampGate>(std::vector<std::string>(resolved_.begin(), resolved_.end()),
@@ -206,10 +206,8 @@ class LazySyncedInput : public LazySubscription {
     const std::string problem = malformedImage(image);
     if (problem.empty()) return true;
     ++malformed_;
-    const double now = steadySeconds();
-    std::atomic<double>& last_report_s = last_malformed_report_s_[index];  // per topic: one must not hide another
-    double last = last_report_s.load();
-    if (now - last >= StampGuard::kWarnPeriodS && last_report_s.compare_exchange_strong(last, now))
+    // Keyed by topic: one camera's broken images must not hide the other's.
+    if (unreadable_.shouldReport(resolved_[index]))
       ROS_ERROR("%s: image dropped on %s: %s", private_nh_.getNamespace().c_str(), resolved_[index].c_str(),
                 problem.c_str());
     return false;
@@ -242,7 +240,7 @@ class LazySyncedInput : public LazySubscription {
   std::unique_ptr<StampGuard> guard_;
   std::unique_ptr<FrameStampGate> gate_;
   std::atomic<uint64_t> malformed_{0};
-  std::array<std::atomic<double>, kTopics> last_malformed_report_s_;  // per topic
+  ErrorThrottle unreadable_{StampGuard::kWarnPeriodS};  // unreadable images' errors, per topic
   std::tuple<Filter<M>...> filters_;  // declared before the admissions and synchronisers: they outlive them
   std::tuple<std::unique_ptr<AdmissionFilter<M>>...> admissions_;  // filters_ -> admissions_ -> synchroniser
   std::unique_ptr<message_filters::Synchronizer<Exact>> exact_;
