@@ -16,6 +16,7 @@
 
 #include <chrono>
 #include <cmath>
+#include <cstdio>
 #include <deque>
 #include <future>
 #include <memory>
@@ -30,6 +31,7 @@
 #include "embedded_calibration_stereo/core/calibration/calibration_health_policy.h"
 #include "embedded_calibration_stereo/core/calibration/calibration_monitor.h"
 #include "embedded_calibration_stereo/core/calibration/depth_coverage_watch.h"
+#include "embedded_calibration_stereo/core/calibration/measurement_rate.h"
 #include "embedded_calibration_stereo/ros/calibration_health_io.h"
 #include "embedded_calibration_stereo/ros/calibration_session.h"
 #include "embedded_calibration_stereo/ros/conversions.h"
@@ -76,6 +78,7 @@ class CalibrationHealthNodelet : public GuardedNodelet {
     const std::string package_path = ros::package::getPath("embedded_calibration_stereo");
     params_ = loadHealthParams(pnh, package_path.empty() ? "" : package_path + "/config/sim_rig.yaml");
     monitor_ = std::make_unique<core::CalibrationMonitor>(params_.monitor);
+    if (params_.depth_rate_hz > 0.0) depth_rate_.emplace(params_.depth_rate_hz);
     coverage_ = std::make_unique<core::DepthCoverageWatch>(params_.coverage);
     policy_ = std::make_unique<HealthPolicy>(params_.policy, [](const Pair& in_force, const Pair& other) {
       return carriesCalibration(in_force.first, other.first) && carriesCalibration(in_force.second, other.second);
@@ -96,10 +99,12 @@ class CalibrationHealthNodelet : public GuardedNodelet {
       stopWaitingForBoards();
       diagnostics_->update();
     });
-    NODELET_INFO("CalibrationHealth: depth mode on %s and %s (every %d settled light-off frame%s), verification "
-                 "on %s, boards %s, %s",
-                 left_sub_.getTopic().c_str(), right_sub_.getTopic().c_str(), params_.depth_every_n_frames,
-                 params_.depth_every_n_frames == 1 ? "" : "s", observations_sub_.getTopic().c_str(),
+    char depth_rate[80] = "every settled light-off frame";
+    if (params_.depth_rate_hz > 0.0)
+      std::snprintf(depth_rate, sizeof(depth_rate), "%g settled light-off frames a second at most", params_.depth_rate_hz);
+    NODELET_INFO("CalibrationHealth: depth mode on %s and %s (%s), verification on %s, boards %s, %s",
+                 left_sub_.getTopic().c_str(), right_sub_.getTopic().c_str(), depth_rate,
+                 observations_sub_.getTopic().c_str(),
                  params_.policy.boards_posed ? "at their poses of the calibration's solve (device_config's for others)"
                                              : "posed per frame",
                  params_.policy.rollback ? "a new calibration that verifies worse is rolled back" : "no rollback");
@@ -167,7 +172,7 @@ class CalibrationHealthNodelet : public GuardedNodelet {
     const ros::Time stamp = mode->header.stamp;
     if (!monitor_->hasCalibration() || policy_->epoch() != mode->calibration_epoch) return;
     if (mode->light_on || !mode->settled) return;
-    if (++light_off_frames_ % params_.depth_every_n_frames != 0) return;
+    if (depth_rate_ && !depth_rate_->take(stamp.toSec())) return;
     std::chrono::steady_clock::time_point start;
     try {  // a cv_bridge::Exception too
       const cv_bridge::CvImageConstPtr left_cv = cv_bridge::toCvShare(left), right_cv = cv_bridge::toCvShare(right);
@@ -382,7 +387,8 @@ class CalibrationHealthNodelet : public GuardedNodelet {
 
   HealthFrameRecords records_{kKeptFrames};  // the latest frames' light, epoch and calibrations
   std::future<std::string> restore_;          // the running restore: "" or why it failed
-  uint64_t light_off_frames_ = 0, depth_frames_ = 0, verifications_ = 0;
+  std::optional<core::MeasurementRate> depth_rate_;  // which light-off frames to measure; none: all
+  uint64_t depth_frames_ = 0, verifications_ = 0;
   double depth_ms_ = 0.0;
 };
 

@@ -35,7 +35,7 @@ void loadMonitorParams(const ParameterReader& read, core::CalibrationMonitorOpti
   m.smoothing_time_s = read.atLeast("smoothing_time_s", m.smoothing_time_s, 0.0);
   m.max_depth_age_s = read.atLeast("max_depth_age_s", m.max_depth_age_s, 0.0);
   m.max_verification_age_s = read.atLeast("max_verification_age_s", m.max_verification_age_s, 0.0);
-  m.depth_frame_stride = 1;  // depth_every_n_frames strides before the images are converted
+  m.depth_frame_stride = 1;  // depth_rate_hz picks the frames before the images are converted
   core::throwIfProblem(m.problem());
 }
 
@@ -75,7 +75,7 @@ HealthParams loadHealthParams(const ros::NodeHandle& pnh, const std::string& def
   policy.solve_boards_wait_s = read.inRange("solve_boards_wait_s", policy.solve_boards_wait_s, 0.0, 60.0);
   policy.refine_predicted_px = read.atLeast("refine_predicted_px", policy.refine_predicted_px, 0.0);
   policy.max_refinements = read.inRange("max_refinements", policy.max_refinements, 0, 10);
-  p.depth_every_n_frames = read.atLeast("depth_every_n_frames", p.depth_every_n_frames, 1);
+  p.depth_rate_hz = read.inRange("depth_rate_hz", p.depth_rate_hz, 0.0, 1000.0);
   p.queue_size = read.atLeast("queue_size", p.queue_size, 1);
   policy.rollback = read.get("rollback", policy.rollback);
   p.service_timeout_s = read.inRange("service_timeout_s", p.service_timeout_s, 0.1, 60.0);

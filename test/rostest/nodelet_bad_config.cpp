@@ -91,7 +91,7 @@ TEST(NodeletGoodConfig, EveryNodeletStarts) {
       {"LightController", {{"min_step", 8}, {"max_delay_frames", 0}, {"approximate_sync", false},
                            {"plateau_fraction", 0.1}, {"calibration_store", "driver"},
                            {"calibration_trigger", "on_demand"}, {"verification_period_s", 6.0}}},
-      {"CalibrationHealth", {{"depth_every_n_frames", 2}, {"boards_posed", false}, {"misalignment_degraded_px", 0.1},
+      {"CalibrationHealth", {{"depth_rate_hz", 15.0}, {"boards_posed", false}, {"misalignment_degraded_px", 0.1},
                              {"misalignment_bad_px", 0.5}}},
   };
   for (const std::string& nodelet : kNodelets) {
@@ -162,7 +162,7 @@ INSTANTIATE_TEST_SUITE_P(
         BadConfig{"LightController", "LightControllerStoreChoice", "calibration_store", "cloud", "cloud"},
         BadConfig{"LightController", "LightControllerTriggerChoice", "calibration_trigger", "hourly", "hourly"},
         BadConfig{"LightController", "LightControllerVerificationRange", "verification_period_s", -1.0, "must be >= 0"},
-        BadConfig{"CalibrationHealth", "HealthEveryNRange", "depth_every_n_frames", 0, "must be >= 1"},
+        BadConfig{"CalibrationHealth", "HealthDepthRateRange", "depth_rate_hz", -1.0, "must be in [0, 1000]"},
         BadConfig{"CalibrationHealth", "HealthBoardsPosedInt", "boards_posed", 1, "must be true or false"},
         BadConfig{"CalibrationHealth", "HealthBadBelowDegraded", "misalignment_bad_px", 0.01, "must be >= 0.08"}),
     [](const testing::TestParamInfo<BadConfig>& info) { return info.param.label; });

@@ -38,7 +38,9 @@ struct HealthParams {
   // (a commit predicted no better than a degraded calibration wants more bursts, which light
   // frames while GOOD), max_refinements; the DEGRADED thresholds are copied from `monitor`.
   core::CalibrationHealthPolicyOptions policy;
-  int depth_every_n_frames = 2;  // measured here; the monitor's own stride is 1
+  // Depth-mode measurements a second, whatever the frame rate (core::MeasurementRate); 0: every
+  // settled light-off frame. Picked here; the monitor's own stride is 1.
+  double depth_rate_hz = 15.0;
   int queue_size = 5;
   double service_timeout_s = 2.0;
   core::CalibrationMonitorOptions monitor;
