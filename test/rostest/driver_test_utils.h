@@ -8,7 +8,10 @@
 #include <rosgraph_msgs/Log.h>
 #include <sensor_msgs/CameraInfo.h>
 
+#include <cstdio>
+
 #include <chrono>
+#include <cstdio>
 #include <condition_variable>
 #include <filesystem>
 #include <functional>
@@ -16,6 +19,8 @@
 #include <mutex>
 #include <string>
 #include <vector>
+
+#include "embedded_calibration_stereo/Recalibrate.h"
 
 namespace embedded_calibration_stereo::test_support {
 
@@ -155,6 +160,24 @@ inline bool latestPair(Collector<sensor_msgs::CameraInfo>& left, Collector<senso
         return true;
       }
   return false;
+}
+
+// Calls `name` once it is advertised (waiting at most wait_s); false when it never is or the call fails.
+template <class Srv>
+bool callService(const std::string& name, Srv* srv, double wait_s = 10.0) {
+  return ros::service::waitForService(name, ros::Duration(wait_s)) && ros::service::call(name, *srv);
+}
+
+// Forces a recalibration of `frames` frames through /stereo/calibration/recalibrate (timeout_s
+// for the calibrator) and prints its answer after `what`. False when the service was not reached.
+inline bool recalibrate(int frames, double timeout_s, const std::string& what, Recalibrate* call,
+                        double wait_s = 10.0) {
+  call->request.frames = frames;
+  call->request.timeout_s = timeout_s;
+  if (!callService("/stereo/calibration/recalibrate", call, wait_s)) return false;
+  std::printf("recalibrate %s: success %d, '%s'\n", what.c_str(), call->response.success,
+              call->response.message.c_str());
+  return true;
 }
 
 }  // namespace embedded_calibration_stereo::test_support

@@ -177,11 +177,6 @@ class Recorder {
   std::vector<double> disparity_valid_;
 };
 
-template <class Srv>
-bool callService(const std::string& name, Srv* srv, double wait_s = 10.0) {
-  return ros::service::waitForService(name, ros::Duration(wait_s)) && ros::service::call(name, *srv);
-}
-
 // 1. The videos and their truth, rendered into `dir`.
 void renderVideos(const std::string& dir, Truth* truth, cv::Mat* scene) {
   char command[2048];
@@ -334,11 +329,7 @@ void expectSeparated(const std::vector<CalibrationMode::ConstPtr>& modes, Record
 //    no boards while the videos' light is off.
 void expectConfirmedThenNoBoards(Collector<CalibrationMode>& modes, Recorder& recorder, const Truth& truth) {
   Recalibrate recalibrate;
-  recalibrate.request.frames = 5;
-  recalibrate.request.timeout_s = 8.0;
-  ASSERT_TRUE(callService("/stereo/calibration/recalibrate", &recalibrate));
-  std::printf("recalibrate with nothing drifted: success %d, '%s'\n", recalibrate.response.success,
-              recalibrate.response.message.c_str());
+  ASSERT_TRUE(test_support::recalibrate(5, 8.0, "with nothing drifted", &recalibrate));
   EXPECT_TRUE(recalibrate.response.success) << recalibrate.response.message;
   EXPECT_NE(recalibrate.response.message.find("calibration in force confirmed"), std::string::npos)
       << recalibrate.response.message;
@@ -357,7 +348,7 @@ void expectConfirmedThenNoBoards(Collector<CalibrationMode>& modes, Recorder& re
   Recalibrate no_boards;
   no_boards.request.frames = 5;
   no_boards.request.timeout_s = 1.0;
-  ASSERT_TRUE(callService("/stereo/calibration/recalibrate", &no_boards));
+  ASSERT_TRUE(test_support::callService("/stereo/calibration/recalibrate", &no_boards));
   EXPECT_FALSE(no_boards.response.success);
   EXPECT_NE(no_boards.response.message.find("no boards seen"), std::string::npos) << no_boards.response.message;
 }
@@ -413,7 +404,7 @@ TEST(ExternalDriver, ImagePublisherRunsTheHead) {
       30.0))
       << "no settled light-on frame of the covered scene\n" << head.logTail();
   std_srvs::Trigger teach;
-  ASSERT_TRUE(callService("/stereo/separator/teach", &teach) && teach.response.success) << teach.response.message;
+  ASSERT_TRUE(test_support::callService("/stereo/separator/teach", &teach) && teach.response.success) << teach.response.message;
 
   expectCommitPublished(dir.path, statuses, left_infos, modes, head);
   if (HasFatalFailure()) return;

@@ -199,11 +199,6 @@ bool waitForDiagnostic(Collector<diagnostic_msgs::DiagnosticArray>& diagnostics,
       timeout_s);
 }
 
-template <class Srv>
-bool callService(const std::string& name, Srv* srv) {
-  return ros::service::waitForService(name, ros::Duration(20.0)) && ros::service::call(name, *srv);
-}
-
 using diagnostic_msgs::DiagnosticStatus;
 
 // What the sections share: the stand-in driver, the head's log, diagnostics and calibration_mode.
@@ -228,11 +223,7 @@ struct Rig {
 void Rig::recalibrateWithTheLightLate() {
   // A. A recalibration with the light two frames late; set_camera_info absent.
   Recalibrate recalibrate;
-  recalibrate.request.frames = 5;
-  recalibrate.request.timeout_s = 15.0;
-  ASSERT_TRUE(callService("/stereo/calibration/recalibrate", &recalibrate));
-  std::printf("recalibrate without set_camera_info: success %d, '%s'\n", recalibrate.response.success,
-              recalibrate.response.message.c_str());
+  ASSERT_TRUE(test_support::recalibrate(5, 15.0, "without set_camera_info", &recalibrate, 20.0));
   EXPECT_FALSE(recalibrate.response.success);
   EXPECT_NE(recalibrate.response.message.find("not committed"), std::string::npos) << recalibrate.response.message;
   EXPECT_NE(recalibrate.response.message.find("left_driver/set_camera_info is not available"), std::string::npos)
@@ -262,7 +253,7 @@ void Rig::noDeviceInView() {
   size_t from = diagnostics.snapshot().size();
   std_srvs::SetBool on;
   on.request.data = true;
-  ASSERT_TRUE(callService("/stereo/set_light", &on) && on.response.success);
+  ASSERT_TRUE(test_support::callService("/stereo/set_light", &on, 20.0) && on.response.success);
   std::string seen;
   EXPECT_TRUE(waitForDiagnostic(diagnostics, from, DiagnosticStatus::ERROR, "light not working", 8.0, &seen))
       << "last light_controller status: " << seen;
@@ -270,7 +261,7 @@ void Rig::noDeviceInView() {
   Recalibrate no_boards;
   no_boards.request.frames = 5;
   no_boards.request.timeout_s = 1.5;
-  ASSERT_TRUE(callService("/stereo/calibration/recalibrate", &no_boards));
+  ASSERT_TRUE(test_support::callService("/stereo/calibration/recalibrate", &no_boards, 20.0));
   EXPECT_FALSE(no_boards.response.success);
   EXPECT_NE(no_boards.response.message.find("no boards seen"), std::string::npos) << no_boards.response.message;
   // The recalibration switched the light off again: the images agree, the report clears.
