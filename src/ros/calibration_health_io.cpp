@@ -75,6 +75,9 @@ HealthParams loadHealthParams(const ros::NodeHandle& pnh, const std::string& def
   policy.solve_boards_wait_s = read.inRange("solve_boards_wait_s", policy.solve_boards_wait_s, 0.0, 60.0);
   policy.refine_predicted_px = read.atLeast("refine_predicted_px", policy.refine_predicted_px, 0.0);
   policy.max_refinements = read.inRange("max_refinements", policy.max_refinements, 0, 10);
+  // A launch file written for the frame-counting stride is refused, not silently measured at 15 Hz.
+  if (read.has("depth_every_n_frames"))
+    throw core::ConfigError("depth_every_n_frames", "replaced by depth_rate_hz (measurements a second, at any frame rate)");
   p.depth_rate_hz = read.inRange("depth_rate_hz", p.depth_rate_hz, 0.0, 1000.0);
   p.queue_size = read.atLeast("queue_size", p.queue_size, 1);
   policy.rollback = read.get("rollback", policy.rollback);

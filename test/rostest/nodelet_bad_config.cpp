@@ -163,6 +163,7 @@ INSTANTIATE_TEST_SUITE_P(
         BadConfig{"LightController", "LightControllerTriggerChoice", "calibration_trigger", "hourly", "hourly"},
         BadConfig{"LightController", "LightControllerVerificationRange", "verification_period_s", -1.0, "must be >= 0"},
         BadConfig{"CalibrationHealth", "HealthDepthRateRange", "depth_rate_hz", -1.0, "must be in [0, 1000]"},
+        BadConfig{"CalibrationHealth", "HealthEveryNRenamed", "depth_every_n_frames", 2, "replaced by depth_rate_hz"},
         BadConfig{"CalibrationHealth", "HealthBoardsPosedInt", "boards_posed", 1, "must be true or false"},
         BadConfig{"CalibrationHealth", "HealthBadBelowDegraded", "misalignment_bad_px", 0.01, "must be >= 0.08"}),
     [](const testing::TestParamInfo<BadConfig>& info) { return info.param.label; });
