@@ -18,7 +18,6 @@ class MeasurementRate {
   explicit MeasurementRate(double rate_hz);
   // Whether the frame stamped `stamp_s` (seconds) is measured. The first frame is.
   bool take(double stamp_s);
-  double rateHz() const { return rate_hz_; }
 
  private:
   double rate_hz_;
