@@ -1,18 +1,16 @@
 #pragma once
 // Helpers shared by the driver's rostest nodes: collect messages of a topic and wait on a
-// condition over them with a deadline (never a fixed sleep as synchronisation), and load the
-// driver nodelet in-process.
+// condition over them with a deadline (never a fixed sleep as synchronisation), load the
+// driver nodelet in-process, and call services (calibration/recalibrate among them).
 #include <gtest/gtest.h>
 #include <nodelet/loader.h>
 #include <ros/ros.h>
 #include <rosgraph_msgs/Log.h>
 #include <sensor_msgs/CameraInfo.h>
 
-#include <cstdio>
-
 #include <chrono>
-#include <cstdio>
 #include <condition_variable>
+#include <cstdio>
 #include <filesystem>
 #include <functional>
 #include <map>
