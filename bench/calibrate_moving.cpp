@@ -13,7 +13,7 @@
 //                          [--align 0|1] [--free-poses 0|1]
 //                          [--truth-background 0|1] [--truth-noise SIGMA] [--saddle 0|1]
 //                          [--learn-window 0|1|2] [--off-frames K] [--scene 0|1] [--filter 0|1]
-//                          [--refine R]
+//                          [--refine R] [--scene-test P]
 // --min-change / --min-improvement: the gate's min_change_in_predicted / min_rms_improvement_rel;
 // what limits the accuracy (docs/figures.md): --align 0 reports cornerSubPix corners instead of the whole-board
 // alignment's, --free-poses 1 solves with one free pose per virtual board instead of the rigid
@@ -86,6 +86,7 @@ struct Args {
   int scene = 0;  // 1: the window observation carries its light-off frames' scene correspondences
   int filter = 0;  // 1: earlier windows' solves as the prior of the groups a window does not contradict
   double refine = 0.0;  // GateOptions::refine_ratio
+  double scene_test = 0.0;  // GateOptions::scene_test_probability
 };
 
 // Distances of scene correspondences to their true epipolar lines (the Sampson distance under
@@ -224,6 +225,7 @@ std::optional<Args> parseArgs(int argc, char** argv, int* status) {
       {"--scene", [](Args* a, const char* v) { a->scene = std::atoi(v); }},
       {"--filter", [](Args* a, const char* v) { a->filter = std::atoi(v); }},
       {"--refine", [](Args* a, const char* v) { a->refine = std::atof(v); }},
+      {"--scene-test", [](Args* a, const char* v) { a->scene_test = std::atof(v); }},
   };
   for (int i = 1; i < argc; ++i) {
     const auto option = std::find_if(std::begin(kOptions), std::end(kOptions),
@@ -297,6 +299,7 @@ GateOptions gateOptions(const Args& args) {
   o.min_rms_improvement_rel = args.min_improvement;
   o.min_change_in_predicted = args.min_change;
   o.refine_ratio = args.refine;
+  o.scene_test_probability = args.scene_test;
   return o;
 }
 
@@ -337,6 +340,9 @@ class MovingCalibration {
                 event.empty() ? "" : ", after ", event.c_str(), observed.corners, observed.truth_corners,
                 observed.errors.rms(), observed.errors.sharedRms(), decision.reason.c_str());
     if (!prior_note.empty()) std::printf("    filter: %s\n", prior_note.c_str());
+    if (const SceneComparison& s = candidate.scene_vs_in_force; s.matches > 0)
+      std::printf("    scene against the calibration in force: %d matches at %.4f px (in force %.4f px), test %.1f\n",
+                  s.matches, s.candidate_rms_px, s.in_force_rms_px, s.statistic);
     if (args_.filter && candidate.success && candidate.covariance_ok && (decision.accepted || decision.in_force_confirmed))
       filter_.setState(candidate.rig, candidate.rig_covariance, t_start);
     if (!decision.accepted) {

@@ -96,6 +96,7 @@ CalibratorParams loadCalibratorParams(const ros::NodeHandle& pnh, const std::str
   p.prior_from_earlier_windows = read.get("prior_from_earlier_windows", p.prior_from_earlier_windows);
   p.filter.change_probability = read.get("change_probability", p.filter.change_probability);
   p.gate.refine_ratio = read.inRange("refine_ratio", 0.85, 0.0, 0.99);
+  p.gate.scene_test_probability = read.inRange("scene_test_probability", 0.001, 0.0, 0.5);
   if (const std::string e = p.filter.validate(); !e.empty()) throw core::ConfigError("change_probability", e);
   non_negative("max_rms_px", &p.gate.max_rms_px);
   non_negative("max_epipolar_rms_px", &p.gate.max_epipolar_rms_px);

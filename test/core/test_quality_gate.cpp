@@ -331,6 +331,39 @@ TEST(QualityGateRules, NoSignificantImprovementIsRejected) {
   }
 }
 
+// scene_test_probability: the scene's matches decide only where the corners do not (a candidate
+// that fits them no better and not clearly worse), and only when asked. test_scene_comparison
+// shows the same on solved windows.
+TEST(QualityGateRules, TheSceneDecidesOnlyWhereTheCornersCannot) {
+  BundleAdjustmentSummary candidate = passingCandidate();  // corner RMS 0.5 px
+  candidate.scene_vs_in_force.matches = 240;
+  candidate.scene_vs_in_force.candidate_rms_px = 0.06;
+  candidate.scene_vs_in_force.in_force_rms_px = 0.10;
+  GateOptions asked;
+  asked.scene_test_probability = 0.001;  // chi-square limit 20.5 with 5 degrees of freedom
+  for (const double statistic : {20.0, 21.0, 300.0}) {
+    candidate.scene_vs_in_force.statistic = statistic;
+    const BundleAdjustmentSummary same = inForceFit(0.5);
+    const GateDecision d = QualityGate(asked).evaluate(candidate, &same);
+    EXPECT_EQ(d.accepted, statistic > 20.6) << statistic << ": " << d.reason;
+    if (d.accepted) {
+      EXPECT_TRUE(contains(d.reason, "accepted: the scene fits it better: 240 scene matches at RMS 0.06 px vs 0.1 px"))
+          << d.reason;
+    } else {
+      EXPECT_TRUE(d.in_force_confirmed) << d.reason;
+    }
+    // Not asked (the default): the corners alone, which do not tell the two apart.
+    EXPECT_FALSE(QualityGate(GateOptions{}).evaluate(candidate, &same).accepted);
+    // A candidate clearly worse on the corners confirms nothing, whatever the scene says.
+    const BundleAdjustmentSummary better_in_force = inForceFit(0.4);
+    EXPECT_FALSE(QualityGate(asked).evaluate(candidate, &better_in_force).accepted);
+  }
+  // Without scene matches there is nothing to consult.
+  candidate.scene_vs_in_force = SceneComparison{};
+  const BundleAdjustmentSummary same = inForceFit(0.5);
+  EXPECT_FALSE(QualityGate(asked).evaluate(candidate, &same).accepted);
+}
+
 TEST(QualityGateRules, ImprovementIsAcceptedFromExactlyTheRequiredFraction) {
   GateOptions o;
   o.min_rms_improvement_rel = 0.25;  // 0.5 px * 1.25 = 0.625 px, exact in binary
@@ -551,6 +584,9 @@ TEST(QualityGateRules, InvalidOptionsRejectEveryCandidateWithTheProblem) {
       {with([](GateOptions* o) { o->min_rms_improvement_rel = -0.01; }), "min_rms_improvement_rel"},
       {with([&](GateOptions* o) { o->min_rms_improvement_rel = nan; }), "min_rms_improvement_rel"},
       {with([](GateOptions* o) { o->in_force_max_rms_px = 0; }), "in_force_max_rms_px"},
+      {with([](GateOptions* o) { o->scene_test_probability = -0.01; }), "scene_test_probability"},
+      {with([](GateOptions* o) { o->scene_test_probability = 1.0; }), "scene_test_probability"},
+      {with([&](GateOptions* o) { o->scene_test_probability = nan; }), "scene_test_probability"},
   };
   const BundleAdjustmentSummary in_force = inForceFit(5.0);
   for (const auto& [options, problem] : invalid) {

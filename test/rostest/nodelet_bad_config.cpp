@@ -138,6 +138,7 @@ INSTANTIATE_TEST_SUITE_P(
         BadConfig{"OnlineCalibrator", "CalibratorCommitChoice", "commit", "bag", "'bag'"},
         BadConfig{"OnlineCalibrator", "CalibratorBoardPlacementChoice", "board_placement", "free",
                   "held, refined or tested, got 'free'"},
+        BadConfig{"OnlineCalibrator", "CalibratorSceneTestRange", "scene_test_probability", 0.7, "must be in [0, 0.5]"},
         BadConfig{"Separator", "SeparatorQueueSizeText", "queue_size", "five", "must be an integer"},
         BadConfig{"Separator", "SeparatorTeachFramesRange", "teach_frames", 0, "must be >= 1"},
         BadConfig{"Separator", "SeparatorApproximateSyncText", "approximate_sync", "yes", "must be true or false"},

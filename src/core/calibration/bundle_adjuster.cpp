@@ -199,6 +199,9 @@ class AdjustmentRun {
       residualStatistics();
     }
     computeCovariance();
+    if (!scene_.empty() && input_.in_force)
+      out_.scene_vs_in_force = compareOnScene(scene_, out_.rig, *input_.in_force, out_.scene_sigma_px,
+                                              options_.max_scene_residual_sigmas);
     out_.success = true;
     out_.solve_ms = msSince(start_);
     return out_;

@@ -1,10 +1,12 @@
 #include "embedded_calibration_stereo/core/calibration/quality_gate.h"
 
-#include "embedded_calibration_stereo/core/calibration/stereo_accuracy.h"
-
 #include <cmath>
 #include <iomanip>
+#include <optional>
 #include <sstream>
+
+#include "embedded_calibration_stereo/core/calibration/calibration_filter.h"
+#include "embedded_calibration_stereo/core/calibration/stereo_accuracy.h"
 
 namespace embedded_calibration_stereo::core {
 
@@ -52,6 +54,7 @@ std::string GateOptions::validate() const {
   if (!(in_force_max_rms_px > 0)) return "in_force_max_rms_px must be > 0";
   if (!(min_change_in_predicted >= 0)) return "min_change_in_predicted must be >= 0";
   if (!(refine_ratio >= 0 && refine_ratio < 1)) return "refine_ratio must be in [0, 1)";
+  if (!(scene_test_probability >= 0 && scene_test_probability < 1)) return "scene_test_probability must be in [0, 1)";
   return "";
 }
 
@@ -170,6 +173,22 @@ Significance significance(const BundleAdjustmentSummary& c, const BundleAdjustme
   return s;
 }
 
+// The scene's verdict on a candidate the corners do not prefer (scene_test_probability): an
+// acceptance when its matches fit the candidate significantly better, nothing otherwise.
+std::optional<GateDecision> sceneVerdict(const BundleAdjustmentSummary& c, const BundleAdjustmentSummary& in_force,
+                                         const GateOptions& o) {
+  const SceneComparison& scene = c.scene_vs_in_force;
+  if (!(o.scene_test_probability > 0) || scene.matches == 0) return std::nullopt;
+  const double limit = chiSquareQuantile(o.scene_test_probability, kSceneComparisonDof);
+  if (!(scene.statistic > limit)) return std::nullopt;
+  const Significance s = significance(c, in_force, o);
+  if (!s.rejection.empty()) return std::nullopt;
+  return accepted("the scene fits it better: " + std::to_string(scene.matches) + " scene matches at RMS " +
+                  fmt(scene.candidate_rms_px) + " px vs " + fmt(scene.in_force_rms_px) +
+                  " px for the calibration in force (test " + fmt(scene.statistic) + " > " + fmt(limit) +
+                  "); corner RMS " + fmt(combinedRms(c)) + " px vs " + fmt(combinedRms(in_force)) + " px" + s.note);
+}
+
 // The decision for a candidate that passed on its own, against the calibration in force's fit of
 // the same observations.
 GateDecision againstInForce(const BundleAdjustmentSummary& c, const BundleAdjustmentSummary& in_force,
@@ -195,6 +214,8 @@ GateDecision againstInForce(const BundleAdjustmentSummary& c, const BundleAdjust
   }
   // A fresh solve clearly worse than the calibration in force confirms nothing: something failed.
   const bool confirms = candidate_rms <= in_force_rms * (1.0 + o.min_rms_improvement_rel);
+  if (confirms)
+    if (std::optional<GateDecision> by_scene = sceneVerdict(c, in_force, o)) return *by_scene;
   const GateDecision kept = verdict(confirms ? GateOutcome::kInForceConfirmed : GateOutcome::kRejected,
                                     "no significant improvement: RMS " + fmt(candidate_rms) + " px vs " +
                                         fmt(in_force_rms) + " px for the calibration in force (needs " +

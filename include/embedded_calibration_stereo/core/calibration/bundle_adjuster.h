@@ -64,6 +64,7 @@
 #include <string>
 #include <vector>
 
+#include "embedded_calibration_stereo/core/calibration/scene_comparison.h"
 #include "embedded_calibration_stereo/core/geometry/calibration_device.h"
 #include "embedded_calibration_stereo/core/geometry/observation.h"
 #include "embedded_calibration_stereo/core/geometry/stereo_rig.h"
@@ -257,6 +258,10 @@ struct BundleAdjustmentSummary {
   int prior_parameters = 0;  // parameters the rig prior informed (estimated and active)
   double scene_sigma_px = 0.0;
   int scene_outliers = 0;
+  // The used scene matches under this solution and under the calibration in force (when the
+  // input has one), at scene_sigma_px, clipped at max_scene_residual_sigmas (scene_comparison.h):
+  // what the quality gate consults when the corners fit both alike.
+  SceneComparison scene_vs_in_force;
 };
 
 class BundleAdjuster {

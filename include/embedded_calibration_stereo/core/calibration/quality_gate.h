@@ -51,6 +51,12 @@ struct GateOptions {
   // force's (evaluate()'s in_force_predicted_px): as well fitted and better known, e.g. solved with
   // what the windows since the calibration in force taught (calibration_filter.h). 0: never.
   double refine_ratio = 0.0;
+  // A candidate whose corners fit no better than the calibration in force's (and not clearly
+  // worse) replaces it when the window's scene matches say the calibration in force is wrong: the
+  // likelihood ratio of scene_comparison.h above the chi-square quantile of this upper tail (with
+  // kSceneComparisonDof). The boards cannot tell a small turn of a camera from a small shift; the
+  // scene can. 0: the scene is not consulted.
+  double scene_test_probability = 0.0;
 
   std::string validate() const;  // empty when usable
 };

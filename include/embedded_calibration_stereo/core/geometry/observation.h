@@ -1,6 +1,7 @@
 #pragma once
 // Board corners and scene correspondences seen in images: the core counterpart of
 // BoardObservation / SceneMatch / StereoPatternObservation messages.
+#include <cstddef>
 #include <cstdint>
 #include <vector>
 

@@ -8,6 +8,7 @@
 #include <cstdint>
 #include <optional>
 #include <string>
+#include <vector>
 
 #include "embedded_calibration_stereo/core/calibration/bundle_adjuster.h"
 #include "embedded_calibration_stereo/core/geometry/calibration_device.h"
@@ -36,6 +37,16 @@ struct SyntheticWindow {
   std::optional<RigPrior> prior;
   const BundleAdjustmentSummary* weights_from = nullptr;
 };
+
+// The window of `truth` as the solve is given it: its observations (the scene's matches on the
+// first), the nominal device, and how many wrong scene matches are among them.
+struct SyntheticWindowData {
+  std::vector<StereoObservation> frames;
+  CalibrationDevice nominal;
+  int scene_wrong = 0;
+};
+SyntheticWindowData makeSyntheticWindow(const ScenarioHead& head, const StereoRig& truth,
+                                        const SyntheticWindow& window);
 
 // The window of `truth` (the head's device seen by that rig) solved; *scene_wrong_count
 // (optional): how many wrong scene matches it was given.
