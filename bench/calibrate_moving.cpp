@@ -13,7 +13,7 @@
 //                          [--align 0|1] [--free-poses 0|1]
 //                          [--truth-background 0|1] [--truth-noise SIGMA] [--saddle 0|1]
 //                          [--learn-window 0|1|2] [--off-frames K] [--scene 0|1] [--filter 0|1]
-//                          [--refine R] [--scene-test P]
+//                          [--refine R] [--scene-test P] [--event-at-burst 0|1] [--scene-sides 0|1]
 // --min-change / --min-improvement: the gate's min_change_in_predicted / min_rms_improvement_rel;
 // what limits the accuracy (docs/figures.md): --align 0 reports cornerSubPix corners instead of the whole-board
 // alignment's, --free-poses 1 solves with one free pose per virtual board instead of the rigid
@@ -24,7 +24,12 @@
 // (window_tracker.h: the device image learned from the window's light-off frames, K on each side,
 // and its light-on frames; one observation per window), 1 the same with light-off frames before
 // the window only; --light-off-gap G: the nearest light-off frames lie G frame periods from the
-// window's first and last light-on frames (default 1; the live driver: settle_frames + 1). Each
+// window's first and last light-on frames (default 1; the live driver: settle_frames + 1).
+// --event-at-burst 1 (with --learn-window) fires each drift event between the light-off frames
+// before a window and its first light-on frame, as a knock can come on a real head (and as the
+// demo's script can fire one just before a burst): the window's light-off frames before it and
+// their scene matches show the rig of before the event. --scene-sides 0 keeps a window's scene
+// matches when its two sides disagree (WindowTrackerOptions::check_scene_sides). Each
 // window also prints the tracked corners' RMS error against the truth and the part of it common
 // to the window's frames.
 // The scene moves with the frame index (time = frame / fps), the noise seeds are the frame
@@ -87,6 +92,8 @@ struct Args {
   int filter = 0;  // 1: earlier windows' solves as the prior of the groups a window does not contradict
   double refine = 0.0;  // GateOptions::refine_ratio
   double scene_test = 0.0;  // GateOptions::scene_test_probability
+  int scene_sides = 1;     // WindowTrackerOptions::check_scene_sides
+  int event_at_burst = 0;  // 1: drift events between a window's light-off frames before it and its light-on frames
 };
 
 // Distances of scene correspondences to their true epipolar lines (the Sampson distance under
@@ -226,6 +233,8 @@ std::optional<Args> parseArgs(int argc, char** argv, int* status) {
       {"--filter", [](Args* a, const char* v) { a->filter = std::atoi(v); }},
       {"--refine", [](Args* a, const char* v) { a->refine = std::atof(v); }},
       {"--scene-test", [](Args* a, const char* v) { a->scene_test = std::atof(v); }},
+      {"--event-at-burst", [](Args* a, const char* v) { a->event_at_burst = std::atoi(v); }},
+      {"--scene-sides", [](Args* a, const char* v) { a->scene_sides = std::atoi(v); }},
   };
   for (int i = 1; i < argc; ++i) {
     const auto option = std::find_if(std::begin(kOptions), std::end(kOptions),
@@ -283,6 +292,7 @@ WindowTrackerOptions windowTrackerOptions(const Args& args) {
   WindowTrackerOptions o;
   if (const char* it = std::getenv("LEARN_ITERATIONS")) o.learner.iterations = std::atoi(it);
   o.scene_matches = args.scene != 0;
+  o.check_scene_sides = args.scene_sides != 0;
   return o;
 }
 
@@ -325,10 +335,12 @@ class MovingCalibration {
     const double t_start = w * args_.period_s;
     // One drift event every other window, half a period before the window (the light is off).
     std::string event;
-    if (w % 2 == 0) event = drift_.next(sim_, t_start - 0.5 * args_.period_s);
+    const bool event_due = w % 2 == 0;
+    const bool at_burst = event_due && args_.event_at_burst && args_.learn_window;
+    if (event_due && !at_burst) event = drift_.next(sim_, t_start - 0.5 * args_.period_s);
     WindowObservations observed;
     if (args_.learn_window)
-      observeWholeWindow(t_start, &observed);
+      observeWholeWindow(t_start, &observed, at_burst ? &event : nullptr);
     else
       observeFrames(t_start, &observed);
     ++windows_;
@@ -396,12 +408,19 @@ class MovingCalibration {
   // The window tracked as a whole, with its light-off frames (before it; with --learn-window 2
   // after it too), rendered in time order where it matters: the simulated auto-exposure carries
   // state from frame to frame.
-  void observeWholeWindow(double t_start, WindowObservations* out) {
+  // *event (not null): the next drift event fires after the light-off frames before the window,
+  // just before its first light-on frame; its name goes there.
+  void observeWholeWindow(double t_start, WindowObservations* out, std::string* event = nullptr) {
     WindowFrames window[2];
+    if (event) {
+      renderLightOff(t_start, true, window);
+      *event = drift_.next(sim_, t_start - 0.5 / args_.fps) + " (just before the burst)";
+    }
     for (int k = 0; k < args_.frames; ++k) {
       const double t = t_start + k / args_.fps;
       out->last = sim_->render(t, 1.0, frameIndex(t));
-      if (k == 0) renderLightOff(t_start, true, window);
+      // The same order as ever without an event: the renderer's caches keep the runs comparable.
+      if (k == 0 && !event) renderLightOff(t_start, true, window);
       window[0].light_on.push_back(out->last.left);
       window[1].light_on.push_back(out->last.right);
       if (args_.learn_window == 2 && k + 1 == args_.frames) renderLightOff(t_start, false, window);
@@ -413,6 +432,10 @@ class MovingCalibration {
                 std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - w0).count(),
                 tracked.saddle_failures);
     const StereoObservation& obs = tracked.observation;
+    if (tracked.scene_sides.compared)
+      std::printf("    scene before and after the window: %s, change %.3f px (+- %.3f px)\n",
+                  tracked.scene_sides.consistent ? "consistent" : "CHANGED, not used", tracked.scene_sides.change_px,
+                  tracked.scene_sides.change_stddev_px);
     if (!obs.scene.empty()) {
       const std::vector<double> scene_distances = epipolarDistances(obs.scene, out->last.truth);
       const size_t n = scene_distances.size();

@@ -50,12 +50,14 @@ void WindowTrackingWorker::track(const Job& job) {
   StereoPatternObservation msg;
   int corners = 0, saddle_failures = 0;
   std::string error, scene_problem;
+  core::SceneConsistency scene_sides;
   try {
     const core::WindowTrack track =
         job.tracker->track(windowFrames(job.burst, 0), windowFrames(job.burst, 1), header.stamp.toSec());
     msg = toMsg(track.observation);
     saddle_failures = track.saddle_failures;
     scene_problem = track.scene_problem;
+    scene_sides = track.scene_sides;
     for (const auto* side : {&msg.left, &msg.right})
       for (const BoardObservation& b : *side) corners += static_cast<int>(b.corner_ids.size());
   } catch (const std::exception& e) {
@@ -73,6 +75,12 @@ void WindowTrackingWorker::track(const Job& job) {
                   "%zu scene correspondences, in %.0f ms",
                   frames, header.stamp.toSec(), corners, saddle_failures, msg.scene.size(), ms);
     ROS_INFO_NAMED(logger_, "PatternTracker: %s", text);
+    if (!scene_sides.consistent)
+      ROS_INFO_NAMED(logger_,
+                     "PatternTracker: the scene's epipolar geometry changed between the light-off frames before "
+                     "and after the burst ending at %.3f s (by %.2f px, +- %.2f px): the camera moved during it; "
+                     "its window is solved on the boards alone",
+                     header.stamp.toSec(), scene_sides.change_px, scene_sides.change_stddev_px);
     if (!scene_problem.empty())
       ROS_WARN_THROTTLE_NAMED(30.0, logger_, "PatternTracker: %s (device_config %s)", scene_problem.c_str(),
                               device_config_.c_str());

@@ -10,7 +10,7 @@
 
 namespace embedded_calibration_stereo::core {
 
-std::vector<double> sceneEpipolarDistances(const std::vector<SceneMatch>& matches, const StereoRig& rig,
+std::vector<double> sceneEpipolarResiduals(const std::vector<SceneMatch>& matches, const StereoRig& rig,
                                            double focal_px) {
   // rigParameters(): left intrinsics, right intrinsics, then the extrinsics, as the cost reads them.
   const RigParameters p = rigParameters(rig);
@@ -20,9 +20,16 @@ std::vector<double> sceneEpipolarDistances(const std::vector<SceneMatch>& matche
   for (const SceneMatch& m : matches) {
     double r = std::numeric_limits<double>::infinity();
     SceneEpipolarCost(m, focal_px, &unit)(p.data(), p.data() + 9, p.data() + 18, &r);
-    distances.push_back(std::abs(r));
+    distances.push_back(r);
   }
   return distances;
+}
+
+std::vector<double> sceneEpipolarDistances(const std::vector<SceneMatch>& matches, const StereoRig& rig,
+                                           double focal_px) {
+  std::vector<double> d = sceneEpipolarResiduals(matches, rig, focal_px);
+  for (double& v : d) v = std::abs(v);
+  return d;
 }
 
 SceneComparison compareOnScene(const std::vector<SceneMatch>& matches, const StereoRig& candidate,
@@ -43,7 +50,9 @@ SceneComparison compareOnScene(const std::vector<SceneMatch>& matches, const Ste
   c.matches = static_cast<int>(matches.size());
   c.candidate_rms_px = std::sqrt(sum_a / c.matches);
   c.in_force_rms_px = std::sqrt(sum_b / c.matches);
-  c.statistic = (sum_b - sum_a) / (sigma_px * sigma_px);
+  // The likelihood ratio with the matches' variance unknown (estimated from each sum): heavy
+  // tails, which the robust spread underrates, raise both sums alike.
+  c.statistic = sum_a > 0.0 ? c.matches * std::log(sum_b / sum_a) : 0.0;
   return c;
 }
 

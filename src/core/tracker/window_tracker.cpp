@@ -19,6 +19,8 @@ std::string WindowTrackerOptions::validate() const {
   if (min_light_on_frames < 1) problems.push_back("min_light_on_frames must be >= 1");
   const std::string matching_problems = matching.validate();
   if (!matching_problems.empty()) problems.push_back("matching: " + matching_problems);
+  const std::string sides_problems = scene_sides.validate();
+  if (!sides_problems.empty()) problems.push_back("scene_sides: " + sides_problems);
   std::string joined;
   for (const std::string& p : problems) joined += (joined.empty() ? "" : "; ") + p;
   return joined;
@@ -176,28 +178,38 @@ WindowTrack WindowTracker::track(const WindowFrames& left, const WindowFrames& r
     if (!error[c].empty()) throw std::invalid_argument(std::string(c ? "right: " : "left: ") + error[c]);
   result.observation.left = std::move(corners[0]);
   result.observation.right = std::move(corners[1]);
-  if (options_.scene_matches && guide_) {
-    // The light-off frames are stereo frames: left and right of one instant, pair by pair.
-    const auto grey = [](const cv::Mat& image) {
-      if (image.channels() == 1) return image;
-      cv::Mat out;
-      cv::cvtColor(image, out, cv::COLOR_BGR2GRAY);
-      return out;
-    };
-    for (const auto side : {&WindowFrames::light_off_before, &WindowFrames::light_off_after})
-      for (size_t i = 0; i < std::min((left.*side).size(), (right.*side).size()); ++i) {
-        if ((left.*side)[i].size() != cv::Size(guide_->left.width, guide_->left.height)) {
-          result.scene_problem = "the guide calibration is for another image size; no scene correspondences";
-          continue;
-        }
-        const std::vector<SceneMatch> m =
-            matchStereoScene(grey((left.*side)[i]), grey((right.*side)[i]), *guide_, options_.matching, &scene_buffers_);
-        result.observation.scene.insert(result.observation.scene.end(), m.begin(), m.end());
-      }
-  }
+  if (options_.scene_matches && guide_) matchScene(left, right, &result);
   result.corners_tracked = tracked[0] + tracked[1];
   result.saddle_failures = dropped[0] + dropped[1];
   return result;
+}
+
+void WindowTracker::matchScene(const WindowFrames& left, const WindowFrames& right, WindowTrack* result) {
+  // The light-off frames are stereo frames: left and right of one instant, pair by pair.
+  const auto grey = [](const cv::Mat& image) {
+    if (image.channels() == 1) return image;
+    cv::Mat out;
+    cv::cvtColor(image, out, cv::COLOR_BGR2GRAY);
+    return out;
+  };
+  std::vector<SceneMatch> sides[2];
+  int s = 0;
+  for (const auto side : {&WindowFrames::light_off_before, &WindowFrames::light_off_after}) {
+    for (size_t i = 0; i < std::min((left.*side).size(), (right.*side).size()); ++i) {
+      if ((left.*side)[i].size() != cv::Size(guide_->left.width, guide_->left.height)) {
+        result->scene_problem = "the guide calibration is for another image size; no scene correspondences";
+        continue;
+      }
+      const std::vector<SceneMatch> m =
+          matchStereoScene(grey((left.*side)[i]), grey((right.*side)[i]), *guide_, options_.matching, &scene_buffers_);
+      sides[s].insert(sides[s].end(), m.begin(), m.end());
+    }
+    ++s;
+  }
+  if (options_.check_scene_sides) result->scene_sides = compareSceneSides(sides[0], sides[1], *guide_, options_.scene_sides);
+  if (result->scene_sides.consistent)
+    for (const std::vector<SceneMatch>& m : sides)
+      result->observation.scene.insert(result->observation.scene.end(), m.begin(), m.end());
 }
 
 }  // namespace embedded_calibration_stereo::core

@@ -5,11 +5,11 @@
 // scene's correspondences, at every depth, tell the two apart (scene_matches.h). The quality
 // gate compares corner fits; this comparison is what it consults when the corners cannot decide.
 //
-// The figure is a likelihood ratio: the Sampson distances of the window's scene matches to the
-// epipolar lines of each calibration, squared in units of the matches' spread at the candidate and
-// clipped (a wrong match counts at most clip_sigmas^2), summed, the calibration in force's sum
-// minus the candidate's. For a calibration in force as good as the candidate it is about a
-// chi-square with the epipolar geometry's five degrees of freedom.
+// The figure is a likelihood ratio: the Sampson distances of the window's N scene matches to the
+// epipolar lines of each calibration, clipped at clip_sigmas of the matches' robust spread at the
+// candidate (a wrong match counts at most that), squared and summed (S), then N ln(S_in_force /
+// S_candidate), the ratio with the matches' variance unknown. For a calibration in force as good
+// as the candidate it is about a chi-square with the epipolar geometry's five degrees of freedom.
 //
 // Threading: free functions without shared state.
 #include <vector>
@@ -27,10 +27,13 @@ struct SceneComparison {
   int matches = 0;               // 0: not compared (no scene, or no calibration in force)
   double candidate_rms_px = 0;   // RMS of the clipped distances under the candidate
   double in_force_rms_px = 0;    // the same under the calibration in force
-  double statistic = 0;          // (in force's clipped squares - candidate's) / sigma^2
+  double statistic = 0;          // N ln(in force's sum of clipped squares / candidate's)
 };
 
-// The Sampson distance (px, times focal_px) of each match to the epipolar line of `rig`.
+// The signed Sampson distance (px, times focal_px) of each match to the epipolar line of `rig`.
+std::vector<double> sceneEpipolarResiduals(const std::vector<SceneMatch>& matches, const StereoRig& rig,
+                                           double focal_px);
+// Their absolute values.
 std::vector<double> sceneEpipolarDistances(const std::vector<SceneMatch>& matches, const StereoRig& rig,
                                            double focal_px);
 

@@ -33,6 +33,7 @@
 #include <string>
 #include <vector>
 
+#include "embedded_calibration_stereo/core/calibration/scene_consistency.h"
 #include "embedded_calibration_stereo/core/calibration/scene_matches.h"
 #include "embedded_calibration_stereo/core/depth/device_image_learner.h"
 #include "embedded_calibration_stereo/core/tracker/pattern_tracker.h"
@@ -58,6 +59,12 @@ struct WindowTrackerOptions {
   // The light-off frames' scene correspondences (with a guide calibration only).
   bool scene_matches = true;
   SceneMatchOptions matching;
+  // The matches of the light-off frames before the window and of those after it are compared
+  // (scene_consistency.h); when the rig changed between them (a knock during the burst) the
+  // window carries none: they would pull its solve between two rigs. Not with check_scene_sides
+  // false.
+  bool check_scene_sides = true;
+  SceneConsistencyOptions scene_sides;
   // Empty when usable; otherwise one message per problem, joined by "; ".
   std::string validate() const;
 };
@@ -88,7 +95,8 @@ struct WindowTrack {
   cv::Mat device[2];              // the learned I_C per camera (CV_32F, grey levels)
   int corners_tracked = 0;        // on I_C before the saddle fit
   int saddle_failures = 0;        // corners dropped because their saddle fit failed
-  std::string scene_problem;      // why there are no scene correspondences; empty otherwise
+  std::string scene_problem;      // why there are no scene correspondences (a problem of set-up); empty otherwise
+  SceneConsistency scene_sides;   // the two sides' matches compared; not consistent: the window carries none
 };
 
 class WindowTracker {
@@ -107,6 +115,9 @@ class WindowTracker {
   const WindowTrackerOptions& options() const { return options_; }
 
  private:
+  // The light-off frames' scene correspondences into result->observation (with a guide only).
+  void matchScene(const WindowFrames& left, const WindowFrames& right, WindowTrack* result);
+
   PatternTracker tracker_;  // its own board states, followed from window to window
   WindowTrackerOptions options_;
   std::optional<StereoRig> guide_;
