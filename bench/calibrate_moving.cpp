@@ -436,7 +436,8 @@ class MovingCalibration {
     for (int k = 0; k < args_.frames; ++k) {
       const double t = t_start + k / args_.fps;
       out->last = sim_->render(t, 1.0, frameIndex(t));
-      // The same order as ever without an event: the renderer's caches keep the runs comparable.
+      // The same order as ever without an event: the simulated auto-exposure carries state from
+      // frame to frame, and another order gives other figures.
       if (k == 0 && !event) renderLightOff(t_start, true, window);
       window[0].light_on.push_back(out->last.left);
       window[1].light_on.push_back(out->last.right);

@@ -79,7 +79,7 @@ void WindowTrackingWorker::track(const Job& job) {
       ROS_INFO_NAMED(logger_,
                      "PatternTracker: the scene's epipolar geometry changed between the light-off frames before "
                      "and after the burst ending at %.3f s (by %.2f px, +- %.2f px): the camera moved during it; "
-                     "its window is solved on the boards alone",
+                     "its window goes to the calibrator without scene correspondences",
                      header.stamp.toSec(), scene_sides.change_px, scene_sides.change_stddev_px);
     if (!scene_problem.empty())
       ROS_WARN_THROTTLE_NAMED(30.0, logger_, "PatternTracker: %s (device_config %s)", scene_problem.c_str(),

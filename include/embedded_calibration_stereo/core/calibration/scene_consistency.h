@@ -18,7 +18,7 @@
 namespace embedded_calibration_stereo::core {
 
 struct SceneConsistencyOptions {
-  // A change is a change when larger than this (px, RMS over the image) and than
+  // A change is a change when larger than this (px, RMS at the matches) and than
   // significance_sigmas of its own standard deviation.
   double max_change_px = 0.15;
   double significance_sigmas = 4.0;
