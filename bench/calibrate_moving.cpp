@@ -55,7 +55,7 @@
 #include "embedded_calibration_stereo/core/calibration/bundle_adjuster.h"
 #include "embedded_calibration_stereo/core/calibration/calibration_filter.h"
 #include "embedded_calibration_stereo/core/calibration/quality_gate.h"
-#include "embedded_calibration_stereo/core/calibration/scene_epipolar_cost.h"
+#include "embedded_calibration_stereo/core/calibration/scene_comparison.h"
 #include "embedded_calibration_stereo/core/calibration/stereo_accuracy.h"
 #include "embedded_calibration_stereo/core/sim/sim_rig.h"
 #include "embedded_calibration_stereo/core/tracker/board_teacher.h"
@@ -101,23 +101,7 @@ struct Args {
 // Distances of scene correspondences to their true epipolar lines (the Sampson distance under
 // the true calibration, px), sorted.
 std::vector<double> epipolarDistances(const std::vector<SceneMatch>& matches, const StereoRig& truth) {
-  const PinholeCamera* cameras[2] = {&truth.left, &truth.right};
-  double intrinsics[2][9];
-  for (int c = 0; c < 2; ++c) {
-    const PinholeCamera& k = *cameras[c];
-    const double values[9] = {k.fx, k.fy, k.cx, k.cy, k.dist[0], k.dist[1], k.dist[2], k.dist[3], k.dist[4]};
-    std::copy(values, values + 9, intrinsics[c]);
-  }
-  const Eigen::AngleAxisd aa(truth.right_from_left.linear());
-  const Eigen::Vector3d r = aa.angle() * aa.axis(), t = truth.right_from_left.translation();
-  const double extrinsics[6] = {r.x(), r.y(), r.z(), t.x(), t.y(), t.z()};
-  const double unit = 1.0;
-  std::vector<double> distances;
-  for (const SceneMatch& m : matches) {
-    double d = 0.0;
-    SceneEpipolarCost(m, truth.right.fy, &unit)(intrinsics[0], intrinsics[1], extrinsics, &d);
-    distances.push_back(std::abs(d));
-  }
+  std::vector<double> distances = sceneEpipolarDistances(matches, truth, truth.right.fy);
   std::sort(distances.begin(), distances.end());
   return distances;
 }

@@ -308,16 +308,8 @@ class AdjustmentRun {
     const double corner_sigma = std::max(reference->residual_sigma_px, 1e-4);
     prior_weight_ = corner_sigma;
     if (!scene) return true;
-    const Intrinsics left = toBlock(reference->rig.left), right = toBlock(reference->rig.right);
-    const std::array<double, kExtrinsicsSize> extrinsics = toBlock(reference->rig.right_from_left);
     scene_focal_px_ = reference->rig.right.fy;
-    const double unit = 1.0;
-    std::vector<double> distances;
-    for (const SceneMatch& m : all) {
-      double r = std::numeric_limits<double>::infinity();
-      SceneEpipolarCost(m, scene_focal_px_, &unit)(left.data(), right.data(), extrinsics.data(), &r);
-      distances.push_back(std::abs(r));
-    }
+    const std::vector<double> distances = sceneEpipolarDistances(all, reference->rig, scene_focal_px_);
     const double sigma = std::max(options_.min_scene_sigma_px, robustSpread(distances));
     for (size_t i = 0; i < distances.size(); ++i)
       if (distances[i] <= options_.max_scene_residual_sigmas * sigma) scene_.push_back(all[i]);
