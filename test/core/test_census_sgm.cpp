@@ -210,7 +210,7 @@ struct Reference {
 };
 
 int paddedCount(int ndisp, const std::string& kernel) {
-  int n = kernel == "avx2" ? 32 : 16;
+  int n = kernel == "avx512" ? 64 : (kernel == "avx2" ? 32 : 16);
   while (n < ndisp) n *= 2;
   return n;
 }

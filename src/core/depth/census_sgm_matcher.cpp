@@ -23,13 +23,22 @@ namespace {
 // Rows of a band, and rows above it over which its paths from above are started: they are
 // fixed, not cut by the number of threads, so that every thread count gives the same result.
 constexpr int kBandRows = 120;
-constexpr int kWarmUpRows = 16;
+constexpr int kWarmUpRows = 8;
 
 #ifdef ECS_SGM_AVX2
 const sgm_kernel::Kernel& (*const kAvx2Kernel)() = sgm_kernel::avx2Kernel;
 #else
 const sgm_kernel::Kernel& (*const kAvx2Kernel)() = nullptr;
 #endif
+#ifdef ECS_SGM_AVX512
+const sgm_kernel::Kernel& (*const kAvx512Kernel)() = sgm_kernel::avx512Kernel;
+#else
+const sgm_kernel::Kernel& (*const kAvx512Kernel)() = nullptr;
+#endif
+
+KernelSet<sgm_kernel::Kernel> sgmKernels() {
+  return {sgm_kernel::baselineKernel(), kAvx2Kernel, kAvx512Kernel};
+}
 
 // Census planes of both images and the images' padded copies (one per call under way), and the
 // bands' scratch memory (one per band under way), reused between calls.
@@ -110,7 +119,7 @@ std::string CensusSgmParams::validate() const {
   return problems;
 }
 
-std::vector<std::string> censusSgmKernelNames() { return kernelNames(); }
+std::vector<std::string> censusSgmKernelNames() { return kernelNames(sgmKernels()); }
 
 void computeCensusSgmDisparity16(const cv::Mat& left, const cv::Mat& right,
                                  const CensusSgmParams& params, cv::Mat* disparity,
@@ -122,7 +131,7 @@ void computeCensusSgmDisparity16(const cv::Mat& left, const cv::Mat& right,
   const std::string problem = params.validate();
   if (!problem.empty()) throw std::invalid_argument("census_sgm matcher: " + problem);
   const sgm_kernel::Kernel& kernel =
-      kernelNamed("census_sgm", params.kernel, sgm_kernel::baselineKernel(), kAvx2Kernel);
+      kernelNamed("census_sgm", params.kernel, sgmKernels());
 
   sgm_kernel::Problem p;
   p.width = left.cols;

@@ -119,7 +119,11 @@ std::vector<int16_t>& threadScratch(size_t elements) {
 
 }  // namespace
 
-std::vector<std::string> sadKernelNames() { return kernelNames(); }
+namespace {
+KernelSet<sad_kernel::Kernel> sadKernels() { return {sad_kernel::baselineKernel(), kAvx2Kernel, nullptr}; }
+}  // namespace
+
+std::vector<std::string> sadKernelNames() { return kernelNames(sadKernels()); }
 
 cv::Mat computeSadDisparity16(const cv::Mat& left, const cv::Mat& right,
                               const SadMatcherParams& params) {
@@ -142,7 +146,7 @@ void computeSadDisparity16(const cv::Mat& left, const cv::Mat& right, const SadM
   if (params.prefilter_cap < 1 || params.prefilter_cap > 63)
     throw std::invalid_argument("sad matcher: prefilter_cap must be in 1..63");
   const sad_kernel::Kernel& kernel =
-      kernelNamed("sad", params.kernel, sad_kernel::baselineKernel(), kAvx2Kernel);
+      kernelNamed("sad", params.kernel, sadKernels());
 
   sad_kernel::Problem p;
   p.width = left.cols;

@@ -1,7 +1,8 @@
 #pragma once
 // The census_sgm matcher's inner loops (sgm_kernel.inl), built once per instruction set as the
 // sad matcher's are (sad_kernel.h says why the interface is plain data): sgm_kernel_baseline.cpp
-// with the build's universal intrinsics and, on x86-64, sgm_kernel_avx2.cpp with 256-bit ones.
+// with the build's universal intrinsics and, on x86-64, sgm_kernel_avx2.cpp with 256-bit ones
+// and sgm_kernel_avx512.cpp with 512-bit ones.
 #include <cstddef>
 #include <cstdint>
 
@@ -55,7 +56,7 @@ struct Band {
 };
 
 struct Kernel {
-  const char* name;  // "baseline", "avx2"
+  const char* name;  // "baseline", "avx2", "avx512"
   int lanes;         // bytes per vector: ndisp_padded must be lanes times 1, 2, 4, ..., 32
   // One row of census planes (kPlanes x width bytes, plane k at out + k * width) from an image
   // padded by kCensusRadiusY rows and kCensusRadiusX columns on every side (row y of the image
@@ -69,7 +70,8 @@ struct Kernel {
 };
 
 const Kernel& baselineKernel();
-const Kernel& avx2Kernel();  // defined only when built with ECS_SGM_AVX2
+const Kernel& avx2Kernel();    // defined only when built with ECS_SGM_AVX2
+const Kernel& avx512Kernel();  // defined only when built with ECS_SGM_AVX512
 
 }  // namespace sgm_kernel
 }  // namespace embedded_calibration_stereo::core

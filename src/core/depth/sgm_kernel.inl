@@ -1,6 +1,7 @@
 // The census_sgm matcher's kernel, written once with OpenCV's width-agnostic universal
-// intrinsics (cv::v_uint8 and vx_*: 16 lanes with SSE2/NEON, 32 with AVX2) and included by one
-// .cpp per instruction set, which defines SGM_KERNEL_GETTER and SGM_KERNEL_NAME first.
+// intrinsics (cv::v_uint8 and vx_*: 16 lanes with SSE2/NEON, 32 with AVX2, 64 with AVX-512) and
+// included by one .cpp per instruction set, which defines SGM_KERNEL_GETTER and SGM_KERNEL_NAME
+// first.
 // Everything but the getter has internal linkage, and nothing here calls a std:: template
 // (sad_kernel.h says why). Every instruction set gives identical results (test_census_sgm).
 //
@@ -12,9 +13,10 @@
 //     every path's minimum reach).
 //   - Up pass, rows bottom to top (eight paths only): the paths from below, below-left and
 //     below-right. With five paths, each row's up step follows its down step at once.
-//   - Per row, right to left: the path from the right, the sum of all paths (bytes, saturating
-//     at 255), and the winner, its uniqueness and the right image's winners (for the left-right
-//     check, from the same sums); after the row, the sub-pixel offsets in one vectorised pass.
+//   - Per row, right to left: the path from the right and the sum of all paths (bytes,
+//     saturating at 255); then, in a second loop, the winner, its uniqueness and the right
+//     image's winners (for the left-right check, from the same sums); after the row, the
+//     sub-pixel offsets in one vectorised pass.
 #include <cstddef>
 #include <cstdint>
 #include <cstring>
@@ -51,7 +53,15 @@ int absInt(int v) { return v < 0 ? -v : v; }
 // its low byte and 0 in its high byte) in one instruction. minOf() gives the minimum as a
 // number; minInAll() in every lane, without the round trip through a general register, for the
 // paths along a row, whose next pixel waits on it.
-#if CV_AVX2
+#if CV_AVX512_SKX
+inline __m128i minInLowWord(const cv::v_uint8& v) {
+  const __m256i h = _mm256_min_epu8(_mm512_castsi512_si256(v.val), _mm512_extracti64x4_epi64(v.val, 1));
+  const __m128i m = _mm_min_epu8(_mm256_castsi256_si128(h), _mm256_extracti128_si256(h, 1));
+  return _mm_minpos_epu16(_mm_min_epu8(m, _mm_srli_epi16(m, 8)));
+}
+inline uint8_t minOf(const cv::v_uint8& v) { return static_cast<uint8_t>(_mm_cvtsi128_si32(minInLowWord(v))); }
+inline cv::v_uint8 minInAll(const cv::v_uint8& v) { return cv::v_uint8(_mm512_broadcastb_epi8(minInLowWord(v))); }
+#elif CV_AVX2
 inline __m128i minInLowWord(const cv::v_uint8& v) {
   const __m128i m = _mm_min_epu8(_mm256_castsi256_si128(v.val), _mm256_extracti128_si256(v.val, 1));
   return _mm_minpos_epu16(_mm_min_epu8(m, _mm_srli_epi16(m, 8)));
@@ -420,7 +430,8 @@ void downRow(const Problem& p, Scratch& s, int y, bool output, const uint8_t* co
 inline int firstBit(uint64_t m) { return __builtin_ctzll(m); }
 
 constexpr int kGroupLanes = 64;                            // lanes per 64-bit lane mask
-constexpr int kVectorsPerGroup = kGroupLanes / kLanes8;  // 2 with AVX2, 4 with 128-bit vectors
+constexpr int kVectorsPerGroup = kGroupLanes / kLanes8;  // 1 with AVX-512, 2 with AVX2, 4 with 128 bits
+constexpr uint64_t kAllLanes = kLanes8 == 64 ? ~uint64_t{0} : (uint64_t{1} << (kLanes8 % 64)) - 1;
 
 // Bit i: whether lane kGroupLanes * g + i of the pixel's sums `s` (NV vectors) passes `test`,
 // which returns 0xFF in the lanes that pass.
@@ -428,8 +439,10 @@ template <int NV, class Test>
 SGM_INLINE uint64_t laneMask(const cv::v_uint8* s, int g, const Test& test) {
   uint64_t mask = 0;
   for (int i = 0; i < kVectorsPerGroup && g * kVectorsPerGroup + i < NV; ++i) {
-    const uint32_t bits = static_cast<uint32_t>(cv::v_signmask(test(s[g * kVectorsPerGroup + i])));
-    mask |= static_cast<uint64_t>(bits) << (i * kLanes8);
+    // v_signmask gives an int for up to 32 lanes (sign-extended here, hence the mask), an int64
+    // for 64.
+    const uint64_t bits = static_cast<uint64_t>(cv::v_signmask(test(s[g * kVectorsPerGroup + i]))) & kAllLanes;
+    mask |= bits << (i * kLanes8);
   }
   return mask;
 }
@@ -589,21 +602,17 @@ struct RowOut {
   uint8_t* occluded;
 };
 
-// Row y, right to left: the paths from below (eight paths; `up`), the path from the right, all
-// paths' sums and each pixel's winner; then the left-right check. Rows of the up pass's
-// warm-up (`output` false) only advance the paths from below.
-template <int NV, bool kUp>
-void upRow(const Problem& p, Scratch& s, int y, bool output, const uint8_t* costs,
-           const uint8_t* down, RowOut out) {
+// Row y's winners from all paths' sums (sums[x * D + k]), right to left: each pixel's winner,
+// its uniqueness and the right image's winners (for the left-right check); then the sub-pixel
+// offsets and the left-right check. A loop of its own, after the paths': each pixel's winner
+// hangs off the path from the right, whose steps wait on one another, and in the same loop it
+// holds up the next steps (the out-of-order window fills).
+template <int NV>
+void chooseWinners(const Problem& p, Scratch& s, const uint8_t* sums_row, RowOut out) {
   constexpr int D = NV * kLanes8;
   const Penalties& pen = *s.penalties;
-  const uint8_t* row = imageRow(p, y);
-  const uint8_t* below = y + 1 < p.height ? imageRow(p, y + 1) : row;
   const int16_t invalid = static_cast<int16_t>((p.min_disp - 1) * kDispScale);
-  rowPenalties(p, pen, row, below, +1, kUp, output, s.p2);
   // The pixel loop reads locals only (VerticalPaths says why).
-  const VerticalPaths<NV> paths(s);
-  const uint8_t* const p2_along = s.p2[3];
   const bool uniqueness = pen.uniqueness, subpixel = p.subpixel, left_right = p.left_right_check;
   const uint8_t* const rival_limit = pen.rival_limit;
   const int ndisp = p.ndisp, min_disp = p.min_disp;
@@ -611,22 +620,15 @@ void upRow(const Problem& p, Scratch& s, int y, bool output, const uint8_t* cost
   uint16_t* const winner_k = s.winner_k;
   int32_t* const offset_num = s.offset_num;
   int32_t* const offset_den = s.offset_den;
-  RowPath<NV> from_right;
   RightWinners<NV> right;
   const int q_start = p.width - 1 + p.right_off + p.min_disp;  // q0(x) = q_start - x
   uint8_t* const right_k = s.right_k + q_start;
   uint8_t* const right_k_high = s.right_k_high + q_start;
   cv::v_uint8 sums[NV];
-  cv::v_uint8 vertical[NV];
   for (int x = p.width - 1; x >= 0; --x) {
-    const uint8_t* cost = costs + static_cast<size_t>(x) * D;
-    if (kUp) paths.step(x, cost, vertical);
-    if (!output) continue;
-    from_right.step(cost, paths.p1, p2_along[x]);
     cv::v_uint8 lowest = cv::vx_setall_u8(255);
     for (int j = 0; j < NV; ++j) {
-      sums[j] = cv::vx_load(down + static_cast<size_t>(x) * D + j * kLanes8) +
-                (kUp ? vertical[j] + from_right.l[j] : from_right.l[j]);
+      sums[j] = cv::vx_load(sums_row + static_cast<size_t>(x) * D + j * kLanes8);
       lowest = cv::v_min(lowest, sums[j]);
     }
     const uint8_t best = minOf(lowest);
@@ -637,11 +639,39 @@ void upRow(const Problem& p, Scratch& s, int y, bool output, const uint8_t* cost
     winner_k[x] = static_cast<uint16_t>(k);
     if (left_right) right.fold(sums, right_k - x, right_k_high - x);
   }
-  if (!output) return;
   if (left_right) right.flush(right_k + 1, right_k_high + 1);
   if (p.subpixel) addSubpixelOffsets(p, s, out.disparity);
   if (out.occluded) std::memset(out.occluded, 0, static_cast<size_t>(p.width));
   if (p.left_right_check) leftRightCheck(p, s, out.disparity, out.occluded);
+}
+
+// Row y, right to left: the paths from below (eight paths; `up`) and the path from the right,
+// added to the down pass's sums in `down`, which then holds all paths' sums; then the row's
+// winners. Rows of the up pass's warm-up (`output` false) only advance the paths from below.
+template <int NV, bool kUp>
+void upRow(const Problem& p, Scratch& s, int y, bool output, const uint8_t* costs, uint8_t* down,
+           RowOut out) {
+  constexpr int D = NV * kLanes8;
+  const Penalties& pen = *s.penalties;
+  const uint8_t* row = imageRow(p, y);
+  const uint8_t* below = y + 1 < p.height ? imageRow(p, y + 1) : row;
+  rowPenalties(p, pen, row, below, +1, kUp, output, s.p2);
+  // The pixel loop reads locals only (VerticalPaths says why).
+  const VerticalPaths<NV> paths(s);
+  const uint8_t* const p2_along = s.p2[3];
+  RowPath<NV> from_right;
+  cv::v_uint8 vertical[NV];
+  for (int x = p.width - 1; x >= 0; --x) {
+    const uint8_t* cost = costs + static_cast<size_t>(x) * D;
+    if (kUp) paths.step(x, cost, vertical);
+    if (!output) continue;
+    from_right.step(cost, paths.p1, p2_along[x]);
+    uint8_t* sum = down + static_cast<size_t>(x) * D;
+    for (int j = 0; j < NV; ++j)
+      cv::v_store(sum + j * kLanes8, cv::vx_load(sum + j * kLanes8) +
+                                         (kUp ? vertical[j] + from_right.l[j] : from_right.l[j]));
+  }
+  if (output) chooseWinners<NV>(p, s, down, out);
 }
 
 RowOut rowOut(const Problem& p, const Band& band, int y) {
