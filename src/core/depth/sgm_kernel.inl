@@ -341,6 +341,16 @@ void rowPenalties(const Problem& p, const Penalties& pen, const uint8_t* row, co
     const int o = offsets[r];
     uint8_t* d = out[r];
     int x = 1;
+#if CV_AVX512_SKX
+    // VBMI's two-table byte permutes look the whole 256-entry table up, 64 pixels at a time.
+    const __m512i t0 = _mm512_loadu_si512(pen.p2), t1 = _mm512_loadu_si512(pen.p2 + 64);
+    const __m512i t2 = _mm512_loadu_si512(pen.p2 + 128), t3 = _mm512_loadu_si512(pen.p2 + 192);
+    for (; x + kLanes8 <= W - 1; x += kLanes8) {
+      const __m512i dI = cv::v_absdiff(cv::vx_load(row + x), cv::vx_load(other + x + o)).val;
+      const __m512i low = _mm512_permutex2var_epi8(t0, dI, t1), high = _mm512_permutex2var_epi8(t2, dI, t3);
+      _mm512_storeu_si512(d + x, _mm512_mask_blend_epi8(_mm512_movepi8_mask(dI), low, high));
+    }
+#else
     if (pen.in_vectors) {
       for (; x + kLanes8 <= W - 1; x += kLanes8)
         cv::v_store(d + x, pen.of(cv::v_absdiff(cv::vx_load(row + x), cv::vx_load(other + x + o))));
@@ -349,6 +359,7 @@ void rowPenalties(const Problem& p, const Penalties& pen, const uint8_t* row, co
         cv::v_store(d + x, cv::v_absdiff(cv::vx_load(row + x), cv::vx_load(other + x + o)));
       for (int i = 1; i < x; ++i) d[i] = pen.p2[d[i]];
     }
+#endif
     for (; x < W - 1; ++x) d[x] = pen.p2[absInt(row[x] - other[x + o])];
     const auto clamped = [W](int v) { return v < 0 ? 0 : (v >= W ? W - 1 : v); };
     d[0] = pen.p2[absInt(row[0] - other[clamped(o)])];
@@ -433,17 +444,38 @@ constexpr int kGroupLanes = 64;                            // lanes per 64-bit l
 constexpr int kVectorsPerGroup = kGroupLanes / kLanes8;  // 1 with AVX-512, 2 with AVX2, 4 with 128 bits
 constexpr uint64_t kAllLanes = kLanes8 == 64 ? ~uint64_t{0} : (uint64_t{1} << (kLanes8 % 64)) - 1;
 
+// Bit i: whether lane i of a vector equals that of `b` / is at most that of `t`. AVX-512
+// compares into a mask register; elsewhere the compare's lanes become bits through v_signmask
+// (an int for up to 32 lanes, sign-extended here, hence kAllLanes; an int64 for 64).
+#if CV_AVX512_SKX
+SGM_INLINE uint64_t equalLanes(const cv::v_uint8& v, const cv::v_uint8& b) { return _mm512_cmpeq_epu8_mask(v.val, b.val); }
+SGM_INLINE uint64_t atMostLanes(const cv::v_uint8& v, const cv::v_uint8& t) { return _mm512_cmple_epu8_mask(v.val, t.val); }
+#else
+SGM_INLINE uint64_t equalLanes(const cv::v_uint8& v, const cv::v_uint8& b) {
+  return static_cast<uint64_t>(cv::v_signmask(v == b)) & kAllLanes;
+}
+SGM_INLINE uint64_t atMostLanes(const cv::v_uint8& v, const cv::v_uint8& t) {
+  return static_cast<uint64_t>(cv::v_signmask(cv::v_min(v, t) == v)) & kAllLanes;
+}
+#endif
+
+// `if_equal` in the lanes where a equals b, `otherwise` elsewhere.
+SGM_INLINE cv::v_uint8 selectWhereEqual(const cv::v_uint8& a, const cv::v_uint8& b, const cv::v_uint8& if_equal,
+                                        const cv::v_uint8& otherwise) {
+#if CV_AVX512_SKX
+  return cv::v_uint8(_mm512_mask_blend_epi8(_mm512_cmpeq_epu8_mask(a.val, b.val), otherwise.val, if_equal.val));
+#else
+  return cv::v_select(a == b, if_equal, otherwise);
+#endif
+}
+
 // Bit i: whether lane kGroupLanes * g + i of the pixel's sums `s` (NV vectors) passes `test`,
-// which returns 0xFF in the lanes that pass.
+// which gives a vector's lanes that pass as bits (equalLanes, atMostLanes).
 template <int NV, class Test>
 SGM_INLINE uint64_t laneMask(const cv::v_uint8* s, int g, const Test& test) {
   uint64_t mask = 0;
-  for (int i = 0; i < kVectorsPerGroup && g * kVectorsPerGroup + i < NV; ++i) {
-    // v_signmask gives an int for up to 32 lanes (sign-extended here, hence the mask), an int64
-    // for 64.
-    const uint64_t bits = static_cast<uint64_t>(cv::v_signmask(test(s[g * kVectorsPerGroup + i]))) & kAllLanes;
-    mask |= bits << (i * kLanes8);
-  }
+  for (int i = 0; i < kVectorsPerGroup && g * kVectorsPerGroup + i < NV; ++i)
+    mask |= test(s[g * kVectorsPerGroup + i]) << (i * kLanes8);
   return mask;
 }
 
@@ -453,7 +485,7 @@ constexpr int groups() { return (NV + kVectorsPerGroup - 1) / kVectorsPerGroup; 
 // The index of the first lane holding the least sum `b` (in every lane of b; so there is one).
 template <int NV>
 SGM_INLINE int firstLaneOf(const cv::v_uint8* s, const cv::v_uint8& b) {
-  const auto is_best = [&b](const cv::v_uint8& v) { return v == b; };
+  const auto is_best = [&b](const cv::v_uint8& v) { return equalLanes(v, b); };
   for (int g = 0; g + 1 < groups<NV>(); ++g) {
     const uint64_t m = laneMask<NV>(s, g, is_best);
     if (m) return g * kGroupLanes + firstBit(m);
@@ -462,11 +494,11 @@ SGM_INLINE int firstLaneOf(const cv::v_uint8* s, const cv::v_uint8& b) {
   return g * kGroupLanes + firstBit(laneMask<NV>(s, g, is_best));
 }
 
-// Whether every sum outside the winner k and its two neighbours is above `limit`.
+// Whether every sum outside the winner k and its two neighbours is above the limit `t` (in
+// every lane).
 template <int NV>
-SGM_INLINE bool noRivalAtMost(const cv::v_uint8* s, int k, uint8_t limit) {
-  const cv::v_uint8 t = cv::vx_setall_u8(limit);
-  const auto at_most = [&t](const cv::v_uint8& v) { return cv::v_min(v, t) == v; };
+SGM_INLINE bool noRivalAtMost(const cv::v_uint8* s, int k, const cv::v_uint8& t) {
+  const auto at_most = [&t](const cv::v_uint8& v) { return atMostLanes(v, t); };
   if (groups<NV>() == 1) {  // 64 disparities or fewer: the winner's lanes by one shift
     const uint64_t around = k > 0 ? uint64_t{7} << (k - 1) : uint64_t{3};
     return (laneMask<NV>(s, 0, at_most) & ~around) == 0;
@@ -510,10 +542,11 @@ struct RightWinners {
   SGM_INLINE void fold(const cv::v_uint8* sums, uint8_t* k_out, uint8_t* high_out) {
     for (int j = 0; j < NV; ++j) {
       const cv::v_uint8 least = cv::v_min(sums[j], cost[j]);
-      const cv::v_uint8 kept = least == cost[j];
+      const cv::v_uint8 before = cost[j];
       cost[j] = least;
-      k[j] = cv::v_select(kept, k[j], index[j]);
-      if (kHigh) high[j] = cv::v_select(kept, high[j], cv::vx_setall_u8(static_cast<uint8_t>((j * kLanes8) >> 8)));
+      k[j] = selectWhereEqual(least, before, k[j], index[j]);
+      if (kHigh)
+        high[j] = selectWhereEqual(least, before, high[j], cv::vx_setall_u8(static_cast<uint8_t>((j * kLanes8) >> 8)));
     }
     *k_out = cv::v_extract_n<0>(k[0]);
     if (kHigh) *high_out = cv::v_extract_n<0>(high[0]);
@@ -580,19 +613,18 @@ void leftRightCheck(const Problem& p, const Scratch& s, int16_t* out, uint8_t* o
   const uint16_t* const winner_k = s.winner_k;
   const uint8_t* const right_k = s.right_k + (p.width - 1 + p.right_off);  // entry of column xr at -xr
   const uint8_t* const right_k_high = s.right_k_high + (p.width - 1 + p.right_off);
+  // Without branches: which pixels fail is as good as random from one pixel to the next.
   for (int x = 0; x < width; ++x) {
-    if (out[x] == invalid) continue;
     const int k = winner_k[x];
     const int xr = x - min_disp - k;
-    if (xr < kCensusRadiusX || xr >= width - kCensusRadiusX) {
-      out[x] = invalid;
-      if (occluded) occluded[x] = 255;
-      continue;
-    }
-    const int rk = right_k[-xr] | (high ? right_k_high[-xr] << 8 : 0);
-    if (absInt(rk - k) <= tolerance) continue;
-    out[x] = invalid;
-    if (occluded && rk > k) occluded[x] = 255;
+    const bool inside = (xr >= kCensusRadiusX) & (xr < width - kCensusRadiusX);
+    const int at = inside ? -xr : -kCensusRadiusX;  // a readable entry either way
+    const int rk = right_k[at] | (high ? right_k_high[at] << 8 : 0);
+    const bool valid = out[x] != invalid;
+    const bool agree = absInt(rk - k) <= tolerance;
+    out[x] = (valid & inside & agree) ? out[x] : invalid;
+    const bool hidden = !inside || (!agree && rk > k);
+    if (occluded) occluded[x] = (valid & hidden) ? 255 : 0;
   }
 }
 
@@ -633,7 +665,7 @@ void chooseWinners(const Problem& p, Scratch& s, const uint8_t* sums_row, RowOut
     }
     const uint8_t best = minOf(lowest);
     const int k = firstLaneOf<NV>(sums, minInAll(lowest));
-    const bool unique = !uniqueness || noRivalAtMost<NV>(sums, k, rival_limit[best]);
+    const bool unique = !uniqueness || noRivalAtMost<NV>(sums, k, cv::vx_setall_u8(rival_limit[best]));
     disparity[x] = unique ? static_cast<int16_t>((min_disp + k) * kDispScale) : invalid;
     keepSubpixelFit<NV>(sums, k, unique && subpixel && k > 0 && k < ndisp - 1, offset_num + x, offset_den + x);
     winner_k[x] = static_cast<uint16_t>(k);

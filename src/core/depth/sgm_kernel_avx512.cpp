@@ -19,6 +19,7 @@
 // GCC 12 warns inside its own AVX-512 headers, whose intrinsics start from _mm512_undefined_*().
 #if defined(__GNUC__) && !defined(__clang__)
 #pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+#pragma GCC diagnostic ignored "-Wuninitialized"
 #endif
 
 #define SGM_KERNEL_GETTER avx512Kernel
