@@ -123,8 +123,7 @@ struct PathRow {
 struct Penalties;
 
 struct Scratch {
-  uint8_t* costs;          // [x][k] census costs of a row outside the band's output rows
-  uint8_t* band_costs;     // [row][x][k] eight paths: the costs of the band's rows y0..
+  uint8_t* costs;          // [x][k] census costs of the row under way
   PathRow vertical[3][2];  // the three paths from the previous row: previous and current row
   uint8_t* down;           // [row][x][k] the down pass's sums, rows y0.. of the band
   uint8_t* right_k;        // [q] the right image's winner, low byte, entries as Problem::census_right
@@ -160,7 +159,6 @@ size_t layOut(const Problem& p, int band_rows, uint8_t* base, Scratch* s) {
     }
   const size_t band = rowElements(p) * static_cast<size_t>(p.paths == 5 ? 1 : band_rows);
   s->down = take(band);
-  s->band_costs = p.paths == 5 ? s->costs : take(band);
   s->right_k = take(right);
   s->right_k_high = take(right);
   s->winner_k = reinterpret_cast<uint16_t*>(take(W * 2));
@@ -724,26 +722,26 @@ void matchFivePaths(const Problem& p, const Band& band, Scratch& s) {
   }
 }
 
-// Eight paths: the down pass over the band (from y_start; the costs and sums of rows y0.. kept),
-// then the up pass (from y_end) back to y0.
+// Eight paths: the down pass over the band (from y_start; the sums of rows y0.. kept), then the
+// up pass (from y_end) back to y0. Each pass computes its rows' costs: keeping the down pass's
+// would take as much memory again as its sums, and reading them back costs about what
+// computing them does.
 template <int NV>
 void matchEightPaths(const Problem& p, const Band& band, Scratch& s) {
   const size_t row_elements = rowElements(p);
   for (int y = band.y_start; y < band.y1; ++y) {
     const bool output = y >= band.y0;
     const size_t at = output ? static_cast<size_t>(y - band.y0) * row_elements : 0;
-    uint8_t* costs = output ? s.band_costs + at : s.costs;
-    costRow<NV>(p, y, costs);
-    downRow<NV>(p, s, y, output, costs, s.down + at);
+    costRow<NV>(p, y, s.costs);
+    downRow<NV>(p, s, y, output, s.costs, s.down + at);
     swapVerticalRows(s);
   }
   resetVerticalPaths(p, s);
   for (int y = band.y_end - 1; y >= band.y0; --y) {
     const bool output = y < band.y1;
     const size_t at = output ? static_cast<size_t>(y - band.y0) * row_elements : 0;
-    if (!output) costRow<NV>(p, y, s.costs);
-    upRow<NV, true>(p, s, y, output, output ? s.band_costs + at : s.costs, s.down + at,
-                    rowOut(p, band, y));
+    costRow<NV>(p, y, s.costs);
+    upRow<NV, true>(p, s, y, output, s.costs, s.down + at, rowOut(p, band, y));
     swapVerticalRows(s);
   }
 }
