@@ -557,7 +557,7 @@ struct RightWinners {
   }
 
   // After the row's last pixel: the entries still in the window, from k_out[0] (high_out[0]).
-  void flush(uint8_t* k_out, uint8_t* high_out) const {
+  SGM_INLINE void flush(uint8_t* k_out, uint8_t* high_out) const {
     for (int j = 0; j < NV; ++j) {
       cv::v_store(k_out + j * kLanes8, k[j]);
       if (kHigh) cv::v_store(high_out + j * kLanes8, high[j]);
@@ -632,35 +632,35 @@ struct RowOut {
   uint8_t* occluded;
 };
 
-// Row y's winners from all paths' sums (sums[x * D + k]), right to left: each pixel's winner,
-// its uniqueness and the right image's winners (for the left-right check); then the sub-pixel
-// offsets and the left-right check. A loop of its own, after the paths': each pixel's winner
-// hangs off the path from the right, whose steps wait on one another, and in the same loop it
-// holds up the next steps (the out-of-order window fills).
+// A row's winners from all paths' sums, pixel by pixel right to left (pick): each pixel's
+// winner, its uniqueness and the right image's winners (for the left-right check); then
+// (finish) the sub-pixel offsets and the left-right check. A local of the row's function, whose
+// members the pixel loop reads (VerticalPaths says why).
 template <int NV>
-void chooseWinners(const Problem& p, Scratch& s, const uint8_t* sums_row, RowOut out) {
-  constexpr int D = NV * kLanes8;
-  const Penalties& pen = *s.penalties;
-  const int16_t invalid = static_cast<int16_t>((p.min_disp - 1) * kDispScale);
-  // The pixel loop reads locals only (VerticalPaths says why).
-  const bool uniqueness = pen.uniqueness, subpixel = p.subpixel, left_right = p.left_right_check;
-  const uint8_t* const rival_limit = pen.rival_limit;
-  const int ndisp = p.ndisp, min_disp = p.min_disp;
-  int16_t* const disparity = out.disparity;
-  uint16_t* const winner_k = s.winner_k;
-  int32_t* const offset_num = s.offset_num;
-  int32_t* const offset_den = s.offset_den;
+struct Winners {
+  const bool uniqueness, subpixel, left_right;
+  const uint8_t* const rival_limit;
+  const int ndisp, min_disp;
+  const int16_t invalid;
+  int16_t* const disparity;
+  uint16_t* const winner_k;
+  int32_t* const offset_num;
+  int32_t* const offset_den;
+  uint8_t* const right_k;       // entry q0(x) = q_start - x at right_k - x
+  uint8_t* const right_k_high;
   RightWinners<NV> right;
-  const int q_start = p.width - 1 + p.right_off + p.min_disp;  // q0(x) = q_start - x
-  uint8_t* const right_k = s.right_k + q_start;
-  uint8_t* const right_k_high = s.right_k_high + q_start;
-  cv::v_uint8 sums[NV];
-  for (int x = p.width - 1; x >= 0; --x) {
-    cv::v_uint8 lowest = cv::vx_setall_u8(255);
-    for (int j = 0; j < NV; ++j) {
-      sums[j] = cv::vx_load(sums_row + static_cast<size_t>(x) * D + j * kLanes8);
-      lowest = cv::v_min(lowest, sums[j]);
-    }
+
+  Winners(const Problem& p, const Scratch& s, const RowOut& out)
+      : uniqueness(s.penalties->uniqueness), subpixel(p.subpixel), left_right(p.left_right_check),
+        rival_limit(s.penalties->rival_limit), ndisp(p.ndisp), min_disp(p.min_disp),
+        invalid(static_cast<int16_t>((p.min_disp - 1) * kDispScale)), disparity(out.disparity),
+        winner_k(s.winner_k), offset_num(s.offset_num), offset_den(s.offset_den),
+        right_k(s.right_k + (p.width - 1 + p.right_off + p.min_disp)),
+        right_k_high(s.right_k_high + (p.width - 1 + p.right_off + p.min_disp)) {}
+
+  SGM_INLINE void pick(int x, const cv::v_uint8* sums) {
+    cv::v_uint8 lowest = sums[0];
+    for (int j = 1; j < NV; ++j) lowest = cv::v_min(lowest, sums[j]);
     const uint8_t best = minOf(lowest);
     const int k = firstLaneOf<NV>(sums, minInAll(lowest));
     const bool unique = !uniqueness || noRivalAtMost<NV>(sums, k, cv::vx_setall_u8(rival_limit[best]));
@@ -669,15 +669,24 @@ void chooseWinners(const Problem& p, Scratch& s, const uint8_t* sums_row, RowOut
     winner_k[x] = static_cast<uint16_t>(k);
     if (left_right) right.fold(sums, right_k - x, right_k_high - x);
   }
-  if (left_right) right.flush(right_k + 1, right_k_high + 1);
-  if (p.subpixel) addSubpixelOffsets(p, s, out.disparity);
-  if (out.occluded) std::memset(out.occluded, 0, static_cast<size_t>(p.width));
-  if (p.left_right_check) leftRightCheck(p, s, out.disparity, out.occluded);
-}
 
-// Row y, right to left: the paths from below (eight paths; `up`) and the path from the right,
-// added to the down pass's sums in `down`, which then holds all paths' sums; then the row's
-// winners. Rows of the up pass's warm-up (`output` false) only advance the paths from below.
+  // Inlined, as flush(): were `this` passed to a call, the object would have to live in memory,
+  // and every byte the pixel loop stores might alias its members.
+  SGM_INLINE void finish(const Problem& p, Scratch& s, const RowOut& out) const {
+    if (left_right) right.flush(right_k + 1, right_k_high + 1);
+    if (p.subpixel) addSubpixelOffsets(p, s, out.disparity);
+    if (out.occluded) std::memset(out.occluded, 0, static_cast<size_t>(p.width));
+    if (p.left_right_check) leftRightCheck(p, s, out.disparity, out.occluded);
+  }
+};
+
+// Row y, right to left: the paths from below (eight paths; kUp), the path from the right, all
+// paths' sums and each pixel's winner (Winners). Rows of the up pass's warm-up (`output` false)
+// only advance the paths from below. With eight paths, the winners are picked in a loop of
+// their own, from the sums stored over the down pass's in `down`: each pixel's winner hangs off
+// the path from the right, whose steps wait on one another, and in the paths' loop it holds up
+// the steps of the three paths from below (the out-of-order window fills). With five, the path
+// from the right is all the loop has, and the winners fill its waits.
 template <int NV, bool kUp>
 void upRow(const Problem& p, Scratch& s, int y, bool output, const uint8_t* costs, uint8_t* down,
            RowOut out) {
@@ -690,18 +699,35 @@ void upRow(const Problem& p, Scratch& s, int y, bool output, const uint8_t* cost
   const VerticalPaths<NV> paths(s);
   const uint8_t* const p2_along = s.p2[3];
   RowPath<NV> from_right;
-  cv::v_uint8 vertical[NV];
+  cv::v_uint8 sums[NV];
+  if (!kUp) {  // five paths: every row is an output row
+    Winners<NV> winners(p, s, out);
+    for (int x = p.width - 1; x >= 0; --x) {
+      const uint8_t* cost = costs + static_cast<size_t>(x) * D;
+      from_right.step(cost, paths.p1, p2_along[x]);
+      for (int j = 0; j < NV; ++j)
+        sums[j] = cv::vx_load(down + static_cast<size_t>(x) * D + j * kLanes8) + from_right.l[j];
+      winners.pick(x, sums);
+    }
+    winners.finish(p, s, out);
+    return;
+  }
   for (int x = p.width - 1; x >= 0; --x) {
     const uint8_t* cost = costs + static_cast<size_t>(x) * D;
-    if (kUp) paths.step(x, cost, vertical);
+    paths.step(x, cost, sums);
     if (!output) continue;
     from_right.step(cost, paths.p1, p2_along[x]);
     uint8_t* sum = down + static_cast<size_t>(x) * D;
     for (int j = 0; j < NV; ++j)
-      cv::v_store(sum + j * kLanes8, cv::vx_load(sum + j * kLanes8) +
-                                         (kUp ? vertical[j] + from_right.l[j] : from_right.l[j]));
+      cv::v_store(sum + j * kLanes8, cv::vx_load(sum + j * kLanes8) + (sums[j] + from_right.l[j]));
   }
-  if (output) chooseWinners<NV>(p, s, down, out);
+  if (!output) return;
+  Winners<NV> winners(p, s, out);  // here, not before the paths' loop, whose registers it would take
+  for (int x = p.width - 1; x >= 0; --x) {
+    for (int j = 0; j < NV; ++j) sums[j] = cv::vx_load(down + static_cast<size_t>(x) * D + j * kLanes8);
+    winners.pick(x, sums);
+  }
+  winners.finish(p, s, out);
 }
 
 RowOut rowOut(const Problem& p, const Band& band, int y) {
