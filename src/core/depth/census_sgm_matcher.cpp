@@ -23,7 +23,7 @@ namespace {
 // Rows of a band, and rows above it over which its paths from above are started: they are
 // fixed, not cut by the number of threads, so that every thread count gives the same result.
 constexpr int kBandRows = 120;
-constexpr int kWarmUpRows = 8;
+constexpr int kWarmUpRows = 16;
 
 #ifdef ECS_SGM_AVX2
 const sgm_kernel::Kernel& (*const kAvx2Kernel)() = sgm_kernel::avx2Kernel;
