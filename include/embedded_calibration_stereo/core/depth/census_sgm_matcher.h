@@ -46,7 +46,8 @@ struct CensusSgmParams {
   std::string validate() const;
 };
 
-// The kernels this build and CPU can run: "baseline" always, "avx2" on x86-64 CPUs with AVX2.
+// The kernels this build and CPU can run: "baseline" always, "avx2" on x86-64 CPUs with AVX2,
+// "avx512" on those with AVX-512 F, BW, VL, DQ, CD, VBMI and BITALG (Ice Lake, Zen 4 and later).
 std::vector<std::string> censusSgmKernelNames();
 
 // left, right: rectified CV_8UC1 of one size. Writes CV_16SC1 disparity scaled by 16
