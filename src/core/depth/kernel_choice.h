@@ -4,6 +4,7 @@
 // the AVX-512 subsets its kernel is built for (CMakeLists.txt), "auto" the widest of those.
 #pragma once
 
+#include <initializer_list>
 #include <opencv2/core/utility.hpp>
 #include <stdexcept>
 #include <string>
@@ -20,12 +21,16 @@ inline bool kernelsAvx2Available() {
 #endif
 }
 
-// True when this build has the census_sgm AVX-512 kernel and this CPU runs it: the SKX set
-// (F, BW, VL, DQ, CD) with VBMI's byte permutes and BITALG's byte popcount.
+// True when this build has the census_sgm AVX-512 kernel and this CPU runs it: F, BW, VL, DQ,
+// CD, VBMI's byte permutes and BITALG's byte popcount. Asked one by one (not as OpenCV's SKX
+// group) so that OPENCV_CPU_DISABLE=AVX512F, which clears the feature but not the group, makes
+// the matchers fall back to AVX2.
 inline bool kernelAvx512Available() {
 #if defined(ECS_SGM_AVX512)
-  return kernelsAvx2Available() && cv::checkHardwareSupport(CV_CPU_AVX512_SKX) &&
-         cv::checkHardwareSupport(CV_CPU_AVX_512VBMI) && cv::checkHardwareSupport(CV_CPU_AVX_512BITALG);
+  for (const int feature : {CV_CPU_AVX_512F, CV_CPU_AVX_512BW, CV_CPU_AVX_512VL, CV_CPU_AVX_512DQ,
+                            CV_CPU_AVX_512CD, CV_CPU_AVX_512VBMI, CV_CPU_AVX_512BITALG})
+    if (!cv::checkHardwareSupport(feature)) return false;
+  return kernelsAvx2Available();
 #else
   return false;
 #endif
