@@ -48,8 +48,8 @@ int absInt(int v) { return v < 0 ? -v : v; }
 #define SGM_INLINE inline
 #endif
 
-// Horizontal minima, the kernel's most frequent reductions: with AVX2, SSE4.1's
-// PHMINPOSUW finds the least of eight 16-bit lanes (here: bytes paired, each pair's lesser in
+// Horizontal minima, the kernel's most frequent reductions: with AVX2 and AVX-512 (after
+// folding the halves down to 128 bits), SSE4.1's PHMINPOSUW finds the least of eight 16-bit lanes (here: bytes paired, each pair's lesser in
 // its low byte and 0 in its high byte) in one instruction. minOf() gives the minimum as a
 // number; minInAll() in every lane, without the round trip through a general register, for the
 // paths along a row, whose next pixel waits on it.
@@ -611,7 +611,8 @@ void leftRightCheck(const Problem& p, const Scratch& s, int16_t* out, uint8_t* o
   const uint16_t* const winner_k = s.winner_k;
   const uint8_t* const right_k = s.right_k + (p.width - 1 + p.right_off);  // entry of column xr at -xr
   const uint8_t* const right_k_high = s.right_k_high + (p.width - 1 + p.right_off);
-  // Without branches: which pixels fail is as good as random from one pixel to the next.
+  // Every pixel takes the same path, without early exits: which pixels fail is as good as random
+  // from one pixel to the next.
   for (int x = 0; x < width; ++x) {
     const int k = winner_k[x];
     const int xr = x - min_disp - k;
