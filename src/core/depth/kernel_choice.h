@@ -53,19 +53,17 @@ std::vector<std::string> kernelNames(const KernelSet<Kernel>& set) {
   return names;
 }
 
-// The kernel called `name` ("auto": the last, widest, of kernelNames). Throws
-// std::invalid_argument naming `matcher` and the kernels there are.
+// The kernel called `name` ("auto": the widest there is). Throws std::invalid_argument naming
+// `matcher` and the kernels there are. Called for every frame: it builds no list unless it throws.
 template <class Kernel>
 const Kernel& kernelNamed(const std::string& matcher, const std::string& name, const KernelSet<Kernel>& set) {
-  const std::vector<std::string> names = kernelNames(set);
-  const std::string chosen = name == "auto" ? names.back() : name;
-  if (chosen == "baseline") return set.baseline;
-  for (const std::string& n : names) {
-    if (n != chosen) continue;
-    return n == "avx2" ? set.avx2() : set.avx512();
-  }
+  const bool avx2 = set.avx2 && kernelsAvx2Available();
+  const bool avx512 = set.avx512 && kernelAvx512Available();  // implies AVX2
+  if ((name == "avx512" || name == "auto") && avx512) return set.avx512();
+  if ((name == "avx2" || name == "auto") && avx2) return set.avx2();
+  if (name == "baseline" || name == "auto") return set.baseline;
   std::string listed;
-  for (const auto& n : names) listed += n + ", ";
+  for (const auto& n : kernelNames(set)) listed += n + ", ";
   throw std::invalid_argument(matcher + " matcher: kernel '" + name + "' is not available here (" +
                               listed + "auto)");
 }
