@@ -109,7 +109,7 @@ bool loadTeddy(cv::Mat* left, cv::Mat* right) {
 
 int main(int argc, char** argv) {
   if (argc < 3) {
-    std::fprintf(stderr, "usage: bench_disparity_ab LIB_A LIB_B [frames] [threads] [paths]\n");
+    std::fprintf(stderr, "usage: bench_disparity_ab LIB_A LIB_B [frames] [threads] [paths] [KERNEL_A KERNEL_B]\n");
     return 2;
   }
   const int frames = argc > 3 ? std::max(10, std::atoi(argv[3])) : 200;
