@@ -14,8 +14,9 @@
 //   - Up pass, rows bottom to top (eight paths only): the paths from below, below-left and
 //     below-right. With five paths, each row's up step follows its down step at once.
 //   - Per row, right to left: the path from the right and the sum of all paths (bytes,
-//     saturating at 255); then, in a second loop, the winner, its uniqueness and the right
-//     image's winners (for the left-right check, from the same sums); after the row, the
+//     saturating at 255); and the winner, its uniqueness and the right image's winners (for
+//     the left-right check, from the same sums): with eight paths in a second loop over the
+//     row's stored sums, with five in the same loop (upRow says why); after the row, the
 //     sub-pixel offsets in one vectorised pass.
 #include <cstddef>
 #include <cstdint>
