@@ -2,6 +2,7 @@
 
 #include <chrono>
 #include <cstdio>
+#include <string>
 
 #include "embedded_calibration_stereo/StereoPatternObservation.h"
 #include "embedded_calibration_stereo/ros/conversions.h"
@@ -40,6 +41,15 @@ void WindowTrackingWorker::dropped(const EndedBurst& ended, const std::string& w
   summary_ = text;
 }
 
+namespace {
+std::string boardsStill(double motion_px) {
+  char text[120];
+  std::snprintf(text, sizeof(text), ", not during the burst (no board moved by more than %.2f px between its halves)",
+                motion_px);
+  return text;
+}
+}  // namespace
+
 void WindowTrackingWorker::run() {
   while (std::optional<Job> job = jobs_.take()) track(*job);
 }
@@ -51,6 +61,8 @@ void WindowTrackingWorker::track(const Job& job) {
   int corners = 0, saddle_failures = 0;
   std::string error, scene_problem;
   core::SceneConsistency scene_sides;
+  bool boards_moved = false, board_motion_checked = false;
+  double board_motion_px = 0.0;
   try {
     const core::WindowTrack track =
         job.tracker->track(windowFrames(job.burst, 0), windowFrames(job.burst, 1), header.stamp.toSec());
@@ -58,6 +70,9 @@ void WindowTrackingWorker::track(const Job& job) {
     saddle_failures = track.saddle_failures;
     scene_problem = track.scene_problem;
     scene_sides = track.scene_sides;
+    boards_moved = track.boards_moved;
+    board_motion_checked = track.board_motion_checked;
+    board_motion_px = track.board_motion_px;
     for (const auto* side : {&msg.left, &msg.right})
       for (const BoardObservation& b : *side) corners += static_cast<int>(b.corner_ids.size());
   } catch (const std::exception& e) {
@@ -67,7 +82,15 @@ void WindowTrackingWorker::track(const Job& job) {
   const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
   const size_t frames = job.burst.light_on.size();
   char text[600];
-  if (error.empty()) {
+  if (error.empty() && boards_moved) {
+    // Learned from the whole burst, its boards would mix two rigs: no observation this time.
+    std::snprintf(text, sizeof(text),
+                  "burst of %zu light-on frames ending at %.3f s dropped: the camera moved during it (the scene's "
+                  "epipolar geometry changed by %.2f px between the light-off frames before and after it, and a "
+                  "board by %.2f px between its first and second half); the next burst calibrates",
+                  frames, header.stamp.toSec(), scene_sides.change_px, board_motion_px);
+    ROS_WARN_NAMED(logger_, "PatternTracker: %s", text);
+  } else if (error.empty()) {
     msg.header = header;
     publisher_.publish(msg);
     std::snprintf(text, sizeof(text),
@@ -78,9 +101,10 @@ void WindowTrackingWorker::track(const Job& job) {
     if (!scene_sides.consistent)
       ROS_INFO_NAMED(logger_,
                      "PatternTracker: the scene's epipolar geometry changed between the light-off frames before "
-                     "and after the burst ending at %.3f s (by %.2f px, +- %.2f px): the camera moved during it; "
+                     "and after the burst ending at %.3f s (by %.2f px, +- %.2f px): the camera moved between them%s; "
                      "its window goes to the calibrator without scene correspondences",
-                     header.stamp.toSec(), scene_sides.change_px, scene_sides.change_stddev_px);
+                     header.stamp.toSec(), scene_sides.change_px, scene_sides.change_stddev_px,
+                     board_motion_checked ? boardsStill(board_motion_px).c_str() : "");
     if (!scene_problem.empty())
       ROS_WARN_THROTTLE_NAMED(30.0, logger_, "PatternTracker: %s (device_config %s)", scene_problem.c_str(),
                               device_config_.c_str());
@@ -92,7 +116,7 @@ void WindowTrackingWorker::track(const Job& job) {
   }
   std::lock_guard<std::mutex> lock(mutex_);
   summary_ = text;
-  if (error.empty()) {
+  if (error.empty() && !boards_moved) {
     ++tracked_;
     last_ms_ = ms;
   } else {

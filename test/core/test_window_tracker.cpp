@@ -98,6 +98,61 @@ TEST(WindowTracker, RefusesAWindowItCannotLearnFrom) {
   WindowTrackerOptions bad;
   bad.min_light_on_frames = 0;
   EXPECT_THROW(WindowTracker(prior, TrackerOptions(), bad), std::exception);
+  bad = WindowTrackerOptions();
+  bad.max_board_motion_px = 0.0;
+  EXPECT_THROW(WindowTracker(prior, TrackerOptions(), bad), std::exception);
+}
+
+// A knock of the right camera within a window: its light-off frames before and after it disagree
+// (scene_consistency.h), and so do its boards between the burst's halves. Knocked just before
+// the burst's first light-on frame, the sides disagree but the boards do not, and the window's
+// corners are those of the knocked rig (against the truth). Knocked after the burst's sixth
+// frame, the window carries nothing: learned whole, it would mix the two rigs.
+TEST(WindowTracker, DropsAWindowWhoseBoardsMovedDuringTheBurst) {
+  const SimRigConfig config = loadSimRigConfig(kConfig);
+  for (const int knock_after : {0, 6}) {
+    SimRig sim(config);
+    const PatternPrior prior = teachSimPrior(sim, 1.0);
+    WindowTracker tracker(prior, TrackerOptions(), WindowTrackerOptions(), config.rig);
+    const int j = 45;  // the light-off frame before the window
+    WindowFrames left, right;
+    const SimFrame before = sim.render(j / kFps, 0.0, 500 + j);
+    left.light_off_before.push_back(before.left);
+    right.light_off_before.push_back(before.right);
+    SimFrame lit;
+    for (int k = 1; k <= kLitFrames; ++k) {
+      if (k == knock_after + 1) {
+        DriftRequest knock;
+        knock.knock_rotation_deg = Eigen::Vector3d(0.2, -0.25, 0.1);
+        ASSERT_TRUE(sim.setDrift(knock, (j + k - 0.5) / kFps).empty());
+      }
+      lit = sim.render((j + k) / kFps, 1.0, 1000 + j + k);
+      left.light_on.push_back(lit.left);
+      right.light_on.push_back(lit.right);
+    }
+    const SimFrame after = sim.render((j + kLitFrames + 1) / kFps, 0.0, 500 + j + kLitFrames + 1);
+    left.light_off_after.push_back(after.left);
+    right.light_off_after.push_back(after.right);
+    const WindowTrack track = tracker.track(left, right, (j + kLitFrames) / kFps);
+    CornerScore score;
+    score.add(track.observation, lit.observations);
+    std::printf("  knocked after %d light-on frames: scene sides %s (%.2f px), board motion %s %.2f px; %s\n",
+                knock_after, track.scene_sides.consistent ? "consistent" : "changed", track.scene_sides.change_px,
+                track.board_motion_checked ? "checked," : "not checked", track.board_motion_px, score.str().c_str());
+    EXPECT_FALSE(track.scene_sides.consistent);
+    ASSERT_TRUE(track.board_motion_checked);
+    if (knock_after == 0) {
+      EXPECT_FALSE(track.boards_moved);
+      EXPECT_LE(track.board_motion_px, 0.1);
+      EXPECT_GE(score.foundFraction(), 0.99) << score.str();
+      EXPECT_LE(score.rms(), 0.03) << score.str();
+      EXPECT_TRUE(track.observation.scene.empty());
+    } else {
+      EXPECT_TRUE(track.boards_moved);
+      EXPECT_GE(track.board_motion_px, 1.0);
+      EXPECT_TRUE(track.observation.left.empty() && track.observation.right.empty());
+    }
+  }
 }
 
 }  // namespace

@@ -1,6 +1,7 @@
 #include "embedded_calibration_stereo/core/tracker/window_tracker.h"
 
 #include <algorithm>
+#include <cmath>
 #include <map>
 #include <opencv2/imgproc.hpp>
 #include <stdexcept>
@@ -21,6 +22,7 @@ std::string WindowTrackerOptions::validate() const {
   if (!matching_problems.empty()) problems.push_back("matching: " + matching_problems);
   const std::string sides_problems = scene_sides.validate();
   if (!sides_problems.empty()) problems.push_back("scene_sides: " + sides_problems);
+  if (!(max_board_motion_px > 0)) problems.push_back("max_board_motion_px must be > 0");
   std::string joined;
   for (const std::string& p : problems) joined += (joined.empty() ? "" : "; ") + p;
   return joined;
@@ -179,9 +181,85 @@ WindowTrack WindowTracker::track(const WindowFrames& left, const WindowFrames& r
   result.observation.left = std::move(corners[0]);
   result.observation.right = std::move(corners[1]);
   if (options_.scene_matches && guide_) matchScene(left, right, &result);
+  if (options_.check_board_motion && result.scene_sides.compared && !result.scene_sides.consistent) {
+    checkBoardMotion(frames, &result);
+    if (result.boards_moved) {
+      result.observation.left.clear();
+      result.observation.right.clear();
+      result.observation.scene.clear();
+    }
+  }
   result.corners_tracked = tracked[0] + tracked[1];
   result.saddle_failures = dropped[0] + dropped[1];
   return result;
+}
+
+namespace {
+
+// How far the boards moved from one tracking to another: the largest mean displacement of a
+// board's corners (same board and id in both; a rig's change moves a board's corners together,
+// while their noise averages out); -1 when the two share no corner.
+double largestBoardShift(const std::vector<BoardCorners>& a, const std::vector<BoardCorners>& b) {
+  std::map<std::pair<int, int>, cv::Point2f> first;
+  for (const BoardCorners& board : a)
+    for (size_t i = 0; i < board.size(); ++i)
+      first[{board.board_id, board.corner_ids[i]}] = cv::Point2f(board.u[i], board.v[i]);
+  double largest = -1.0;
+  for (const BoardCorners& board : b) {
+    cv::Point2d sum(0, 0);
+    int n = 0;
+    for (size_t i = 0; i < board.size(); ++i) {
+      const auto it = first.find({board.board_id, board.corner_ids[i]});
+      if (it == first.end()) continue;
+      sum += cv::Point2d(board.u[i] - it->second.x, board.v[i] - it->second.y);
+      ++n;
+    }
+    if (n > 0) largest = std::max(largest, cv::norm(sum) / n);
+  }
+  return largest;
+}
+
+// The first (half = 0) or second (1) half of a burst's light-on frames with the light-off frames
+// on that side.
+WindowFrames burstHalf(const WindowFrames& f, int half) {
+  WindowFrames out;
+  const size_t middle = f.light_on.size() / 2;
+  if (half == 0) {
+    out.light_off_before = f.light_off_before;
+    out.light_on.assign(f.light_on.begin(), f.light_on.begin() + middle);
+  } else {
+    out.light_off_after = f.light_off_after;
+    out.light_on.assign(f.light_on.begin() + middle, f.light_on.end());
+  }
+  return out;
+}
+
+}  // namespace
+
+void WindowTracker::checkBoardMotion(const WindowFrames* frames[2], WindowTrack* result) {
+  for (int c = 0; c < 2; ++c) {
+    const WindowFrames& f = *frames[c];
+    if (f.light_off_before.empty() || f.light_off_after.empty() ||
+        static_cast<int>(f.light_on.size()) < 2 * std::max(2, options_.min_light_on_frames))
+      return;
+  }
+  double worst = 0.0;
+  for (int c = 0; c < 2; ++c) {
+    std::vector<BoardCorners> halves[2];
+    for (int h = 0; h < 2; ++h) {
+      std::string error;
+      const cv::Mat device = learnGreyDevice(burstHalf(*frames[c], h), options_.learner, &error);
+      if (!error.empty()) return;
+      CameraTracker tracker = tracker_.camera(c);  // a copy: the halves leave its state alone
+      halves[h] = tracker.trackSceneFree(device);
+    }
+    const double shift = largestBoardShift(halves[0], halves[1]);
+    if (shift < 0) return;
+    worst = std::max(worst, shift);
+  }
+  result->board_motion_checked = true;
+  result->board_motion_px = worst;
+  result->boards_moved = worst > options_.max_board_motion_px;
 }
 
 void WindowTracker::matchScene(const WindowFrames& left, const WindowFrames& right, WindowTrack* result) {

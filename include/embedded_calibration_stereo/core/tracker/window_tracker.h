@@ -65,6 +65,14 @@ struct WindowTrackerOptions {
   // false.
   bool check_scene_sides = true;
   SceneConsistencyOptions scene_sides;
+  // When the two sides disagree, the change may have come during the burst: then the boards
+  // moved too, and a device image learned from the whole burst mixes two rigs (a calibration
+  // solved on it lies between them). The burst's halves are then learned and tracked apart
+  // (each with the light-off frames on its side) and, when a board's corners moved between
+  // them by more than max_board_motion_px on average (in either camera), the window carries no
+  // corners. Only after a disagreement of the sides: it costs a second learning of the burst.
+  bool check_board_motion = true;
+  double max_board_motion_px = 0.2;
   // Empty when usable; otherwise one message per problem, joined by "; ".
   std::string validate() const;
 };
@@ -97,6 +105,12 @@ struct WindowTrack {
   int saddle_failures = 0;        // corners dropped because their saddle fit failed
   std::string scene_problem;      // why there are no scene correspondences (a problem of set-up); empty otherwise
   SceneConsistency scene_sides;   // the two sides' matches compared; not consistent: the window carries none
+  // The burst's halves compared (only when the sides disagree): the largest mean displacement
+  // of one board's corners between them, over both cameras. boards_moved: above
+  // max_board_motion_px; the observation then holds no corners (nor scene correspondences).
+  bool board_motion_checked = false;
+  double board_motion_px = 0.0;
+  bool boards_moved = false;
 };
 
 class WindowTracker {
@@ -117,6 +131,10 @@ class WindowTracker {
  private:
   // The light-off frames' scene correspondences into result->observation (with a guide only).
   void matchScene(const WindowFrames& left, const WindowFrames& right, WindowTrack* result);
+  // Sets result->board_motion_* (and boards_moved) from the burst's two halves, learned and
+  // tracked apart, without touching the tracker's state; no check when a side lacks light-off
+  // frames or the burst has fewer than 2 * min_light_on_frames light-on frames.
+  void checkBoardMotion(const WindowFrames* frames[2], WindowTrack* result);
 
   PatternTracker tracker_;  // its own board states, followed from window to window
   WindowTrackerOptions options_;
