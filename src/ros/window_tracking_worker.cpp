@@ -44,7 +44,7 @@ void WindowTrackingWorker::dropped(const EndedBurst& ended, const std::string& w
 namespace {
 std::string boardsStill(double motion_px) {
   char text[120];
-  std::snprintf(text, sizeof(text), ", not during the burst (no board moved by more than %.2f px between its halves)",
+  std::snprintf(text, sizeof(text), ", not during the burst (no board moved by more than %.2f px between its first and last light-on frames)",
                 motion_px);
   return text;
 }
@@ -85,10 +85,10 @@ void WindowTrackingWorker::track(const Job& job) {
   if (error.empty() && boards_moved) {
     // Learned from the whole burst, its boards would mix two rigs: no observation this time.
     std::snprintf(text, sizeof(text),
-                  "burst of %zu light-on frames ending at %.3f s dropped: the camera moved during it (the scene's "
-                  "epipolar geometry changed by %.2f px between the light-off frames before and after it, and a "
-                  "board by %.2f px between its first and second half); the next burst calibrates",
-                  frames, header.stamp.toSec(), scene_sides.change_px, board_motion_px);
+                  "burst of %zu light-on frames ending at %.3f s dropped: its boards moved during it (a board by "
+                  "%.2f px between its first and last light-on frames: a zoom step or a knock); the next burst "
+                  "calibrates",
+                  frames, header.stamp.toSec(), board_motion_px);
     ROS_WARN_NAMED(logger_, "PatternTracker: %s", text);
   } else if (error.empty()) {
     msg.header = header;

@@ -181,7 +181,7 @@ WindowTrack WindowTracker::track(const WindowFrames& left, const WindowFrames& r
   result.observation.left = std::move(corners[0]);
   result.observation.right = std::move(corners[1]);
   if (options_.scene_matches && guide_) matchScene(left, right, &result);
-  if (options_.check_board_motion && result.scene_sides.compared && !result.scene_sides.consistent) {
+  if (options_.check_board_motion) {
     checkBoardMotion(frames, &result);
     if (result.boards_moved) {
       result.observation.left.clear();
@@ -219,47 +219,29 @@ double largestBoardShift(const std::vector<BoardCorners>& a, const std::vector<B
   return largest;
 }
 
-// The first (half = 0) or second (1) half of a burst's light-on frames with the light-off frames
-// on that side.
-WindowFrames burstHalf(const WindowFrames& f, int half) {
-  WindowFrames out;
-  const size_t middle = f.light_on.size() / 2;
-  if (half == 0) {
-    out.light_off_before = f.light_off_before;
-    out.light_on.assign(f.light_on.begin(), f.light_on.begin() + middle);
-  } else {
-    out.light_off_after = f.light_off_after;
-    out.light_on.assign(f.light_on.begin() + middle, f.light_on.end());
-  }
-  return out;
-}
-
 }  // namespace
 
 void WindowTracker::checkBoardMotion(const WindowFrames* frames[2], WindowTrack* result) {
+  double largest = 0.0;
   for (int c = 0; c < 2; ++c) {
     const WindowFrames& f = *frames[c];
-    if (f.light_off_before.empty() || f.light_off_after.empty() ||
-        static_cast<int>(f.light_on.size()) < 2 * std::max(2, options_.min_light_on_frames))
-      return;
-  }
-  double worst = 0.0;
-  for (int c = 0; c < 2; ++c) {
-    std::vector<BoardCorners> halves[2];
-    for (int h = 0; h < 2; ++h) {
-      std::string error;
-      const cv::Mat device = learnGreyDevice(burstHalf(*frames[c], h), options_.learner, &error);
-      if (!error.empty()) return;
-      CameraTracker tracker = tracker_.camera(c);  // a copy: the halves leave its state alone
-      halves[h] = tracker.trackSceneFree(device);
+    if (f.light_off_before.empty() || f.light_off_after.empty() || f.light_on.size() < 2) return;
+    // Each end of the burst against the light-off frame next to it, by copies of the tracker (the
+    // checks leave its state alone).
+    std::vector<BoardCorners> ends[2];
+    for (int e = 0; e < 2; ++e) {
+      CameraTracker tracker = tracker_.camera(c);
+      tracker.reset();
+      tracker.setBackground(e == 0 ? f.light_off_before.back() : f.light_off_after.front());
+      ends[e] = tracker.track(e == 0 ? f.light_on.front() : f.light_on.back());
     }
-    const double shift = largestBoardShift(halves[0], halves[1]);
+    const double shift = largestBoardShift(ends[0], ends[1]);
     if (shift < 0) return;
-    worst = std::max(worst, shift);
+    largest = std::max(largest, shift);
   }
   result->board_motion_checked = true;
-  result->board_motion_px = worst;
-  result->boards_moved = worst > options_.max_board_motion_px;
+  result->board_motion_px = largest;
+  result->boards_moved = largest > options_.max_board_motion_px;
 }
 
 void WindowTracker::matchScene(const WindowFrames& left, const WindowFrames& right, WindowTrack* result) {

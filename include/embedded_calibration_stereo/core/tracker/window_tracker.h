@@ -65,14 +65,15 @@ struct WindowTrackerOptions {
   // false.
   bool check_scene_sides = true;
   SceneConsistencyOptions scene_sides;
-  // When the two sides disagree, the change may have come during the burst: then the boards
-  // moved too, and a device image learned from the whole burst mixes two rigs (a calibration
-  // solved on it lies between them). The burst's halves are then learned and tracked apart
-  // (each with the light-off frames on its side) and, when a board's corners moved between
-  // them by more than max_board_motion_px on average (in either camera), the window carries no
-  // corners. Only after a disagreement of the sides: it costs a second learning of the burst.
+  // The boards do not move during a burst unless the camera does (a zoom step, a knock); a
+  // device image learned from a burst during which they moved mixes two rigs, and a calibration
+  // solved on it lies between them (its corners can be more than half a square from either).
+  // The burst's first and last light-on frames are tracked on their own, each against the
+  // light-off frame next to it; when one board's corners moved between them by more than
+  // max_board_motion_px on average (in either camera), the window carries nothing. Both sides
+  // need light-off frames; the check costs four single-frame trackings.
   bool check_board_motion = true;
-  double max_board_motion_px = 0.2;
+  double max_board_motion_px = 0.5;
   // Empty when usable; otherwise one message per problem, joined by "; ".
   std::string validate() const;
 };
@@ -105,8 +106,8 @@ struct WindowTrack {
   int saddle_failures = 0;        // corners dropped because their saddle fit failed
   std::string scene_problem;      // why there are no scene correspondences (a problem of set-up); empty otherwise
   SceneConsistency scene_sides;   // the two sides' matches compared; not consistent: the window carries none
-  // The burst's halves compared (only when the sides disagree): the largest mean displacement
-  // of one board's corners between them, over both cameras. boards_moved: above
+  // The burst's ends compared (check_board_motion): the largest mean displacement of one board's
+  // corners between its first and last light-on frames, over both cameras. boards_moved: above
   // max_board_motion_px; the observation then holds no corners (nor scene correspondences).
   bool board_motion_checked = false;
   double board_motion_px = 0.0;
@@ -131,9 +132,9 @@ class WindowTracker {
  private:
   // The light-off frames' scene correspondences into result->observation (with a guide only).
   void matchScene(const WindowFrames& left, const WindowFrames& right, WindowTrack* result);
-  // Sets result->board_motion_* (and boards_moved) from the burst's two halves, learned and
-  // tracked apart, without touching the tracker's state; no check when a side lacks light-off
-  // frames or the burst has fewer than 2 * min_light_on_frames light-on frames.
+  // Sets result->board_motion_* (and boards_moved) from the burst's first and last light-on
+  // frames, tracked apart, without touching the tracker's state; no check when a side lacks
+  // light-off frames.
   void checkBoardMotion(const WindowFrames* frames[2], WindowTrack* result);
 
   PatternTracker tracker_;  // its own board states, followed from window to window
