@@ -22,6 +22,7 @@
 #include "embedded_calibration_stereo/core/sim/sim_rig.h"
 #include "embedded_calibration_stereo/core/tracker/window_tracker.h"
 #include "embedded_calibration_stereo/test_support/corner_score.h"
+#include "embedded_calibration_stereo/test_support/rendered_window.h"
 #include "embedded_calibration_stereo/test_support/process_memory.h"
 #include "embedded_calibration_stereo/test_support/sim_prior.h"
 
@@ -82,19 +83,9 @@ int main(int argc, char** argv) {
   std::vector<double> wall_all, cpu_all, rms_all, memory_all;
   for (int w = 0; w < windows; ++w) {
     const int j = 45 + std::max(60, 2 * lit_frames + 30) * w;  // the light-off frame before the window
-    WindowFrames left, right;
-    const SimFrame before = sim.render(j / kFps, 0.0, 500 + j);
-    left.light_off_before.push_back(before.left);
-    right.light_off_before.push_back(before.right);
-    SimFrame lit;
-    for (int k = 1; k <= lit_frames; ++k) {
-      lit = sim.render((j + k) / kFps, 1.0, 1000 + j + k);
-      left.light_on.push_back(lit.left);
-      right.light_on.push_back(lit.right);
-    }
-    const SimFrame after = sim.render((j + lit_frames + 1) / kFps, 0.0, 500 + j + lit_frames + 1);
-    left.light_off_after.push_back(after.left);
-    right.light_off_after.push_back(after.right);
+    const RenderedWindow window = renderWindow(sim, j, lit_frames);
+    const WindowFrames &left = window.left, &right = window.right;
+    const SimFrame& lit = window.lit.back();
     std::vector<double> wall, cpu;
     double memory = 0.0;
     CornerScore score;

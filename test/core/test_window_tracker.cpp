@@ -17,6 +17,7 @@
 #include "embedded_calibration_stereo/core/sim/sim_rig.h"
 #include "embedded_calibration_stereo/core/tracker/window_tracker.h"
 #include "embedded_calibration_stereo/test_support/corner_score.h"
+#include "embedded_calibration_stereo/test_support/rendered_window.h"
 #include "embedded_calibration_stereo/test_support/sim_prior.h"
 
 namespace embedded_calibration_stereo::core {
@@ -45,24 +46,16 @@ TEST(WindowTracker, TracksMovingWindowsAgainstTheTruth) {
       knock.knock_rotation_deg = Eigen::Vector3d(0.2, -0.25, 0.1);
       ASSERT_TRUE(sim.setDrift(knock, (j - 5) / kFps).empty());
     }
-    WindowFrames left, right;
-    const SimFrame before = sim.render(j / kFps, 0.0, 500 + j);
-    left.light_off_before.push_back(before.left);
-    right.light_off_before.push_back(before.right);
+    const RenderedWindow window = renderWindow(sim, j, kLitFrames);
     WindowCornerErrors shared;
-    SimFrame lit;
     for (int k = 1; k <= kLitFrames; ++k) {
-      lit = sim.render((j + k) / kFps, 1.0, 1000 + j + k);
-      left.light_on.push_back(lit.left);
-      right.light_on.push_back(lit.right);
+      const SimFrame& lit = window.lit[k - 1];
       const StereoObservation per_frame = frame_tracker.trackStereo(lit.left, lit.right, (j + k) / kFps);
       shared.add(0, per_frame.left, lit.observations.left);
       shared.add(1, per_frame.right, lit.observations.right);
     }
-    const SimFrame after = sim.render((j + kLitFrames + 1) / kFps, 0.0, 500 + j + kLitFrames + 1);
-    left.light_off_after.push_back(after.left);
-    right.light_off_after.push_back(after.right);
-    const WindowTrack track = window_tracker.track(left, right, (j + kLitFrames) / kFps);
+    const SimFrame& lit = window.lit.back();
+    const WindowTrack track = window_tracker.track(window.left, window.right, (j + kLitFrames) / kFps);
     CornerScore window_score;
     window_score.add(track.observation, lit.observations);
     score.add(track.observation, lit.observations);
@@ -121,28 +114,17 @@ TEST(WindowTracker, DropsAWindowWhoseBoardsMovedDuringTheBurst) {
     const PatternPrior prior = teachSimPrior(sim, 1.0);
     WindowTracker tracker(prior, TrackerOptions(), WindowTrackerOptions(), config.rig);
     const int j = 45;  // the light-off frame before the window
-    WindowFrames left, right;
-    const SimFrame before = sim.render(j / kFps, 0.0, 500 + j);
-    left.light_off_before.push_back(before.left);
-    right.light_off_before.push_back(before.right);
-    SimFrame lit;
-    for (int k = 1; k <= kLitFrames; ++k) {
-      if (k == event.after + 1) {
-        DriftRequest drift;
-        if (event.zoom)
-          drift.focal_scale = 1.05;
-        else
-          drift.knock_rotation_deg = Eigen::Vector3d(0.2, -0.25, 0.1);
-        ASSERT_TRUE(sim.setDrift(drift, (j + k - 0.5) / kFps).empty());
-      }
-      lit = sim.render((j + k) / kFps, 1.0, 1000 + j + k);
-      left.light_on.push_back(lit.left);
-      right.light_on.push_back(lit.right);
-    }
-    const SimFrame after = sim.render((j + kLitFrames + 1) / kFps, 0.0, 500 + j + kLitFrames + 1);
-    left.light_off_after.push_back(after.left);
-    right.light_off_after.push_back(after.right);
-    const WindowTrack track = tracker.track(left, right, (j + kLitFrames) / kFps);
+    const RenderedWindow window = renderWindow(sim, j, kLitFrames, [&](int k) {
+      if (k != event.after + 1) return;
+      DriftRequest drift;
+      if (event.zoom)
+        drift.focal_scale = 1.05;
+      else
+        drift.knock_rotation_deg = Eigen::Vector3d(0.2, -0.25, 0.1);
+      ASSERT_TRUE(sim.setDrift(drift, (j + k - 0.5) / kFps).empty());
+    });
+    const SimFrame& lit = window.lit.back();
+    const WindowTrack track = tracker.track(window.left, window.right, (j + kLitFrames) / kFps);
     CornerScore score;
     score.add(track.observation, lit.observations);
     std::printf("  %s: scene sides %s (%.2f px), a board moved %.2f px; %s\n", event.name,
