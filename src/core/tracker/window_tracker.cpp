@@ -159,6 +159,11 @@ WindowTrack WindowTracker::track(const WindowFrames& left, const WindowFrames& r
   }
   WindowTrack result;
   result.observation.stamp = stamp;
+  // First, as it costs far less than learning: a burst whose boards moved gives nothing.
+  if (options_.check_board_motion) {
+    checkBoardMotion(frames, &result);
+    if (result.boards_moved) return result;
+  }
   std::vector<BoardCorners> corners[2];
   int dropped[2] = {0, 0}, tracked[2] = {0, 0};
   std::string error[2];
@@ -181,14 +186,6 @@ WindowTrack WindowTracker::track(const WindowFrames& left, const WindowFrames& r
   result.observation.left = std::move(corners[0]);
   result.observation.right = std::move(corners[1]);
   if (options_.scene_matches && guide_) matchScene(left, right, &result);
-  if (options_.check_board_motion) {
-    checkBoardMotion(frames, &result);
-    if (result.boards_moved) {
-      result.observation.left.clear();
-      result.observation.right.clear();
-      result.observation.scene.clear();
-    }
-  }
   result.corners_tracked = tracked[0] + tracked[1];
   result.saddle_failures = dropped[0] + dropped[1];
   return result;

@@ -101,14 +101,15 @@ WindowFrames windowEnds(const WindowFrames& frames, int per_end);
 
 struct WindowTrack {
   StereoObservation observation;  // corners of both cameras, stamped by the caller
-  cv::Mat device[2];              // the learned I_C per camera (CV_32F, grey levels)
+  cv::Mat device[2];              // the learned I_C per camera (CV_32F, grey levels); empty if boards_moved
   int corners_tracked = 0;        // on I_C before the saddle fit
   int saddle_failures = 0;        // corners dropped because their saddle fit failed
   std::string scene_problem;      // why there are no scene correspondences (a problem of set-up); empty otherwise
   SceneConsistency scene_sides;   // the two sides' matches compared; not consistent: the window carries none
   // The burst's ends compared (check_board_motion): the largest mean displacement of one board's
   // corners between its first and last light-on frames, over both cameras. boards_moved: above
-  // max_board_motion_px; the observation then holds no corners (nor scene correspondences).
+  // max_board_motion_px; the window is then neither learned nor tracked further: no device
+  // images, no corners, no scene correspondences.
   bool board_motion_checked = false;
   double board_motion_px = 0.0;
   bool boards_moved = false;
