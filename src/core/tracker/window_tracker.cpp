@@ -1,7 +1,6 @@
 #include "embedded_calibration_stereo/core/tracker/window_tracker.h"
 
 #include <algorithm>
-#include <cmath>
 #include <map>
 #include <opencv2/imgproc.hpp>
 #include <stdexcept>
