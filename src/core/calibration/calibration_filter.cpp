@@ -40,6 +40,37 @@ double chiSquareSurvival(double x, int k) {
   return std::erfc(std::sqrt(0.5 * x)) + sum;
 }
 
+Eigen::Matrix3d rotationOf(const Eigen::Vector3d& r) {
+  return r.norm() > 0 ? Eigen::AngleAxisd(r.norm(), r.normalized()).toRotationMatrix() : Eigen::Matrix3d::Identity();
+}
+
+// The state's stereo translation at the window's stereo rotation: t = -R C with the state's right
+// camera centre C = -R_state^T t_state. Heat and knocks turn the right camera about its own centre,
+// which leaves C where it was and turns t with R; comparing t as it was would take every such turn
+// for a move of the camera.
+Eigen::Vector3d translationAt(const Eigen::Vector3d& window_rotation, const RigParameters& state) {
+  return rotationOf(window_rotation) * rotationOf(state.segment<3>(18)).transpose() * state.segment<3>(21);
+}
+
+// d translationAt / d rotation (of the window's when `of_window`, else of the state's), by central
+// differences (the function is smooth, and a step of 1e-6 rad is far below any rotation it sees).
+Eigen::Matrix3d translationAtRotationJacobian(const Eigen::Vector3d& window_rotation, const RigParameters& state,
+                                              bool of_window) {
+  constexpr double kStep = 1e-6;
+  Eigen::Matrix3d J;
+  for (int k = 0; k < 3; ++k) {
+    Eigen::Vector3d w_plus = window_rotation, w_minus = window_rotation;
+    RigParameters s_plus = state, s_minus = state;
+    if (of_window) {
+      w_plus[k] += kStep, w_minus[k] -= kStep;
+    } else {
+      s_plus[18 + k] += kStep, s_minus[18 + k] -= kStep;
+    }
+    J.col(k) = (translationAt(w_plus, s_plus) - translationAt(w_minus, s_minus)) / (2 * kStep);
+  }
+  return J;
+}
+
 }  // namespace
 
 const std::vector<std::string>& turnAndZoomGroups() {
@@ -77,6 +108,44 @@ std::string CalibrationFilterOptions::validate() const {
   return "";
 }
 
+namespace {
+
+// The random walk's variance per parameter and second.
+RigParameters walkVariance(const StereoRig& rig, const CalibrationFilterOptions& options) {
+  RigParameters walk = RigParameters::Zero();
+  for (int c = 0; c < 2; ++c) {
+    const PinholeCamera& camera = c ? rig.right : rig.left;
+    const int o = 9 * c;
+    walk[o + 0] = std::pow(options.focal_walk_rel * camera.fx, 2);
+    walk[o + 1] = std::pow(options.focal_walk_rel * camera.fy, 2);
+    walk[o + 2] = walk[o + 3] = std::pow(options.principal_point_walk_px, 2);
+    for (int k = 4; k < 9; ++k) walk[o + k] = std::pow(options.distortion_walk, 2);
+  }
+  for (int k = 18; k < 21; ++k) walk[k] = std::pow(options.rotation_walk_deg * M_PI / 180.0, 2);
+  for (int k = 21; k < 24; ++k) walk[k] = std::pow(options.translation_walk_m, 2);
+  return walk;
+}
+
+// The state with its translation carried to the window's rotation (translationAt), the linear map
+// of that carriage (for the state's covariance), and the window's: d(window - carried state) /
+// d(window) (the carried translation depends on the window's rotation).
+struct Carried {
+  RigParameters state;
+  RigCovariance jacobian = RigCovariance::Identity(), window_jacobian = RigCovariance::Identity();
+};
+
+Carried carriedToWindowRotation(const RigParameters& state, const Eigen::Vector3d& window_rotation) {
+  Carried out;
+  out.state = state;
+  out.state.segment<3>(21) = translationAt(window_rotation, state);
+  out.jacobian.block<3, 3>(21, 18) = translationAtRotationJacobian(window_rotation, state, false);
+  out.jacobian.block<3, 3>(21, 21) = rotationOf(window_rotation) * rotationOf(state.segment<3>(18)).transpose();
+  out.window_jacobian.block<3, 3>(21, 18) = -translationAtRotationJacobian(window_rotation, state, true);
+  return out;
+}
+
+}  // namespace
+
 CalibrationFilter::CalibrationFilter(CalibrationFilterOptions options) : options_(options) {
   const std::string problem = options_.validate();
   if (!problem.empty()) throw std::invalid_argument("calibration filter: " + problem);
@@ -91,22 +160,17 @@ std::optional<RigPrior> CalibrationFilter::priorFor(const BundleAdjustmentSummar
                                                     const std::vector<std::string>& known_changed) const {
   if (changed) changed->clear();
   if (!state_ || !window.success || !window.covariance_ok) return std::nullopt;
-  const RigParameters state = rigParameters(state_->rig), measured = rigParameters(window.rig);
-  // The walk's variance per parameter over the time since the state.
+  const RigParameters measured = rigParameters(window.rig);
+  const Carried carried = carriedToWindowRotation(rigParameters(state_->rig), measured.segment<3>(18));
+  const RigParameters& state = carried.state;
+  // The window's covariance as its translation is compared with the carried state's.
+  const RigCovariance window_covariance =
+      carried.window_jacobian * window.rig_covariance * carried.window_jacobian.transpose();
+  // The state's, carried, and the walk's variance over the time since the state.
   const double dt = std::max(0.0, time_s - state_->time_s);
-  RigParameters walk = RigParameters::Zero();
-  for (int c = 0; c < 2; ++c) {
-    const PinholeCamera& camera = c ? state_->rig.right : state_->rig.left;
-    const int o = 9 * c;
-    walk[o + 0] = std::pow(options_.focal_walk_rel * camera.fx, 2);
-    walk[o + 1] = std::pow(options_.focal_walk_rel * camera.fy, 2);
-    walk[o + 2] = walk[o + 3] = std::pow(options_.principal_point_walk_px, 2);
-    for (int k = 4; k < 9; ++k) walk[o + k] = std::pow(options_.distortion_walk, 2);
-  }
-  for (int k = 18; k < 21; ++k) walk[k] = std::pow(options_.rotation_walk_deg * M_PI / 180.0, 2);
-  for (int k = 21; k < 24; ++k) walk[k] = std::pow(options_.translation_walk_m, 2);
   const RigCovariance prior_covariance =
-      options_.covariance_scale * state_->covariance + RigCovariance(walk.asDiagonal()) * dt;
+      carried.jacobian * (options_.covariance_scale * state_->covariance) * carried.jacobian.transpose() +
+      RigCovariance(walkVariance(state_->rig, options_).asDiagonal()) * dt;
 
   RigPrior prior;
   prior.mean = state;
@@ -127,7 +191,7 @@ std::optional<RigPrior> CalibrationFilter::priorFor(const BundleAdjustmentSummar
     for (int a = 0; a < n; ++a) {
       delta[a] = measured[index[a]] - state[index[a]];
       for (int b = 0; b < n; ++b)
-        C(a, b) = options_.covariance_scale * window.rig_covariance(index[a], index[b]) +
+        C(a, b) = options_.covariance_scale * window_covariance(index[a], index[b]) +
                   prior_covariance(index[a], index[b]);
     }
     const Eigen::LDLT<Eigen::MatrixXd> ldlt(C);

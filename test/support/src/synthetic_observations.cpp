@@ -186,7 +186,10 @@ StereoRig driftedRig(const StereoRig& truth, double focal_scale,
   StereoRig rig = truth;
   rig.left = rig.left.withFocalScale(focal_scale);
   rig.right = rig.right.withFocalScale(focal_scale);
-  rig.right_from_left.linear() = rotationFromVectorDeg(rotation_deg) * rig.right_from_left.linear();
+  // About the right camera's centre: its translation turns with it.
+  Eigen::Isometry3d turn = Eigen::Isometry3d::Identity();
+  turn.linear() = rotationFromVectorDeg(rotation_deg);
+  rig.right_from_left = turn * rig.right_from_left;
   return rig;
 }
 

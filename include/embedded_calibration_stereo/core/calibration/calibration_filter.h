@@ -23,6 +23,14 @@
 // translation. A zoom changes the focal lengths (and often the principal point and distortion a
 // little: then those groups too fail the test); heat and knocks the extrinsics.
 //
+// Heat and most knocks turn the right camera about its own centre: the rotation R of
+// right_from_left changes, and its translation t = -R C turns with it while the right camera's
+// centre C (in the left camera's frame) stays. The state's translation is therefore carried to
+// the window's rotation before it is compared and before it is the prior's (t = -R_window C_state,
+// its covariance carried with it): such a turn is a change of the stereo rotation alone, and the
+// baseline keeps what earlier windows taught. A move of the camera's centre is still a change of
+// the translation.
+//
 // Threading: not thread-safe; one owner (the calibrator's worker thread).
 #include <optional>
 #include <string>

@@ -56,8 +56,8 @@ StereoRig makeSimLikeStereoRig();
 // direction; each mirror plane is tilted by `angle_deg` about a random in-plane axis and
 // shifted by +-position_m along its normal. Seeded, so tests are repeatable.
 // The calibration in force after a drift: fx and fy of both cameras scaled by focal_scale
-// (a zoom) and the right camera turned by rotation_deg (rotation vector, degrees, applied in
-// the right optical frame, as the simulator's right_rotation_deg).
+// (a zoom) and the right camera turned about its centre by rotation_deg (rotation vector,
+// degrees, applied in the right optical frame, as the simulator's right_rotation_deg).
 StereoRig driftedRig(const StereoRig& truth, double focal_scale,
                      const Eigen::Vector3d& rotation_deg);
 
