@@ -98,5 +98,33 @@ TEST(StereoRig, RotationHelpers) {
   EXPECT_NEAR(rotationAngleDeg(Eigen::Matrix3d::Identity(), tiny), 1e-5, 1e-12);
 }
 
+// Rotation vectors in radians against OpenCV's Rodrigues formula, both ways, from a zero turn to
+// nearly half a turn.
+TEST(StereoRig, RotationVectorsMatchRodrigues) {
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> component(-1.0, 1.0);
+  for (const double angle : {0.0, 1e-9, 2e-3, 0.3, 1.5, 3.1}) {
+    for (int trial = 0; trial < 5; ++trial) {
+      Eigen::Vector3d axis(component(rng), component(rng), component(rng));
+      axis.normalize();
+      const Eigen::Vector3d rotvec = angle * axis;
+      cv::Mat cv_rotation;
+      cv::Rodrigues(cv::Vec3d(rotvec.x(), rotvec.y(), rotvec.z()), cv_rotation);
+      const Eigen::Matrix3d rotation = rotationFromVector(rotvec);
+      for (int r = 0; r < 3; ++r)
+        for (int c = 0; c < 3; ++c) EXPECT_NEAR(rotation(r, c), cv_rotation.at<double>(r, c), 1e-12) << angle;
+      cv::Vec3d cv_back;
+      cv::Rodrigues(cv_rotation, cv_back);
+      const Eigen::Vector3d back = rotationVector(rotation);
+      for (int k = 0; k < 3; ++k) EXPECT_NEAR(back[k], cv_back[k], 1e-9) << angle;
+      EXPECT_NEAR((back - rotvec).norm(), 0.0, 1e-9) << angle;
+    }
+  }
+  EXPECT_NEAR((rotationFromVectorDeg(Eigen::Vector3d(10, -20, 30)) -
+               rotationFromVector(Eigen::Vector3d(10, -20, 30) * M_PI / 180.0))
+                  .norm(),
+              0.0, 1e-15);
+}
+
 }  // namespace
 }  // namespace embedded_calibration_stereo::core

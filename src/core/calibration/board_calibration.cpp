@@ -192,8 +192,7 @@ RigBlocks rigBlocks(const StereoRig& rig) {
   RigBlocks b;
   b.left = block(rig.left);
   b.right = block(rig.right);
-  const Eigen::AngleAxisd aa(rig.right_from_left.linear());
-  const Eigen::Vector3d r = aa.angle() * aa.axis(), t = rig.right_from_left.translation();
+  const Eigen::Vector3d r = rotationVector(rig.right_from_left.linear()), t = rig.right_from_left.translation();
   b.extrinsics = {{r.x(), r.y(), r.z(), t.x(), t.y(), t.z()}};
   return b;
 }

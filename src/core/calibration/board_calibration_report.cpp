@@ -54,8 +54,7 @@ std::string boardCalibrationReportYaml(const BoardCalibrationResult& r, const Ch
   const BundleAdjustmentSummary& s = r.summary;
   std::ostringstream o;
   o.precision(10);
-  const Eigen::AngleAxisd aa(r.rig.right_from_left.linear());
-  const Eigen::Vector3d rotvec = aa.angle() * aa.axis() * 180.0 / M_PI;
+  const Eigen::Vector3d rotvec = rotationVector(r.rig.right_from_left.linear()) * 180.0 / M_PI;
   const Eigen::Vector3d t = r.rig.right_from_left.translation();
   o << "# calibrate_images report: pixels, metres, degrees. stddev = one standard deviation\n"
     << "# from the adjustment's covariance scaled by the residual variance.\n"
@@ -72,7 +71,7 @@ std::string boardCalibrationReportYaml(const BoardCalibrationResult& r, const Ch
     << "  # corners with a residual above " << BundleAdjustmentOptions().outlier_threshold_px
     << " px\n"
     << "baseline_m: " << r.rig.baseline() << "\nbaseline_stddev_m: " << s.baseline_stddev_m
-    << "\nrotation_deg: " << aa.angle() * 180.0 / M_PI
+    << "\nrotation_deg: " << rotvec.norm()
     << "\nrotation_stddev_deg: " << s.rotation_stddev_deg << "\nright_from_left:\n  rotation_deg: ["
     << rotvec.x() << ", " << rotvec.y() << ", " << rotvec.z()
     << "]  # rotation vector\n  translation_m: [" << t.x() << ", " << t.y() << ", " << t.z()

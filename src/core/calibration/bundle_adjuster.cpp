@@ -57,8 +57,7 @@ RigParameters rigParameters(const StereoRig& rig) {
         cam.dist[3], cam.dist[4];
   }
   // The rotation vector as the bundle adjuster's extrinsics block holds it.
-  const Eigen::AngleAxisd aa(rig.right_from_left.linear());
-  p.segment<3>(18) = aa.angle() * aa.axis();
+  p.segment<3>(18) = rotationVector(rig.right_from_left.linear());
   p.segment<3>(21) = rig.right_from_left.translation();
   return p;
 }
@@ -72,9 +71,8 @@ StereoRig rigFromParameters(const RigParameters& p, const StereoRig& like) {
     cam.fx = b[0], cam.fy = b[1], cam.cx = b[2], cam.cy = b[3];
     for (int k = 0; k < 5; ++k) cam.dist[k] = b[4 + k];
   }
-  const Eigen::Vector3d r = p.segment<3>(18);
   rig.right_from_left = Eigen::Isometry3d::Identity();
-  if (r.norm() > 0) rig.right_from_left.linear() = Eigen::AngleAxisd(r.norm(), r.normalized()).toRotationMatrix();
+  rig.right_from_left.linear() = rotationFromVector(p.segment<3>(18));
   rig.right_from_left.translation() = p.segment<3>(21);
   return rig;
 }
@@ -110,15 +108,13 @@ PinholeCamera fromBlock(const Intrinsics& b, int width, int height) {
 }
 
 std::array<double, kExtrinsicsSize> toBlock(const Eigen::Isometry3d& t) {
-  const Eigen::AngleAxisd aa(t.linear());
-  const Eigen::Vector3d r = aa.angle() * aa.axis();
+  const Eigen::Vector3d r = rotationVector(t.linear());
   return {{r.x(), r.y(), r.z(), t.translation().x(), t.translation().y(), t.translation().z()}};
 }
 
 Eigen::Isometry3d extrinsicsFromBlock(const std::array<double, kExtrinsicsSize>& b) {
-  const Eigen::Vector3d r(b[0], b[1], b[2]);
   Eigen::Isometry3d t = Eigen::Isometry3d::Identity();
-  if (r.norm() > 0) t.linear() = Eigen::AngleAxisd(r.norm(), r.normalized()).toRotationMatrix();
+  t.linear() = rotationFromVector(Eigen::Vector3d(b[0], b[1], b[2]));
   t.translation() = Eigen::Vector3d(b[3], b[4], b[5]);
   return t;
 }

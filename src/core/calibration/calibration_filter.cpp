@@ -40,8 +40,9 @@ double chiSquareSurvival(double x, int k) {
   return std::erfc(std::sqrt(0.5 * x)) + sum;
 }
 
-Eigen::Matrix3d rotationOf(const Eigen::Vector3d& r) {
-  return r.norm() > 0 ? Eigen::AngleAxisd(r.norm(), r.normalized()).toRotationMatrix() : Eigen::Matrix3d::Identity();
+// R_window R_state^T: what turns the state's right camera into the window's.
+Eigen::Matrix3d windowFromStateRotation(const Eigen::Vector3d& window_rotation, const RigParameters& state) {
+  return rotationFromVector(window_rotation) * rotationFromVector(state.segment<3>(18)).transpose();
 }
 
 // The state's stereo translation at the window's stereo rotation: t = -R C with the state's right
@@ -49,7 +50,7 @@ Eigen::Matrix3d rotationOf(const Eigen::Vector3d& r) {
 // which leaves C where it was and turns t with R; comparing t as it was would take every such turn
 // for a move of the camera.
 Eigen::Vector3d translationAt(const Eigen::Vector3d& window_rotation, const RigParameters& state) {
-  return rotationOf(window_rotation) * rotationOf(state.segment<3>(18)).transpose() * state.segment<3>(21);
+  return windowFromStateRotation(window_rotation, state) * state.segment<3>(21);
 }
 
 // d translationAt / d rotation (of the window's when `of_window`, else of the state's), by central
@@ -70,6 +71,41 @@ Eigen::Matrix3d translationAtRotationJacobian(const Eigen::Vector3d& window_rota
   }
   return J;
 }
+
+// The random walk's variance per parameter and second.
+RigParameters walkVariance(const StereoRig& rig, const CalibrationFilterOptions& options) {
+  RigParameters walk = RigParameters::Zero();
+  for (int c = 0; c < 2; ++c) {
+    const PinholeCamera& camera = c ? rig.right : rig.left;
+    const int o = 9 * c;
+    walk[o + 0] = std::pow(options.focal_walk_rel * camera.fx, 2);
+    walk[o + 1] = std::pow(options.focal_walk_rel * camera.fy, 2);
+    walk[o + 2] = walk[o + 3] = std::pow(options.principal_point_walk_px, 2);
+    for (int k = 4; k < 9; ++k) walk[o + k] = std::pow(options.distortion_walk, 2);
+  }
+  for (int k = 18; k < 21; ++k) walk[k] = std::pow(options.rotation_walk_deg * M_PI / 180.0, 2);
+  for (int k = 21; k < 24; ++k) walk[k] = std::pow(options.translation_walk_m, 2);
+  return walk;
+}
+
+// The state with its translation carried to the window's rotation (translationAt), the linear map
+// of that carriage (for the state's covariance), and the window's: d(window - carried state) /
+// d(window) (the carried translation depends on the window's rotation).
+struct Carried {
+  RigParameters state;
+  RigCovariance jacobian = RigCovariance::Identity(), window_jacobian = RigCovariance::Identity();
+};
+
+Carried carriedToWindowRotation(const RigParameters& state, const Eigen::Vector3d& window_rotation) {
+  Carried out;
+  out.state = state;
+  out.state.segment<3>(21) = translationAt(window_rotation, state);
+  out.jacobian.block<3, 3>(21, 18) = translationAtRotationJacobian(window_rotation, state, false);
+  out.jacobian.block<3, 3>(21, 21) = windowFromStateRotation(window_rotation, state);
+  out.window_jacobian.block<3, 3>(21, 18) = -translationAtRotationJacobian(window_rotation, state, true);
+  return out;
+}
+
 
 }  // namespace
 
@@ -107,44 +143,6 @@ std::string CalibrationFilterOptions::validate() const {
     if (!(walk >= 0.0 && std::isfinite(walk))) return "the walks must be finite and >= 0";
   return "";
 }
-
-namespace {
-
-// The random walk's variance per parameter and second.
-RigParameters walkVariance(const StereoRig& rig, const CalibrationFilterOptions& options) {
-  RigParameters walk = RigParameters::Zero();
-  for (int c = 0; c < 2; ++c) {
-    const PinholeCamera& camera = c ? rig.right : rig.left;
-    const int o = 9 * c;
-    walk[o + 0] = std::pow(options.focal_walk_rel * camera.fx, 2);
-    walk[o + 1] = std::pow(options.focal_walk_rel * camera.fy, 2);
-    walk[o + 2] = walk[o + 3] = std::pow(options.principal_point_walk_px, 2);
-    for (int k = 4; k < 9; ++k) walk[o + k] = std::pow(options.distortion_walk, 2);
-  }
-  for (int k = 18; k < 21; ++k) walk[k] = std::pow(options.rotation_walk_deg * M_PI / 180.0, 2);
-  for (int k = 21; k < 24; ++k) walk[k] = std::pow(options.translation_walk_m, 2);
-  return walk;
-}
-
-// The state with its translation carried to the window's rotation (translationAt), the linear map
-// of that carriage (for the state's covariance), and the window's: d(window - carried state) /
-// d(window) (the carried translation depends on the window's rotation).
-struct Carried {
-  RigParameters state;
-  RigCovariance jacobian = RigCovariance::Identity(), window_jacobian = RigCovariance::Identity();
-};
-
-Carried carriedToWindowRotation(const RigParameters& state, const Eigen::Vector3d& window_rotation) {
-  Carried out;
-  out.state = state;
-  out.state.segment<3>(21) = translationAt(window_rotation, state);
-  out.jacobian.block<3, 3>(21, 18) = translationAtRotationJacobian(window_rotation, state, false);
-  out.jacobian.block<3, 3>(21, 21) = rotationOf(window_rotation) * rotationOf(state.segment<3>(18)).transpose();
-  out.window_jacobian.block<3, 3>(21, 18) = -translationAtRotationJacobian(window_rotation, state, true);
-  return out;
-}
-
-}  // namespace
 
 CalibrationFilter::CalibrationFilter(CalibrationFilterOptions options) : options_(options) {
   const std::string problem = options_.validate();

@@ -19,10 +19,19 @@ double rotationAngleDeg(const Eigen::Matrix3d& a, const Eigen::Matrix3d& b) {
   return std::abs(aa.angle()) * 180.0 / M_PI;
 }
 
-Eigen::Matrix3d rotationFromVectorDeg(const Eigen::Vector3d& rotvec_deg) {
-  const double angle = rotvec_deg.norm() * M_PI / 180.0;
+Eigen::Matrix3d rotationFromVector(const Eigen::Vector3d& rotvec) {
+  const double angle = rotvec.norm();
   if (angle < 1e-15) return Eigen::Matrix3d::Identity();
-  return Eigen::AngleAxisd(angle, rotvec_deg.normalized()).toRotationMatrix();
+  return Eigen::AngleAxisd(angle, rotvec / angle).toRotationMatrix();
+}
+
+Eigen::Vector3d rotationVector(const Eigen::Matrix3d& rotation) {
+  const Eigen::AngleAxisd aa(rotation);
+  return aa.angle() * aa.axis();
+}
+
+Eigen::Matrix3d rotationFromVectorDeg(const Eigen::Vector3d& rotvec_deg) {
+  return rotationFromVector(rotvec_deg * (M_PI / 180.0));
 }
 
 }  // namespace embedded_calibration_stereo::core

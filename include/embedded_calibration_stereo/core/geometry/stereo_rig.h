@@ -23,6 +23,10 @@ struct StereoRig {
 
 // Angle of the rotation R_a^T R_b in degrees.
 double rotationAngleDeg(const Eigen::Matrix3d& a, const Eigen::Matrix3d& b);
+// Rotation from a rotation vector (the axis times the angle, radians), as Ceres' angle-axis
+// parameter blocks hold it; rotationVector() is its inverse, with the angle in [0, pi].
+Eigen::Matrix3d rotationFromVector(const Eigen::Vector3d& rotvec);
+Eigen::Vector3d rotationVector(const Eigen::Matrix3d& rotation);
 // Rotation from a rotation vector given in degrees.
 Eigen::Matrix3d rotationFromVectorDeg(const Eigen::Vector3d& rotvec_deg);
 
