@@ -150,11 +150,14 @@ struct PriorFigures {
   double alone_m = 0, alone_b = 0, fused_m = 0, fused_b = 0, fused_pm = 0, fused_pb = 0;
 };
 
-PriorFigures priorFigures(const ScenarioHead& head, const StereoRig& after, int trials, int* translation_priors) {
+// filters[t] is window t's filter, learned from three earlier windows of the truth.
+PriorFigures priorFigures(const ScenarioHead& head, const StereoRig& after, const std::vector<CalibrationFilter>& filters,
+                          int* translation_priors) {
   PriorFigures out;
   *translation_priors = 0;
+  const int trials = static_cast<int>(filters.size());
   for (int t = 0; t < trials; ++t) {
-    const CalibrationFilter filter = learnedFilter(head, 3, 1000 + 10 * t, exactNoise());
+    const CalibrationFilter& filter = filters[t];
     const BundleAdjustmentSummary alone = solveWindow(head, after, 1001 + 10 * t);
     const std::optional<RigPrior> prior = filter.priorFor(alone, 15.0);
     EXPECT_TRUE(prior.has_value());
@@ -179,6 +182,9 @@ PriorFigures priorFigures(const ScenarioHead& head, const StereoRig& after, int 
 TEST(CalibrationFilter, ThePriorOfTheUnchangedGroupsBringsAKnockedWindowCloserAsPredicted) {
   const ScenarioHead head = loadScenarioHead(ECS_SOURCE_DIR "/config/drive_photo.yaml");
   const int trials = 12;
+  // The same earlier windows before either event.
+  std::vector<CalibrationFilter> filters;
+  for (int t = 0; t < trials; ++t) filters.push_back(learnedFilter(head, 3, 1000 + 10 * t, exactNoise()));
   struct Event {
     const char* name;
     StereoRig after;
@@ -187,7 +193,7 @@ TEST(CalibrationFilter, ThePriorOfTheUnchangedGroupsBringsAKnockedWindowCloserAs
   for (const Event& e : {Event{"knock (turn and move)", knocked(head.truth), false},
                          Event{"turn about the right camera's centre", turnedRight(head.truth), true}}) {
     int translation_priors = 0;
-    const PriorFigures f = priorFigures(head, e.after, trials, &translation_priors);
+    const PriorFigures f = priorFigures(head, e.after, filters, &translation_priors);
     std::printf("[ figures  ] after a %s, RMS over %d windows: alone misalignment %.4f px, bias %.4f px; with the "
                 "prior of the unchanged groups misalignment %.4f px (predicted %.4f), bias %.4f px (predicted %.4f); "
                 "translation in the prior in %d\n",
