@@ -14,6 +14,7 @@
 //                          [--truth-background 0|1] [--truth-noise SIGMA] [--saddle 0|1]
 //                          [--learn-window 0|1|2] [--off-frames K] [--scene 0|1] [--filter 0|1]
 //                          [--refine R] [--scene-test P] [--event-at-burst 0|1] [--scene-sides 0|1]
+//                          [--learn-iterations N] [--flow-iterations I] [--flow-pair-step K]
 // --min-change / --min-improvement: the gate's min_change_in_predicted / min_rms_improvement_rel;
 // what limits the accuracy (docs/figures.md): --align 0 reports cornerSubPix corners instead of the whole-board
 // alignment's, --free-poses 1 solves with one free pose per virtual board instead of the rigid
@@ -29,7 +30,11 @@
 // before a window and its first light-on frame, as a knock can come on a real head (and as the
 // demo's script can fire one just before a burst): the window's light-off frames before it and
 // their scene matches show the rig of before the event. --scene-sides 0 keeps a window's scene
-// matches when its two sides disagree (WindowTrackerOptions::check_scene_sides). Each
+// matches when its two sides disagree (WindowTrackerOptions::check_scene_sides).
+// --learn-iterations, --flow-iterations and --flow-pair-step set the window learner's alignment
+// passes, the flow's variational refinement iterations and its pair step
+// (DeviceLearnerOptions::iterations, flow_refinement_iterations, flow_pair_step; default: the
+// product's, windowLearnerOptions()). Each
 // window also prints the tracked corners' RMS error against the truth and the part of it common
 // to the window's frames.
 // The scene moves with the frame index (time = frame / fps), the noise seeds are the frame
@@ -96,6 +101,8 @@ struct Args {
   double scene_test = 0.0;  // GateOptions::scene_test_probability
   int scene_sides = 1;     // WindowTrackerOptions::check_scene_sides
   int event_at_burst = 0;  // 1: drift events between a window's light-off frames before it and its light-on frames
+  // The window learner's options (-1: the product's, windowLearnerOptions()).
+  int learn_iterations = -1, flow_iterations = -1, flow_pair_step = -1;
 };
 
 // Distances of scene correspondences to their true epipolar lines (the Sampson distance under
@@ -221,6 +228,9 @@ std::optional<Args> parseArgs(int argc, char** argv, int* status) {
       {"--scene-test", [](Args* a, const char* v) { a->scene_test = std::atof(v); }},
       {"--event-at-burst", [](Args* a, const char* v) { a->event_at_burst = std::atoi(v); }},
       {"--scene-sides", [](Args* a, const char* v) { a->scene_sides = std::atoi(v); }},
+      {"--learn-iterations", [](Args* a, const char* v) { a->learn_iterations = std::atoi(v); }},
+      {"--flow-iterations", [](Args* a, const char* v) { a->flow_iterations = std::atoi(v); }},
+      {"--flow-pair-step", [](Args* a, const char* v) { a->flow_pair_step = std::atoi(v); }},
   };
   for (int i = 1; i < argc; ++i) {
     const auto option = std::find_if(std::begin(kOptions), std::end(kOptions),
@@ -276,7 +286,9 @@ TrackerOptions trackerOptions(const Args& args) {
 
 WindowTrackerOptions windowTrackerOptions(const Args& args) {
   WindowTrackerOptions o;
-  if (const char* it = std::getenv("LEARN_ITERATIONS")) o.learner.iterations = std::atoi(it);
+  if (args.learn_iterations >= 0) o.learner.iterations = args.learn_iterations;
+  if (args.flow_iterations >= 0) o.learner.flow_refinement_iterations = args.flow_iterations;
+  if (args.flow_pair_step >= 0) o.learner.flow_pair_step = args.flow_pair_step;
   o.scene_matches = args.scene != 0;
   o.check_scene_sides = args.scene_sides != 0;
   return o;
