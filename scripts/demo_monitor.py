@@ -688,10 +688,10 @@ def health_report(mon, script, health_steps, epochs, t0):
 
 
 def psnr(a, b):
-    """PSNR (dB) of two 8-bit images' bytes."""
-    a = np.frombuffer(a, np.uint8).astype(np.float64)
-    b = np.frombuffer(b, np.uint8).astype(np.float64)
-    mse = float(np.mean((a - b) ** 2))
+    """PSNR (dB) of two 8-bit images' bytes. Integer arithmetic: it runs on every settled frame,
+    beside the head, and costs a twentieth of the same in floats."""
+    d = np.frombuffer(a, np.uint8).astype(np.int32) - np.frombuffer(b, np.uint8)
+    mse = float(np.einsum("i,i->", d, d, dtype=np.int64)) / max(d.size, 1)
     return 99.0 if mse == 0 else 10 * math.log10(255.0 ** 2 / mse)
 
 
