@@ -15,7 +15,6 @@
 //                          [--learn-window 0|1|2] [--off-frames K] [--scene 0|1] [--filter 0|1]
 //                          [--refine R] [--scene-test P] [--event-at-burst 0|1] [--scene-sides 0|1]
 //                          [--learn-iterations N] [--flow-iterations I] [--flow-pair-step K]
-//                          [--max-light-on N]
 // --min-change / --min-improvement: the gate's min_change_in_predicted / min_rms_improvement_rel;
 // what limits the accuracy (docs/figures.md): --align 0 reports cornerSubPix corners instead of the whole-board
 // alignment's, --free-poses 1 solves with one free pose per virtual board instead of the rigid
@@ -35,8 +34,7 @@
 // --learn-iterations, --flow-iterations and --flow-pair-step set the window learner's alignment
 // passes, the flow's variational refinement iterations and its pair step
 // (DeviceLearnerOptions::iterations, flow_refinement_iterations, flow_pair_step; default: the
-// product's, windowLearnerOptions()); --max-light-on N learns each window's device image from N
-// of its light-on frames, evenly spaced (WindowTrackerOptions::max_light_on_frames). Each
+// product's, windowLearnerOptions()). Each
 // window also prints the tracked corners' RMS error against the truth and the part of it common
 // to the window's frames.
 // The scene moves with the frame index (time = frame / fps), the noise seeds are the frame
@@ -105,7 +103,6 @@ struct Args {
   int event_at_burst = 0;  // 1: drift events between a window's light-off frames before it and its light-on frames
   // The window learner's options (-1: the product's, windowLearnerOptions()).
   int learn_iterations = -1, flow_iterations = -1, flow_pair_step = -1;
-  int max_light_on = 0;  // WindowTrackerOptions::max_light_on_frames
 };
 
 // Distances of scene correspondences to their true epipolar lines (the Sampson distance under
@@ -234,7 +231,6 @@ std::optional<Args> parseArgs(int argc, char** argv, int* status) {
       {"--learn-iterations", [](Args* a, const char* v) { a->learn_iterations = std::atoi(v); }},
       {"--flow-iterations", [](Args* a, const char* v) { a->flow_iterations = std::atoi(v); }},
       {"--flow-pair-step", [](Args* a, const char* v) { a->flow_pair_step = std::atoi(v); }},
-      {"--max-light-on", [](Args* a, const char* v) { a->max_light_on = std::atoi(v); }},
   };
   for (int i = 1; i < argc; ++i) {
     const auto option = std::find_if(std::begin(kOptions), std::end(kOptions),
@@ -293,7 +289,6 @@ WindowTrackerOptions windowTrackerOptions(const Args& args) {
   if (args.learn_iterations >= 0) o.learner.iterations = args.learn_iterations;
   if (args.flow_iterations >= 0) o.learner.flow_refinement_iterations = args.flow_iterations;
   if (args.flow_pair_step >= 0) o.learner.flow_pair_step = args.flow_pair_step;
-  o.max_light_on_frames = args.max_light_on;
   o.scene_matches = args.scene != 0;
   o.check_scene_sides = args.scene_sides != 0;
   return o;

@@ -3,11 +3,9 @@
 // `repeats` times by one tracker (the boards' state follows from window to window).
 //   bench_window_tracker [--config FILE] [--windows N] [--repeats R] [--scene 0|1] [--frames F]
 //                        [--flow-scale S] [--flow-stride P] [--flow-pair-step K] [--flow-iterations I]
-//                        [--max-light-on N]
 // (default: $ECS_SOURCE_DIR/config/drive_photo.yaml, 6 windows 2 s apart, 3 repeats, no scene
 // correspondences, 10 light-on frames (the launch files' bursts have 30), the learner's flow at
-// its default finest scale, patch stride, pair step and refinement iterations, all light-on frames
-// learned from). Prints per window the
+// its default finest scale, patch stride, pair step and refinement iterations). Prints per window the
 // wall-clock ms of track(), the process CPU time it took (both cameras' threads; on a loaded
 // machine the wall time is inflated by other processes, the CPU time much less), the resident
 // memory that track() took at its peak above what the process held before it (the kernel's
@@ -61,7 +59,6 @@ int main(int argc, char** argv) {
     else if (!std::strcmp(argv[i], "--repeats")) repeats = std::atoi(value());
     else if (!std::strcmp(argv[i], "--scene")) scene = std::atoi(value());
     else if (!std::strcmp(argv[i], "--frames")) lit_frames = std::atoi(value());
-    else if (!std::strcmp(argv[i], "--max-light-on")) options.max_light_on_frames = std::atoi(value());
     else if (!std::strcmp(argv[i], "--flow-scale")) options.learner.flow_finest_scale = std::atoi(value());
     else if (!std::strcmp(argv[i], "--flow-stride")) options.learner.flow_patch_stride = std::atoi(value());
     else if (!std::strcmp(argv[i], "--flow-pair-step")) options.learner.flow_pair_step = std::atoi(value());

@@ -7,12 +7,10 @@
 // error per corner) is what a window of per-frame observations gives the calibrator.
 #include <gtest/gtest.h>
 
-#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <stdexcept>
 #include <string>
-#include <vector>
 
 #include <opencv2/imgproc.hpp>
 
@@ -96,38 +94,6 @@ TEST(WindowTracker, RefusesAWindowItCannotLearnFrom) {
   bad = WindowTrackerOptions();
   bad.max_board_motion_px = 0.0;
   EXPECT_THROW(WindowTracker(prior, TrackerOptions(), bad), std::exception);
-  bad = WindowTrackerOptions();
-  bad.max_light_on_frames = 1;
-  EXPECT_THROW(WindowTracker(prior, TrackerOptions(), bad), std::exception);
-}
-
-// A long burst thinned to fewer light-on frames keeps its first and last and spaces the others
-// evenly (gaps that differ by one frame at most); a short one, or none asked, stays whole.
-TEST(WindowTracker, ThinsALongBurstEvenlyKeepingItsEnds) {
-  for (const int n : {2, 3, 10, 17, 30, 31, 45}) {
-    WindowFrames frames;
-    frames.light_off_before.push_back(cv::Mat(1, 1, CV_32S, cv::Scalar(-1)));
-    for (int i = 0; i < n; ++i) frames.light_on.push_back(cv::Mat(1, 1, CV_32S, cv::Scalar(i)));
-    for (const int m : {0, 2, 3, 8, 15, 16, 30}) {
-      const WindowFrames thin = thinnedLightOn(frames, m);
-      const int expected = m == 0 ? n : std::min(n, m);
-      ASSERT_EQ(static_cast<int>(thin.light_on.size()), expected) << n << " frames, at most " << m;
-      ASSERT_EQ(thin.light_off_before.size(), 1u);
-      std::vector<int> index;
-      for (const cv::Mat& f : thin.light_on) index.push_back(f.at<int>(0, 0));
-      EXPECT_EQ(index.front(), 0);
-      EXPECT_EQ(index.back(), n - 1);
-      int shortest = n, longest = 0;
-      for (size_t k = 1; k < index.size(); ++k) {
-        shortest = std::min(shortest, index[k] - index[k - 1]);
-        longest = std::max(longest, index[k] - index[k - 1]);
-      }
-      EXPECT_GE(shortest, 1) << n << " frames, at most " << m;
-      EXPECT_LE(longest - shortest, 1) << n << " frames, at most " << m;
-    }
-  }
-  EXPECT_THROW(thinnedLightOn(WindowFrames(), 1), std::invalid_argument);
-  EXPECT_THROW(thinnedLightOn(WindowFrames(), -2), std::invalid_argument);
 }
 
 // The boards move during a burst only when the camera does. A knock of the right camera just

@@ -1,7 +1,6 @@
 #include "embedded_calibration_stereo/core/tracker/window_tracker.h"
 
 #include <algorithm>
-#include <cmath>
 #include <map>
 #include <opencv2/imgproc.hpp>
 #include <stdexcept>
@@ -23,7 +22,6 @@ std::string WindowTrackerOptions::validate() const {
   const std::string sides_problems = scene_sides.validate();
   if (!sides_problems.empty()) problems.push_back("scene_sides: " + sides_problems);
   if (!(max_board_motion_px > 0)) problems.push_back("max_board_motion_px must be > 0");
-  if (max_light_on_frames < 0 || max_light_on_frames == 1) problems.push_back("max_light_on_frames must be 0 or >= 2");
   std::string joined;
   for (const std::string& p : problems) joined += (joined.empty() ? "" : "; ") + p;
   return joined;
@@ -123,17 +121,6 @@ WindowFrames windowEnds(const WindowFrames& frames, int per_end) {
   return ends;
 }
 
-WindowFrames thinnedLightOn(const WindowFrames& frames, int max_light_on) {
-  if (max_light_on < 0 || max_light_on == 1) throw std::invalid_argument("thinnedLightOn: max_light_on must be 0 or >= 2");
-  const int n = static_cast<int>(frames.light_on.size());
-  if (max_light_on == 0 || n <= max_light_on) return frames;
-  WindowFrames thin = frames;
-  thin.light_on.clear();
-  for (int k = 0; k < max_light_on; ++k)
-    thin.light_on.push_back(frames.light_on[static_cast<size_t>(std::lround(k * (n - 1.0) / (max_light_on - 1.0)))]);
-  return thin;
-}
-
 namespace {
 
 // One camera's device image, grey; empty with *error set when learning fails. The tracker learns
@@ -179,8 +166,7 @@ WindowTrack WindowTracker::track(const WindowFrames& left, const WindowFrames& r
   std::vector<BoardCorners> corners[2];
   int dropped[2] = {0, 0}, tracked[2] = {0, 0};
   std::string error[2];
-  for (int c = 0; c < 2; ++c)
-    result.device[c] = learnGreyDevice(thinnedLightOn(*frames[c], options_.max_light_on_frames), options_.learner, &error[c]);
+  for (int c = 0; c < 2; ++c) result.device[c] = learnGreyDevice(*frames[c], options_.learner, &error[c]);
   cv::parallel_for_(cv::Range(0, 2), [&](const cv::Range& range) {
     for (int c = range.start; c < range.end; ++c) {
       if (!error[c].empty()) continue;

@@ -74,10 +74,6 @@ struct WindowTrackerOptions {
   // need light-off frames; the check costs four single-frame trackings.
   bool check_board_motion = true;
   double max_board_motion_px = 0.5;
-  // At most this many light-on frames are learned from (0: all), evenly spaced over the burst
-  // with its first and last (thinnedLightOn): the learning's cost grows with the frames, while
-  // the scene's variety that the per-pixel combination needs grows with the burst's duration.
-  int max_light_on_frames = 0;
   // Empty when usable; otherwise one message per problem, joined by "; ".
   std::string validate() const;
 };
@@ -102,10 +98,6 @@ LearnedDevice learnWindowDevice(const WindowFrames& frames, const DeviceLearnerO
 // in time: learning a whole burst's device image for a fraction of the cost, for uses that need
 // less than the tracker's precision (the Separator's template). per_end >= 1.
 WindowFrames windowEnds(const WindowFrames& frames, int per_end);
-
-// The window with at most `max_light_on` of its light-on frames (all when it has no more, or
-// max_light_on is 0), evenly spaced, its first and last among them. max_light_on is 0 or >= 2.
-WindowFrames thinnedLightOn(const WindowFrames& frames, int max_light_on);
 
 struct WindowTrack {
   StereoObservation observation;  // corners of both cameras, stamped by the caller
