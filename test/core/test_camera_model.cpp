@@ -120,10 +120,12 @@ TEST(StereoRig, RotationVectorsMatchRodrigues) {
       EXPECT_NEAR((back - rotvec).norm(), 0.0, 1e-9) << angle;
     }
   }
-  EXPECT_NEAR((rotationFromVectorDeg(Eigen::Vector3d(10, -20, 30)) -
-               rotationFromVector(Eigen::Vector3d(10, -20, 30) * M_PI / 180.0))
-                  .norm(),
-              0.0, 1e-15);
+  // The same in degrees.
+  cv::Mat cv_rotation;
+  cv::Rodrigues(cv::Vec3d(10, -20, 30) * (M_PI / 180.0), cv_rotation);
+  const Eigen::Matrix3d rotation = rotationFromVectorDeg(Eigen::Vector3d(10, -20, 30));
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 3; ++c) EXPECT_NEAR(rotation(r, c), cv_rotation.at<double>(r, c), 1e-12);
 }
 
 }  // namespace

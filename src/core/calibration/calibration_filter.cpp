@@ -106,7 +106,6 @@ Carried carriedToWindowRotation(const RigParameters& state, const Eigen::Vector3
   return out;
 }
 
-
 }  // namespace
 
 const std::vector<std::string>& turnAndZoomGroups() {
